@@ -1,0 +1,16 @@
+"""TripleSumo: cooperation in a physical, contact-rich, adversarial three-agent game.
+
+A reimplementation of Wang, Das & Millard, *Learning cooperative behaviours in
+adversarial multi-agent systems* (TAROS 2022), on MuJoCo, PettingZoo and Gymnasium.
+"""
+
+from triplesumo.envs import Match, TripleSumoEnv, TripleSumoParallelEnv, parallel_env, register_envs
+from triplesumo.rules import MatchConfig, ResetNoise, RewardConfig
+
+__version__ = "0.1.0"
+ENV_VERSION = "v0"
+
+register_envs()
+
+__all__ = ["ENV_VERSION", "Match", "MatchConfig", "ResetNoise", "RewardConfig", "TripleSumoEnv",
+           "TripleSumoParallelEnv", "__version__", "parallel_env"]

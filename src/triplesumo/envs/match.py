@@ -1,0 +1,192 @@
+"""The match core: one TripleSumo match, free of any RL framework.
+
+:class:`Match` ties the simulation to the rules: it validates and scales actions,
+steps the physics, judges ring exits, computes every agent's reward terms and
+observation, and watches MuJoCo for trouble. The PettingZoo and Gymnasium views
+wrap it; batch runners and benchmarks use it directly through :meth:`Match.step_array`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from triplesumo.model import build_model, names, ring_half_size
+from triplesumo.rules import outcome as rules_outcome
+from triplesumo.rules import rewards as rules_rewards
+from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.observations import ObservationBuilder
+from triplesumo.rules.teams import Teams
+from triplesumo.sim.physics import PhysicsError, Simulation
+
+ACTION_SIZE = len(names.LEG_JOINTS)
+
+
+@dataclass
+class StepResult:
+    """What one env step returns, per agent in roster order."""
+
+    observations: list[np.ndarray]
+    rewards: np.ndarray
+    terminated: bool
+    truncated: bool
+    infos: list[dict[str, Any]]
+
+
+class Match:
+    """One match between the agents of a :class:`MatchConfig`."""
+
+    def __init__(self, config: MatchConfig | None = None) -> None:
+        self.config = config or MatchConfig()
+        self.agents = self.config.agent_names
+        self.n_agents = len(self.agents)
+        self.model = build_model(self.config.agents, self.config.physics)
+        self.sim = Simulation(self.model, self.agents, self.config.physics.frame_skip)
+        self.data = self.sim.data
+        self.teams = Teams.from_agents(self.config.agents)
+        self.half_size = ring_half_size(self.model)
+        self.observer = ObservationBuilder(
+            self.sim, self.teams, self.config.obs_mode, self.half_size, self.config.contact_force_clip
+        )
+        self._ctrl_mid = (self.sim.ctrl_high + self.sim.ctrl_low) / 2.0
+        self._ctrl_half = (self.sim.ctrl_high - self.sim.ctrl_low) / 2.0
+        self.np_random = np.random.default_rng()
+        self.steps = 0
+        self.over = True
+        self._last_obs: list[np.ndarray] = []
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, seed: int | None = None) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+        """Start a new match from the start pose plus seeded noise.
+
+        ``seed`` re-seeds the match's only random generator; ``None`` keeps drawing
+        from the current one.
+        """
+        if seed is not None:
+            self.np_random = np.random.default_rng(seed)
+        qpos, qvel = self.start_state(self.np_random)
+        self.sim.reset(qpos, qvel)
+        self.steps = 0
+        self.over = False
+        self._last_obs = self.observer.build()
+        infos = [{"step": 0, "outcome": None} for _ in self.agents]
+        return self._last_obs, infos
+
+    def start_state(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """Start pose (``model.qpos0``) with the configured noise drawn from ``rng``."""
+        noise = self.config.reset_noise
+        qpos = self.model.qpos0.copy()
+        for a in self.sim.agents:
+            r = a.root_qpos
+            qpos[r:r + 2] += rng.uniform(-noise.position, noise.position, 2)
+            half = rng.uniform(-noise.yaw, noise.yaw) / 2.0
+            turn = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+            qpos[r + 3:r + 7] = _quat_mul(turn, qpos[r + 3:r + 7])
+            qpos[a.joint_qpos] += rng.uniform(-noise.joints, noise.joints, len(a.joint_qpos))
+        qvel = rng.normal(0.0, noise.velocity, self.model.nv) if noise.velocity > 0 else np.zeros(self.model.nv)
+        return qpos, qvel
+
+    # ------------------------------------------------------------------- step
+    def actions_from_dict(self, actions: Mapping[str, Any]) -> np.ndarray:
+        """Validate a ``{agent: action}`` mapping and stack it in roster order (a copy)."""
+        if not isinstance(actions, Mapping):
+            raise ValueError(f"actions must be a dict {{agent: action}} for agents {list(self.agents)}, "
+                             f"got {type(actions).__name__}")
+        missing = [a for a in self.agents if a not in actions]
+        unknown = [a for a in actions if a not in self.agents]
+        if missing or unknown:
+            raise ValueError(f"actions must have exactly the keys {list(self.agents)}; "
+                             f"missing {missing}, unknown {unknown}")
+        return np.stack([self.check_action(a, actions[a]) for a in self.agents])
+
+    def check_action(self, agent: str, action: Any) -> np.ndarray:
+        """One agent's action as a float64 copy, or ``ValueError`` naming the agent."""
+        arr = np.array(action, dtype=np.float64, copy=True)
+        if arr.shape != (ACTION_SIZE,):
+            raise ValueError(f"action of {agent!r} must have shape ({ACTION_SIZE},), got {arr.shape}")
+        if not np.isfinite(arr).all():
+            raise ValueError(f"action of {agent!r} contains NaN or inf: {arr.tolist()}")
+        return arr
+
+    def step_array(self, actions: np.ndarray) -> StepResult:
+        """One env step with ``(n_agents, 8)`` normalised actions in roster order.
+
+        Finite values beyond [-1, 1] are clipped; each agent's action is scaled to its
+        motors' control range. NaN or inf raises ``ValueError`` naming the agent.
+        """
+        if self.over:
+            raise RuntimeError("the match is over (or was never started): call reset() first")
+        actions = np.asarray(actions, dtype=np.float64)
+        if actions.shape != (self.n_agents, ACTION_SIZE):
+            raise ValueError(f"actions must have shape ({self.n_agents}, {ACTION_SIZE}), got {actions.shape}")
+        bad = ~np.isfinite(actions).all(axis=1)
+        if bad.any():
+            raise ValueError(f"action of {self.agents[int(np.argmax(bad))]!r} contains NaN or inf")
+        ctrl = self._ctrl_mid + np.clip(actions, -1.0, 1.0) * self._ctrl_half
+        self.sim.step(ctrl)
+        self.steps += 1
+        trouble = self.sim.new_warnings()
+        if trouble:
+            return self._physics_error(trouble)
+        pos, vel = self.sim.torso_positions(), self.sim.torso_velocities()
+        out = rules_outcome.agents_out(pos, self.half_size)
+        results = rules_outcome.judge(out, self.teams.team_of, len(self.teams.names))
+        timed_out = results is None and self.steps >= self.config.max_steps
+        cfg = self.config.reward
+        terms = rules_rewards.dense_terms(pos, vel, self.teams, cfg)
+        terms["reward_outcome"] = rules_rewards.outcome_term(results, self.teams, cfg, self.n_agents, timed_out)
+        rewards = rules_rewards.total(terms)
+        dense = sum(terms[t] for t in rules_rewards.DENSE_TERMS)
+        exited = [self.agents[i] for i in np.flatnonzero(out)]
+        infos = []
+        for i in range(self.n_agents):
+            info: dict[str, Any] = {name: float(terms[name][i]) for name in rules_rewards.TERMS}
+            info["dense_reward"] = float(dense[i])
+            info["sparse_reward"] = float(terms["reward_outcome"][i])
+            if results is not None:
+                info["outcome"] = results[self.teams.team_of[i]]
+            else:
+                info["outcome"] = rules_outcome.DRAW if timed_out else None
+            info["out_of_ring"] = exited
+            info["step"] = self.steps
+            infos.append(info)
+        self.over = results is not None or timed_out
+        self._last_obs = self.observer.build()
+        return StepResult(self._last_obs, rewards, results is not None, timed_out, infos)
+
+    def _physics_error(self, trouble: list[str]) -> StepResult:
+        message = (f"MuJoCo reported {', '.join(trouble)} at step {self.steps}; "
+                   "the simulation can no longer be trusted")
+        self.over = True
+        if self.config.on_physics_error == "raise":
+            raise PhysicsError(message)
+        infos = []
+        for _ in self.agents:
+            info: dict[str, Any] = {name: 0.0 for name in rules_rewards.TERMS}
+            info.update(dense_reward=0.0, sparse_reward=0.0, outcome="error", out_of_ring=[],
+                        step=self.steps, physics_error=message)
+            infos.append(info)
+        # The last trustworthy observation: never the NaN or auto-reset state.
+        return StepResult(self._last_obs, np.zeros(self.n_agents), False, True, infos)
+
+    def state(self) -> np.ndarray:
+        """Global state: the ``paper`` observation vector (torso states, contact forces, qpos, qvel)."""
+        sim = self.sim
+        forces = np.clip(sim.contact_forces(), -self.config.contact_force_clip, self.config.contact_force_clip)
+        return np.concatenate([sim.torso_positions().ravel(), sim.torso_velocities().ravel(),
+                               forces.ravel(), sim.data.qpos, sim.data.qvel]).astype(np.float32)
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ])

@@ -1,0 +1,195 @@
+"""The PettingZoo view of a match: a native ``ParallelEnv``."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.rules.config import MatchConfig
+from triplesumo.sim.render import FrameRenderer, HumanViewer
+
+RENDER_MODES = ("human", "rgb_array")
+
+
+class TripleSumoParallelEnv(ParallelEnv):
+    """TripleSumo: three quadrupeds on a sumo ring, Ant and Bug against Spider.
+
+    ## Description
+    A reimplementation of the three-agent sumo game of Wang, Das and Millard, *Learning
+    cooperative behaviours in adversarial multi-agent systems* (TAROS 2022), built on
+    OpenAI's RoboSumo. Three identical four-legged MuJoCo bodies start on a raised square
+    ring (the *tatami*, playable half-size 2) and push each other off it.
+
+    ## Agents
+    ``ant`` (red, team), ``bug`` (blue, team) and ``spider`` (green, alone). Motor control
+    ranges: Spider +-0.22, Ant +-0.20, Bug +-0.18 (read from the compiled model). Other
+    rosters (free-for-all, M-vs-1) are ``MatchConfig.agents``.
+
+    ## Action Space
+    ``Box(-1, 1, (8,), float32)`` per agent: hip and ankle torques of the four legs (order
+    hip_1, ankle_1, ..., hip_4, ankle_4), scaled linearly to the agent's control range.
+    Finite values beyond +-1 are clipped. NaN or inf raises ``ValueError`` naming the
+    agent; wrong shapes, missing or unknown agents raise ``ValueError`` saying what was
+    expected. Actions are copied.
+
+    ## Observation Space
+    ``Box(-inf, inf, (n,), float32)`` per agent. ``obs_mode="paper"`` (default, n = 222):
+    torso positions (9) and velocities (9) of the three agents, the world-frame contact
+    force on each of the 39 agent geoms summed over all its contacts (117, clipped to
+    +-100 N), all qpos (45) and qvel (42); the same vector for every agent.
+    ``obs_mode="egocentric"`` (n = 79): the agent's own body state, the other agents'
+    torso positions and velocities in its heading frame, its distance to the ring edge and
+    its contact forces. Blocks and sizes: ``env.observation_structure[agent]``; details in
+    :mod:`triplesumo.rules.observations`.
+
+    ## Rewards
+    Every agent gets the paper's hybrid reward from its side's point of view,
+    ``dense + sparse``, reported term by term in ``info[agent]`` (the reward is their exact
+    sum):
+
+    - ``reward_opponent_velocity = C1 * mean_o sum_{k=x,y} sign(p_o,k - p_i,k) * v_o,k``
+      (positive when the opponent moves away)
+    - ``reward_self_velocity = C2 * mean_o sum_k sign(p_o,k - p_i,k) * v_i,k``
+      (positive when the agent moves toward the opponent)
+    - ``reward_partner_velocity = C3 * mean_j mean_o sum_k sign(p_o,k - p_j,k) * v_j,k``
+      over partners ``j`` (Spider has none: 0)
+    - ``reward_still``: the still punishment, a negative constant every step
+    - ``reward_outcome``: +500 win, -400 loss, 0 draw, on the final step
+
+    Means are over opponents ``o`` (Spider has two: Ant and Bug). Defaults C1 = C2 = C3 = 5,
+    still -4 (the paper's code); see :class:`triplesumo.rules.RewardConfig`. ``info`` also
+    has ``dense_reward``, ``sparse_reward``, ``outcome`` (``None`` while playing, then
+    ``"win"``/``"loss"``/``"draw"``/``"error"`` for the agent's side), ``out_of_ring`` and
+    ``step``.
+
+    ## Starting State
+    Agents evenly spaced on a circle of radius 1.4 around the centre (Ant at angle 0, Bug at
+    120 degrees, Spider at 240), facing the centre, torso at height 1.25 so they drop onto
+    the tatami. Seeded noise: uniform +-0.1 m on x and y, +-0.1 rad on yaw, +-0.1 rad on
+    every leg joint, Gaussian 0.1 on every qvel. Zero noise gives an identical start.
+
+    ## Episode End
+    Termination: on the step the centre of mass (free-joint position, current after the
+    step) of any agent leaves the ring (``max(|x|, |y|) > 2``). Spider out: the team wins;
+    Ant or Bug out: Spider wins; both sides out in the same step: a draw. Truncation: the
+    step limit (default 500) is reached, a draw; or MuJoCo reports a physics warning (bad
+    qacc, full contact or constraint memory, non-finite state): ``outcome == "error"`` and
+    ``info[agent]["physics_error"]`` says what happened (``on_physics_error="raise"``
+    raises ``PhysicsError`` instead). All agents end together.
+
+    ## Arguments
+    ``triplesumo.parallel_env(render_mode=None, **config)`` where ``config`` are fields of
+    :class:`triplesumo.rules.MatchConfig` (``max_steps``, ``obs_mode``, ``reward``,
+    ``physics``, ``reset_noise``, ``agents``, ``contact_force_clip``,
+    ``on_physics_error``), plus ``width``/``height`` of rendered frames.
+
+    ## Version History
+    - v0: first release.
+    """
+
+    metadata = {"render_modes": list(RENDER_MODES), "name": "triplesumo_v0", "is_parallelizable": True,
+                "render_fps": 20}
+
+    def __init__(self, config: MatchConfig | None = None, render_mode: str | None = None,
+                 width: int = 480, height: int = 480) -> None:
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}")
+        self.match = Match(config)
+        self.config = self.match.config
+        self.render_mode = render_mode
+        self._size = (width, height)
+        self.possible_agents = list(self.match.agents)
+        self.agents: list[str] = []
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.match.sim.dt)}
+        self._obs_spaces = {
+            a: spaces.Box(-np.inf, np.inf, (self.match.observer.sizes[a],), np.float32)
+            for a in self.possible_agents
+        }
+        self._act_spaces = {a: spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32) for a in self.possible_agents}
+        n_state = len(self.match.state())
+        self.state_space = spaces.Box(-np.inf, np.inf, (n_state,), np.float32)
+        self.observation_structure = self.match.observer.structure
+        self._renderer: FrameRenderer | None = None
+        self._viewer: HumanViewer | None = None
+
+    @property
+    def model(self) -> Any:
+        """The compiled ``mujoco.MjModel``."""
+        return self.match.model
+
+    @property
+    def data(self) -> Any:
+        """The live ``mujoco.MjData``."""
+        return self.match.data
+
+    def observation_space(self, agent: str) -> spaces.Box:
+        return self._obs_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Box:
+        return self._act_spaces[agent]
+
+    def reset(self, seed: int | None = None, options: dict | None = None
+              ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        obs, infos = self.match.reset(seed=seed)
+        self.agents = list(self.possible_agents)
+        if self.render_mode == "human":
+            self.render()
+        return dict(zip(self.agents, obs, strict=True)), dict(zip(self.agents, infos, strict=True))
+
+    def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+        if not self.agents:
+            raise RuntimeError("the match is over: call reset() before step()")
+        result = self.match.step_array(self.match.actions_from_dict(actions))
+        names = self.agents
+        obs = dict(zip(names, result.observations, strict=True))
+        rewards = {a: float(r) for a, r in zip(names, result.rewards, strict=True)}
+        terms = {a: result.terminated for a in names}
+        truncs = {a: result.truncated for a in names}
+        infos = dict(zip(names, result.infos, strict=True))
+        if result.terminated or result.truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terms, truncs, infos
+
+    def state(self) -> np.ndarray:
+        """The global state (the ``paper`` observation vector)."""
+        return self.match.state()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            import gymnasium
+
+            gymnasium.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'.")
+            return None
+        if self.render_mode == "human":
+            if self._viewer is None:
+                self._viewer = HumanViewer(self.match.model, self.match.data)
+            self._viewer.sync()
+            return None
+        if self._renderer is None:
+            self._renderer = FrameRenderer(self.match.model, *self._size)
+        return self._renderer.render(self.match.data)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None
+
+
+def parallel_env(render_mode: str | None = None, width: int = 480, height: int = 480,
+                 **config: Any) -> TripleSumoParallelEnv:
+    """Make the PettingZoo ``ParallelEnv``; ``config`` are :class:`MatchConfig` fields."""
+    known = {f.name for f in dataclasses.fields(MatchConfig)}
+    unknown = sorted(set(config) - known)
+    if unknown:
+        raise ValueError(f"unknown MatchConfig field(s) {unknown}; known: {sorted(known)}")
+    return TripleSumoParallelEnv(MatchConfig(**config), render_mode=render_mode, width=width, height=height)

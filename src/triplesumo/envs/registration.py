@@ -1,0 +1,16 @@
+"""Gymnasium ids of TripleSumo's single-agent view."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+ENV_IDS = ("TripleSumo-v0", "TripleSumo-Paper-v0")
+
+
+def register_envs() -> None:
+    """Register the ids (idempotent)."""
+    if "TripleSumo-v0" not in gym.registry:
+        gym.register("TripleSumo-v0", entry_point="triplesumo.envs.single:TripleSumoEnv")
+    if "TripleSumo-Paper-v0" not in gym.registry:
+        # The shipped Ant and Spider drive the others; resolved lazily by the zoo.
+        gym.register("TripleSumo-Paper-v0", entry_point="triplesumo.agents.zoo:make_paper_env")

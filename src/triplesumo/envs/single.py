@@ -1,0 +1,158 @@
+"""The Gymnasium view: one learner acts, the other agents are driven by given policies."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.rules.config import MatchConfig
+from triplesumo.sim.render import FrameRenderer, HumanViewer
+
+Policy = Callable[[np.ndarray], np.ndarray]
+"""Any callable from one observation to one normalised action in [-1, 1]^8. If it has a
+``reset(seed)`` method, the env calls it at every reset with a seed derived from the
+env's seed, so seeded episodes are reproducible."""
+
+
+class TripleSumoEnv(gym.Env):
+    """TripleSumo seen by one learner (default Bug); the others follow fixed policies.
+
+    ## Description
+    The match of :class:`triplesumo.envs.parallel.TripleSumoParallelEnv` (read its
+    docstring for the game, rewards and episode end), from one agent's seat: ``step``
+    takes the learner's action, asks every other agent's policy for its action from its
+    own observation, and returns the learner's observation, reward, termination,
+    truncation and info.
+
+    ## Action Space
+    ``Box(-1, 1, (8,), float32)``, scaled to the learner's control range (Bug: +-0.18).
+
+    ## Observation Space
+    The learner's observation (``paper``: 222 floats; ``egocentric``: 79); layout in
+    ``env.unwrapped.observation_structure``.
+
+    ## Rewards
+    The learner's hybrid reward; terms in ``info`` under ``reward_*`` keys.
+
+    ## Episode End
+    As the match: termination on a ring exit, truncation at the step limit (draw) or on a
+    physics error. ``info["outcome"]`` is the learner's side's result.
+
+    ## Arguments
+    ``learner`` (``"bug"``), ``policies`` (``{agent: callable}`` for the others; an agent
+    without a policy is passive: zero action), ``render_mode`` (``"rgb_array"`` or
+    ``"human"``), ``width``, ``height``, and any :class:`MatchConfig` field as a keyword.
+    Registered ids: ``TripleSumo-v0`` (others passive unless given) and
+    ``TripleSumo-Paper-v0`` (Ant and Spider from the shipped policy zoo).
+
+    ## Version History
+    - v0: first release.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
+
+    def __init__(self, learner: str = "bug", policies: Mapping[str, Policy] | None = None,
+                 render_mode: str | None = None, width: int = 480, height: int = 480,
+                 config: MatchConfig | None = None, **config_fields: Any) -> None:
+        if config is not None and config_fields:
+            raise ValueError("pass either config=MatchConfig(...) or MatchConfig fields, not both")
+        if config is None:
+            known = {f.name for f in dataclasses.fields(MatchConfig)}
+            unknown = sorted(set(config_fields) - known)
+            if unknown:
+                raise ValueError(f"unknown MatchConfig field(s) {unknown}; known: {sorted(known)}")
+            config = MatchConfig(**config_fields)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
+                             f"got {render_mode!r}")
+        self.match = Match(config)
+        if learner not in self.match.agents:
+            raise ValueError(f"learner must be one of {list(self.match.agents)}, got {learner!r}")
+        policies = dict(policies or {})
+        unknown = [a for a in policies if a not in self.match.agents or a == learner]
+        if unknown:
+            raise ValueError(f"policies given for {unknown}, which are not non-learner agents "
+                             f"of {list(self.match.agents)}")
+        for name, policy in policies.items():
+            if not callable(policy):
+                raise ValueError(f"policy for {name!r} must be callable (observation -> action)")
+        self.learner = learner
+        self._learner_index = self.match.agents.index(learner)
+        self.policies = policies
+        self._others = [(i, a) for i, a in enumerate(self.match.agents) if a != learner]
+        self.render_mode = render_mode
+        self._size = (width, height)
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.match.sim.dt)}
+        self.observation_space = spaces.Box(-np.inf, np.inf, (self.match.observer.sizes[learner],), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
+        self.observation_structure = self.match.observer.structure[learner]
+        self._obs: list[np.ndarray] = []
+        self._renderer: FrameRenderer | None = None
+        self._viewer: HumanViewer | None = None
+
+    @property
+    def model(self) -> Any:
+        """The compiled ``mujoco.MjModel``."""
+        return self.match.model
+
+    @property
+    def data(self) -> Any:
+        """The live ``mujoco.MjData``."""
+        return self.match.data
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        if seed is None:
+            seed = int(self.np_random.integers(2**63))
+            self._np_random = np.random.default_rng(seed)
+        children = np.random.SeedSequence(seed).spawn(len(self.policies) + 1)
+        match_seed = int(children[0].generate_state(1, np.uint64)[0])
+        for child, policy in zip(children[1:], self.policies.values(), strict=True):
+            reset = getattr(policy, "reset", None)
+            if callable(reset):
+                reset(seed=int(child.generate_state(1, np.uint64)[0]))
+        self._obs, infos = self.match.reset(seed=match_seed)
+        if self.render_mode == "human":
+            self.render()
+        return self._obs[self._learner_index], infos[self._learner_index]
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        actions = np.zeros((self.match.n_agents, ACTION_SIZE))
+        actions[self._learner_index] = self.match.check_action(self.learner, action)
+        for i, name in self._others:
+            policy = self.policies.get(name)
+            if policy is not None:
+                actions[i] = self.match.check_action(name, policy(self._obs[i]))
+        result = self.match.step_array(actions)
+        self._obs = result.observations
+        k = self._learner_index
+        if self.render_mode == "human":
+            self.render()
+        return self._obs[k], float(result.rewards[k]), result.terminated, result.truncated, result.infos[k]
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'.")
+            return None
+        if self.render_mode == "human":
+            if self._viewer is None:
+                self._viewer = HumanViewer(self.match.model, self.match.data)
+            self._viewer.sync()
+            return None
+        if self._renderer is None:
+            self._renderer = FrameRenderer(self.match.model, *self._size)
+        return self._renderer.render(self.match.data)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        if self._viewer is not None:
+            self._viewer.close()
+            self._viewer = None

@@ -1,0 +1,97 @@
+"""Compile the match's ``MjModel`` from the tatami scene and one quadruped body.
+
+The quadruped is attached once per agent with ``mujoco.MjSpec.attach`` under the
+agent's name prefix (as dm_control's composer attaches PyMJCF models), then given
+the agent's colour and control range. Start poses: agents evenly spaced on a circle
+of ``PhysicsConfig.start_radius``, the first at angle 0, each facing the centre; the
+compiled ``qpos0`` is that start pose.
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from triplesumo.model import names
+from triplesumo.model.specs import AgentSpec, PhysicsConfig, validate_roster
+
+_INTEGRATOR = {
+    "RK4": mujoco.mjtIntegrator.mjINT_RK4,
+    "Euler": mujoco.mjtIntegrator.mjINT_EULER,
+    "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
+    "implicitfast": mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+}
+
+
+def start_layout(n_agents: int, radius: float) -> list[tuple[float, float, float]]:
+    """``(x, y, yaw)`` of each agent: evenly spaced on a circle, facing the centre."""
+    poses = []
+    for i in range(n_agents):
+        angle = 2.0 * math.pi * i / n_agents
+        poses.append((radius * math.cos(angle), radius * math.sin(angle), angle + math.pi))
+    return poses
+
+
+def build_spec(agents: tuple[AgentSpec, ...], physics: PhysicsConfig) -> mujoco.MjSpec:
+    """The uncompiled scene: tatami plus one prefixed quadruped per agent."""
+    validate_roster(agents)
+    spec = mujoco.MjSpec.from_file(str(names.TATAMI_XML))
+    spec.option.timestep = physics.timestep
+    spec.option.integrator = _INTEGRATOR[physics.integrator]
+    spec.memory = _memory_bytes(physics.memory)
+    torso_rest_z = 0.75  # torso height inside quadruped.xml
+    for agent, (x, y, yaw) in zip(
+        agents, start_layout(len(agents), physics.start_radius), strict=True
+    ):
+        body = mujoco.MjSpec.from_file(str(names.QUADRUPED_XML))
+        quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+        frame = spec.worldbody.add_frame(
+            pos=[x, y, physics.start_height - torso_rest_z], quat=quat
+        )
+        spec.attach(body, prefix=names.prefix(agent.name), frame=frame)
+    pre = {a.name: names.prefix(a.name) for a in agents}
+    by_prefix = {a.name: a for a in agents}
+    for geom in spec.geoms:
+        owner = _owner(geom.name, pre)
+        if owner is not None:
+            geom.rgba = list(by_prefix[owner].rgba)
+    for act in spec.actuators:
+        owner = _owner(act.name, pre)
+        if owner is None:
+            raise RuntimeError(f"actuator {act.name!r} belongs to no agent")
+        r = by_prefix[owner].ctrl_range
+        act.ctrlrange = [-r, r]
+    return spec
+
+
+def build_model(agents: tuple[AgentSpec, ...], physics: PhysicsConfig) -> mujoco.MjModel:
+    """Compile the match model."""
+    return build_spec(agents, physics).compile()
+
+
+def ring_half_size(model: mujoco.MjModel) -> float:
+    """Playable half-size of the ring, read from the border marker in the MJCF."""
+    gid = model.geom(names.RING_MARKER_GEOM).id
+    return float(np.abs(model.geom_pos[gid, 0]))
+
+
+def tatami_top(model: mujoco.MjModel) -> float:
+    """Height of the tatami's top surface."""
+    gid = model.geom(names.TATAMI_GEOM).id
+    return float(model.geom_pos[gid, 2] + model.geom_size[gid, 2])
+
+
+def _owner(name: str, prefixes: dict[str, str]) -> str | None:
+    for agent, p in prefixes.items():
+        if name.startswith(p):
+            return agent
+    return None
+
+
+def _memory_bytes(text: str) -> int:
+    scale = {"K": 2**10, "M": 2**20, "G": 2**30}
+    if text[-1] in scale:
+        return int(text[:-1]) * scale[text[-1]]
+    return int(text)

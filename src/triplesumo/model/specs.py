@@ -1,0 +1,99 @@
+"""Who is in a match: agent specs, teams, and the physics options of the model.
+
+These are plain frozen dataclasses with no knowledge of rewards or RL. The paper's
+2-vs-1 roster is :data:`PAPER_AGENTS`; free-for-all or M-vs-1 rosters are other
+tuples of :class:`AgentSpec`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+RED = (0.85, 0.15, 0.15, 1.0)
+BLUE = (0.15, 0.3, 0.9, 1.0)
+GREEN = (0.15, 0.7, 0.2, 1.0)
+
+_NAME = re.compile(r"^[a-z][a-z0-9_]*$")
+INTEGRATORS = ("RK4", "Euler", "implicit", "implicitfast")
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """One quadruped in the match."""
+
+    name: str
+    """Agent name and MJCF prefix (lower-case identifier), e.g. ``"bug"``."""
+    team: str
+    """Team label; agents with the same label are partners, all others opponents."""
+    ctrl_range: float
+    """Symmetric motor control range: every motor's ctrl lies in [-ctrl_range, ctrl_range]."""
+    rgba: tuple[float, float, float, float] = (0.8, 0.6, 0.4, 1.0)
+    """Colour of the agent's geoms."""
+
+    def __post_init__(self) -> None:
+        if not _NAME.match(self.name):
+            raise ValueError(f"AgentSpec.name must be a lower-case identifier, got {self.name!r}")
+        if not self.team:
+            raise ValueError(f"AgentSpec.team of {self.name!r} must be a non-empty string")
+        if not (math.isfinite(self.ctrl_range) and self.ctrl_range > 0):
+            raise ValueError(
+                f"AgentSpec.ctrl_range of {self.name!r} must be finite and > 0, got {self.ctrl_range}"
+            )
+        if len(self.rgba) != 4 or not all(0.0 <= c <= 1.0 for c in self.rgba):
+            raise ValueError(f"AgentSpec.rgba of {self.name!r} must be 4 values in [0, 1]")
+
+
+PAPER_AGENTS: tuple[AgentSpec, ...] = (
+    AgentSpec("ant", "team", 0.20, RED),
+    AgentSpec("bug", "team", 0.18, BLUE),
+    AgentSpec("spider", "spider", 0.22, GREEN),
+)
+"""The paper's roster: Ant (red, ±0.20) and Bug (blue, ±0.18) against Spider (green, ±0.22)."""
+
+
+def validate_roster(agents: tuple[AgentSpec, ...]) -> None:
+    """Raise ``ValueError`` unless the roster has >= 2 uniquely named agents in >= 2 teams."""
+    if len(agents) < 2:
+        raise ValueError(f"agents: a match needs at least 2 agents, got {len(agents)}")
+    names = [a.name for a in agents]
+    if len(set(names)) != len(names):
+        raise ValueError(f"agents: names must be unique, got {names}")
+    if len({a.team for a in agents}) < 2:
+        raise ValueError("agents: a match needs at least 2 teams")
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """MuJoCo options of the compiled model (defaults: RoboSumo / the paper's code)."""
+
+    timestep: float = 0.01
+    """Physics timestep in seconds."""
+    integrator: str = "RK4"
+    """MuJoCo integrator: RK4 (paper), Euler, implicit or implicitfast."""
+    frame_skip: int = 5
+    """Physics steps per env step (env dt = timestep * frame_skip)."""
+    memory: str = "16M"
+    """Arena memory for contacts and constraints (MJCF ``<size memory>``)."""
+    start_radius: float = 1.4
+    """Agents start evenly spaced on a circle of this radius, facing the centre. RoboSumo used
+    1.15 for two agents; with three, legs touch below 1.4 (measured), so 1.4."""
+    start_height: float = 1.25
+    """Start height of the torso centre; agents fall onto the tatami (top at z = 0.5)."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.timestep) and self.timestep > 0):
+            raise ValueError(f"PhysicsConfig.timestep must be > 0, got {self.timestep}")
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(
+                f"PhysicsConfig.integrator must be one of {INTEGRATORS}, got {self.integrator!r}"
+            )
+        if self.frame_skip < 1:
+            raise ValueError(f"PhysicsConfig.frame_skip must be >= 1, got {self.frame_skip}")
+        if not re.fullmatch(r"\d+[KMG]?", self.memory):
+            raise ValueError(f"PhysicsConfig.memory must look like '16M', got {self.memory!r}")
+        if not (0.0 <= self.start_radius < 2.0):
+            raise ValueError(f"PhysicsConfig.start_radius must be in [0, 2), got {self.start_radius}")
+        if not self.start_height > 0.5:
+            raise ValueError(f"PhysicsConfig.start_height must be > 0.5, got {self.start_height}")

@@ -1,0 +1,109 @@
+"""Configuration of a match: roster, physics, rules, reward weights and observations.
+
+Frozen, typed dataclasses validated in ``__post_init__`` with errors that name the
+field. Paper values (and, where the paper is silent, its original code's) are the
+defaults.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from triplesumo.model.specs import PAPER_AGENTS, AgentSpec, PhysicsConfig, validate_roster
+
+OBS_MODES = ("paper", "egocentric")
+PHYSICS_ERROR_MODES = ("truncate", "raise")
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """Weights of the paper's hybrid reward (dense + sparse), the same for every agent."""
+
+    opponent_velocity: float = 5.0
+    """C1: weight of the opponent-velocity term (paper's code: 5)."""
+    self_velocity: float = 5.0
+    """C2: weight of the self-velocity term (paper's code: 5)."""
+    partner_velocity: float = 5.0
+    """C3: weight of the partner-velocity term (paper's code: 5)."""
+    still: float = -4.0
+    """Still punishment added every step (paper's code: -4); must be <= 0."""
+    win: float = 500.0
+    """Sparse reward to every agent of the winning side."""
+    loss: float = -400.0
+    """Sparse reward to every agent of a losing side."""
+    draw: float = 0.0
+    """Sparse reward when the step limit is reached, or when both sides exit together."""
+
+    def __post_init__(self) -> None:
+        for name in ("opponent_velocity", "self_velocity", "partner_velocity", "still", "win", "loss", "draw"):
+            value = getattr(self, name)
+            if not isinstance(value, int | float) or not math.isfinite(value):
+                raise ValueError(f"RewardConfig.{name} must be a finite number, got {value!r}")
+        if self.still > 0:
+            raise ValueError(f"RewardConfig.still is a punishment and must be <= 0, got {self.still}")
+
+
+@dataclass(frozen=True)
+class ResetNoise:
+    """Seeded noise added to the documented start pose at every reset."""
+
+    position: float = 0.1
+    """Half-width (m) of the uniform noise on each torso's x and y."""
+    yaw: float = 0.1
+    """Half-width (rad) of the uniform noise on each torso's heading."""
+    joints: float = 0.1
+    """Half-width (rad) of the uniform noise on each leg joint angle."""
+    velocity: float = 0.1
+    """Standard deviation of the Gaussian noise on every qvel entry."""
+
+    def __post_init__(self) -> None:
+        for name in ("position", "yaw", "joints", "velocity"):
+            value = getattr(self, name)
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"ResetNoise.{name} must be finite and >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class MatchConfig:
+    """Everything that defines one TripleSumo match."""
+
+    agents: tuple[AgentSpec, ...] = PAPER_AGENTS
+    """The roster; agents sharing a ``team`` label are partners."""
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    """MuJoCo options (timestep, integrator, physics steps per env step)."""
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    """Reward weights."""
+    reset_noise: ResetNoise = field(default_factory=ResetNoise)
+    """Start-pose noise; all zeros gives an identical start every reset."""
+    max_steps: int = 500
+    """Step limit of a match; reaching it is a draw (truncation)."""
+    obs_mode: str = "paper"
+    """Observation mode: "paper" (global vector) or "egocentric" (agent's own frame)."""
+    contact_force_clip: float = 100.0
+    """Contact forces in observations are clipped to +-this many newtons."""
+    on_physics_error: str = "truncate"
+    """On a MuJoCo warning: "truncate" the match (info["physics_error"]) or "raise"."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.agents, tuple) or not all(isinstance(a, AgentSpec) for a in self.agents):
+            raise ValueError("MatchConfig.agents must be a tuple of AgentSpec")
+        validate_roster(self.agents)
+        if not isinstance(self.max_steps, int) or self.max_steps < 1:
+            raise ValueError(f"MatchConfig.max_steps must be an int >= 1, got {self.max_steps!r}")
+        if self.obs_mode not in OBS_MODES:
+            raise ValueError(f"MatchConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
+        if not (math.isfinite(self.contact_force_clip) and self.contact_force_clip > 0):
+            raise ValueError(
+                f"MatchConfig.contact_force_clip must be finite and > 0, got {self.contact_force_clip!r}"
+            )
+        if self.on_physics_error not in PHYSICS_ERROR_MODES:
+            raise ValueError(
+                f"MatchConfig.on_physics_error must be one of {PHYSICS_ERROR_MODES}, "
+                f"got {self.on_physics_error!r}"
+            )
+
+    @property
+    def agent_names(self) -> tuple[str, ...]:
+        """Agent names in roster order."""
+        return tuple(a.name for a in self.agents)

@@ -1,0 +1,175 @@
+"""Step a compiled match model and read each agent's state.
+
+:class:`Simulation` owns one ``MjData``. It resolves every name to ids once, at
+construction, and gives array views per agent: torso position and velocity read from
+the free joint (current after ``mj_step``, unlike the one-substep-stale ``xpos``),
+joint state, and contact forces summed over every contact of each agent geom.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from triplesumo.model import names
+
+WATCHED_WARNINGS: dict[str, int] = {
+    "bad_qacc": int(mujoco.mjtWarning.mjWARN_BADQACC),
+    "bad_qpos": int(mujoco.mjtWarning.mjWARN_BADQPOS),
+    "bad_qvel": int(mujoco.mjtWarning.mjWARN_BADQVEL),
+    "bad_ctrl": int(mujoco.mjtWarning.mjWARN_BADCTRL),
+    "contact_full": int(mujoco.mjtWarning.mjWARN_CONTACTFULL),
+    "constraint_full": int(mujoco.mjtWarning.mjWARN_CNSTRFULL),
+}
+"""MuJoCo warnings that mean the physics can no longer be trusted (auto-reset, overflow)."""
+
+
+class PhysicsError(RuntimeError):
+    """MuJoCo reported a warning that invalidates the simulation (see WATCHED_WARNINGS)."""
+
+
+@dataclass(frozen=True)
+class AgentIndex:
+    """Ids and addresses of one agent's elements in the compiled model."""
+
+    name: str
+    torso_body: int
+    root_qpos: int
+    """Address of the free joint in qpos (x, y, z, qw, qx, qy, qz)."""
+    root_qvel: int
+    """Address of the free joint in qvel (vx, vy, vz world frame; wx, wy, wz body frame)."""
+    joint_qpos: np.ndarray
+    joint_qvel: np.ndarray
+    actuators: np.ndarray
+    geoms: np.ndarray
+
+
+class Simulation:
+    """One match's physics: ``MjData`` plus per-agent views of it."""
+
+    def __init__(self, model: mujoco.MjModel, agent_names: tuple[str, ...], frame_skip: int) -> None:
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.frame_skip = int(frame_skip)
+        self.agent_names = tuple(agent_names)
+        self.agents = tuple(self._index(model, a) for a in self.agent_names)
+        self.n_agents = len(self.agents)
+        self.torso_qpos = np.array([[a.root_qpos + k for k in range(3)] for a in self.agents])
+        self.torso_qvel = np.array([[a.root_qvel + k for k in range(3)] for a in self.agents])
+        self.quat_qpos = np.array([[a.root_qpos + 3 + k for k in range(4)] for a in self.agents])
+        self.angvel_qvel = np.array([[a.root_qvel + 3 + k for k in range(3)] for a in self.agents])
+        self.actuator_ids = np.stack([a.actuators for a in self.agents])
+        self.agent_geoms = np.concatenate([a.geoms for a in self.agents])
+        """All agent geom ids, agent by agent; rows of :meth:`contact_forces`."""
+        self.geoms_per_agent = len(self.agents[0].geoms)
+        self._geom_row = np.full(model.ngeom, -1, dtype=np.int64)
+        self._geom_row[self.agent_geoms] = np.arange(len(self.agent_geoms))
+        lo, hi = model.actuator_ctrlrange[self.actuator_ids].transpose(2, 0, 1)
+        self.ctrl_low: np.ndarray = lo
+        self.ctrl_high: np.ndarray = hi
+        self._warn_ids = np.array(list(WATCHED_WARNINGS.values()))
+        self._warn_seen = np.zeros(len(WATCHED_WARNINGS), dtype=np.int64)
+
+    @property
+    def dt(self) -> float:
+        """Seconds of simulated time per env step."""
+        return float(self.model.opt.timestep) * self.frame_skip
+
+    @staticmethod
+    def _index(model: mujoco.MjModel, agent: str) -> AgentIndex:
+        root = model.joint(names.scoped(agent, names.ROOT_JOINT))
+        joints = [model.joint(names.scoped(agent, j)) for j in names.LEG_JOINTS]
+        acts = [model.actuator(names.scoped(agent, j)).id for j in names.LEG_JOINTS]
+        torso = model.body(names.scoped(agent, names.TORSO_BODY)).id
+        geoms = [g for g in range(model.ngeom) if _body_root(model, int(model.geom_bodyid[g])) == torso]
+        return AgentIndex(
+            name=agent,
+            torso_body=torso,
+            root_qpos=int(root.qposadr[0]),
+            root_qvel=int(root.dofadr[0]),
+            joint_qpos=np.array([int(j.qposadr[0]) for j in joints]),
+            joint_qvel=np.array([int(j.dofadr[0]) for j in joints]),
+            actuators=np.array(acts),
+            geoms=np.array(geoms),
+        )
+
+    # ------------------------------------------------------------------ state
+    def reset(self, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        """Set the state, clear controls and warnings, and recompute derived quantities."""
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = qpos
+        self.data.qvel[:] = qvel
+        mujoco.mj_forward(self.model, self.data)
+        self._warn_seen[:] = 0
+
+    def step(self, ctrl: np.ndarray) -> None:
+        """Apply ``ctrl`` (shape ``(n_agents, n_motors)``, already in control units) for one env step."""
+        self.data.ctrl[self.actuator_ids.ravel()] = ctrl.ravel()
+        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+
+    def torso_positions(self) -> np.ndarray:
+        """``(n_agents, 3)`` torso centres from the free joints' qpos (current after a step)."""
+        return self.data.qpos[self.torso_qpos]
+
+    def torso_velocities(self) -> np.ndarray:
+        """``(n_agents, 3)`` torso linear velocities in the world frame."""
+        return self.data.qvel[self.torso_qvel]
+
+    def torso_quaternions(self) -> np.ndarray:
+        """``(n_agents, 4)`` torso orientations (w, x, y, z)."""
+        return self.data.qpos[self.quat_qpos]
+
+    def torso_angular_velocities(self) -> np.ndarray:
+        """``(n_agents, 3)`` torso angular velocities in the torso frame."""
+        return self.data.qvel[self.angvel_qvel]
+
+    def contact_forces(self) -> np.ndarray:
+        """``(n_agent_geoms, 3)`` world-frame contact force on each agent geom.
+
+        Summed over every contact the geom takes part in (the paper's code overwrote
+        all but one). MuJoCo's contact normal points from geom1 to geom2; the force
+        from ``mj_contactForce`` acts on geom2 and its reaction on geom1.
+        """
+        out = np.zeros((len(self.agent_geoms), 3))
+        data, model, rows = self.data, self.model, self._geom_row
+        ncon = data.ncon
+        if ncon == 0:
+            return out
+        contact = data.contact
+        r1, r2 = rows[contact.geom1[:ncon]], rows[contact.geom2[:ncon]]
+        involved = np.flatnonzero((r1 >= 0) | (r2 >= 0))
+        if len(involved) == 0:
+            return out
+        local = np.empty((len(involved), 6))
+        for k, i in enumerate(involved):
+            mujoco.mj_contactForce(model, data, int(i), local[k])
+        frames = contact.frame[involved].reshape(-1, 3, 3)
+        world = np.einsum("nji,nj->ni", frames, local[:, :3])  # frame rows are the contact axes
+        r1, r2 = r1[involved], r2[involved]
+        np.add.at(out, r2[r2 >= 0], world[r2 >= 0])
+        np.subtract.at(out, r1[r1 >= 0], world[r1 >= 0])
+        return out
+
+    # ------------------------------------------------------------- warnings
+    def new_warnings(self) -> list[str]:
+        """Names of watched MuJoCo warnings raised since the last call or reset.
+
+        Also reports ``non_finite_state`` when qpos or qvel hold NaN or inf.
+        """
+        counts = self.data.warning.number[self._warn_ids]
+        fired = []
+        if (counts > self._warn_seen).any():
+            fired = [n for n, c, s in zip(WATCHED_WARNINGS, counts, self._warn_seen, strict=True) if c > s]
+            self._warn_seen[:] = counts
+        if not (np.isfinite(self.data.qpos.sum()) and np.isfinite(self.data.qvel.sum())):
+            fired.append("non_finite_state")
+        return fired
+
+
+def _body_root(model: mujoco.MjModel, body: int) -> int:
+    """The child-of-world ancestor of ``body`` (the agent's torso for agent geoms)."""
+    while model.body_parentid[body] != 0:
+        body = int(model.body_parentid[body])
+    return body
