@@ -9,20 +9,15 @@ display exists. Never fork a process after a renderer exists (the child hangs): 
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import mujoco
 import numpy as np
 
+from triplesumo._gl import ensure_headless_gl
 from triplesumo.model import names
 
-
-def ensure_headless_gl() -> None:
-    """Pick EGL for offscreen rendering when no GL backend is chosen and no display exists."""
-    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
-        os.environ["MUJOCO_GL"] = "egl"
-        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+__all__ = ["FrameRenderer", "HumanViewer", "ensure_headless_gl"]
 
 
 class FrameRenderer:

@@ -1,0 +1,86 @@
+"""Command-line options generated from frozen config dataclasses.
+
+Each field becomes ``--field-name`` (nested dataclasses: ``--outer.field-name``) with
+its type, its default and its attribute docstring as help, so the CLI can never drift
+from the configs. Values are validated by the dataclasses themselves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+import textwrap
+import types
+import typing
+from functools import cache
+from typing import Any
+
+
+@cache
+def field_docs(cls: type) -> dict[str, str]:
+    """Attribute docstrings (the string literal under each field) of a dataclass."""
+    try:
+        source = textwrap.dedent(inspect.getsource(cls))
+    except (OSError, TypeError):
+        return {}
+    body = ast.parse(source).body[0].body  # type: ignore[attr-defined]
+    docs: dict[str, str] = {}
+    for node, nxt in zip(body, body[1:], strict=False):
+        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
+                and isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant)
+                and isinstance(nxt.value.value, str)):
+            docs[node.target.id] = " ".join(nxt.value.value.split())
+    return docs
+
+
+def _flag(prefix: str, name: str) -> str:
+    return "--" + prefix + name.replace("_", "-")
+
+
+def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "",
+                  skip: tuple[str, ...] = ()) -> None:
+    """Add one option per field of dataclass ``cls`` (recursing into nested dataclasses)."""
+    hints = typing.get_type_hints(cls)
+    docs = field_docs(cls)
+    defaults = cls()
+    for f in dataclasses.fields(cls):
+        if f.name in skip:
+            continue
+        tp = hints[f.name]
+        default = getattr(defaults, f.name)
+        dest = (prefix + f.name).replace(".", "__")
+        if dataclasses.is_dataclass(tp):
+            add_arguments(parser, tp, prefix=f"{prefix}{f.name}.")
+            continue
+        help_text = f"{docs.get(f.name, '')} (default: {default!r})".strip()
+        kwargs: dict[str, Any] = {"dest": dest, "default": argparse.SUPPRESS, "help": help_text}
+        origin, args = typing.get_origin(tp), typing.get_args(tp)
+        if tp is bool:
+            parser.add_argument(_flag(prefix, f.name), action=argparse.BooleanOptionalAction, **kwargs)
+        elif origin is tuple:
+            parser.add_argument(_flag(prefix, f.name), nargs="*", type=args[0], metavar=args[0].__name__.upper(),
+                                **kwargs)
+        elif origin in (typing.Union, types.UnionType):
+            inner = next(a for a in args if a is not type(None))
+            parser.add_argument(_flag(prefix, f.name), type=inner, metavar=inner.__name__.upper(), **kwargs)
+        else:
+            parser.add_argument(_flag(prefix, f.name), type=tp, metavar=tp.__name__.upper(), **kwargs)
+
+
+def build(cls: type, namespace: argparse.Namespace, prefix: str = "", base: Any = None) -> Any:
+    """Instantiate ``cls`` from parsed options; fields not given keep ``base``'s (or default) values."""
+    hints = typing.get_type_hints(cls)
+    base = base if base is not None else cls()
+    values: dict[str, Any] = {}
+    given = vars(namespace)
+    for f in dataclasses.fields(cls):
+        dest = (prefix + f.name).replace(".", "__")
+        if dataclasses.is_dataclass(hints[f.name]):
+            values[f.name] = build(hints[f.name], namespace, prefix=f"{prefix}{f.name}.",
+                                   base=getattr(base, f.name))
+        elif dest in given:
+            value = given[dest]
+            values[f.name] = tuple(value) if isinstance(value, list) else value
+    return dataclasses.replace(base, **values)

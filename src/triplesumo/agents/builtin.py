@@ -1,0 +1,34 @@
+"""Built-in policies that need no weights: passive (zero action) and uniform random.
+
+A policy is any callable from one observation to one normalised action in [-1, 1]^8;
+one with a ``reset(seed)`` method is re-seeded by the env at every reset.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ACTION_SIZE = 8
+
+
+class ZeroPolicy:
+    """Passive: zero torque on every motor (the legs hold no pose)."""
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return np.zeros(ACTION_SIZE, dtype=np.float32)
+
+
+class RandomPolicy:
+    """Uniform random actions in [-1, 1]^8 from its own seeded generator."""
+
+    def __init__(self, seed: int | None = None) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return self.rng.uniform(-1.0, 1.0, ACTION_SIZE).astype(np.float32)
+
+
+BUILTIN = {"zero": ZeroPolicy, "passive": ZeroPolicy, "random": RandomPolicy}

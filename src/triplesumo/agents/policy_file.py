@@ -1,0 +1,129 @@
+"""Policy files: an actor's weights as safetensors beside a JSON manifest.
+
+``NAME.safetensors`` holds the actor's tensors (keys ``actor.*``); ``NAME.json`` says
+what they are: agent, observation mode and size, action size, hidden sizes, env and
+mujoco versions, and how they were made (command, seed, epochs, evaluation). Loading
+never unpickles anything.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+from safetensors import SafetensorError
+from safetensors.torch import load_file, save_file
+
+from triplesumo.agents.networks import Actor, ActorPolicy
+
+FORMAT = "triplesumo-policy/1"
+REQUIRED = ("format", "agent", "obs_mode", "obs_dim", "act_dim", "hidden")
+
+
+class PolicyFileError(ValueError):
+    """A policy or checkpoint file is missing, truncated, corrupt or incompatible."""
+
+
+def atomic_write_bytes(path: Path, payload: bytes) -> None:
+    """Write ``payload`` to ``path`` via a temp file, fsync and ``os.replace``."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_save_tensors(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str] | None = None) -> None:
+    """safetensors ``save_file`` made atomic (temp file in the same folder, then replace)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        save_file({k: v.detach().contiguous().cpu() for k, v in tensors.items()}, tmp, metadata=metadata)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_tensors(path: Path) -> dict[str, torch.Tensor]:
+    """Load a safetensors file, or :class:`PolicyFileError` naming the file and the reason."""
+    path = Path(path)
+    if not path.is_file():
+        raise PolicyFileError(f"{path}: file not found")
+    try:
+        return load_file(str(path))
+    except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
+        raise PolicyFileError(f"{path}: not a readable safetensors file (truncated or corrupt?): {exc}") from exc
+
+
+def load_json(path: Path) -> dict[str, Any]:
+    """Load a JSON object, or :class:`PolicyFileError` naming the file and the reason."""
+    path = Path(path)
+    if not path.is_file():
+        raise PolicyFileError(f"{path}: file not found")
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise PolicyFileError(f"{path}: corrupt JSON: {exc}") from exc
+    if not isinstance(data, dict):
+        raise PolicyFileError(f"{path}: expected a JSON object")
+    return data
+
+
+def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any]) -> tuple[Path, Path]:
+    """Write ``stem.safetensors`` and ``stem.json``; returns both paths."""
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    full = {"format": FORMAT, "obs_dim": actor.obs_dim, "act_dim": actor.act_dim,
+            "hidden": list(actor.hidden), **manifest}
+    missing = [k for k in REQUIRED if k not in full]
+    if missing:
+        raise ValueError(f"policy manifest lacks {missing}")
+    weights, meta = stem.with_suffix(".safetensors"), stem.with_suffix(".json")
+    atomic_save_tensors({f"actor.{k}": v for k, v in actor.state_dict().items()}, weights)
+    atomic_write_bytes(meta, (json.dumps(full, indent=2, sort_keys=True) + "\n").encode())
+    return weights, meta
+
+
+def load_policy(stem: Path, expect_obs_mode: str | None = None,
+                expect_obs_dim: int | None = None) -> tuple[ActorPolicy, dict[str, Any]]:
+    """Load a policy file pair; checks the manifest against the weights and expectations."""
+    stem = Path(stem)
+    if stem.suffix in (".json", ".safetensors"):
+        stem = stem.with_suffix("")
+    meta_path, weights_path = stem.with_suffix(".json"), stem.with_suffix(".safetensors")
+    manifest = load_json(meta_path)
+    missing = [k for k in REQUIRED if k not in manifest]
+    if missing:
+        raise PolicyFileError(f"{meta_path}: manifest lacks {missing}")
+    if manifest["format"] != FORMAT:
+        raise PolicyFileError(f"{meta_path}: format {manifest['format']!r}, expected {FORMAT!r}")
+    if expect_obs_mode is not None and manifest["obs_mode"] != expect_obs_mode:
+        raise PolicyFileError(f"{meta_path}: policy was trained with obs_mode {manifest['obs_mode']!r}, "
+                              f"the match uses {expect_obs_mode!r}")
+    if expect_obs_dim is not None and int(manifest["obs_dim"]) != expect_obs_dim:
+        raise PolicyFileError(f"{meta_path}: policy expects {manifest['obs_dim']} observation values, "
+                              f"the match gives {expect_obs_dim}")
+    tensors = load_tensors(weights_path)
+    try:
+        actor = Actor.from_state_dict(tensors, prefix="actor.")
+    except (KeyError, ValueError, RuntimeError) as exc:
+        raise PolicyFileError(f"{weights_path}: not an actor: {exc}") from exc
+    if actor.obs_dim != int(manifest["obs_dim"]) or actor.act_dim != int(manifest["act_dim"]):
+        raise PolicyFileError(f"{weights_path}: weights are {actor.obs_dim}->{actor.act_dim}, "
+                              f"manifest says {manifest['obs_dim']}->{manifest['act_dim']}")
+    actor.eval()
+    return ActorPolicy(actor), manifest

@@ -1,0 +1,60 @@
+"""The policy zoo: trained policies shipped in the package, loadable by name.
+
+Each entry is ``NAME.safetensors`` + ``NAME.json`` in this folder (see
+:mod:`triplesumo.agents.policy_file`); the manifest records the command and seed that
+made it. :func:`make_policy` also resolves built-in policies and policy files, so one
+string names any policy: ``"zero"`` / ``"passive"``, ``"random"``, ``"zoo:spider"``, or a
+path to a policy file (``runs/x/policy`` or ``runs/x/policy.json``).
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from triplesumo.agents.builtin import BUILTIN
+from triplesumo.agents.policy_file import load_policy
+
+ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
+
+
+def available() -> list[str]:
+    """Names of the shipped policies."""
+    return sorted(p.stem for p in ZOO_DIR.glob("*.json"))
+
+
+def load(name: str, expect_obs_mode: str | None = None) -> tuple[Any, dict[str, Any]]:
+    """Load a shipped policy and its manifest by name (``"ant"``, ``"spider"``, ``"bug"``)."""
+    if name not in available():
+        raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
+    return load_policy(ZOO_DIR / name, expect_obs_mode=expect_obs_mode)
+
+
+def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None) -> Any:
+    """A policy callable from its name: built-in, ``zoo:NAME`` or a policy-file path."""
+    if spec in BUILTIN:
+        cls = BUILTIN[spec]
+        return cls(seed) if spec == "random" else cls()
+    if spec.startswith("zoo:"):
+        return load(spec[4:], expect_obs_mode=expect_obs_mode)[0]
+    path = Path(spec)
+    if path.suffix in ("", ".json", ".safetensors") and (path.with_suffix(".json").exists() or path.exists()):
+        return load_policy(path, expect_obs_mode=expect_obs_mode)[0]
+    raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' "
+                     f"(shipped: {available()}) or the path of a policy file")
+
+
+def make_paper_env(**kwargs: Any) -> Any:
+    """``TripleSumo-Paper-v0``: Bug learns; Ant and Spider are the shipped zoo policies."""
+    from triplesumo.envs.single import TripleSumoEnv
+
+    obs_mode = kwargs.get("obs_mode", "paper")
+    policies = kwargs.pop("policies", None) or {
+        "ant": load("ant", expect_obs_mode=obs_mode)[0],
+        "spider": load("spider", expect_obs_mode=obs_mode)[0],
+    }
+    kwargs.setdefault("learner", "bug")
+    return TripleSumoEnv(policies=policies, **kwargs)
+
+

@@ -1,0 +1,182 @@
+"""Uniform experience replay for off-policy learners (DDPG), in preallocated numpy arrays.
+
+What goes in (the caller's contract):
+
+- ``done = 1`` means *no bootstrap*: a real terminal, i.e. the match was won or lost.
+- A transition that ends in a truncation (a draw by the time limit) is stored with
+  ``done = 0``: the value bootstraps through the time limit, since the state itself is not
+  terminal.
+- A transition that ends in a physics error (simulation instability) is dropped by the
+  caller and never stored; its next observation is meaningless.
+
+The buffer is circular: once full, each new transition overwrites the oldest one. Its
+:meth:`ReplayBuffer.state_dict` is a dict of plain numpy arrays, so a run can be saved with
+``np.savez`` (no pickle) and resumed exactly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+FIELDS = ("obs", "act", "rew", "next_obs", "done")
+"""Names of the stored arrays, as used in sampled batches and in the state dict."""
+
+
+def _positive_int(name: str, value: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be an int >= 1, got {value!r}")
+    return int(value)
+
+
+class ReplayBuffer:
+    """Circular buffer of ``(obs, act, rew, next_obs, done)`` transitions, all float32.
+
+    Storage is allocated up front with ``np.zeros`` (pages are only committed by the OS
+    when written, so a large, mostly empty buffer is cheap).
+
+    Args:
+        capacity: Maximum number of transitions kept (paper: 1,000,000).
+        obs_dim: Size of one (flat) observation.
+        act_dim: Size of one action.
+    """
+
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int) -> None:
+        self._capacity = _positive_int("capacity", capacity)
+        self.obs_dim = _positive_int("obs_dim", obs_dim)
+        self.act_dim = _positive_int("act_dim", act_dim)
+        self.obs = np.zeros((self._capacity, self.obs_dim), dtype=np.float32)
+        self.act = np.zeros((self._capacity, self.act_dim), dtype=np.float32)
+        self.rew = np.zeros(self._capacity, dtype=np.float32)
+        self.next_obs = np.zeros((self._capacity, self.obs_dim), dtype=np.float32)
+        self.done = np.zeros(self._capacity, dtype=np.float32)
+        self._pos = 0  # index the next transition is written to
+        self._size = 0  # number of filled slots (saturates at capacity)
+
+    @property
+    def capacity(self) -> int:
+        """Maximum number of transitions kept."""
+        return self._capacity
+
+    @property
+    def pos(self) -> int:
+        """Index the next transition will be written to."""
+        return self._pos
+
+    def __len__(self) -> int:
+        return self._size
+
+    def _row_shapes(self) -> dict[str, tuple[int, ...]]:
+        return {
+            "obs": (self.obs_dim,),
+            "act": (self.act_dim,),
+            "rew": (),
+            "next_obs": (self.obs_dim,),
+            "done": (),
+        }
+
+    def add(
+        self,
+        obs: np.ndarray,
+        act: np.ndarray,
+        rew: float,
+        next_obs: np.ndarray,
+        done: float | bool,
+    ) -> None:
+        """Store ONE transition (``done`` true only for a real terminal: win or loss)."""
+        self.add_batch(
+            np.asarray(obs)[None],
+            np.asarray(act)[None],
+            np.asarray(rew)[None],
+            np.asarray(next_obs)[None],
+            np.asarray(done)[None],
+        )
+
+    def add_batch(
+        self,
+        obs: np.ndarray,
+        act: np.ndarray,
+        rew: np.ndarray,
+        next_obs: np.ndarray,
+        done: np.ndarray,
+    ) -> None:
+        """Store ``n`` transitions at once (leading axis ``n``), in order, wrapping around.
+
+        Equivalent to ``n`` calls of :meth:`add`; if ``n > capacity`` only the last
+        ``capacity`` transitions survive, exactly as with sequential adds.
+        """
+        arrays = {"obs": obs, "act": act, "rew": rew, "next_obs": next_obs, "done": done}
+        n = int(np.shape(obs)[0]) if np.ndim(obs) > 0 else 0
+        checked: dict[str, np.ndarray] = {}
+        for name, row_shape in self._row_shapes().items():
+            arr = np.asarray(arrays[name], dtype=np.float32)
+            if arr.shape != (n, *row_shape):
+                raise ValueError(f"{name} must have shape {(n, *row_shape)}, got {arr.shape}")
+            checked[name] = arr
+        if n == 0:
+            return
+        start = 0
+        if n > self._capacity:  # only the newest `capacity` transitions would survive
+            start = n - self._capacity
+        idx = (self._pos + start + np.arange(n - start)) % self._capacity
+        for name, arr in checked.items():
+            getattr(self, name)[idx] = arr[start:]
+        self._pos = int((self._pos + n) % self._capacity)
+        self._size = min(self._size + n, self._capacity)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """Draw ``batch_size`` transitions uniformly (with replacement) from the filled part.
+
+        Returns fresh arrays keyed by :data:`FIELDS`: ``obs (B, obs_dim)``, ``act (B, act_dim)``,
+        ``rew (B,)``, ``next_obs (B, obs_dim)``, ``done (B,)``.
+        """
+        batch_size = _positive_int("batch_size", batch_size)
+        if self._size == 0:
+            raise ValueError("cannot sample from an empty ReplayBuffer")
+        idx = rng.integers(0, self._size, size=batch_size)
+        return {name: getattr(self, name)[idx] for name in FIELDS}
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Filled part of every array plus ``pos``, ``size``, ``capacity`` as 0-d int64 arrays.
+
+        All values are numpy arrays, so ``np.savez(path, **buffer.state_dict())`` works
+        without pickle.
+        """
+        state = {name: getattr(self, name)[: self._size].copy() for name in FIELDS}
+        state["pos"] = np.asarray(self._pos, dtype=np.int64)
+        state["size"] = np.asarray(self._size, dtype=np.int64)
+        state["capacity"] = np.asarray(self._capacity, dtype=np.int64)
+        return state
+
+    def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore from :meth:`state_dict` (e.g. an ``np.load`` of a saved ``.npz``).
+
+        Raises:
+            KeyError: A key is missing.
+            ValueError: Capacity, sizes or array shapes do not match this buffer.
+        """
+        for key in (*FIELDS, "pos", "size", "capacity"):
+            if key not in state:
+                raise KeyError(f"replay state is missing {key!r}")
+        capacity = int(np.asarray(state["capacity"]))
+        size = int(np.asarray(state["size"]))
+        pos = int(np.asarray(state["pos"]))
+        if capacity != self._capacity:
+            raise ValueError(f"capacity: saved {capacity}, this buffer has {self._capacity}")
+        if not 0 <= size <= capacity:
+            raise ValueError(f"size must be in [0, {capacity}], got {size}")
+        if not 0 <= pos < capacity or (size < capacity and pos != size):
+            raise ValueError(f"pos {pos} is inconsistent with size {size} and capacity {capacity}")
+        loaded = {}
+        for name, row_shape in self._row_shapes().items():
+            arr = np.asarray(state[name])
+            if arr.shape != (size, *row_shape):
+                raise ValueError(f"{name} must have shape {(size, *row_shape)}, got {arr.shape}")
+            loaded[name] = arr
+        for name, arr in loaded.items():
+            target = getattr(self, name)
+            target[:size] = arr
+            target[size:] = 0.0
+        self._pos = pos
+        self._size = size

@@ -1,0 +1,43 @@
+"""Write frames of a match to an mp4 (imageio with the ffmpeg binary from its wheel)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+import imageio.v2 as imageio
+import numpy as np
+
+
+def check_writable(path: Path) -> Path:
+    """Create ``path``'s folder and fail now, naming it, if it cannot be written."""
+    path = Path(path)
+    folder = path.parent if path.suffix else path
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OSError(f"cannot create output folder {folder}: {exc.strerror}") from exc
+    if not os.access(folder, os.W_OK):
+        raise PermissionError(f"output folder {folder} is not writable")
+    return path
+
+
+def write_mp4(frames: Iterable[np.ndarray], path: Path, fps: int) -> int:
+    """Encode ``(H, W, 3)`` uint8 frames as H.264 mp4; returns the number of frames written."""
+    path = check_writable(Path(path))
+    n = 0
+    with imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=8) as writer:
+        for frame in frames:
+            writer.append_data(np.asarray(frame, dtype=np.uint8))
+            n += 1
+    if n == 0:
+        path.unlink(missing_ok=True)
+        raise ValueError("no frames to write")
+    return n
+
+
+def count_frames(path: Path) -> int:
+    """Decode an mp4 and count its frames (used to check recordings)."""
+    with imageio.get_reader(path) as reader:
+        return sum(1 for _ in reader)
