@@ -89,7 +89,7 @@ class MatchConfig:
         if not isinstance(self.agents, tuple) or not all(isinstance(a, AgentSpec) for a in self.agents):
             raise ValueError("MatchConfig.agents must be a tuple of AgentSpec")
         validate_roster(self.agents)
-        if not isinstance(self.max_steps, int) or self.max_steps < 1:
+        if not isinstance(self.max_steps, int) or isinstance(self.max_steps, bool) or self.max_steps < 1:
             raise ValueError(f"MatchConfig.max_steps must be an int >= 1, got {self.max_steps!r}")
         if self.obs_mode not in OBS_MODES:
             raise ValueError(f"MatchConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")

@@ -70,7 +70,7 @@ class ObservationBuilder:
         if self.mode == "paper":
             obs = np.concatenate([pos.ravel(), vel.ravel(), forces.ravel(), sim.data.qpos, sim.data.qvel])
             obs = obs.astype(np.float32)
-            return [obs] * sim.n_agents
+            return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
         quat = sim.torso_quaternions()
         yaw = yaw_of(quat)
         angvel = sim.torso_angular_velocities()

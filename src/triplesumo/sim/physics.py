@@ -69,6 +69,7 @@ class Simulation:
         lo, hi = model.actuator_ctrlrange[self.actuator_ids].transpose(2, 0, 1)
         self.ctrl_low: np.ndarray = lo
         self.ctrl_high: np.ndarray = hi
+        self._fatal = ""
         self._warn_ids = np.array(list(WATCHED_WARNINGS.values()))
         self._warn_seen = np.zeros(len(WATCHED_WARNINGS), dtype=np.int64)
 
@@ -103,11 +104,15 @@ class Simulation:
         self.data.qvel[:] = qvel
         mujoco.mj_forward(self.model, self.data)
         self._warn_seen[:] = 0
+        self._fatal = ""
 
     def step(self, ctrl: np.ndarray) -> None:
         """Apply ``ctrl`` (shape ``(n_agents, n_motors)``, already in control units) for one env step."""
         self.data.ctrl[self.actuator_ids.ravel()] = ctrl.ravel()
-        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        try:
+            mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        except mujoco.FatalError as exc:  # e.g. the arena stack overflows: reported by new_warnings()
+            self._fatal = str(exc)
 
     def torso_positions(self) -> np.ndarray:
         """``(n_agents, 3)`` torso centres from the free joints' qpos (current after a step)."""
@@ -156,13 +161,18 @@ class Simulation:
     def new_warnings(self) -> list[str]:
         """Names of watched MuJoCo warnings raised since the last call or reset.
 
-        Also reports ``non_finite_state`` when qpos or qvel hold NaN or inf.
+        Also reports ``non_finite_state`` when qpos or qvel hold NaN or inf, and
+        ``arena_overflow`` when ``mj_step`` failed with a MuJoCo fatal error (out of arena
+        memory).
         """
         counts = self.data.warning.number[self._warn_ids]
         fired = []
         if (counts > self._warn_seen).any():
             fired = [n for n, c, s in zip(WATCHED_WARNINGS, counts, self._warn_seen, strict=True) if c > s]
             self._warn_seen[:] = counts
+        if self._fatal:
+            fired.append("arena_overflow")
+            self._fatal = ""
         if not (np.isfinite(self.data.qpos.sum()) and np.isfinite(self.data.qvel.sum())):
             fired.append("non_finite_state")
         return fired

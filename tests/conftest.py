@@ -1,0 +1,63 @@
+"""Shared fixtures of the test suite.
+
+``MUJOCO_GL`` must be chosen before anything imports mujoco, so it is set here, first.
+"""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from collections.abc import Callable  # noqa: E402
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from triplesumo.envs.match import Match  # noqa: E402
+from triplesumo.rules.config import MatchConfig, ResetNoise  # noqa: E402
+
+NO_NOISE = ResetNoise(position=0.0, yaw=0.0, joints=0.0, velocity=0.0)
+
+
+@pytest.fixture
+def no_noise() -> ResetNoise:
+    """Reset noise switched off: every reset gives the documented start pose."""
+    return NO_NOISE
+
+
+@pytest.fixture
+def make_match() -> Callable[..., Match]:
+    """``make_match(**MatchConfig fields)``: a match reset with seed 0 (noise-free unless given)."""
+
+    def make(**fields: object) -> Match:
+        fields.setdefault("reset_noise", NO_NOISE)
+        match = Match(MatchConfig(**fields))  # type: ignore[arg-type]
+        match.reset(seed=0)
+        return match
+
+    return make
+
+
+@pytest.fixture
+def place() -> Callable[..., None]:
+    """``place(match, agent, x=, y=, z=, vx=, vy=, vz=)``: set an agent's torso free joint and forward.
+
+    Only the given coordinates change; positions are absolute, velocities world-frame.
+    """
+
+    def put(match: Match, agent: str, **coords: float) -> None:
+        a = match.sim.agents[match.agents.index(agent)]
+        for k, axis in enumerate("xyz"):
+            if axis in coords:
+                match.data.qpos[a.root_qpos + k] = coords[axis]
+            if f"v{axis}" in coords:
+                match.data.qvel[a.root_qvel + k] = coords[f"v{axis}"]
+        mujoco.mj_forward(match.model, match.data)
+
+    return put
+
+
+@pytest.fixture
+def zeros() -> Callable[[Match], np.ndarray]:
+    """``zeros(match)``: the all-zero action array of a match."""
+    return lambda match: np.zeros((match.n_agents, 8))

@@ -1,0 +1,225 @@
+"""The compiled physics model: names, control ranges, colours, arena, physics options, rosters."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+import pytest
+
+from triplesumo.envs.match import Match
+from triplesumo.model import PAPER_AGENTS, AgentSpec, PhysicsConfig, build_model, ring_half_size
+from triplesumo.model import names as mjcf_names
+from triplesumo.model.specs import BLUE, GREEN, RED
+from triplesumo.rules.config import MatchConfig, RewardConfig
+
+
+@pytest.fixture(scope="module")
+def model() -> mujoco.MjModel:
+    return build_model(PAPER_AGENTS, PhysicsConfig())
+
+
+def _actuator_names(model: mujoco.MjModel) -> list[str]:
+    return [model.actuator(i).name for i in range(model.nu)]
+
+
+# ------------------------------------------------------------------ names and ranges
+@pytest.mark.parametrize(("agent", "limit"), [("spider", 0.22), ("ant", 0.20), ("bug", 0.18)])
+def test_control_ranges_read_back_from_compiled_model(model: mujoco.MjModel, agent: str, limit: float) -> None:
+    ids = [i for i, n in enumerate(_actuator_names(model)) if n.startswith(f"{agent}/")]
+    assert len(ids) == 8
+    ranges = model.actuator_ctrlrange[ids]
+    np.testing.assert_allclose(ranges[:, 0], -limit, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ranges[:, 1], limit, rtol=0, atol=1e-12)
+    assert model.actuator_ctrllimited[ids].all()
+
+
+def test_every_actuator_belongs_to_an_agent_and_each_has_eight(model: mujoco.MjModel) -> None:
+    prefixes = [n.split("/")[0] for n in _actuator_names(model)]
+    assert sorted(set(prefixes)) == ["ant", "bug", "spider"]
+    assert {p: prefixes.count(p) for p in set(prefixes)} == {"ant": 8, "bug": 8, "spider": 8}
+    assert model.nu == 24
+
+
+@pytest.mark.parametrize(
+    ("kind", "name"),
+    [
+        (mujoco.mjtObj.mjOBJ_BODY, "spider/torso"),
+        (mujoco.mjtObj.mjOBJ_JOINT, "spider/root"),
+        (mujoco.mjtObj.mjOBJ_BODY, "ant/torso"),
+        (mujoco.mjtObj.mjOBJ_JOINT, "bug/root"),
+        (mujoco.mjtObj.mjOBJ_BODY, "bug/torso"),
+        (mujoco.mjtObj.mjOBJ_JOINT, "ant/root"),
+    ],
+)
+def test_prefixed_names_exist(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> None:
+    assert mujoco.mj_name2id(model, kind, name) >= 0
+
+
+def test_root_joints_are_free_joints(model: mujoco.MjModel) -> None:
+    for agent in ("ant", "bug", "spider"):
+        assert model.joint(f"{agent}/root").type[0] == mujoco.mjtJoint.mjJNT_FREE
+
+
+def test_no_hand_suffixed_copies_of_the_paper_code(model: mujoco.MjModel) -> None:
+    """The paper's code named copies ``torso2``, ``hip_12``...; ours has none of those names."""
+    for name in ("torso", "torso1", "torso2", "torso3", "hip_12", "root2"):
+        assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name) == -1
+        assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name) == -1
+
+
+def test_exactly_one_quadruped_mjcf_in_assets() -> None:
+    xmls = sorted(mjcf_names.ASSETS.glob("*.xml"))
+    with_motors = [p for p in xmls if "<motor" in p.read_text()]
+    assert with_motors == [mjcf_names.QUADRUPED_XML]
+    body = mujoco.MjModel.from_xml_path(str(mjcf_names.QUADRUPED_XML))
+    assert body.nu == 8
+    assert body.njnt == 9  # one free joint + 8 hinges
+
+
+# -------------------------------------------------------------------------- colours
+@pytest.mark.parametrize(("agent", "channel"), [("ant", 0), ("spider", 1), ("bug", 2)])
+def test_agent_geoms_are_coloured_by_agent(model: mujoco.MjModel, agent: str, channel: int) -> None:
+    ids = [g for g in range(model.ngeom) if model.geom(g).name.startswith(f"{agent}/")]
+    assert len(ids) == 13
+    rgb = model.geom_rgba[ids, :3]
+    others = [c for c in range(3) if c != channel]
+    assert (rgb[:, channel] > rgb[:, others].max(axis=1) + 0.2).all(), rgb
+
+
+def test_colours_are_the_specs(model: mujoco.MjModel) -> None:
+    for agent, rgba in (("ant", RED), ("bug", BLUE), ("spider", GREEN)):
+        np.testing.assert_allclose(model.geom(f"{agent}/torso_geom").rgba, rgba, atol=1e-6)
+
+
+# ---------------------------------------------------------------- arena and physics
+def test_ring_half_size_is_two_from_the_model(model: mujoco.MjModel) -> None:
+    assert ring_half_size(model) == pytest.approx(2.0)
+    assert model.geom("border_left").pos[0] == pytest.approx(-2.0)
+
+
+def test_physics_defaults_are_the_papers(model: mujoco.MjModel) -> None:
+    assert PhysicsConfig().frame_skip == 5
+    assert model.opt.timestep == pytest.approx(0.01)
+    assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_RK4
+    match = Match()
+    assert match.sim.frame_skip == 5
+    assert match.sim.dt == pytest.approx(0.05)
+
+
+def test_physics_config_flows_into_the_model() -> None:
+    model = build_model(PAPER_AGENTS, PhysicsConfig(timestep=0.005, integrator="implicitfast"))
+    assert model.opt.timestep == pytest.approx(0.005)
+    assert model.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+
+
+def test_a_step_advances_frame_skip_physics_steps() -> None:
+    match = Match(MatchConfig(physics=PhysicsConfig(frame_skip=3)))
+    match.reset(seed=0)
+    match.step_array(np.zeros((3, 8)))
+    assert match.data.time == pytest.approx(0.03)
+
+
+# --------------------------------------------------------------------------- rosters
+def _pursuit_roster() -> tuple[AgentSpec, ...]:
+    return (
+        AgentSpec("p0", "pursuers", 0.2, RED),
+        AgentSpec("p1", "pursuers", 0.2, RED),
+        AgentSpec("p2", "pursuers", 0.2, RED),
+        AgentSpec("evader", "evader", 0.22, GREEN),
+    )
+
+
+def _free_for_all() -> tuple[AgentSpec, ...]:
+    return (AgentSpec("a", "a", 0.2), AgentSpec("b", "b", 0.2), AgentSpec("c", "c", 0.2))
+
+
+@pytest.mark.parametrize("agents", [_pursuit_roster(), _free_for_all()], ids=["3-vs-1", "free-for-all"])
+def test_other_rosters_compile_and_step(agents: tuple[AgentSpec, ...]) -> None:
+    match = Match(MatchConfig(agents=agents, max_steps=20))
+    obs, _ = match.reset(seed=1)
+    n = len(agents)
+    assert match.model.nu == 8 * n
+    assert len(obs) == n
+    for a in agents:
+        assert mujoco.mj_name2id(match.model, mujoco.mjtObj.mjOBJ_JOINT, f"{a.name}/root") >= 0
+    start = match.sim.torso_positions().copy()
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        result = match.step_array(rng.uniform(-1, 1, (n, 8)))
+    assert result.rewards.shape == (n,)
+    assert len(result.infos) == n
+    assert all(np.isfinite(o).all() for o in result.observations)
+    assert not np.allclose(match.sim.torso_positions(), start)
+
+
+def test_pursuit_roster_teams() -> None:
+    match = Match(MatchConfig(agents=_pursuit_roster()))
+    assert match.teams.names == ("pursuers", "evader")
+    assert match.teams.team_of.tolist() == [0, 0, 0, 1]
+    assert match.teams.opponents[3].tolist() == [0, 1, 2]
+    assert match.teams.partners[0].tolist() == [1, 2]
+
+
+# ------------------------------------------------------------------------ validation
+@pytest.mark.parametrize(
+    ("build", "field"),
+    [
+        (lambda: AgentSpec("ant", "team", -0.2), "ctrl_range"),
+        (lambda: AgentSpec("ant", "team", float("nan")), "ctrl_range"),
+        (lambda: AgentSpec("ant", "team", 0.0), "ctrl_range"),
+        (lambda: AgentSpec("Ant!", "team", 0.2), "name"),
+        (lambda: PhysicsConfig(integrator="Verlet"), "integrator"),
+        (lambda: PhysicsConfig(timestep=0.0), "timestep"),
+        (lambda: PhysicsConfig(frame_skip=0), "frame_skip"),
+        (lambda: PhysicsConfig(memory="lots"), "memory"),
+        (lambda: MatchConfig(obs_mode="pixels"), "obs_mode"),
+        (lambda: MatchConfig(max_steps=0), "max_steps"),
+        (lambda: MatchConfig(max_steps=2.5), "max_steps"),
+        (lambda: MatchConfig(on_physics_error="ignore"), "on_physics_error"),
+        (lambda: RewardConfig(still=1.0), "still"),
+        (lambda: RewardConfig(opponent_velocity=float("inf")), "opponent_velocity"),
+        (lambda: MatchConfig(agents=(PAPER_AGENTS[0], PAPER_AGENTS[0], PAPER_AGENTS[2])), "agents"),
+        (lambda: MatchConfig(agents=(PAPER_AGENTS[0], PAPER_AGENTS[1])), "agents"),
+    ],
+)
+def test_config_errors_name_the_field(build, field: str) -> None:
+    with pytest.raises(ValueError, match=field):
+        build()
+
+
+def test_duplicate_agent_names_are_rejected_by_the_builder_too() -> None:
+    with pytest.raises(ValueError, match="unique"):
+        build_model((PAPER_AGENTS[0], PAPER_AGENTS[0], PAPER_AGENTS[2]), PhysicsConfig())
+
+
+def test_configs_are_frozen() -> None:
+    for cfg in (PhysicsConfig(), MatchConfig(), RewardConfig(), PAPER_AGENTS[0]):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(cfg, dataclasses.fields(cfg)[0].name, None)
+
+
+# ----------------------------------------------------------------- start pose at rest
+def test_agents_at_rest_never_touch_and_stand_on_the_tatami(make_match, zeros) -> None:
+    match = make_match()
+    owner = np.full(match.model.ngeom, -1)
+    for i, a in enumerate(match.sim.agents):
+        owner[a.geoms] = i
+    start = match.sim.torso_positions().copy()
+    for _ in range(300):
+        result = match.step_array(zeros(match))
+        assert not (result.terminated or result.truncated)
+        n = match.data.ncon
+        g1, g2 = owner[match.data.contact.geom1[:n]], owner[match.data.contact.geom2[:n]]
+        assert not ((g1 >= 0) & (g2 >= 0) & (g1 != g2)).any(), f"agents touch at step {match.steps}"
+    # Nobody drifted, and every torso rests above the tatami's top (z = 0.5).
+    np.testing.assert_allclose(match.sim.torso_positions()[:, :2], start[:, :2], atol=0.05)
+    assert (match.sim.torso_positions()[:, 2] > 0.5).all()
+    # At rest, the contact forces summed over every geom of an agent carry its weight.
+    forces = match.sim.contact_forces()
+    g = match.sim.geoms_per_agent
+    gravity = -match.model.opt.gravity[2]
+    for i, a in enumerate(match.sim.agents):
+        weight = match.model.body_subtreemass[a.torso_body] * gravity
+        np.testing.assert_allclose(forces[i * g:(i + 1) * g].sum(axis=0), [0.0, 0.0, weight], atol=1e-3 * weight)

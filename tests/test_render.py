@@ -1,0 +1,62 @@
+"""Headless ``rgb_array`` frames (EGL; MUJOCO_GL is set in conftest.py)."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from triplesumo import TripleSumoEnv, parallel_env
+
+
+def test_rgb_array_frames_show_the_match() -> None:
+    env = parallel_env(render_mode="rgb_array", width=160, height=120)
+    env.reset(seed=0)
+    first = env.render()
+    assert first.shape == (120, 160, 3)
+    assert first.dtype == np.uint8
+    assert first.std() > 10.0  # not a blank or constant frame
+    # the rendered frame is a copy, not the renderer's buffer
+    again = env.render()
+    np.testing.assert_array_equal(first, again)
+    # move Spider far away (off the ring, onto the floor side): the picture changes
+    match = env.unwrapped.match
+    spider = match.sim.agents[2]
+    match.data.qpos[spider.root_qpos:spider.root_qpos + 3] = [0.0, 1.8, 0.9]
+    mujoco.mj_forward(match.model, match.data)
+    moved = env.render()
+    diff = np.abs(moved.astype(int) - first.astype(int))
+    assert (diff.sum(axis=2) > 30).mean() > 0.005
+    env.close()
+
+
+def test_frames_differ_between_states_far_apart_in_time() -> None:
+    env = parallel_env(render_mode="rgb_array", width=160, height=120)
+    env.reset(seed=1)
+    start = env.render()
+    rng = np.random.default_rng(1)
+    for _ in range(40):
+        _, _, term, trunc, _ = env.step({a: rng.uniform(-1, 1, 8) for a in env.possible_agents})
+        if any(term.values()) or any(trunc.values()):
+            break
+    later = env.render()
+    assert later.shape == start.shape
+    assert np.abs(later.astype(int) - start.astype(int)).mean() > 0.5
+    env.close()
+
+
+def test_gymnasium_view_renders_rgb_array() -> None:
+    env = TripleSumoEnv(render_mode="rgb_array", width=160, height=120)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (120, 160, 3)
+    assert frame.dtype == np.uint8
+    assert frame.std() > 10.0
+    env.close()
+
+
+def test_render_without_mode_returns_none() -> None:
+    env = parallel_env()
+    env.reset(seed=0)
+    with pytest.warns(UserWarning):
+        assert env.render() is None
