@@ -2,19 +2,48 @@
 
 A reimplementation of Wang, Das & Millard, *Learning cooperative behaviours in
 adversarial multi-agent systems* (TAROS 2022), on MuJoCo, PettingZoo and Gymnasium.
+
+``import triplesumo`` registers the Gymnasium ids (``TripleSumo-v0``,
+``TripleSumo-Paper-v0``) and nothing heavier: the env classes, PettingZoo and torch are
+imported when first used (``triplesumo.parallel_env``, ``triplesumo.Match``, ...).
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from triplesumo._gl import ensure_headless_gl
 
 ensure_headless_gl()
 
-from triplesumo.envs import Match, TripleSumoEnv, TripleSumoParallelEnv, parallel_env, register_envs  # noqa: E402
-from triplesumo.rules import MatchConfig, ResetNoise, RewardConfig  # noqa: E402
-
 __version__ = "0.1.0"
 ENV_VERSION = "v0"
 
-register_envs()
+_LAZY = {
+    "Match": "triplesumo.envs.match",
+    "MatchBatch": "triplesumo.envs.batch",
+    "TripleSumoEnv": "triplesumo.envs.single",
+    "TripleSumoParallelEnv": "triplesumo.envs.parallel",
+    "parallel_env": "triplesumo.envs.parallel",
+    "MatchConfig": "triplesumo.rules.config",
+    "ResetNoise": "triplesumo.rules.config",
+    "RewardConfig": "triplesumo.rules.config",
+}
 
-__all__ = ["ENV_VERSION", "Match", "MatchConfig", "ResetNoise", "RewardConfig", "TripleSumoEnv",
-           "TripleSumoParallelEnv", "__version__", "parallel_env"]
+__all__ = ["ENV_VERSION", "__version__", *_LAZY]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'triplesumo' has no attribute {name!r}")
+
+
+def _register() -> None:
+    from triplesumo.registration import register_envs
+
+    register_envs()
+
+
+_register()

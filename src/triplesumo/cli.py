@@ -15,6 +15,16 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     play = sub.add_parser("play", help="play one seeded match between policies; --video FILE records it")
     _dcargs.add_arguments(play, PlayConfig)
+    from triplesumo.train.config import TrainConfig
+
+    train = sub.add_parser("train", help="train one agent with DDPG (the others follow given policies)")
+    train.add_argument("--resume", metavar="RUN_DIR", default=None,
+                       help="continue the killed or finished run in RUN_DIR (its saved config; "
+                            "--epochs and --max-minutes may be raised)")
+    _dcargs.add_arguments(train, TrainConfig)
+    plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
+    plot.add_argument("run_dir", help="run folder (holds metrics.csv)")
+    plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
     bench = sub.add_parser("bench", help="benchmarks: 'bench env' or 'bench train' (--help for each)")
     bench.add_argument("which", choices=["env", "train"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
@@ -30,6 +40,34 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.evaluation.play import PlayConfig, run_play
 
             run_play(_dcargs.build(PlayConfig, args))
+        elif args.command == "train":
+            from triplesumo.train.config import TrainConfig
+            from triplesumo.train.loop import train
+
+            if args.resume:
+                allowed = ("epochs", "max_minutes", "progress")
+                given = {k for k in vars(args) if k not in ("command", "resume")}
+                if given - set(allowed):
+                    extra = given - set(allowed)
+                    flags = ", ".join(sorted("--" + k.replace("__", ".").replace("_", "-") for k in extra))
+                    raise ValueError(f"with --resume the run's saved config is used; only --epochs, --max-minutes "
+                                     f"and --progress may be given, not {flags}")
+                overrides = {k: v for k, v in vars(args).items() if k in allowed}
+                result = train(TrainConfig(), resume_dir=args.resume, overrides=overrides)
+            else:
+                result = train(_dcargs.build(TrainConfig, args))
+            print(f"trained {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates "
+                  f"in {result.seconds:.0f} s; MWR {result.mwr:+.3f}")
+            print(f"run folder: {result.run_dir} (metrics.csv, plots/, checkpoints/, policy.json)")
+        elif args.command == "plot":
+            from pathlib import Path
+
+            from triplesumo.evaluation.plots import plot_run, read_metrics_csv
+
+            run_dir = Path(args.run_dir)
+            paths = plot_run(read_metrics_csv(run_dir / "metrics.csv"), run_dir / "plots", window=args.window,
+                             title=run_dir.name)
+            print("\n".join(str(p) for p in paths))
         elif args.command == "bench":
             if args.which == "env":
                 from triplesumo.benchmarks.env import main as bench_env

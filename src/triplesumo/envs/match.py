@@ -117,6 +117,18 @@ class Match:
 
         Finite values beyond [-1, 1] are clipped; each agent's action is scaled to its
         motors' control range. NaN or inf raises ``ValueError`` naming the agent.
+        It is :meth:`prepare`, the physics step, then :meth:`finish_step`.
+        """
+        ctrl = self.prepare(actions)
+        self.sim.step(ctrl)
+        return self.finish_step()
+
+    def prepare(self, actions: np.ndarray) -> np.ndarray:
+        """Check ``(n_agents, 8)`` normalised actions and return the ``(n_agents, 8)`` controls.
+
+        The first half of :meth:`step_array`, with its errors; it changes nothing, so a
+        runner that steps the physics of many matches together
+        (:class:`triplesumo.envs.batch.MatchBatch`) can check every match first.
         """
         if self.over:
             raise RuntimeError("the match is over (or was never started): call reset() first")
@@ -126,8 +138,15 @@ class Match:
         bad = ~np.isfinite(actions).all(axis=1)
         if bad.any():
             raise ValueError(f"action of {self.agents[int(np.argmax(bad))]!r} contains NaN or inf")
-        ctrl = self._ctrl_mid + np.clip(actions, -1.0, 1.0) * self._ctrl_half
-        self.sim.step(ctrl)
+        return self._ctrl_mid + np.clip(actions, -1.0, 1.0) * self._ctrl_half
+
+    def finish_step(self) -> StepResult:
+        """Judge the physics step just taken: outcome, rewards, observations, MuJoCo warnings.
+
+        The second half of :meth:`step_array`: call it exactly once after ``sim.step(ctrl)``
+        (or an equivalent ``frame_skip`` substeps on this match's ``data``) with the
+        controls :meth:`prepare` returned.
+        """
         self.steps += 1
         trouble = self.sim.new_warnings()
         if trouble:
@@ -172,6 +191,39 @@ class Match:
             infos.append(info)
         # The last trustworthy observation: never the NaN or auto-reset state.
         return StepResult(self._last_obs, np.zeros(self.n_agents), False, True, infos)
+
+    def snapshot(self) -> dict[str, Any]:
+        """Everything needed to continue this match exactly: physics integration state
+        (incl. warm start), step count, last observations, warning counters and the
+        random generator's state. Arrays and JSON-able values only (no pickle)."""
+        import mujoco
+
+        size = mujoco.mj_stateSize(self.model, mujoco.mjtState.mjSTATE_INTEGRATION)
+        physics = np.empty(size)
+        mujoco.mj_getState(self.model, self.data, physics, mujoco.mjtState.mjSTATE_INTEGRATION)
+        return {
+            "physics": physics,
+            "last_obs": np.stack(self._last_obs) if self._last_obs else np.zeros((0,)),
+            "warnings": self.sim._warn_seen.copy(),
+            "steps": self.steps,
+            "over": self.over,
+            "rng": self.np_random.bit_generator.state,
+        }
+
+    def restore(self, snap: dict[str, Any]) -> None:
+        """Continue from :meth:`snapshot` (the same config is assumed)."""
+        import mujoco
+
+        mujoco.mj_resetData(self.model, self.data)
+        mujoco.mj_setState(self.model, self.data, np.asarray(snap["physics"], dtype=np.float64),
+                           mujoco.mjtState.mjSTATE_INTEGRATION)
+        mujoco.mj_forward(self.model, self.data)
+        self.sim._warn_seen[:] = snap["warnings"]
+        self.steps = int(snap["steps"])
+        self.over = bool(snap["over"])
+        self._last_obs = list(np.asarray(snap["last_obs"], dtype=np.float32)) if len(snap["last_obs"]) else []
+        self.np_random = np.random.default_rng()
+        self.np_random.bit_generator.state = snap["rng"]
 
     def state(self) -> np.ndarray:
         """Global state: the ``paper`` observation vector (torso states, contact forces, qpos, qvel)."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from triplesumo.agents.zoo import make_policy
+from triplesumo.agents.zoo import policies_from_pairs
 from triplesumo.evaluation.runner import MatchRecord, play_match
 from triplesumo.rules.config import MatchConfig
 
@@ -38,19 +38,10 @@ class PlayConfig:
             raise ValueError("PlayConfig.width and height must be >= 16")
 
 
-def parse_policies(pairs: tuple[str, ...], seed: int, obs_mode: str) -> dict[str, object]:
-    """``("ant=zoo:ant", ...)`` -> ``{"ant": policy, ...}``."""
-    out = {}
-    for k, pair in enumerate(pairs):
-        agent, spec = pair.split("=")
-        out[agent] = make_policy(spec, seed=seed * 1000 + k, expect_obs_mode=obs_mode)
-    return out
-
-
 def run_play(cfg: PlayConfig) -> MatchRecord:
     """Play the match, print its outcome, and return its record."""
     match_cfg = MatchConfig(max_steps=cfg.max_steps, obs_mode=cfg.obs_mode)
-    policies = parse_policies(cfg.policies, cfg.seed, cfg.obs_mode)
+    policies = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
     video = Path(cfg.video) if cfg.video else None
     record = play_match(policies, seed=cfg.seed, config=match_cfg, video=video, width=cfg.width, height=cfg.height)
     who = ", ".join(f"{a}: {o}" for a, o in record.outcomes.items())

@@ -20,7 +20,7 @@ WIN, LOSS, DRAW = "win", "loss", "draw"
 
 def agents_out(torso_xy: np.ndarray, half_size: float) -> np.ndarray:
     """Boolean ``(n_agents,)``: whose centre of mass is outside the ring."""
-    return np.max(np.abs(torso_xy[:, :2]), axis=1) > half_size
+    return (np.abs(torso_xy[:, :2]) > half_size).any(axis=1)
 
 
 def judge(out: np.ndarray, team_of: np.ndarray, n_teams: int) -> list[str] | None:

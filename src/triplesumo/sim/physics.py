@@ -153,8 +153,11 @@ class Simulation:
         frames = contact.frame[involved].reshape(-1, 3, 3)
         world = np.einsum("nji,nj->ni", frames, local[:, :3])  # frame rows are the contact axes
         r1, r2 = r1[involved], r2[involved]
-        np.add.at(out, r2[r2 >= 0], world[r2 >= 0])
-        np.subtract.at(out, r1[r1 >= 0], world[r1 >= 0])
+        on2, on1 = r2 >= 0, r1 >= 0
+        rows_hit = np.concatenate([r2[on2], r1[on1]])
+        forces = np.concatenate([world[on2], -world[on1]])
+        flat = (rows_hit[:, None] * 3 + np.arange(3)).ravel()
+        out = np.bincount(flat, forces.ravel(), minlength=out.size).reshape(out.shape)
         return out
 
     # ------------------------------------------------------------- warnings

@@ -45,6 +45,17 @@ def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None 
                      f"(shipped: {available()}) or the path of a policy file")
 
 
+def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str) -> dict[str, Any]:
+    """``("ant=zoo:ant", "spider=random")`` -> ``{"ant": policy, "spider": policy}``."""
+    out: dict[str, Any] = {}
+    for k, pair in enumerate(pairs):
+        agent, spec = pair.split("=")
+        if agent in out:
+            raise ValueError(f"policy for {agent!r} given twice")
+        out[agent] = make_policy(spec, seed=seed * 1000 + k, expect_obs_mode=obs_mode)
+    return out
+
+
 def make_paper_env(**kwargs: Any) -> Any:
     """``TripleSumo-Paper-v0``: Bug learns; Ant and Spider are the shipped zoo policies."""
     from triplesumo.envs.single import TripleSumoEnv

@@ -1,4 +1,6 @@
-"""Gymnasium ids of TripleSumo's single-agent view."""
+"""Gymnasium ids of TripleSumo's single-agent view (registered by ``import triplesumo``).
+
+Kept outside :mod:`triplesumo.envs` so that registering imports only gymnasium."""
 
 from __future__ import annotations
 

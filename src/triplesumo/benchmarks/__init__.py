@@ -1,0 +1,1 @@
+"""Speed measurements (never timed tests): ``triplesumo bench env`` is :mod:`triplesumo.benchmarks.env`."""

@@ -1,0 +1,331 @@
+"""``triplesumo bench env``: env steps per second, measured in one run.
+
+Variants, each on its own compiled model of the same :class:`MatchConfig`:
+
+``raw_physics``
+    ``mj_step(model, data, nstep=frame_skip)`` with the random controls written to
+    ``data.ctrl``: no observations, rewards or checks. It replays the seeded starts and
+    actions of ``match_core`` and restarts where that match's episodes end (a ring-exit
+    test on the torso qpos and the step limit, a few us), so every single-match variant
+    simulates the very same trajectories.
+``parallel_env``
+    ``triplesumo.parallel_env()``: ``step`` with a dict of actions, observations, rewards
+    and infos, ``reset()`` when the agents are done. Target: >= 0.85 x ``raw_physics``.
+``match_core``
+    The bare match core, ``Match.step_array`` on an ``(n_agents, 8)`` array.
+``batch_<backend>_<n>t``
+    :class:`~triplesumo.envs.batch.MatchBatch` of ``n_matches`` matches on ``n`` threads
+    (``mujoco``: ``mujoco.batch``; ``threads``: a Python thread pool), ``reset_one`` on
+    every finished match; about ``steps`` env steps in total. ``batch_threads_1t`` is
+    those matches stepped one after another (``Match.step_array``'s work), the baseline
+    of ``..._vs_sequential``; ``..._vs_one_match`` compares with ``match_core``.
+
+Actions are uniform in [-1, 1], drawn in advance from ``np.random.default_rng(seed)``.
+In each of ``rounds`` rounds every variant replays the same seeded work, the variants
+taking turns in chunks of about ``chunk`` env steps (A, B, C, ..., A, B, C, ...) so that
+a change in the machine's load hits them alike. A rate is the median over rounds; a
+ratio is the ratio of two such medians. The machine's load and number of usable CPUs
+are recorded beside them: on a shared 2-core machine compare ratios, not rates.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from triplesumo.envs.batch import BACKENDS, MatchBatch
+from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.envs.parallel import TripleSumoParallelEnv
+from triplesumo.model.specs import PhysicsConfig
+from triplesumo.rules import outcome as rules_outcome
+from triplesumo.rules.config import MatchConfig
+
+TARGET_ENV_VS_RAW = 0.85
+"""Issue 2: the PettingZoo view must run at >= 0.85 x the raw physics rate (RK4)."""
+
+LABELS = {
+    "raw_physics": "raw physics (mj_step)",
+    "parallel_env": "PettingZoo parallel_env",
+    "match_core": "Match.step_array",
+}
+
+def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2, integrator: str = "RK4",
+                      seed: int = 0, rounds: int = 3, chunk: int = 250) -> dict[str, Any]:
+    """Measure every variant ``rounds`` times, interleaved; return rates, ratios and the setup.
+
+    Within a round the variants take turns in chunks of about ``chunk`` env steps until
+    each has run ``steps``, so that a change in the machine's load hits them alike.
+
+    Keys: ``setup`` (sizes, physics, versions, CPUs, load), ``rates`` (median env steps/s
+    by variant), ``rounds`` (each round's rate by variant), ``episodes`` (finished per
+    round, by variant), ``ratios`` (``parallel_env_vs_raw``, ``match_core_vs_raw``, and
+    for each batch variant ``<name>_vs_one_match`` against ``match_core`` and
+    ``<name>_vs_sequential`` against ``batch_threads_1t``, the same matches stepped one
+    after another), ``target`` (the ``parallel_env_vs_raw`` goal and whether it was met).
+    """
+    for name, value in (("steps", steps), ("n_matches", n_matches), ("n_threads", n_threads), ("rounds", rounds),
+                        ("chunk", chunk)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    config = MatchConfig(physics=PhysicsConfig(integrator=integrator))
+    variants: dict[str, _Variant] = {
+        "raw_physics": _RawPhysics(config, steps, seed),
+        "parallel_env": _ParallelEnv(config, steps, seed),
+        "match_core": _MatchCore(config, steps, seed),
+    }
+    per_match = max(1, steps // n_matches)
+    for backend, threads in _batch_variants(n_threads):
+        batch = MatchBatch(config, n_matches, threads, backend=backend)
+        variants[f"batch_{backend}_{threads}t"] = _Batch(batch, per_match, seed)
+    load = os.getloadavg()
+    per_round: dict[str, list[float]] = {name: [] for name in variants}
+    try:
+        for _ in range(rounds):
+            for name, rate in _one_round(variants, chunk).items():
+                per_round[name].append(rate)
+    finally:
+        for variant in variants.values():
+            variant.close()
+    rates = {name: float(np.median(r)) for name, r in per_round.items()}
+    ratios = {
+        "parallel_env_vs_raw": rates["parallel_env"] / rates["raw_physics"],
+        "match_core_vs_raw": rates["match_core"] / rates["raw_physics"],
+    }
+    for name in variants:
+        if name.startswith("batch_"):
+            ratios[f"{name}_vs_one_match"] = rates[name] / rates["match_core"]
+            ratios[f"{name}_vs_sequential"] = rates[name] / rates[SEQUENTIAL]
+    return {
+        "setup": {
+            "steps": steps, "n_matches": n_matches, "steps_per_match": per_match, "n_threads": n_threads,
+            "rounds": rounds, "chunk": chunk, "seed": seed, "integrator": integrator,
+            "timestep": config.physics.timestep, "frame_skip": config.physics.frame_skip,
+            "versions": _versions(), "cpu_count": os.cpu_count(),
+            "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+            "load_average_before": [round(x, 2) for x in load], "platform": platform.platform(),
+        },
+        "rates": rates,
+        "rounds": per_round,
+        "episodes": {name: v.episodes for name, v in variants.items()},
+        "ratios": ratios,
+        "target": {"parallel_env_vs_raw": TARGET_ENV_VS_RAW,
+                   "met": ratios["parallel_env_vs_raw"] >= TARGET_ENV_VS_RAW},
+    }
+
+
+def _one_round(variants: dict[str, _Variant], chunk: int) -> dict[str, float]:
+    """Every variant from its seeded start to its end, taking turns; env steps/s by variant."""
+    seconds = dict.fromkeys(variants, 0.0)
+    done = dict.fromkeys(variants, 0)
+    for variant in variants.values():
+        variant.start()
+    while any(done[name] < v.length for name, v in variants.items()):
+        for name, v in variants.items():
+            stop = min(v.length, done[name] + max(1, chunk // v.width))
+            if stop > done[name]:
+                begin = time.perf_counter()
+                v.run(done[name], stop)
+                seconds[name] += time.perf_counter() - begin
+                done[name] = stop
+    return {name: v.length * v.width / seconds[name] for name, v in variants.items()}
+
+
+# ----------------------------------------------------------------- variants
+def _actions(n_agents: int, steps: int, seed: int) -> np.ndarray:
+    """``(steps, n_agents, 8)`` float32 actions, uniform in [-1, 1], the same for every single-match variant."""
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, n_agents, ACTION_SIZE)).astype(np.float32)
+
+
+class _Variant:
+    """A way of stepping: ``start`` (untimed) from the seeded start, then ``run`` steps ``[t0, t1)``."""
+
+    length: int
+    """Steps of one round."""
+    width = 1
+    """Env steps per step (matches stepped together)."""
+    episodes = 0
+    """Episodes finished in the current round."""
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+    def run(self, t0: int, t1: int) -> None:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Release threads or renderers."""
+
+
+class _RawPhysics(_Variant):
+    def __init__(self, config: MatchConfig, steps: int, seed: int) -> None:
+        self.match, self.length, self.seed = Match(config), steps, seed
+        sim = self.match.sim
+        actions = _actions(self.match.n_agents, steps, seed).astype(np.float64)
+        mid, half_range = (sim.ctrl_high + sim.ctrl_low) / 2.0, (sim.ctrl_high - sim.ctrl_low) / 2.0  # as Match
+        self.ctrl = np.zeros((steps, self.match.model.nu))  # actuator order: a step writes data.ctrl whole
+        self.ctrl[:, sim.actuator_ids.ravel()] = (mid + actions * half_range).reshape(steps, -1)
+
+    def start(self) -> None:
+        self.rng = np.random.default_rng(self.seed)  # the starts Match.reset(seed), then reset(), draw
+        self.match.sim.reset(*self.match.start_state(self.rng))
+        self.episodes = self.episode_length = 0
+
+    def run(self, t0: int, t1: int) -> None:
+        match, model, data, ctrl = self.match, self.match.model, self.match.data, self.ctrl
+        torso, half, frame_skip = match.sim.torso_qpos, match.half_size, match.sim.frame_skip
+        limit = match.config.max_steps
+        for t in range(t0, t1):
+            data.ctrl[:] = ctrl[t]
+            mujoco.mj_step(model, data, nstep=frame_skip)
+            self.episode_length += 1
+            if self.episode_length >= limit or rules_outcome.agents_out(data.qpos[torso], half).any():
+                match.sim.reset(*match.start_state(self.rng))
+                self.episodes += 1
+                self.episode_length = 0
+
+
+class _ParallelEnv(_Variant):
+    def __init__(self, config: MatchConfig, steps: int, seed: int) -> None:
+        self.env, self.length, self.seed = TripleSumoParallelEnv(config), steps, seed
+        actions = _actions(len(self.env.possible_agents), steps, seed)
+        self.actions = [dict(zip(self.env.possible_agents, a, strict=True)) for a in actions]
+
+    def start(self) -> None:
+        self.env.reset(seed=self.seed)
+        self.episodes = 0
+
+    def run(self, t0: int, t1: int) -> None:
+        env = self.env
+        for t in range(t0, t1):
+            env.step(self.actions[t])
+            if not env.agents:
+                env.reset()
+                self.episodes += 1
+
+    def close(self) -> None:
+        self.env.close()
+
+
+class _MatchCore(_Variant):
+    def __init__(self, config: MatchConfig, steps: int, seed: int) -> None:
+        self.match, self.length, self.seed = Match(config), steps, seed
+        self.actions = _actions(self.match.n_agents, steps, seed)
+
+    def start(self) -> None:
+        self.match.reset(self.seed)
+        self.episodes = 0
+
+    def run(self, t0: int, t1: int) -> None:
+        match = self.match
+        for t in range(t0, t1):
+            match.step_array(self.actions[t])
+            if match.over:
+                match.reset()
+                self.episodes += 1
+
+
+class _Batch(_Variant):
+    def __init__(self, batch: MatchBatch, per_match: int, seed: int) -> None:
+        self.batch, self.length, self.width, self.seed = batch, per_match, batch.n_matches, seed
+        shape = (per_match, batch.n_matches, batch.n_agents, ACTION_SIZE)
+        self.actions = np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32)
+
+    def start(self) -> None:
+        self.batch.reset_all(self.seed)
+        self.episodes = 0
+
+    def run(self, t0: int, t1: int) -> None:
+        batch = self.batch
+        for t in range(t0, t1):
+            batch.step(self.actions[t])
+            for k in np.flatnonzero(batch.over):
+                batch.reset_one(int(k))
+                self.episodes += 1
+
+    def close(self) -> None:
+        self.batch.close()
+
+
+SEQUENTIAL = "batch_threads_1t"
+"""The batch's matches stepped one after another on the calling thread: step_array's work."""
+
+
+def _batch_variants(n_threads: int) -> list[tuple[str, int]]:
+    """The same matches sequentially, then each backend on 1 and on ``n_threads`` threads."""
+    variants = [("threads", 1), ("mujoco", 1)] + [(backend, n_threads) for backend in BACKENDS]
+    return list(dict.fromkeys(variants))
+
+
+def _versions() -> dict[str, str]:
+    versions = {"python": platform.python_version(), "mujoco": mujoco.__version__, "numpy": np.__version__}
+    for package in ("triplesumo", "gymnasium", "pettingzoo"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = "not installed"
+    return versions
+
+
+# --------------------------------------------------------------------- report
+def format_table(result: dict[str, Any]) -> str:
+    """The readable table ``main`` prints."""
+    setup, rates, ratios = result["setup"], result["rates"], result["ratios"]
+    v = setup["versions"]
+    lines = [
+        f"TripleSumo env benchmark: {setup['integrator']}, timestep {setup['timestep']}, frame_skip "
+        f"{setup['frame_skip']}; median of {setup['rounds']} rounds, interleaved in chunks of "
+        f"{setup['chunk']} env steps; seed {setup['seed']}",
+        f"python {v['python']}, mujoco {v['mujoco']}, numpy {v['numpy']}; {setup['cpu_count']} CPUs "
+        f"({setup['usable_cpus']} usable), load before {setup['load_average_before'][0]}",
+        "",
+        f"{'variant':46s} {'env steps/s':>11s} {'vs raw':>7s} {'vs 1 match':>10s} {'vs seq':>7s} {'episodes':>8s}",
+    ]
+    for name, rate in rates.items():
+        if name.startswith("batch_"):
+            _, backend, threads = name.split("_")
+            label = (f"MatchBatch {setup['n_matches']} x {setup['steps_per_match']} steps, "
+                     f"{backend}, {threads[:-1]} thread{'s' if threads != '1t' else ''}")
+            versus = f"{ratios[f'{name}_vs_one_match']:10.2f} {ratios[f'{name}_vs_sequential']:7.2f}"
+        else:
+            label, versus = f"{LABELS[name]}, {setup['steps']} steps", " " * 18
+        lines.append(f"{label:46s} {rate:11.0f} {rate / rates['raw_physics']:7.2f} {versus} "
+                     f"{result['episodes'][name]:8d}")
+    target = result["target"]
+    lines += ["", f"target parallel_env >= {target['parallel_env_vs_raw']} x raw physics: "
+              f"{ratios['parallel_env_vs_raw']:.2f} ({'met' if target['met'] else 'NOT met'})"]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="triplesumo bench env", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--steps", type=int, default=3000, help="env steps per variant and round (default: 3000)")
+    parser.add_argument("--matches", type=int, default=16, help="matches of the MatchBatch variants (default: 16)")
+    parser.add_argument("--threads", type=int, default=2, help="threads of the MatchBatch variants (default: 2)")
+    parser.add_argument("--rounds", type=int, default=3, help="repetitions; the median is reported (default: 3)")
+    parser.add_argument("--chunk", type=int, default=250, help="env steps per turn of a variant (default: 250)")
+    parser.add_argument("--integrator", default="RK4", help="MuJoCo integrator (default: RK4, the paper's)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of starts and actions (default: 0)")
+    parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
+    parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
+    args = parser.parse_args(argv)
+    if args.quick:
+        args.steps, args.matches, args.rounds, args.chunk = 20, 2, 1, 10
+    result = run_env_benchmark(steps=args.steps, n_matches=args.matches, n_threads=args.threads,
+                               integrator=args.integrator, seed=args.seed, rounds=args.rounds,
+                               chunk=args.chunk)
+    print(format_table(result))
+    if args.json:
+        path = Path(args.json)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result, indent=2) + "\n")
+        print(f"wrote {path}")
+    return 0

@@ -1,0 +1,475 @@
+"""Read a run's metrics CSV and draw the paper's figures.
+
+A metrics CSV has one row per epoch and at least the columns of
+:data:`REQUIRED_COLUMNS`, plus any number of reward-term columns whose names start with
+:data:`TERM_PREFIX` (``reward_opponent_velocity``, ``reward_still``, ...).
+
+Figures are built with :class:`matplotlib.figure.Figure` directly, never through the
+pyplot state machine, so plotting works under any backend (including ``Agg`` on a
+headless machine), never opens a window and never changes the global backend. Each
+figure is cleared once written.
+
+All curves use the trailing window λ of :mod:`triplesumo.evaluation.metrics` with
+partial windows at the start; the first λ − 1 epochs are shaded grey in every figure
+so a reader can tell them apart.
+"""
+
+from __future__ import annotations
+
+import csv
+import errno
+import math
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from triplesumo.evaluation.metrics import (
+    OUTCOMES,
+    moving_winning_rate,
+    rolling_mean,
+    rolling_steps_to_win,
+)
+
+__all__ = [
+    "REQUIRED_COLUMNS",
+    "TERM_PREFIX",
+    "plot_comparison",
+    "plot_run",
+    "read_metrics_csv",
+]
+
+REQUIRED_COLUMNS: Final[tuple[str, ...]] = (
+    "epoch",
+    "outcome",
+    "local_winning_rate",
+    "steps",
+    "total_reward",
+    "dense_reward",
+    "sparse_reward",
+)
+"""Columns every metrics CSV must have."""
+
+TERM_PREFIX: Final[str] = "reward_"
+"""Prefix of the per-term reward columns (one column per named reward term)."""
+
+_STRING_COLUMNS: Final[frozenset[str]] = frozenset({"outcome"})
+_FIGSIZE: Final[tuple[float, float]] = (8.0, 4.5)
+_DPI: Final[int] = 110
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_metrics_csv(path: str | os.PathLike[str]) -> dict[str, NDArray[np.generic]]:
+    """Read a metrics CSV into one array per column.
+
+    Required columns and ``reward_*`` columns become float64 arrays (an empty cell is
+    NaN); ``outcome`` becomes a string array whose values are checked against
+    :data:`~triplesumo.evaluation.metrics.OUTCOMES`. Any other column is float64 if
+    every cell parses as a number, else a string array.
+
+    Args:
+        path: The CSV file.
+
+    Returns:
+        Column name -> array, in the file's column order, all of the same length.
+
+    Raises:
+        FileNotFoundError: If the file does not exist.
+        ValueError: If the file is empty, lacks a required column (the message names
+            the file and the missing columns), has a duplicate column, a row with the
+            wrong number of fields, a non-numeric cell in a numeric column, or an
+            unknown outcome (the message names the file and line).
+    """
+    source = Path(path)
+    with source.open(newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if header is None:
+            raise ValueError(
+                f"{source}: empty file; expected a header with columns {list(REQUIRED_COLUMNS)}"
+            )
+        names = [h.strip() for h in header]
+        duplicates = sorted({n for n in names if names.count(n) > 1})
+        if duplicates:
+            raise ValueError(f"{source}: duplicate column(s) {duplicates}")
+        missing = [c for c in REQUIRED_COLUMNS if c not in names]
+        if missing:
+            raise ValueError(
+                f"{source}: missing column(s) {missing}; "
+                f"required: {list(REQUIRED_COLUMNS)} plus optional '{TERM_PREFIX}*' terms"
+            )
+        cells: dict[str, list[str]] = {n: [] for n in names}
+        lines: list[int] = []
+        for row in reader:
+            if not row:
+                continue
+            if len(row) != len(names):
+                raise ValueError(
+                    f"{source}, line {reader.line_num}: expected {len(names)} fields, "
+                    f"got {len(row)}"
+                )
+            lines.append(reader.line_num)
+            for name, cell in zip(names, row, strict=True):
+                cells[name].append(cell.strip())
+
+    out: dict[str, NDArray[np.generic]] = {}
+    for name in names:
+        column = cells[name]
+        if name in _STRING_COLUMNS:
+            for line, value in zip(lines, column, strict=True):
+                if value not in OUTCOMES:
+                    raise ValueError(
+                        f"{source}, line {line}: unknown {name} {value!r}; "
+                        f"expected one of {list(OUTCOMES)}"
+                    )
+            out[name] = np.asarray(column, dtype=np.str_)
+        elif name in REQUIRED_COLUMNS or name.startswith(TERM_PREFIX):
+            out[name] = _parse_floats(column, name, lines, source)
+        else:
+            try:
+                out[name] = _parse_floats(column, name, lines, source)
+            except ValueError:
+                out[name] = np.asarray(column, dtype=np.str_)
+    return out
+
+
+def _parse_floats(
+    column: list[str], name: str, lines: list[int], source: Path
+) -> NDArray[np.float64]:
+    """Parse a column of cells as floats; an empty cell is NaN."""
+    values = np.empty(len(column), dtype=np.float64)
+    for i, cell in enumerate(column):
+        if cell == "":
+            values[i] = math.nan
+            continue
+        try:
+            values[i] = float(cell)
+        except ValueError:
+            raise ValueError(
+                f"{source}, line {lines[i]}: column {name!r} is not a number: {cell!r}"
+            ) from None
+    return values
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _prepare_dir(out_dir: str | os.PathLike[str]) -> Path:
+    """Create ``out_dir`` if needed and check it is writable; errors name the folder."""
+    folder = Path(out_dir)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _folder_error(folder, exc) from exc
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise PermissionError(
+            errno.EACCES,
+            f"cannot write plots to folder {folder}: not writable",
+            str(folder),
+        )
+    return folder
+
+
+def _folder_error(folder: Path, exc: OSError) -> OSError:
+    """An ``OSError`` of the same kind as ``exc`` whose message names ``folder``."""
+    reason = exc.strerror or str(exc)
+    if exc.errno is None:
+        return OSError(f"cannot write plots to folder {folder}: {reason}")
+    # OSError(errno, ...) picks the matching subclass (PermissionError, ...).
+    return OSError(exc.errno, f"cannot write plots to folder {folder}: {reason}")
+
+
+def _title(prefix: str, what: str) -> str:
+    """Figure title: ``what``, preceded by the run's title when one is given."""
+    return f"{prefix}: {what}" if prefix else what
+
+
+def _new_axes(title: str, xlabel: str, ylabel: str) -> tuple[Figure, Axes]:
+    """A new, pyplot-free figure with one labelled axes and a light grid."""
+    fig = Figure(figsize=_FIGSIZE, layout="constrained")
+    ax = fig.add_subplot()
+    ax.set_title(title)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    return fig, ax
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    """Write ``fig`` as a PNG at ``path``, then clear it to release its artists."""
+    try:
+        fig.savefig(path, dpi=_DPI)
+    except OSError as exc:
+        raise _folder_error(path.parent, exc) from exc
+    finally:
+        fig.clear()
+    return path
+
+
+def _shade_partial(ax: Axes, epochs: NDArray[np.float64], window: int) -> None:
+    """Shade the first ``window - 1`` epochs, whose trailing window is partial."""
+    if window <= 1 or epochs.size < 2:
+        return
+    end = epochs[min(window - 1, epochs.size - 1)]
+    ax.axvspan(
+        float(epochs[0]),
+        float(end),
+        color="0.85",
+        alpha=0.5,
+        lw=0,
+        label=f"partial window (first {window - 1} epochs)",
+    )
+
+
+def _column(
+    metrics: Mapping[str, NDArray[np.generic]],
+    name: str,
+    what: str,
+    n: int | None = None,
+) -> NDArray[np.generic]:
+    """Fetch a column, with errors that name the column and whose metrics it is."""
+    if name not in metrics:
+        raise ValueError(f"{what}: missing column {name!r}; have {sorted(metrics)}")
+    values = np.asarray(metrics[name])
+    if values.ndim != 1:
+        raise ValueError(f"{what}: column {name!r} must be one-dimensional")
+    if n is not None and values.size != n:
+        raise ValueError(
+            f"{what}: column {name!r} has {values.size} rows, expected {n}"
+        )
+    return values
+
+
+def _smooth(
+    values: NDArray[np.generic], window: int, name: str, what: str
+) -> NDArray[np.float64]:
+    """Rolling mean of a column, with errors that name the column."""
+    try:
+        return rolling_mean(np.asarray(values, dtype=np.float64), window)
+    except ValueError as exc:
+        raise ValueError(f"{what}: column {name!r}: {exc}") from exc
+
+
+def _epochs(
+    metrics: Mapping[str, NDArray[np.generic]], n: int, what: str
+) -> NDArray[np.float64]:
+    """The epoch column as floats, or ``0..n-1`` when the metrics have none."""
+    if "epoch" not in metrics:
+        return np.arange(n, dtype=np.float64)
+    return np.asarray(_column(metrics, "epoch", what, n), dtype=np.float64)
+
+
+def _pretty_term(name: str) -> str:
+    """``reward_opponent_velocity`` -> ``opponent velocity``."""
+    return name.removeprefix(TERM_PREFIX).replace("_", " ")
+
+
+# --------------------------------------------------------------------------- one run
+
+
+def plot_run(
+    metrics: Mapping[str, NDArray[np.generic]],
+    out_dir: str | os.PathLike[str],
+    *,
+    window: int = 200,
+    title: str = "",
+    label: str = "Bug",
+) -> list[Path]:
+    """Draw the paper's figures for one run (training or test).
+
+    Writes four PNGs into ``out_dir``:
+
+    * ``rewards.png``: rolling mean of the total, dense and sparse reward per epoch;
+    * ``reward_terms.png``: rolling mean of every ``reward_*`` term column (a note
+      when there is none);
+    * ``mwr.png``: moving winning rate with a zero line (above zero: more wins than
+      losses);
+    * ``steps_to_win.png``: rolling mean of the steps needed to win, over won epochs
+      only (gaps where the window holds no win).
+
+    Args:
+        metrics: Column name -> per-epoch array, as returned by
+            :func:`read_metrics_csv`; needs the columns of :data:`REQUIRED_COLUMNS`.
+        out_dir: Folder for the figures; created if missing.
+        window: Window length λ of every rolling statistic; 200 as in the paper.
+        title: Run title shown before each figure's own title (e.g. ``"training"``).
+        label: Name of the learning agent, used in legends.
+
+    Returns:
+        Paths of the written files, in the order above.
+
+    Raises:
+        ValueError: If a required column is missing (named), columns differ in length,
+            a plotted column holds non-finite values, or ``window < 1``.
+        OSError: If ``out_dir`` cannot be created or written (the message names it).
+    """
+    what = "metrics"
+    n = _column(metrics, "outcome", what).size
+    for name in REQUIRED_COLUMNS:
+        _column(metrics, name, what, n)
+    epochs = _epochs(metrics, n, what)
+    # Validate the numbers before touching the disk.
+    rewards = {
+        kind: _smooth(metrics[f"{kind}_reward"], window, f"{kind}_reward", what)
+        for kind in ("total", "dense", "sparse")
+    }
+    terms = {
+        name: _smooth(_column(metrics, name, what, n), window, name, what)
+        for name in metrics
+        if name.startswith(TERM_PREFIX)
+    }
+    try:
+        mwr = moving_winning_rate(
+            np.asarray(metrics["local_winning_rate"], np.float64), window
+        )
+    except ValueError as exc:
+        raise ValueError(f"{what}: column 'local_winning_rate': {exc}") from exc
+    outcomes = [str(o) for o in metrics["outcome"]]
+    try:
+        steps = rolling_steps_to_win(
+            np.asarray(metrics["steps"], np.float64), outcomes, window
+        )
+    except ValueError as exc:
+        raise ValueError(f"{what}: columns 'steps' and 'outcome': {exc}") from exc
+    folder = _prepare_dir(out_dir)
+    smoothing = f"rolling mean over λ = {window} epochs"
+    written: list[Path] = []
+
+    fig, ax = _new_axes(
+        _title(title, f"{label}'s reward per epoch"), "epoch", f"reward ({smoothing})"
+    )
+    _shade_partial(ax, epochs, window)
+    for kind, curve in rewards.items():
+        ax.plot(epochs, curve, lw=1.2, label=f"{label} {kind}")
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.legend(loc="best")
+    written.append(_save(fig, folder / "rewards.png"))
+
+    fig, ax = _new_axes(
+        _title(title, f"{label}'s reward terms per epoch"),
+        "epoch",
+        f"reward ({smoothing})",
+    )
+    _shade_partial(ax, epochs, window)
+    for name, curve in terms.items():
+        ax.plot(epochs, curve, lw=1.2, label=_pretty_term(name))
+    ax.axhline(0.0, color="k", lw=0.6)
+    if terms:
+        ax.legend(loc="best")
+    else:
+        ax.text(
+            0.5,
+            0.5,
+            f"no '{TERM_PREFIX}*' columns",
+            transform=ax.transAxes,
+            ha="center",
+            va="center",
+        )
+    written.append(_save(fig, folder / "reward_terms.png"))
+
+    fig, ax = _new_axes(
+        _title(title, f"moving winning rate of {label}'s team (λ = {window})"),
+        "epoch",
+        "MWR",
+    )
+    _shade_partial(ax, epochs, window)
+    ax.plot(epochs, mwr, lw=1.2, color="C0", label=f"{label}'s team MWR")
+    ax.axhline(0.0, color="k", lw=0.8, ls="--", label="0: as many wins as losses")
+    ax.set_ylim(-1.05, 1.05)
+    ax.legend(loc="best")
+    written.append(_save(fig, folder / "mwr.png"))
+
+    fig, ax = _new_axes(
+        _title(title, f"steps needed to win ({label}'s team, λ = {window})"),
+        "epoch",
+        "steps (mean over won epochs in window)",
+    )
+    _shade_partial(ax, epochs, window)
+    ax.plot(epochs, steps, lw=1.2, color="C2", label=f"{label}'s team, won epochs")
+    if np.all(np.isnan(steps)):
+        ax.text(
+            0.5, 0.5, "no epoch won", transform=ax.transAxes, ha="center", va="center"
+        )
+    ax.legend(loc="best")
+    written.append(_save(fig, folder / "steps_to_win.png"))
+    return written
+
+
+# --------------------------------------------------------------------------- several runs
+
+
+def plot_comparison(
+    curves: Mapping[str, Mapping[str, NDArray[np.generic]]],
+    out_dir: str | os.PathLike[str],
+    window: int = 200,
+) -> list[Path]:
+    """Compare several runs (e.g. a trained Bug against ``passive`` and ``random``).
+
+    Writes ``compare_mwr.png`` (one MWR curve per run, with a zero line) and
+    ``compare_rewards.png`` (rolling mean total reward per run) into ``out_dir``.
+
+    Args:
+        curves: Run name (used as legend label) -> metrics of that run; each needs the
+            columns ``local_winning_rate`` and ``total_reward``; ``epoch`` is used for
+            the x axis when present, else ``0..n-1``. Runs may differ in length.
+        out_dir: Folder for the figures; created if missing.
+        window: Window length λ of the rolling statistics; 200 as in the paper.
+
+    Returns:
+        Paths of the two written files, MWR first.
+
+    Raises:
+        ValueError: If ``curves`` is empty, a run lacks a column (run and column are
+            named), or a column holds invalid values.
+        OSError: If ``out_dir`` cannot be created or written (the message names it).
+    """
+    if not curves:
+        raise ValueError("curves is empty: nothing to compare")
+    prepared: list[
+        tuple[str, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+    ] = []
+    longest = np.zeros(0)
+    for name, metrics in curves.items():
+        what = f"run {name!r}"
+        lwr = _column(metrics, "local_winning_rate", what)
+        n = lwr.size
+        total = _column(metrics, "total_reward", what, n)
+        epochs = _epochs(metrics, n, what)
+        try:
+            mwr = moving_winning_rate(np.asarray(lwr, np.float64), window)
+        except ValueError as exc:
+            raise ValueError(f"{what}: column 'local_winning_rate': {exc}") from exc
+        reward = _smooth(total, window, "total_reward", what)
+        prepared.append((name, epochs, mwr, reward))
+        if epochs.size > longest.size:
+            longest = epochs
+    folder = _prepare_dir(out_dir)
+
+    fig, ax = _new_axes(f"moving winning rate (λ = {window})", "epoch", "MWR")
+    _shade_partial(ax, longest, window)
+    for name, epochs, mwr, _ in prepared:
+        ax.plot(epochs, mwr, lw=1.2, label=name)
+    ax.axhline(0.0, color="k", lw=0.8, ls="--", label="0: as many wins as losses")
+    ax.set_ylim(-1.05, 1.05)
+    ax.legend(loc="best")
+    mwr_path = _save(fig, folder / "compare_mwr.png")
+
+    fig, ax = _new_axes(
+        "total reward per epoch",
+        "epoch",
+        f"reward (rolling mean over λ = {window} epochs)",
+    )
+    _shade_partial(ax, longest, window)
+    for name, epochs, _, reward in prepared:
+        ax.plot(epochs, reward, lw=1.2, label=name)
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.legend(loc="best")
+    rewards_path = _save(fig, folder / "compare_rewards.png")
+    return [mwr_path, rewards_path]

@@ -1,0 +1,1 @@
+"""Training: the DDPG loop over batched matches, checkpoints, metrics logging."""

@@ -1,0 +1,178 @@
+"""MatchBatch: many matches stepped together give exactly the trajectories of each match alone."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from triplesumo.envs.batch import MatchBatch, match_seeds
+from triplesumo.envs.match import Match
+from triplesumo.rules.config import MatchConfig
+from triplesumo.sim.physics import PhysicsError
+
+N_MATCHES, N_STEPS = 3, 50
+SHORT = MatchConfig(max_steps=20)
+"""Episodes end by the step limit (a draw, truncated) at step 20, so 50 steps see resets."""
+
+VARIANTS = [("mujoco", 1), ("mujoco", 2), ("threads", 2)]
+
+
+def _actions(seed: int = 3) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, (N_STEPS, N_MATCHES, 3, 8))
+
+
+def _record(results: list, matches: list[Match]) -> list[tuple]:
+    return [(m.data.qpos.copy(), m.data.qvel.copy(), r.rewards.copy(), np.stack(r.observations), r.terminated,
+             r.truncated, r.infos[0]["outcome"]) for r, m in zip(results, matches, strict=True)]
+
+
+def _sequential(config: MatchConfig, actions: np.ndarray, seed: int) -> tuple[list, int]:
+    """Each match stepped alone with Match.step_array: the reference."""
+    matches = [Match(config) for _ in range(N_MATCHES)]
+    for match, s in zip(matches, match_seeds(seed, N_MATCHES), strict=True):
+        match.reset(s)
+    log, resets = [], 0
+    for t in range(N_STEPS):
+        results = [m.step_array(a) for m, a in zip(matches, actions[t], strict=True)]
+        log.append(_record(results, matches))
+        for m in matches:
+            if m.over:
+                m.reset()
+                resets += 1
+    return log, resets
+
+
+def _assert_same(expected: list, actual: list) -> None:
+    for t, (rows_e, rows_a) in enumerate(zip(expected, actual, strict=True)):
+        for k, (e, a) in enumerate(zip(rows_e, rows_a, strict=True)):
+            for name, x, y in zip(("qpos", "qvel", "rewards", "observations"), e[:4], a[:4], strict=True):
+                assert np.array_equal(x, y), f"step {t}, match {k}: {name} differs by {np.abs(x - y).max()}"
+            assert e[4:] == a[4:], f"step {t}, match {k}: (terminated, truncated, outcome) differ"
+
+
+@pytest.mark.parametrize(("backend", "n_threads"), VARIANTS)
+def test_trajectories_equal_each_match_alone_bit_for_bit(backend: str, n_threads: int) -> None:
+    actions = _actions()
+    expected, expected_resets = _sequential(SHORT, actions, seed=11)
+    assert expected_resets >= N_MATCHES  # every match ended and was reset at least once
+    log, resets = [], 0
+    with MatchBatch(SHORT, N_MATCHES, n_threads, backend=backend) as batch:
+        batch.reset_all(11)
+        for t in range(N_STEPS):
+            log.append(_record(batch.step(actions[t]), batch.matches))
+            for k in np.flatnonzero(batch.over):
+                batch.reset_one(int(k))
+                resets += 1
+    assert resets == expected_resets
+    _assert_same(expected, log)
+
+
+def test_reset_all_seeds_each_match_from_the_seed_sequence() -> None:
+    seeds = match_seeds(5, N_MATCHES)
+    assert seeds == match_seeds(5, N_MATCHES)
+    assert len(set(seeds)) == N_MATCHES
+    with MatchBatch(None, N_MATCHES, 1) as batch:
+        starts = [obs[0] for obs, _ in batch.reset_all(5)]
+    for seed, obs in zip(seeds, starts, strict=True):
+        alone = Match()
+        np.testing.assert_array_equal(alone.reset(seed)[0][0], obs)
+
+
+@pytest.mark.parametrize(("backend", "n_threads"), VARIANTS)
+def test_a_finished_match_is_reported_over_until_reset(
+        backend: str, n_threads: int, place: Callable[..., None]) -> None:
+    with MatchBatch(None, N_MATCHES, n_threads, backend=backend) as batch:
+        batch.reset_all(0)
+        assert not batch.over.any()
+        place(batch.matches[1], "spider", x=3.0, y=0.0)  # Spider's torso past the edge
+        batch.reload(1)
+        results = batch.step(np.zeros((N_MATCHES, 3, 8)))
+        assert results[1].terminated and not results[1].truncated
+        assert [info["outcome"] for info in results[1].infos] == ["win", "win", "loss"]
+        assert not results[0].terminated and not results[2].terminated
+        assert batch.over.tolist() == [False, True, False]
+        with pytest.raises(RuntimeError, match=r"matches \[1\] are over"):
+            batch.step(np.zeros((N_MATCHES, 3, 8)))
+        batch.reset_one(1)
+        assert not batch.over.any()
+        batch.step(np.zeros((N_MATCHES, 3, 8)))
+
+
+@pytest.mark.parametrize("shape", [(N_MATCHES, 3, 7), (N_MATCHES - 1, 3, 8), (3, 8), (N_MATCHES, 2, 8)])
+def test_wrong_action_shape_is_a_value_error(shape: tuple[int, ...]) -> None:
+    with MatchBatch(None, N_MATCHES, 1) as batch:
+        batch.reset_all(0)
+        with pytest.raises(ValueError, match=r"actions must have shape \(3, 3, 8\)"):
+            batch.step(np.zeros(shape))
+
+
+@pytest.mark.parametrize(("backend", "n_threads"), VARIANTS)
+def test_nan_action_names_match_and_agent_and_steps_nothing(backend: str, n_threads: int) -> None:
+    with MatchBatch(None, N_MATCHES, n_threads, backend=backend) as batch:
+        batch.reset_all(0)
+        before = [m.data.qpos.copy() for m in batch.matches]
+        actions = np.zeros((N_MATCHES, 3, 8))
+        actions[2, 1, 4] = np.nan
+        with pytest.raises(ValueError, match=r"match 2: action of 'bug' contains NaN or inf"):
+            batch.step(actions)
+        assert all(np.array_equal(b, m.data.qpos) for b, m in zip(before, batch.matches, strict=True))
+        assert [m.steps for m in batch.matches] == [0, 0, 0]
+
+
+@pytest.mark.parametrize(("backend", "n_threads"), VARIANTS)
+def test_physics_blow_up_in_one_match_truncates_only_that_match(backend: str, n_threads: int) -> None:
+    with MatchBatch(None, N_MATCHES, n_threads, backend=backend) as batch:
+        batch.reset_all(0)
+        batch.matches[0].data.qvel[:] = 1e12  # MuJoCo's bad-qvel warning and auto-reset
+        batch.reload(0)
+        results = batch.step(np.zeros((N_MATCHES, 3, 8)))
+    assert results[0].truncated and results[0].infos[0]["outcome"] == "error"
+    assert "bad_qvel" in results[0].infos[0]["physics_error"]
+    assert all(np.isfinite(o).all() for o in results[0].observations)
+    assert [r.infos[0]["outcome"] for r in results[1:]] == [None, None]
+
+
+def test_physics_error_raise_mode_finishes_every_match_then_names_the_match() -> None:
+    with MatchBatch(MatchConfig(on_physics_error="raise"), N_MATCHES, 2) as batch:
+        batch.reset_all(0)
+        batch.matches[1].data.qvel[:] = 1e12
+        batch.reload(1)
+        with pytest.raises(PhysicsError, match="match 1: MuJoCo reported bad_qvel"):
+            batch.step(np.zeros((N_MATCHES, 3, 8)))
+        assert [m.steps for m in batch.matches] == [1, 1, 1]
+
+
+def test_after_a_step_each_match_data_holds_its_state_with_current_contacts() -> None:
+    """The mujoco backend copies the whole MjData back: contacts as after stepping the match alone."""
+    with MatchBatch(None, 2, 2) as batch:
+        batch.reset_all(0)
+        for _ in range(30):  # the agents have landed on the tatami
+            batch.step(np.zeros((2, 3, 8)))
+        match = batch.matches[0]
+        forces = match.sim.contact_forces()
+        assert match.data.ncon > 0 and np.abs(forces).sum() > 0
+        stepped = Match()  # the same contacts as stepping this match alone
+        stepped.reset(match_seeds(0, 2)[0])
+        for _ in range(30):
+            stepped.step_array(np.zeros((3, 8)))
+        assert stepped.data.ncon == match.data.ncon
+        np.testing.assert_array_equal(stepped.sim.contact_forces(), forces)
+
+
+def test_bad_arguments_and_closed_batch() -> None:
+    with pytest.raises(ValueError, match="n_matches"):
+        MatchBatch(None, 0)
+    with pytest.raises(ValueError, match="n_threads"):
+        MatchBatch(None, 2, 0)
+    with pytest.raises(ValueError, match="backend"):
+        MatchBatch(None, 2, 1, backend="rollout")
+    batch = MatchBatch(None, 2, 2)
+    with pytest.raises(RuntimeError, match="call reset_one"):  # never started
+        batch.step(np.zeros((2, 3, 8)))
+    with pytest.raises(IndexError):
+        batch.reset_one(2)
+    batch.close()
+    with pytest.raises(RuntimeError, match="closed"):
+        batch.reset_all(0)

@@ -1,0 +1,59 @@
+"""``triplesumo bench env`` at tiny sizes: the result's shape and consistency, never its speed."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from triplesumo.benchmarks.env import main, run_env_benchmark
+
+SINGLE = ("raw_physics", "parallel_env", "match_core")
+BATCHES = ("batch_threads_1t", "batch_mujoco_1t", "batch_mujoco_2t", "batch_threads_2t")
+
+
+def _check(result: dict) -> None:
+    assert set(result) == {"setup", "rates", "rounds", "episodes", "ratios", "target"}
+    assert set(result["rates"]) == set(SINGLE + BATCHES)
+    for name, rate in result["rates"].items():
+        assert math.isfinite(rate) and rate > 0, name
+        assert len(result["rounds"][name]) == result["setup"]["rounds"]
+    rates, ratios = result["rates"], result["ratios"]
+    assert ratios["parallel_env_vs_raw"] == pytest.approx(rates["parallel_env"] / rates["raw_physics"], rel=1e-12)
+    assert ratios["match_core_vs_raw"] == pytest.approx(rates["match_core"] / rates["raw_physics"], rel=1e-12)
+    for name in BATCHES:
+        assert ratios[f"{name}_vs_one_match"] == pytest.approx(rates[name] / rates["match_core"], rel=1e-12)
+        assert ratios[f"{name}_vs_sequential"] == pytest.approx(rates[name] / rates["batch_threads_1t"], rel=1e-12)
+    assert result["target"] == {"parallel_env_vs_raw": 0.85, "met": ratios["parallel_env_vs_raw"] >= 0.85}
+    setup = result["setup"]
+    assert setup["integrator"] == "RK4" and setup["cpu_count"] >= 1
+    assert {"python", "mujoco", "numpy"} <= set(setup["versions"])
+
+
+def test_run_env_benchmark_returns_consistent_rates_and_ratios() -> None:
+    result = run_env_benchmark(steps=8, n_matches=2, n_threads=2, rounds=2, chunk=3)
+    _check(result)
+    assert result["setup"]["steps_per_match"] == 4
+
+
+def test_single_match_variants_replay_the_same_episodes() -> None:
+    """Raw physics restarts where the env's episodes end: the same trajectories, so the same count."""
+    result = run_env_benchmark(steps=260, n_matches=2, n_threads=1, rounds=1)
+    counts = {result["episodes"][name] for name in SINGLE}
+    assert len(counts) == 1, result["episodes"]
+    assert counts.pop() >= 1, "no episode ended: lengthen the run so the check means something"
+
+
+def test_main_quick_writes_json_with_the_documented_keys(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    path = tmp_path / "out" / "bench.json"
+    assert main(["--quick", "--json", str(path)]) == 0
+    _check(json.loads(path.read_text()))
+    printed = capsys.readouterr().out
+    assert "raw physics" in printed and "PettingZoo parallel_env" in printed and "MatchBatch" in printed
+
+
+def test_bad_sizes_are_value_errors() -> None:
+    with pytest.raises(ValueError, match="steps"):
+        run_env_benchmark(steps=0)

@@ -1,0 +1,174 @@
+"""Policy files (safetensors + JSON manifest) and the zoo's policy names."""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import save_file
+
+from triplesumo.agents import policy_file
+from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
+from triplesumo.agents.networks import Actor, ActorPolicy
+from triplesumo.agents.policy_file import PolicyFileError, load_policy, save_policy
+from triplesumo.agents.zoo import load, make_policy, policies_from_pairs
+
+OBS_DIM = 12
+
+
+@pytest.fixture
+def actor() -> Actor:
+    torch.manual_seed(3)
+    return Actor(OBS_DIM, 8, (16, 16))
+
+
+@pytest.fixture
+def stem(tmp_path: Path, actor: Actor) -> Path:
+    stem = tmp_path / "pol"
+    save_policy(stem, actor, {"agent": "bug", "obs_mode": "paper", "seed": 7, "epochs": 42})
+    return stem
+
+
+def observations(n: int = 5) -> np.ndarray:
+    return np.random.default_rng(0).normal(size=(n, OBS_DIM)).astype(np.float32)
+
+
+def test_round_trip_gives_the_same_actions(stem: Path, actor: Actor) -> None:
+    assert sorted(p.name for p in stem.parent.iterdir()) == ["pol.json", "pol.safetensors"]  # no temp files left
+    expected = ActorPolicy(actor)(observations())
+    for name in (stem, stem.with_suffix(".json"), stem.with_suffix(".safetensors")):
+        policy, manifest = load_policy(name, expect_obs_mode="paper", expect_obs_dim=OBS_DIM)
+        assert np.array_equal(policy(observations()), expected)
+        assert policy(observations()[0]).shape == (8,)
+    assert manifest["format"] == policy_file.FORMAT
+    assert (manifest["agent"], manifest["obs_mode"], manifest["obs_dim"], manifest["act_dim"]) == ("bug", "paper",
+                                                                                                    OBS_DIM, 8)
+    assert manifest["hidden"] == [16, 16] and manifest["seed"] == 7 and manifest["epochs"] == 42
+
+
+def test_save_policy_needs_agent_and_obs_mode(tmp_path: Path, actor: Actor) -> None:
+    with pytest.raises(ValueError, match="lacks.*agent"):
+        save_policy(tmp_path / "pol", actor, {"obs_mode": "paper"})
+
+
+def test_failed_save_keeps_the_previous_file(stem: Path, actor: Actor, monkeypatch: pytest.MonkeyPatch) -> None:
+    weights = stem.with_suffix(".safetensors")
+    before = weights.read_bytes()
+
+    def dies(tensors: object, path: str, metadata: object = None) -> None:
+        Path(path).write_bytes(b"half")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(policy_file, "save_file", dies)
+    with torch.no_grad():
+        actor.net[0].weight.add_(1.0)
+    with pytest.raises(OSError, match="disk full"):
+        save_policy(stem, actor, {"agent": "bug", "obs_mode": "paper"})
+    assert weights.read_bytes() == before
+    assert sorted(p.name for p in stem.parent.iterdir()) == ["pol.json", "pol.safetensors"]
+
+
+def _edit_manifest(**changes: object) -> Callable[[Path], None]:
+    def edit(stem: Path) -> None:
+        path = stem.with_suffix(".json")
+        data = json.loads(path.read_text())
+        for key, value in changes.items():
+            if value is None:
+                del data[key]
+            else:
+                data[key] = value
+        path.write_text(json.dumps(data))
+    return edit
+
+
+def _truncate(stem: Path) -> None:
+    path = stem.with_suffix(".safetensors")
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def _not_an_actor(stem: Path) -> None:
+    save_file({"critic.net.0.weight": torch.zeros(3, 3)}, str(stem.with_suffix(".safetensors")))
+
+
+BROKEN = {
+    "missing-json": (lambda s: s.with_suffix(".json").unlink(), ".json", {}, "file not found"),
+    "missing-safetensors": (lambda s: s.with_suffix(".safetensors").unlink(), ".safetensors", {}, "file not found"),
+    "truncated-safetensors": (_truncate, ".safetensors", {}, "truncated or corrupt"),
+    "garbage-safetensors": (lambda s: s.with_suffix(".safetensors").write_bytes(b"\xff" * 64), ".safetensors", {},
+                            "truncated or corrupt"),
+    "corrupt-json": (lambda s: s.with_suffix(".json").write_text('{"agent": "bug",'), ".json", {}, "corrupt JSON"),
+    "json-not-an-object": (lambda s: s.with_suffix(".json").write_text("[1, 2]"), ".json", {},
+                           "expected a JSON object"),
+    "wrong-format": (_edit_manifest(format="other/9"), ".json", {}, "format 'other/9'"),
+    "manifest-lacks-key": (_edit_manifest(obs_dim=None), ".json", {}, "lacks ['obs_dim']"),
+    "obs-mode-mismatch": (lambda s: None, ".json", {"expect_obs_mode": "egocentric"}, "obs_mode 'paper'"),
+    "obs-dim-mismatch": (lambda s: None, ".json", {"expect_obs_dim": OBS_DIM + 1}, f"expects {OBS_DIM} observation"),
+    "manifest-disagrees-with-weights": (_edit_manifest(obs_dim=OBS_DIM + 1), ".safetensors", {},
+                                        f"weights are {OBS_DIM}->8, manifest says {OBS_DIM + 1}->8"),
+    "weights-not-an-actor": (_not_an_actor, ".safetensors", {}, "not an actor"),
+}
+
+
+@pytest.mark.parametrize("case", list(BROKEN))
+def test_broken_policy_file_error_names_the_file(stem: Path, case: str) -> None:
+    damage, suffix, expect, reason = BROKEN[case]
+    damage(stem)
+    pattern = f"{re.escape(str(stem.with_suffix(suffix)))}.*{re.escape(reason)}"
+    with pytest.raises(PolicyFileError, match=pattern):
+        load_policy(stem, **expect)
+
+
+# --------------------------------------------------------------------------- zoo
+
+
+def test_make_policy_builtins() -> None:
+    obs = observations()[0]
+    for name in ("zero", "passive"):
+        policy = make_policy(name)
+        assert isinstance(policy, ZeroPolicy)
+        assert np.array_equal(policy(obs), np.zeros(8))
+    a, b, c = make_policy("random", seed=5), make_policy("random", seed=5), make_policy("random", seed=6)
+    assert isinstance(a, RandomPolicy)
+    first = np.stack([a(obs) for _ in range(4)])
+    assert first.shape == (4, 8) and np.abs(first).max() <= 1.0 and len(np.unique(first)) == first.size
+    assert np.array_equal(first, np.stack([b(obs) for _ in range(4)]))
+    assert not np.array_equal(first, np.stack([c(obs) for _ in range(4)]))
+
+
+def test_make_policy_from_a_policy_file(stem: Path, actor: Actor) -> None:
+    expected = ActorPolicy(actor)(observations())
+    for spec in (str(stem), str(stem.with_suffix(".json")), str(stem.with_suffix(".safetensors"))):
+        assert np.array_equal(make_policy(spec, expect_obs_mode="paper")(observations()), expected)
+    with pytest.raises(PolicyFileError, match="obs_mode"):
+        make_policy(str(stem), expect_obs_mode="egocentric")
+
+
+def test_make_policy_unknown_name_lists_the_choices(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"unknown policy 'telepathy'.*'passive', 'random', 'zero'.*zoo:NAME"):
+        make_policy("telepathy")
+    with pytest.raises(ValueError, match="unknown policy"):
+        make_policy(str(tmp_path / "no-such-policy"))
+
+
+def test_zoo_load_unknown_name() -> None:
+    with pytest.raises(FileNotFoundError, match="no policy 'nonexistent' in the zoo"):
+        load("nonexistent")
+    with pytest.raises(FileNotFoundError, match="nonexistent"):
+        make_policy("zoo:nonexistent")
+
+
+def test_policies_from_pairs_seeds_each_policy_apart() -> None:
+    policies = policies_from_pairs(("spider=random", "ant=random", "bug=zero"), seed=1, obs_mode="paper")
+    assert list(policies) == ["spider", "ant", "bug"]
+    obs = observations()[0]
+    assert not np.array_equal(policies["spider"](obs), policies["ant"](obs))
+    again = policies_from_pairs(("spider=random", "ant=random", "bug=zero"), seed=1, obs_mode="paper")
+    assert np.array_equal(again["spider"](obs), make_policy("random", seed=1000)(obs))
+    with pytest.raises(ValueError, match="'ant' given twice"):
+        policies_from_pairs(("ant=zero", "ant=random"), seed=0, obs_mode="paper")

@@ -1,0 +1,458 @@
+"""Tiny training runs that assert outcomes: the trainer, its run folder, resume and its errors.
+
+Every run here is a few hundred env steps with 16-unit networks (a few seconds on the
+2-core machine). ``uninterrupted`` is one run shared by the module: 4 epochs, a checkpoint
+every 2, TensorBoard on. The resume tests rebuild it from a run killed at epoch 2 and
+demand the very same bits.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from triplesumo.agents.policy_file import PolicyFileError, load_policy
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.cli import main
+from triplesumo.rules.rewards import DENSE_TERMS
+from triplesumo.train import checkpoint
+from triplesumo.train import loop as train_loop
+from triplesumo.train.checkpoint import CheckpointError
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.logger import COLUMNS
+from triplesumo.train.loop import Trainer, TrainResult, config_from_json, train
+
+TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=5000, learning_starts=50, batch_size=16, learn_every=2)
+PLOTS = ("rewards.png", "reward_terms.png", "mwr.png", "steps_to_win.png")
+LWR = {"win": 1.0, "loss": -1.0, "draw": 0.0, "error": 0.0}
+E = 2
+"""Checkpoint interval of the resume tests; the uninterrupted run trains 2E epochs."""
+
+
+def tiny(out: Path, name: str = "run", **fields: Any) -> TrainConfig:
+    """A training config small enough for a test: 2 matches of 30 steps, 16-unit networks."""
+    values: dict[str, Any] = {
+        "name": name, "out": str(out), "learner": "bug", "policies": ("spider=random", "ant=zero"),
+        "epochs": 2 * E, "steps_per_epoch": 30, "n_envs": 2, "checkpoint_every": E, "seed": 0,
+        "ddpg": TINY_DDPG, "progress": False, "tensorboard": False,
+    }
+    values.update(fields)
+    return TrainConfig(**values)
+
+
+def read_rows(run: Path) -> tuple[list[str], list[dict[str, str]]]:
+    with (run / "metrics.csv").open(newline="") as fh:
+        reader = csv.DictReader(fh)
+        return list(reader.fieldnames or []), list(reader)
+
+
+def without_wall_time(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    return [{k: v for k, v in r.items() if k != "wall_time"} for r in rows]
+
+
+def assert_same_tensors(a_path: Path, b_path: Path) -> None:
+    a, b = load_file(str(a_path)), load_file(str(b_path))
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), f"{b_path}: tensor {key} differs"
+
+
+def assert_same_arrays(a_path: Path, b_path: Path) -> None:
+    with np.load(a_path) as a, np.load(b_path) as b:
+        assert sorted(a.files) == sorted(b.files)
+        for key in a.files:
+            assert np.array_equal(a[key], b[key]), f"{b_path}: array {key} differs"
+
+
+def assert_same_run(a: Path, b: Path) -> None:
+    """Bit-identical weights (policy and last checkpoint), replay, arrays; CSV equal but for wall_time."""
+    assert_same_tensors(a / "policy.safetensors", b / "policy.safetensors")
+    last_a, last_b = checkpoint.latest(a), checkpoint.latest(b)
+    assert last_a.name == last_b.name
+    assert_same_tensors(last_a / "weights.safetensors", last_b / "weights.safetensors")
+    assert_same_arrays(last_a / "replay.npz", last_b / "replay.npz")
+    assert_same_arrays(last_a / "arrays.npz", last_b / "arrays.npz")
+    assert without_wall_time(read_rows(a)[1]) == without_wall_time(read_rows(b)[1])
+
+
+@dataclass
+class Trained:
+    cfg: TrainConfig
+    trainer: Trainer
+    result: TrainResult
+    initial: dict[str, torch.Tensor]
+
+    @property
+    def run(self) -> Path:
+        return self.result.run_dir
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> Trained:
+    """2E epochs straight through, checkpoint every E, TensorBoard on."""
+    cfg = tiny(tmp_path_factory.mktemp("runs"), name="A", tensorboard=True)
+    trainer = Trainer(cfg)
+    initial = trainer.agent.state_dict()
+    result = trainer.run()
+    return Trained(cfg, trainer, result, initial)
+
+
+@pytest.fixture
+def run_copy(uninterrupted: Trained, tmp_path: Path) -> Path:
+    """A copy of the uninterrupted run's folder, free to be damaged."""
+    return Path(shutil.copytree(uninterrupted.run, tmp_path / "copy"))
+
+
+# ----------------------------------------------------------------- one tiny run
+
+
+def test_tiny_run_learns_finite_losses(uninterrupted: Trained) -> None:
+    trainer, result, ddpg = uninterrupted.trainer, uninterrupted.result, uninterrupted.cfg.ddpg
+    assert result.epochs == trainer.epochs_done >= uninterrupted.cfg.epochs
+    assert set(trainer.last_losses) == {"critic_loss", "actor_loss", "q_mean"}
+    assert all(math.isfinite(v) for v in trainer.last_losses.values()), trainer.last_losses
+    # One gradient step per learn_every transitions from learning_starts on (n_envs divides both).
+    expected_updates = (result.env_steps - ddpg.learning_starts) // ddpg.learn_every + 1
+    assert result.updates == trainer.agent.num_updates == expected_updates
+
+
+def test_tiny_run_fills_replay_with_every_learner_transition(uninterrupted: Trained) -> None:
+    trainer, result = uninterrupted.trainer, uninterrupted.result
+    assert result.env_steps == trainer.env_steps > 0
+    _, rows = read_rows(uninterrupted.run)
+    errors = sum(r["outcome"] == "error" for r in rows)  # a physics error's transition is dropped
+    assert 0 < len(trainer.replay) == result.env_steps - errors <= result.env_steps
+    batch = trainer.replay.sample(len(trainer.replay), np.random.default_rng(0))
+    assert all(np.isfinite(v).all() for v in batch.values())
+    assert np.abs(batch["act"]).max() <= 1.0
+
+
+def test_tiny_run_moves_online_and_target_networks(uninterrupted: Trained) -> None:
+    initial, now = uninterrupted.initial, uninterrupted.trainer.agent.state_dict()
+    for net in ("actor", "critic"):
+        keys = [k for k in initial if k.startswith(f"{net}.")]
+        assert keys
+        for key in keys:
+            target_key = f"{net}_target.{key.removeprefix(f'{net}.')}"
+            assert torch.equal(initial[key], initial[target_key])  # targets start as copies
+            assert not torch.equal(now[key], initial[key]), f"online {key} never changed"
+            assert not torch.equal(now[target_key], initial[target_key]), f"target {target_key} never moved"
+            assert not torch.equal(now[target_key], now[key]), f"{target_key} is a hard copy, not soft-updated"
+
+
+def test_tiny_run_metrics_csv(uninterrupted: Trained) -> None:
+    header, rows = read_rows(uninterrupted.run)
+    assert tuple(header) == COLUMNS
+    assert [int(r["epoch"]) for r in rows] == list(range(1, uninterrupted.result.epochs + 1))
+    env_steps = [int(r["env_steps"]) for r in rows]
+    assert env_steps == sorted(env_steps)
+    for r in rows:
+        assert r["outcome"] in LWR
+        assert float(r["local_winning_rate"]) == LWR[r["outcome"]]
+        assert 1 <= int(r["steps"]) <= uninterrupted.cfg.steps_per_epoch
+        if r["outcome"] == "draw":
+            assert int(r["steps"]) == uninterrupted.cfg.steps_per_epoch
+        values = {k: float(r[k]) for k in COLUMNS if k not in ("outcome",)}
+        assert all(math.isfinite(v) for v in values.values()), r
+        assert values["total_reward"] == pytest.approx(values["dense_reward"] + values["sparse_reward"])
+        assert values["dense_reward"] == pytest.approx(sum(values[t] for t in DENSE_TERMS))
+        assert values["sparse_reward"] == pytest.approx(values["reward_outcome"])
+
+
+def test_metrics_env_steps_include_the_finishing_step(uninterrupted: Trained) -> None:
+    _, rows = read_rows(uninterrupted.run)
+    # The run stops on the step that finishes its last epoch: that row has seen every env step.
+    assert int(rows[-1]["env_steps"]) == uninterrupted.result.env_steps
+
+
+def test_tiny_run_writes_plots_config_and_tensorboard(uninterrupted: Trained) -> None:
+    run = uninterrupted.run
+    for name in PLOTS:
+        data = (run / "plots" / name).read_bytes()
+        assert data.startswith(b"\x89PNG\r\n\x1a\n") and len(data) > 1000, name
+    assert config_from_json(json.loads((run / "config.json").read_text())) == uninterrupted.cfg
+    assert list((run / "tensorboard").glob("events.out.tfevents.*"))
+
+
+def test_tiny_run_policy_file_acts_deterministically(uninterrupted: Trained) -> None:
+    trainer = uninterrupted.trainer
+    policy, manifest = load_policy(uninterrupted.run / "policy", expect_obs_mode="paper",
+                                   expect_obs_dim=trainer.obs_dim)
+    assert manifest["agent"] == "bug" and manifest["obs_mode"] == "paper"
+    assert manifest["epochs"] == uninterrupted.result.epochs and manifest["hidden"] == [16, 16]
+    obs = np.random.default_rng(1).normal(size=(3, trainer.obs_dim)).astype(np.float32)
+    first = policy(obs)
+    assert first.shape == (3, 8) and np.abs(first).max() <= 1.0
+    assert np.array_equal(first, policy(obs))
+    assert np.array_equal(first, trainer.agent.act(obs))  # the final actor was saved
+    assert policy(obs[0]).shape == (8,)
+
+
+# ------------------------------------------------------------------------ resume
+
+
+@pytest.mark.parametrize("rows_past_checkpoint", [False, True], ids=["clean", "rows-past-checkpoint"])
+def test_resume_equals_uninterrupted(uninterrupted: Trained, tmp_path: Path, rows_past_checkpoint: bool) -> None:
+    killed = train(tiny(tmp_path, name="B", epochs=E)).run_dir
+    assert checkpoint.latest(killed).name == f"epoch-{E:06d}"
+    if rows_past_checkpoint:  # the killed run logged an epoch its checkpoint does not hold
+        bogus = read_rows(killed)[1][-1] | {"epoch": str(E + 1), "outcome": "win", "local_winning_rate": "1.0"}
+        with (killed / "metrics.csv").open("a", newline="") as fh:
+            csv.DictWriter(fh, COLUMNS).writerow(bogus)
+    result = train(TrainConfig(), resume_dir=killed, overrides={"epochs": 2 * E})
+    assert result.epochs == uninterrupted.result.epochs
+    assert result.env_steps == uninterrupted.result.env_steps
+    assert result.updates == uninterrupted.result.updates
+    assert_same_run(uninterrupted.run, killed)
+
+
+class SimulatedKill(Exception):
+    """Stands for the process dying inside a checkpoint write."""
+
+
+def test_kill_during_save_keeps_previous_checkpoint(uninterrupted: Trained, tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    real = checkpoint.atomic_save_tensors
+    calls = []
+
+    def dies_on_second_save(tensors: dict[str, torch.Tensor], path: Path, metadata: Any = None) -> None:
+        calls.append(path)
+        if len(calls) == 1:
+            return real(tensors, path, metadata)
+        Path(path).write_bytes(b"half a safetensors file")
+        raise SimulatedKill(path)
+
+    monkeypatch.setattr(checkpoint, "atomic_save_tensors", dies_on_second_save)
+    with pytest.raises(SimulatedKill):
+        train(tiny(tmp_path, name="B"))
+    monkeypatch.undo()
+    run = tmp_path / "B"
+    first = run / "checkpoints" / f"epoch-{E:06d}"
+    assert checkpoint.latest(run) == first
+    assert (run / "checkpoints" / f".epoch-{2 * E:06d}.tmp").is_dir()  # the half-written save
+    assert not (run / "checkpoints" / f"epoch-{2 * E:06d}").exists()
+    checkpoint.load(first, need_replay=True)  # still complete
+    train(TrainConfig(), resume_dir=run)
+    assert not (run / "checkpoints" / f".epoch-{2 * E:06d}.tmp").exists()
+    assert_same_run(uninterrupted.run, run)
+
+
+def test_stray_temp_checkpoint_is_ignored(uninterrupted: Trained, run_copy: Path) -> None:
+    before = checkpoint.latest(run_copy)
+    stray = run_copy / "checkpoints" / ".epoch-000099.tmp"
+    stray.mkdir()
+    (stray / "weights.safetensors").write_bytes(b"\x00garbage")
+    (stray / "state.json").write_text("{")
+    assert checkpoint.latest(run_copy) == before
+    result = train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": uninterrupted.result.epochs + E})
+    assert result.epochs >= uninterrupted.result.epochs + E
+    _, rows = read_rows(run_copy)
+    assert [int(r["epoch"]) for r in rows] == list(range(1, result.epochs + 1))
+
+
+# ----------------------------------------------------------- corrupt checkpoints
+
+
+def _truncate(path: Path) -> None:
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+
+
+def _latest_file(run: Path, name: str) -> Path:
+    return checkpoint.latest(run) / name
+
+
+CORRUPTIONS = {
+    "missing-latest-json": (lambda run: (run / "checkpoints" / "latest.json").unlink(),
+                            lambda run: run / "checkpoints" / "latest.json", "file not found"),
+    "latest-json-points-nowhere": (
+        lambda run: (run / "checkpoints" / "latest.json").write_text('{"dir": "epoch-000777"}'),
+        lambda run: run / "checkpoints" / "latest.json", "epoch-000777, which does not exist"),
+    "garbage-latest-json": (lambda run: (run / "checkpoints" / "latest.json").write_text("epoch-000004"),
+                            lambda run: run / "checkpoints" / "latest.json", "corrupt JSON"),
+    "truncated-weights": (lambda run: _truncate(_latest_file(run, "weights.safetensors")),
+                          lambda run: _latest_file(run, "weights.safetensors"), "truncated or corrupt"),
+    "garbage-state-json": (lambda run: _latest_file(run, "state.json").write_bytes(b"{\x00not json"),
+                           lambda run: _latest_file(run, "state.json"), "corrupt JSON"),
+    "wrong-format-state-json": (lambda run: _latest_file(run, "state.json").write_text('{"format": "x"}'),
+                                lambda run: _latest_file(run, "state.json"), "format 'x'"),
+    "truncated-arrays": (lambda run: _truncate(_latest_file(run, "arrays.npz")),
+                         lambda run: _latest_file(run, "arrays.npz"), "corrupt or truncated npz"),
+    "truncated-replay": (lambda run: _truncate(_latest_file(run, "replay.npz")),
+                         lambda run: _latest_file(run, "replay.npz"), "corrupt or truncated npz"),
+    "missing-replay": (lambda run: _latest_file(run, "replay.npz").unlink(),
+                       lambda run: _latest_file(run, "replay.npz"), "file not found"),
+}
+
+
+@pytest.mark.parametrize("case", list(CORRUPTIONS))
+def test_corrupt_checkpoint_error_names_file_and_reason(run_copy: Path, case: str) -> None:
+    corrupt, culprit, reason = CORRUPTIONS[case]
+    path = culprit(run_copy)
+    corrupt(run_copy)
+    with pytest.raises(PolicyFileError, match=f"{re.escape(str(path))}.*{re.escape(reason)}"):
+        train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": 99})
+
+
+def test_corrupt_npz_members_are_checkpoint_errors(run_copy: Path) -> None:
+    _truncate(_latest_file(run_copy, "arrays.npz"))
+    with pytest.raises(CheckpointError, match="arrays.npz"):
+        checkpoint.load(checkpoint.latest(run_copy), need_replay=False)
+
+
+def test_missing_run_folder_names_config_json(tmp_path: Path) -> None:
+    with pytest.raises(PolicyFileError, match=re.escape(str(tmp_path / "nope" / "config.json"))):
+        train(TrainConfig(), resume_dir=tmp_path / "nope")
+
+
+def _drop_state_key(run: Path) -> None:
+    path = _latest_file(run, "state.json")
+    state = json.loads(path.read_text())
+    del state["config"]
+    path.write_text(json.dumps(state))
+
+
+def _drop_array(run: Path) -> None:
+    path = _latest_file(run, "arrays.npz")
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files if k != "lwr"}
+    with path.open("wb") as fh:
+        np.savez(fh, **arrays)
+
+
+@pytest.mark.parametrize(("damage", "name"), [(_drop_state_key, "state.json"), (_drop_array, "arrays.npz")],
+                         ids=["state-json-lacks-config", "arrays-npz-lacks-lwr"])
+def test_checkpoint_lacking_a_key_names_the_file(run_copy: Path, damage: Any, name: str) -> None:
+    path = _latest_file(run_copy, name)
+    damage(run_copy)
+    with pytest.raises(PolicyFileError, match=re.escape(str(path))):
+        train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": 99})
+
+
+@pytest.mark.parametrize(("field", "changes"), [
+    ("learner", {"learner": "spider", "policies": ["ant=zero", "bug=random"]}),
+    ("obs_mode", {"obs_mode": "egocentric"}),
+    ("ddpg", {"ddpg": {**json.loads(json.dumps(TINY_DDPG.__dict__)), "hidden": [8, 8]}}),
+])
+def test_incompatible_checkpoint_names_the_field(run_copy: Path, field: str, changes: dict[str, Any]) -> None:
+    config = run_copy / "config.json"
+    config.write_text(json.dumps(json.loads(config.read_text()) | changes))
+    state = re.escape(str(_latest_file(run_copy, "state.json")))
+    with pytest.raises(CheckpointError, match=f"{state}: incompatible checkpoint.*{field}="):
+        train(TrainConfig(), resume_dir=run_copy)
+
+
+# ------------------------------------------------------------ unwritable folder
+
+
+def _no_env(*args: Any, **kwargs: Any) -> None:
+    raise AssertionError("the trainer built its matches before checking the run folder")
+
+
+def test_run_folder_under_a_file_fails_at_start(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    monkeypatch.setattr(train_loop, "MatchBatch", _no_env)
+    with pytest.raises(PermissionError, match=re.escape(str(blocker / "sub" / "run"))):
+        Trainer(tiny(blocker / "sub"))
+
+
+def test_read_only_run_folder_fails_at_start(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        if os.access(locked, os.W_OK):
+            pytest.skip("chmod does not stop this user (root) from writing")
+        monkeypatch.setattr(train_loop, "MatchBatch", _no_env)
+        with pytest.raises(PermissionError, match=re.escape(str(locked / "run"))):
+            Trainer(tiny(locked))
+    finally:
+        locked.chmod(0o700)
+
+
+# ------------------------------------------------------------------ validation
+
+
+@pytest.mark.parametrize(("fields", "named"), [
+    ({"epochs": 0}, "TrainConfig.epochs"),
+    ({"epochs": True}, "TrainConfig.epochs"),
+    ({"n_envs": 0}, "TrainConfig.n_envs"),
+    ({"steps_per_epoch": -5}, "TrainConfig.steps_per_epoch"),
+    ({"checkpoint_every": 0}, "TrainConfig.checkpoint_every"),
+    ({"obs_mode": "pixels"}, "TrainConfig.obs_mode"),
+    ({"policies": ("bug=random",)}, "TrainConfig.policies.*learner 'bug'"),
+    ({"policies": ("spider",)}, "TrainConfig.policies.*AGENT=POLICY"),
+    ({"policies": ("spider=random=zero",)}, "TrainConfig.policies.*AGENT=POLICY"),
+    ({"policies": ("=random",)}, "TrainConfig.policies.*AGENT=POLICY"),
+    ({"name": "a/b"}, "TrainConfig.name"),
+    ({"max_minutes": -1.0}, "TrainConfig.max_minutes"),
+])
+def test_config_errors_name_the_field(tmp_path: Path, fields: dict[str, Any], named: str) -> None:
+    with pytest.raises(ValueError, match=named):
+        tiny(tmp_path, **fields)
+
+
+@pytest.mark.parametrize(("fields", "named"), [
+    ({"learner": "dragon"}, "TrainConfig.learner.*dragon"),
+    ({"policies": ("spider=random", "dragon=zero")}, "TrainConfig.policies.*dragon"),
+    ({"policies": ("spider=random", "spider=zero")}, "'spider' given twice"),
+    ({"policies": ("spider=telepathy",)}, "unknown policy 'telepathy'"),
+])
+def test_trainer_rejects_unknown_agents_and_policies(tmp_path: Path, fields: dict[str, Any], named: str) -> None:
+    with pytest.raises(ValueError, match=named):
+        Trainer(tiny(tmp_path, **fields))
+
+
+# -------------------------------------------------------------------------- CLI
+
+CLI_TINY = ["--policies", "spider=random", "ant=zero", "--ddpg.hidden", "16", "16", "--ddpg.buffer-size", "2000",
+            "--ddpg.learning-starts", "50", "--ddpg.batch-size", "16", "--ddpg.learn-every", "2",
+            "--n-envs", "2", "--steps-per-epoch", "20", "--checkpoint-every", "2", "--no-progress",
+            "--no-tensorboard"]
+
+
+def test_cli_train_resume_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = tmp_path / "cli"
+    assert main(["train", "--out", str(tmp_path), "--name", "cli", "--epochs", "3", *CLI_TINY]) == 0
+    assert "run folder" in capsys.readouterr().out
+    saved = config_from_json(json.loads((run / "config.json").read_text()))
+    assert saved.ddpg.hidden == (16, 16) and saved.policies == ("spider=random", "ant=zero") and saved.epochs == 3
+    header, rows = read_rows(run)
+    assert tuple(header) == COLUMNS
+    first = len(rows)
+    assert first >= 3 and [int(r["epoch"]) for r in rows] == list(range(1, first + 1))
+
+    assert main(["train", "--resume", str(run), "--epochs", "6", "--no-progress"]) == 0
+    _, rows = read_rows(run)
+    assert len(rows) >= 6 and [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
+    assert json.loads((run / "policy.json").read_text())["epochs"] == len(rows)
+
+    shutil.rmtree(run / "plots")
+    assert main(["plot", str(run), "--window", "5"]) == 0
+    assert all((run / "plots" / name).is_file() for name in PLOTS)
+    assert "mwr.png" in capsys.readouterr().out
+
+
+def test_cli_bad_value_exits_2_naming_the_field(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["train", "--out", str(tmp_path), "--name", "bad", *CLI_TINY, "--epochs", "0"]) == 2
+    assert "TrainConfig.epochs" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
+
+
+def test_cli_resume_of_missing_run_exits_2_naming_the_file(tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["train", "--resume", str(tmp_path / "gone")]) == 2
+    assert str(tmp_path / "gone" / "config.json") in capsys.readouterr().err
