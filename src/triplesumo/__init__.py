@@ -37,6 +37,8 @@ __all__ = ["ENV_VERSION", "__version__", *_LAZY]
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
         return getattr(importlib.import_module(_LAZY[name]), name)
+    if name == "zoo":
+        return importlib.import_module("triplesumo.zoo")
     raise AttributeError(f"module 'triplesumo' has no attribute {name!r}")
 
 

@@ -13,6 +13,11 @@ def _parser() -> argparse.ArgumentParser:
 
     parser = argparse.ArgumentParser(prog="triplesumo", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
+    from triplesumo.demo import DemoConfig
+
+    demo = sub.add_parser("demo", help="the main job: train Bug briefly in the shipped ongoing match, "
+                                       "evaluate it against baselines, record a match")
+    _dcargs.add_arguments(demo, DemoConfig)
     play = sub.add_parser("play", help="play one seeded match between policies; --video FILE records it")
     _dcargs.add_arguments(play, PlayConfig)
     from triplesumo.train.config import TrainConfig
@@ -22,9 +27,19 @@ def _parser() -> argparse.ArgumentParser:
                        help="continue the killed or finished run in RUN_DIR (its saved config; "
                             "--epochs and --max-minutes may be raised)")
     _dcargs.add_arguments(train, TrainConfig)
+    from triplesumo.evaluation.evaluate import EvaluateConfig
+
+    evaluate = sub.add_parser("evaluate", help="test epochs of a policy (no exploration) against passive and "
+                                               "random baselines in the same matches")
+    _dcargs.add_arguments(evaluate, EvaluateConfig)
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
+    zoo = sub.add_parser("zoo", help="list the shipped policies, or publish a trained one into the zoo")
+    zoo.add_argument("action", choices=["list", "publish"])
+    zoo.add_argument("policy", nargs="?", help="publish: the run's policy file (e.g. runs/ant/policy)")
+    zoo.add_argument("name", nargs="?", help="publish: the zoo name (e.g. ant)")
+    zoo.add_argument("--evaluation", default=None, help="publish: a JSON file of evaluation results to record")
     bench = sub.add_parser("bench", help="benchmarks: 'bench env' or 'bench train' (--help for each)")
     bench.add_argument("which", choices=["env", "train"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
@@ -36,7 +51,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     try:
-        if args.command == "play":
+        if args.command == "demo":
+            from triplesumo.demo import DemoConfig, run_demo
+
+            run_demo(_dcargs.build(DemoConfig, args))
+        elif args.command == "play":
             from triplesumo.evaluation.play import PlayConfig, run_play
 
             run_play(_dcargs.build(PlayConfig, args))
@@ -59,6 +78,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"trained {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates "
                   f"in {result.seconds:.0f} s; MWR {result.mwr:+.3f}")
             print(f"run folder: {result.run_dir} (metrics.csv, plots/, checkpoints/, policy.json)")
+        elif args.command == "evaluate":
+            from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
+
+            cfg = _dcargs.build(EvaluateConfig, args)
+            summary = evaluate(cfg)
+            print(format_summary(summary))
+            print(f"report: {cfg.out}/summary.json; plots: {cfg.out}/compare_mwr.png, {cfg.out}/*/plots/")
         elif args.command == "plot":
             from pathlib import Path
 
@@ -68,6 +94,22 @@ def main(argv: list[str] | None = None) -> int:
             paths = plot_run(read_metrics_csv(run_dir / "metrics.csv"), run_dir / "plots", window=args.window,
                              title=run_dir.name)
             print("\n".join(str(p) for p in paths))
+        elif args.command == "zoo":
+            import json
+            from pathlib import Path
+
+            from triplesumo.agents import zoo as zoo_module
+
+            if args.action == "list":
+                for name in zoo_module.available():
+                    meta = json.loads((zoo_module.ZOO_DIR / f"{name}.json").read_text())
+                    print(f"{name:8s} agent={meta['agent']} obs_mode={meta['obs_mode']} epochs={meta.get('epochs')} "
+                          f"seed={meta.get('seed')}  made by: {meta.get('command')}")
+            else:
+                if not args.policy or not args.name:
+                    raise ValueError("zoo publish needs POLICY and NAME")
+                evaluation = json.loads(Path(args.evaluation).read_text()) if args.evaluation else None
+                print(zoo_module.publish(Path(args.policy), args.name, evaluation))
         elif args.command == "bench":
             if args.which == "env":
                 from triplesumo.benchmarks.env import main as bench_env

@@ -32,3 +32,14 @@ class RandomPolicy:
 
 
 BUILTIN = {"zero": ZeroPolicy, "passive": ZeroPolicy, "random": RandomPolicy}
+
+
+def act_batch(policy: object, obs: np.ndarray) -> np.ndarray:
+    """Actions for a batch ``(n, obs_dim)`` of observations, as float64 ``(n, 8)``.
+
+    Batched policies (trained actors, which have an ``obs_dim``) are called once;
+    others once per row.
+    """
+    if getattr(policy, "obs_dim", None) is not None:
+        return np.asarray(policy(obs), dtype=np.float64)  # type: ignore[operator]
+    return np.stack([np.asarray(policy(o), dtype=np.float64) for o in obs])  # type: ignore[operator]

@@ -161,15 +161,16 @@ class Match:
         rewards = rules_rewards.total(terms)
         dense = sum(terms[t] for t in rules_rewards.DENSE_TERMS)
         exited = [self.agents[i] for i in np.flatnonzero(out)]
+        columns = np.stack([terms[t] for t in rules_rewards.TERMS] + [dense, terms["reward_outcome"]]).T.tolist()
+        keys = (*rules_rewards.TERMS, "dense_reward", "sparse_reward")
+        if results is not None:
+            outcomes = [results[t] for t in self.teams.team_of]
+        else:
+            outcomes = [rules_outcome.DRAW if timed_out else None] * self.n_agents
         infos = []
         for i in range(self.n_agents):
-            info: dict[str, Any] = {name: float(terms[name][i]) for name in rules_rewards.TERMS}
-            info["dense_reward"] = float(dense[i])
-            info["sparse_reward"] = float(terms["reward_outcome"][i])
-            if results is not None:
-                info["outcome"] = results[self.teams.team_of[i]]
-            else:
-                info["outcome"] = rules_outcome.DRAW if timed_out else None
+            info: dict[str, Any] = dict(zip(keys, columns[i], strict=True))
+            info["outcome"] = outcomes[i]
             info["out_of_ring"] = exited
             info["step"] = self.steps
             infos.append(info)

@@ -27,7 +27,7 @@ class MetricsLog:
                 csv.DictWriter(fh, COLUMNS).writerows(rows)
         else:
             self._write_header()
-        self._fh = self.path.open("a", newline="")
+        self._fh = self.path.open("a", newline="", buffering=1)  # line-buffered: rows show up as epochs end
         self._csv = csv.DictWriter(self._fh, COLUMNS)
         self._tb: Any = None
         if tensorboard:

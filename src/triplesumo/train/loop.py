@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from triplesumo import ENV_VERSION, __version__
+from triplesumo.agents.builtin import act_batch
 from triplesumo.agents.policy_file import save_policy
 from triplesumo.agents.zoo import policies_from_pairs
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
@@ -75,13 +76,6 @@ def prepare_run_dir(run_dir: Path) -> Path:
     except OSError as exc:
         raise PermissionError(f"run folder {run_dir} is not writable: {exc.strerror or exc}") from exc
     return run_dir
-
-
-def _act(policy: Any, obs: np.ndarray) -> np.ndarray:
-    """Actions for a batch of observations: one call for batched policies, else one per row."""
-    if getattr(policy, "obs_dim", None) is not None:
-        return np.asarray(policy(obs), dtype=np.float64)
-    return np.stack([np.asarray(policy(o), dtype=np.float64) for o in obs])
 
 
 class Trainer:
@@ -155,7 +149,7 @@ class Trainer:
             learner_act = np.clip(self.agent.act(obs) + self.noise.sample(self.rng), -1.0, 1.0)
         actions[:, self.L] = learner_act
         for i, policy in self.others:
-            actions[:, i] = _act(policy, self._stacked_obs(i))
+            actions[:, i] = act_batch(policy, self._stacked_obs(i))
         t1 = time.perf_counter()
         results = self.batch.step(actions)
         t2 = time.perf_counter()

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.policy_file import load_policy
+from triplesumo.agents.policy_file import load_policy, save_policy
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
 
@@ -29,6 +29,26 @@ def load(name: str, expect_obs_mode: str | None = None) -> tuple[Any, dict[str, 
     if name not in available():
         raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
     return load_policy(ZOO_DIR / name, expect_obs_mode=expect_obs_mode)
+
+
+def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = None,
+            zoo_dir: Path | None = None) -> Path:
+    """Copy a trained policy file pair into the zoo as ``name``, adding evaluation results.
+
+    The manifest keeps the command, seed and epochs the training run recorded; nothing
+    but the project's own training output can be published this way.
+    """
+    policy, manifest = load_policy(Path(policy_stem))
+    for key in ("command", "seed", "epochs"):
+        if key not in manifest:
+            raise ValueError(f"{policy_stem}: manifest lacks {key!r}; only training runs' policies can be published")
+    zoo_dir = Path(zoo_dir) if zoo_dir is not None else ZOO_DIR
+    manifest = {**manifest, "zoo_name": name}
+    if evaluation is not None:
+        manifest["evaluation"] = evaluation
+    save_policy(zoo_dir / name, policy.actor, {k: v for k, v in manifest.items()
+                                                      if k not in ("format", "obs_dim", "act_dim", "hidden")})
+    return zoo_dir / f"{name}.json"
 
 
 def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None) -> Any:

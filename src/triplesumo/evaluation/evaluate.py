@@ -1,0 +1,230 @@
+"""``triplesumo evaluate``: test epochs with fixed policies, against baselines.
+
+A *candidate* is a learner policy (default: the trained Bug). It plays ``epochs`` test
+matches with the other agents' fixed policies (default: the shipped Ant and Spider),
+with no exploration noise; the reset noise of test epoch ``i`` is seeded with
+``seed + i``, so the matches differ from each other but every candidate meets the very
+same starts (a paired comparison). The baselines play the same matches: Bug passive
+(zero action) and Bug random. Cooperation is shown by the difference between the
+candidate and the baselines, not assumed.
+
+Writes, into ``out``: ``<label>/metrics.csv`` (the training CSV schema) and its plots
+per candidate, ``compare_mwr.png`` and ``compare_rewards.png``, and ``summary.json``
+with win/loss/draw counts and 95% Wilson intervals, the mean local winning rate (the
+test MWR over the whole run) with its 95% interval, and mean steps to win.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from triplesumo.agents.builtin import act_batch
+from triplesumo.agents.zoo import make_policy, policies_from_pairs
+from triplesumo.envs.batch import MatchBatch
+from triplesumo.envs.match import ACTION_SIZE
+from triplesumo.evaluation.metrics import local_winning_rate, summarize
+from triplesumo.evaluation.video import check_writable
+from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.rewards import TERMS
+from triplesumo.train.logger import COLUMNS
+
+
+@dataclass(frozen=True)
+class EvaluateConfig:
+    """Test epochs of a learner policy against baselines in the same matches."""
+
+    learner: str = "bug"
+    """The agent whose policy is evaluated."""
+    policy: str = "zoo:bug"
+    """The learner's policy: zoo:NAME, a policy file (e.g. runs/bug/policy), zero or random."""
+    policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider")
+    """AGENT=POLICY for the other agents (fixed, no exploration noise)."""
+    baselines: tuple[str, ...] = ("passive", "random")
+    """Baseline learner policies played in the same matches (built-in names)."""
+    epochs: int = 2000
+    """Test epochs per candidate (the paper used 20,000)."""
+    seed: int = 10_000
+    """Test epoch i resets with seed + i (the same starts for every candidate)."""
+    steps_per_epoch: int = 500
+    """Step limit of a match (a draw when reached)."""
+    obs_mode: str = "paper"
+    """Observation mode the policies expect."""
+    window: int = 200
+    """λ of the MWR and rolling curves (paper: 200)."""
+    out: str = "runs/evaluation"
+    """Folder for the report, CSVs and plots."""
+    n_envs: int = 16
+    """Matches played at once."""
+    n_threads: int = 2
+    """MuJoCo threads."""
+    progress: bool = True
+    """Show a progress bar."""
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"EvaluateConfig.{name} must be an int >= 1, got {value!r}")
+        for pair in self.policies:
+            if pair.count("=") != 1 or not all(pair.split("=")):
+                raise ValueError(f"EvaluateConfig.policies: expected AGENT=POLICY, got {pair!r}")
+            if pair.split("=")[0] == self.learner:
+                raise ValueError(f"EvaluateConfig.policies: {self.learner!r} is the evaluated learner")
+
+
+def play_test_epochs(
+    learner_policy: Any,
+    others: dict[str, Any],
+    learner: str,
+    epochs: int,
+    seed: int,
+    match_cfg: MatchConfig,
+    n_envs: int = 16,
+    n_threads: int = 2,
+    label: str = "",
+    progress: bool = False,
+) -> list[dict[str, Any]]:
+    """Play ``epochs`` test matches (epoch ``i`` seeded ``seed + i``); one metrics row per epoch, in order."""
+    n_envs = min(n_envs, epochs)
+    batch = MatchBatch(match_cfg, n_envs, n_threads)
+    agents = batch.matches[0].agents
+    if learner not in agents:
+        raise ValueError(f"learner must be one of {list(agents)}, got {learner!r}")
+    L = agents.index(learner)
+    drivers = [(agents.index(a), p) for a, p in others.items()] + [(L, learner_policy)]
+    for name, policy in (*others.items(), (learner, learner_policy)):
+        reset = getattr(policy, "reset", None)
+        if callable(reset):
+            reset(seed=seed + 7919 * (agents.index(name) + 1))
+    rows: dict[int, dict[str, Any]] = {}
+    slot_epoch = [-1] * n_envs
+    obs: list[list[np.ndarray]] = [[] for _ in range(n_envs)]
+    acc = [dict.fromkeys(("dense_reward", "sparse_reward", *TERMS), 0.0) for _ in range(n_envs)]
+    next_epoch = 0
+
+    def start(k: int) -> None:
+        nonlocal next_epoch
+        epoch = next_epoch if next_epoch < epochs else -1  # -1: a filler match, discarded
+        next_epoch += 1
+        slot_epoch[k] = epoch
+        obs[k] = batch.reset_one(k, seed=seed + epoch if epoch >= 0 else seed - 1 - k)[0]
+        acc[k] = dict.fromkeys(acc[k], 0.0)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=epochs, unit="epoch", desc=f"evaluate {label}".strip(), dynamic_ncols=True)
+    for k in range(n_envs):
+        start(k)
+    try:
+        with batch:
+            while len(rows) < epochs:
+                actions = np.zeros((n_envs, len(agents), ACTION_SIZE))
+                for i, policy in drivers:
+                    actions[:, i] = act_batch(policy, np.stack([o[i] for o in obs]))
+                for k, res in enumerate(batch.step(actions)):
+                    info = res.infos[L]
+                    for key in acc[k]:
+                        acc[k][key] += info[key]
+                    if res.terminated or res.truncated:
+                        e = slot_epoch[k]
+                        if e >= 0:
+                            a = acc[k]
+                            rows[e] = {
+                                "epoch": e + 1,
+                                "outcome": info["outcome"],
+                                "local_winning_rate": float(local_winning_rate([info["outcome"]])[0]),
+                                "steps": info["step"],
+                                "total_reward": a["dense_reward"] + a["sparse_reward"],
+                                **a,
+                                "env_steps": 0,
+                                "wall_time": 0.0,
+                            }
+                            if bar is not None:
+                                bar.update(1)
+                        start(k)
+                    else:
+                        obs[k] = res.observations
+    finally:
+        if bar is not None:
+            bar.close()
+    return [rows[e] for e in range(epochs)]
+
+
+def write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
+    """Run every candidate, write CSVs, plots and ``summary.json``; returns the summary."""
+    from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
+
+    out = check_writable(Path(cfg.out))
+    match_cfg = MatchConfig(max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode)
+    others = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
+    candidates = {"trained": cfg.policy, **{b: b for b in cfg.baselines}}
+    summary: dict[str, Any] = {"config": asdict(cfg), "candidates": {}}
+    curves = {}
+    for label, spec in candidates.items():
+        policy = make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode)
+        rows = play_test_epochs(
+            policy,
+            others,
+            cfg.learner,
+            cfg.epochs,
+            cfg.seed,
+            match_cfg,
+            cfg.n_envs,
+            cfg.n_threads,
+            label=f"{cfg.learner}={spec}",
+            progress=cfg.progress,
+        )
+        write_rows(out / label / "metrics.csv", rows)
+        metrics = read_metrics_csv(out / label / "metrics.csv")
+        plot_run(
+            metrics, out / label / "plots", window=cfg.window, title=f"test: {cfg.learner}={spec}", label=cfg.learner
+        )
+        curves[f"{cfg.learner} {label} ({spec})"] = metrics
+        stats = summarize([r["outcome"] for r in rows], [r["steps"] for r in rows])
+        summary["candidates"][label] = {
+            "policy": spec,
+            **{k: _clean(v) for k, v in dict(stats).items()},
+            "mean_total_reward": float(np.mean([r["total_reward"] for r in rows])),
+            "mean_dense_reward": float(np.mean([r["dense_reward"] for r in rows])),
+            "mean_sparse_reward": float(np.mean([r["sparse_reward"] for r in rows])),
+        }
+    plot_comparison(curves, out, window=cfg.window)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """A readable table of a summary."""
+    lines = [
+        f"{'candidate':10s} {'policy':28s} {'n':>6s} {'win':>6s} {'loss':>6s} {'draw':>6s} "
+        f"{'test MWR [95% CI]':>26s} {'steps to win':>12s}"
+    ]
+    for label, c in summary["candidates"].items():
+        ci = f"{c['mean_lwr']:+.3f} [{c['mean_lwr_lo']:+.3f}, {c['mean_lwr_hi']:+.3f}]"
+        stw = "-" if c["mean_steps_to_win"] is None else f"{c['mean_steps_to_win']:.0f}"
+        counts = f"{c['n']:6d} {c['n_win']:6d} {c['n_loss']:6d} {c['n_draw']:6d}"
+        lines.append(f"{label:10s} {c['policy'][:28]:28s} {counts} {ci:>26s} {stw:>12s}")
+    return "\n".join(lines)
