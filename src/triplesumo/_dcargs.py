@@ -84,3 +84,24 @@ def build(cls: type, namespace: argparse.Namespace, prefix: str = "", base: Any 
             value = given[dest]
             values[f.name] = tuple(value) if isinstance(value, list) else value
     return dataclasses.replace(base, **values)
+
+
+def to_argv(obj: Any, prefix: str = "") -> list[str]:
+    """The options that rebuild dataclass ``obj`` from its class defaults (inverse of :func:`build`)."""
+    cls = type(obj)
+    hints = typing.get_type_hints(cls)
+    defaults = cls()
+    argv: list[str] = []
+    for f in dataclasses.fields(cls):
+        value, default = getattr(obj, f.name), getattr(defaults, f.name)
+        if dataclasses.is_dataclass(hints[f.name]):
+            argv += to_argv(value, prefix=f"{prefix}{f.name}.")
+        elif value != default:
+            flag = _flag(prefix, f.name)
+            if hints[f.name] is bool:
+                argv.append(flag if value else "--no-" + flag[2:])
+            elif isinstance(value, tuple):
+                argv += [flag, *map(str, value)]
+            elif value is not None:
+                argv += [flag, str(value)]
+    return argv

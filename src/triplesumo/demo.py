@@ -39,22 +39,28 @@ class DemoConfig:
     """Test epochs for the trained Bug and for each baseline."""
     seed: int = 0
     """Seed of training; evaluation uses its own fixed seed."""
+    steps_per_epoch: int = 500
+    """Step limit of every match (paper: 500); smaller makes a quicker smoke run."""
     n_envs: int = 16
     """Matches played at once."""
     learning_starts: int = 1000
     """Random warm-up transitions before Bug's first update."""
     video: bool = True
     """Record one test match of the trained Bug as mp4."""
+    video_size: int = 480
+    """Width and height of the video in pixels."""
     progress: bool = True
     """Show progress bars."""
 
     def __post_init__(self) -> None:
-        for name in ("train_epochs", "eval_epochs", "n_envs"):
+        for name in ("train_epochs", "eval_epochs", "n_envs", "steps_per_epoch"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"DemoConfig.{name} must be an int >= 1, got {value!r}")
         if self.max_minutes < 0:
             raise ValueError(f"DemoConfig.max_minutes must be >= 0, got {self.max_minutes}")
+        if self.video_size < 16:
+            raise ValueError(f"DemoConfig.video_size must be >= 16, got {self.video_size}")
         if self.learning_starts < 0:
             raise ValueError(f"DemoConfig.learning_starts must be >= 0, got {self.learning_starts}")
 
@@ -63,6 +69,7 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     out = check_writable(Path(cfg.out))
     print(f"[1/3] training Bug with DDPG (paper preset) in the shipped ongoing match -> {out / 'bug'}")
     train_cfg = TrainConfig(name="bug", out=str(out), epochs=cfg.train_epochs, max_minutes=cfg.max_minutes,
+                            steps_per_epoch=cfg.steps_per_epoch,
                             seed=cfg.seed, n_envs=cfg.n_envs, progress=cfg.progress,
                             checkpoint_every=max(cfg.train_epochs // 4, 1),
                             ddpg=dataclasses.replace(DDPGConfig(), learning_starts=cfg.learning_starts))
@@ -72,6 +79,7 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     policy = str(result.run_dir / "policy")
     print(f"[2/3] evaluating the trained Bug against passive and random Bug ({cfg.eval_epochs} test epochs each)")
     eval_cfg = EvaluateConfig(policy=policy, epochs=cfg.eval_epochs, out=str(out / "evaluation"),
+                              steps_per_epoch=cfg.steps_per_epoch,
                               n_envs=cfg.n_envs, progress=cfg.progress)
     summary = evaluate(eval_cfg)
     print(format_summary(summary))
@@ -80,7 +88,8 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     if cfg.video:
         print("[3/3] recording a test match of the trained Bug with Ant against Spider")
         video = out / "match.mp4"
-        run_play(PlayConfig(seed=eval_cfg.seed, video=str(video),
+        run_play(PlayConfig(seed=eval_cfg.seed, video=str(video), max_steps=cfg.steps_per_epoch,
+                            width=cfg.video_size, height=cfg.video_size,
                             policies=(f"bug={policy}", "ant=zoo:ant", "spider=zoo:spider")))
         paths["video"] = video
     print("\nwhere to look:")

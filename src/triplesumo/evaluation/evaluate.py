@@ -16,6 +16,7 @@ test MWR over the whole run) with its 95% interval, and mean steps to win.
 
 from __future__ import annotations
 
+import copy
 import csv
 import json
 import math
@@ -25,13 +26,13 @@ from typing import Any
 
 import numpy as np
 
-from triplesumo.agents.builtin import act_batch
+from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.zoo import make_policy, policies_from_pairs
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import ACTION_SIZE
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.video import check_writable
-from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.rewards import TERMS
 from triplesumo.train.logger import COLUMNS
 
@@ -72,11 +73,21 @@ class EvaluateConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"EvaluateConfig.{name} must be an int >= 1, got {value!r}")
+        agents = [a.name for a in MatchConfig().agents]
+        if self.learner not in agents:
+            raise ValueError(f"EvaluateConfig.learner must be one of {agents}, got {self.learner!r}")
         for pair in self.policies:
             if pair.count("=") != 1 or not all(pair.split("=")):
                 raise ValueError(f"EvaluateConfig.policies: expected AGENT=POLICY, got {pair!r}")
             if pair.split("=")[0] == self.learner:
                 raise ValueError(f"EvaluateConfig.policies: {self.learner!r} is the evaluated learner")
+            if pair.split("=")[0] not in agents:
+                raise ValueError(f"EvaluateConfig.policies: unknown agent in {pair!r}; agents are {agents}")
+        unknown = [b for b in self.baselines if b not in BUILTIN]
+        if unknown:
+            raise ValueError(f"EvaluateConfig.baselines must be built-in policies {sorted(BUILTIN)}, got {unknown}")
+        if self.obs_mode not in OBS_MODES:
+            raise ValueError(f"EvaluateConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
 
 
 def play_test_epochs(
@@ -98,11 +109,12 @@ def play_test_epochs(
     if learner not in agents:
         raise ValueError(f"learner must be one of {list(agents)}, got {learner!r}")
     L = agents.index(learner)
-    drivers = [(agents.index(a), p) for a, p in others.items()] + [(L, learner_policy)]
-    for name, policy in (*others.items(), (learner, learner_policy)):
-        reset = getattr(policy, "reset", None)
-        if callable(reset):
-            reset(seed=seed + 7919 * (agents.index(name) + 1))
+    named = [*others.items(), (learner, learner_policy)]
+    # Stateful policies (with reset(seed)) get one copy per match slot, re-seeded from
+    # (test epoch, agent) at every epoch start, and every policy is called one observation
+    # at a time: so each test epoch's result depends on its seed only, never on n_envs.
+    drivers = [(agents.index(name), [copy.deepcopy(p) for _ in range(n_envs)] if callable(getattr(p, "reset", None))
+                else [p] * n_envs) for name, p in named]
     rows: dict[int, dict[str, Any]] = {}
     slot_epoch = [-1] * n_envs
     obs: list[list[np.ndarray]] = [[] for _ in range(n_envs)]
@@ -114,6 +126,10 @@ def play_test_epochs(
         epoch = next_epoch if next_epoch < epochs else -1  # -1: a filler match, discarded
         next_epoch += 1
         slot_epoch[k] = epoch
+        for i, per_slot in drivers:
+            reset = getattr(per_slot[k], "reset", None)
+            if callable(reset):
+                reset(seed=int(np.random.SeedSequence([seed + max(epoch, 0), i]).generate_state(1)[0]))
         obs[k] = batch.reset_one(k, seed=seed + epoch if epoch >= 0 else seed - 1 - k)[0]
         acc[k] = dict.fromkeys(acc[k], 0.0)
 
@@ -128,8 +144,9 @@ def play_test_epochs(
         with batch:
             while len(rows) < epochs:
                 actions = np.zeros((n_envs, len(agents), ACTION_SIZE))
-                for i, policy in drivers:
-                    actions[:, i] = act_batch(policy, np.stack([o[i] for o in obs]))
+                for i, per_slot in drivers:
+                    for k in range(n_envs):
+                        actions[k, i] = per_slot[k](obs[k][i])
                 for k, res in enumerate(batch.step(actions)):
                     info = res.infos[L]
                     for key in acc[k]:
@@ -223,7 +240,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"{'test MWR [95% CI]':>26s} {'steps to win':>12s}"
     ]
     for label, c in summary["candidates"].items():
-        ci = f"{c['mean_lwr']:+.3f} [{c['mean_lwr_lo']:+.3f}, {c['mean_lwr_hi']:+.3f}]"
+        lo, hi = c["mean_lwr_lo"], c["mean_lwr_hi"]
+        ci = f"{c['mean_lwr']:+.3f} " + ("[n/a]" if lo is None or hi is None else f"[{lo:+.3f}, {hi:+.3f}]")
         stw = "-" if c["mean_steps_to_win"] is None else f"{c['mean_steps_to_win']:.0f}"
         counts = f"{c['n']:6d} {c['n_win']:6d} {c['n_loss']:6d} {c['n_draw']:6d}"
         lines.append(f"{label:10s} {c['policy'][:28]:28s} {counts} {ci:>26s} {stw:>12s}")

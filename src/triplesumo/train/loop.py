@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import shlex
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -65,6 +64,13 @@ def config_from_json(data: dict[str, Any]) -> TrainConfig:
     return TrainConfig(**data)
 
 
+def command_for(cfg: TrainConfig) -> str:
+    """The ``triplesumo train`` command line that makes ``cfg`` (its non-default options)."""
+    from triplesumo import _dcargs
+
+    return " ".join(shlex.quote(a) for a in ["triplesumo", "train", *_dcargs.to_argv(cfg)])
+
+
 def prepare_run_dir(run_dir: Path) -> Path:
     """Create the run folder and prove it is writable now, not after hours."""
     run_dir = Path(run_dir)
@@ -91,7 +97,7 @@ class Trainer:
         if unknown:
             raise ValueError(f"TrainConfig.policies names unknown agents {unknown}; agents are {agent_names}")
         self.run_dir = prepare_run_dir(Path(run_dir) if run_dir else Path(cfg.out) / cfg.name)
-        self.command = command or " ".join(shlex.quote(a) for a in ["triplesumo", *sys.argv[1:]])
+        self.command = command or command_for(cfg)
         torch.set_num_threads(cfg.torch_threads)
         self.match_cfg = MatchConfig(max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode, reward=cfg.reward)
         self.batch = MatchBatch(self.match_cfg, cfg.n_envs, cfg.n_threads)
@@ -113,6 +119,8 @@ class Trainer:
         self.epochs_done = 0
         self.env_steps = 0
         self.lwr: list[float] = []
+        self.finished_epoch_steps: list[int] = []
+        """Length of every epoch finished by this process (not restored on resume)."""
         self.acc = [self._empty_acc() for _ in range(cfg.n_envs)]
         self.obs: list[list[np.ndarray]] = []
         self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0}
@@ -193,6 +201,7 @@ class Trainer:
         acc = self.acc[k]
         lwr = float(local_winning_rate([info["outcome"]])[0])
         self.lwr.append(lwr)
+        self.finished_epoch_steps.append(int(info["step"]))
         total = acc["dense_reward"] + acc["sparse_reward"]
         row = {"epoch": self.epochs_done, "outcome": info["outcome"], "local_winning_rate": lwr,
                "steps": info["step"], "total_reward": total, **acc, "env_steps": self.env_steps,

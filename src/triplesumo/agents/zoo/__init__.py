@@ -9,6 +9,7 @@ path to a policy file (``runs/x/policy`` or ``runs/x/policy.json``).
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -42,6 +43,8 @@ def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = No
     for key in ("command", "seed", "epochs"):
         if key not in manifest:
             raise ValueError(f"{policy_stem}: manifest lacks {key!r}; only training runs' policies can be published")
+    if not re.fullmatch(r"[a-z][a-z0-9_-]*", name):
+        raise ValueError(f"zoo name must be lower-case letters, digits, - or _, got {name!r}")
     zoo_dir = Path(zoo_dir) if zoo_dir is not None else ZOO_DIR
     manifest = {**manifest, "zoo_name": name}
     if evaluation is not None:

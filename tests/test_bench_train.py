@@ -1,0 +1,94 @@
+"""``triplesumo bench train --quick``: the report's shape and arithmetic (never its speed).
+
+Speed lives in the benchmark itself; here the rates only have to exist, be positive
+and finite, and the derived numbers have to follow from them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from triplesumo.benchmarks.train import PAPER_EPOCHS, main
+
+LABELS = {"env_only": "env alone (collection, no learning)", "train_paper": "training, paper preset",
+          "sb3_ddpg": "Stable-Baselines3 DDPG, same schedule"}
+QUICK_STEPS, QUICK_ENVS, QUICK_WARM_UP = 64, 2, 32
+"""What ``--quick`` sets: env steps per variant, matches, warm-up transitions."""
+
+
+def run_bench(argv: list[str]) -> tuple[int, str]:
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = main(argv)
+    return rc, buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, dict[str, Any], Path]:
+    path = tmp_path_factory.mktemp("bench") / "sub" / "b.json"
+    rc, printed = run_bench(["--quick", "--json", str(path)])
+    return rc, printed, json.loads(path.read_text()), path
+
+
+@pytest.fixture(scope="module")
+def quick_no_sb3(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, dict[str, Any]]:
+    path = tmp_path_factory.mktemp("bench") / "n.json"
+    rc, printed = run_bench(["--quick", "--no-sb3", "--json", str(path)])
+    return rc, printed, json.loads(path.read_text())
+
+
+def test_quick_prints_the_table_with_all_three_variants(quick: tuple) -> None:
+    rc, printed, result, path = quick
+    assert rc == 0
+    for name, label in LABELS.items():
+        line = next(line for line in printed.splitlines() if line.startswith(label))
+        assert float(line.split()[-2]) == pytest.approx(result["rates"][name], abs=0.5)
+    assert "SB3: measured" in printed
+    assert "train / env alone:" in printed and "train / SB3 DDPG:" in printed
+    assert printed.rstrip().endswith(f"wrote {path}")
+
+
+def test_quick_json_rates_ratios_split_and_projection_follow_from_each_other(quick: tuple) -> None:
+    _, _, result, _ = quick
+    rates = result["rates"]
+    assert set(LABELS) <= set(rates)  # (other variants may be measured too)
+    assert all(math.isfinite(r) and r > 0 for r in rates.values()), rates
+    assert result["ratios"]["train_vs_env"] == pytest.approx(rates["train_paper"] / rates["env_only"])
+    assert result["ratios"]["train_vs_sb3"] == pytest.approx(rates["train_paper"] / rates["sb3_ddpg"])
+    split = result["time_split"]
+    assert set(split) == {"env", "act", "learn"}
+    assert all(0.0 <= v <= 1.0 for v in split.values())
+    assert sum(split.values()) == pytest.approx(1.0)
+    assert split["learn"] > 0  # the paper preset did learn during the timed steps
+    hours = result["projected_hours_20000_epochs"]
+    assert hours["at_500_steps_per_epoch"] == pytest.approx(PAPER_EPOCHS * 500 / rates["train_paper"] / 3600)
+    assert hours["at_measured_epoch_length"] > 0 and hours["at_500_steps_per_epoch"] > 0
+    setup = result["setup"]
+    assert (setup["steps"], setup["n_envs"], setup["learning_starts"]) == (QUICK_STEPS, QUICK_ENVS, QUICK_WARM_UP)
+    assert setup["sb3"] == "measured"
+
+
+def test_quick_never_reports_an_epoch_longer_than_any_match_has_run(quick: tuple) -> None:
+    _, _, result, _ = quick
+    longest_possible = (QUICK_WARM_UP + QUICK_STEPS) / QUICK_ENVS  # steps any one match has taken
+    assert result["mean_epoch_steps"] is None or result["mean_epoch_steps"] <= longest_possible
+
+
+def test_no_sb3_leaves_sb3_out(quick_no_sb3: tuple[int, str, dict[str, Any]]) -> None:
+    rc, printed, result = quick_no_sb3
+    assert rc == 0
+    assert {"env_only", "train_paper"} <= set(result["rates"])
+    assert "sb3_ddpg" not in result["rates"] and "train_vs_sb3" not in result["ratios"]
+    assert all(math.isfinite(r) and r > 0 for r in result["rates"].values())
+    assert result["setup"]["sb3"] == "skipped"
+    assert "SB3: skipped" in printed
+    assert LABELS["sb3_ddpg"] not in printed
+    assert "train / SB3" not in printed
+    assert any(line.startswith(LABELS["train_paper"]) for line in printed.splitlines())

@@ -1,0 +1,289 @@
+"""``triplesumo evaluate`` on a tiny budget: test epochs, their rows, the report and its plots.
+
+The shipped zoo may be empty, so the module trains its own tiny zoo first (Ant and
+Spider, 2 epochs of 20 steps with 16-unit networks) and a tiny Bug policy file, and
+points :data:`triplesumo.agents.zoo.ZOO_DIR` at it where a test resolves ``zoo:NAME``.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import triplesumo.agents.zoo
+from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
+from triplesumo.agents.policy_file import load_policy
+from triplesumo.agents.zoo import publish
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary, play_test_epochs, write_rows
+from triplesumo.evaluation.metrics import OUTCOMES
+from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.rewards import DENSE_TERMS
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.logger import COLUMNS
+from triplesumo.train.loop import train
+
+TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=2000, learning_starts=20, batch_size=8, learn_every=2)
+LWR = {"win": 1.0, "loss": -1.0, "draw": 0.0, "error": 0.0}
+STEPS = 30
+"""Step limit of the test matches here."""
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+@dataclass(frozen=True)
+class TinyZoo:
+    zoo_dir: Path
+    """Folder holding ant.{json,safetensors} and spider.{json,safetensors}."""
+    bug_policy: Path
+    """Stem of a tiny trained Bug policy file."""
+
+
+def train_tiny(out: Path, learner: str, policies: tuple[str, ...]) -> Path:
+    """A 2-epoch training run of ``learner``; returns its run folder."""
+    result = train(TrainConfig(out=str(out), name=learner, learner=learner, policies=policies, epochs=2,
+                               steps_per_epoch=20, n_envs=2, ddpg=TINY_DDPG, progress=False, tensorboard=False))
+    return result.run_dir
+
+
+@pytest.fixture(scope="module")
+def tiny_zoo(tmp_path_factory: pytest.TempPathFactory) -> TinyZoo:
+    root = tmp_path_factory.mktemp("tiny-zoo")
+    zoo_dir = root / "zoo"
+    for learner, policies in (("ant", ("spider=random", "bug=zero")), ("spider", ("ant=random", "bug=zero"))):
+        publish(train_tiny(root / "runs", learner, policies) / "policy", learner, zoo_dir=zoo_dir)
+    bug_run = train_tiny(root / "runs", "bug", ("ant=zero", "spider=random"))
+    return TinyZoo(zoo_dir, bug_run / "policy")
+
+
+def fixed_others(zoo_dir: Path) -> dict[str, Any]:
+    return {name: load_policy(zoo_dir / name, expect_obs_mode="paper")[0] for name in ("ant", "spider")}
+
+
+def play(learner_policy: Any, others: dict[str, Any], epochs: int, n_envs: int, seed: int = 100) -> list[dict]:
+    return play_test_epochs(learner_policy, others, "bug", epochs, seed, MatchConfig(max_steps=STEPS),
+                            n_envs=n_envs, n_threads=1)
+
+
+class Recorder:
+    """Wraps a per-observation policy and keeps every observation it is asked about."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.seen: list[np.ndarray] = []
+
+    def __deepcopy__(self, memo: dict) -> Recorder:
+        # play_test_epochs copies stateful policies per match slot; the copies share `seen`.
+        twin = Recorder(copy.deepcopy(self.inner, memo))
+        twin.seen = self.seen
+        return twin
+
+    def reset(self, seed: int | None = None) -> None:
+        reset = getattr(self.inner, "reset", None)
+        if callable(reset):
+            reset(seed=seed)
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        self.seen.append(np.array(obs, copy=True))
+        return self.inner(obs)
+
+
+# ----------------------------------------------------------------- play_test_epochs
+def test_rows_are_one_per_epoch_in_order_with_the_metrics_schema(tiny_zoo: TinyZoo, tmp_path: Path) -> None:
+    bug = load_policy(tiny_zoo.bug_policy)[0]
+    rows = play(bug, fixed_others(tiny_zoo.zoo_dir), epochs=5, n_envs=2)
+    assert [r["epoch"] for r in rows] == [1, 2, 3, 4, 5]
+    for r in rows:
+        assert set(r) == set(COLUMNS)
+        assert r["outcome"] in OUTCOMES
+        assert r["local_winning_rate"] == LWR[r["outcome"]]
+        assert 1 <= r["steps"] <= STEPS
+        if r["outcome"] == "draw":
+            assert r["steps"] == STEPS
+        assert r["total_reward"] == pytest.approx(r["dense_reward"] + r["sparse_reward"])
+        assert r["dense_reward"] == pytest.approx(sum(r[t] for t in DENSE_TERMS))
+        assert r["sparse_reward"] == pytest.approx(r["reward_outcome"])
+    # Seeded reset noise: the test matches differ from each other.
+    assert len({round(r["total_reward"], 9) for r in rows}) > 1
+    write_rows(tmp_path / "m.csv", rows)
+    with (tmp_path / "m.csv").open(newline="") as fh:
+        reader = csv.DictReader(fh)
+        assert tuple(reader.fieldnames or ()) == COLUMNS
+        assert [int(r["epoch"]) for r in reader] == [1, 2, 3, 4, 5]
+
+
+class PerRow:
+    """A trained actor asked one observation at a time (``act_batch`` then calls it per row)."""
+
+    def __init__(self, actor: Any) -> None:
+        self.actor = actor
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        return np.asarray(self.actor(obs[None]))[0]
+
+
+def test_rows_are_exactly_independent_of_n_envs_for_per_row_policies(tiny_zoo: TinyZoo) -> None:
+    """Epoch i is seeded ``seed + i`` whichever slot plays it: n_envs changes nothing."""
+    bug = PerRow(load_policy(tiny_zoo.bug_policy)[0])
+    others = {a: PerRow(p) for a, p in fixed_others(tiny_zoo.zoo_dir).items()}
+    one = play(bug, others, epochs=4, n_envs=1)
+    assert play(bug, others, epochs=4, n_envs=3) == one
+    assert play(ZeroPolicy(), others, epochs=4, n_envs=1) == play(ZeroPolicy(), others, epochs=4, n_envs=3)
+
+
+def test_trained_actors_and_random_policies_give_the_same_epochs_for_any_n_envs(tiny_zoo: TinyZoo) -> None:
+    """Policies act one observation at a time and stateful ones are re-seeded per test epoch,
+    so a test epoch's result depends on its seed only, never on how many matches run at once."""
+    bug = load_policy(tiny_zoo.bug_policy)[0]
+    others = fixed_others(tiny_zoo.zoo_dir)
+    three = play(bug, others, epochs=4, n_envs=3)
+    assert play(bug, others, epochs=4, n_envs=3) == three
+    assert play(bug, others, epochs=4, n_envs=1) == three
+    random_others = {**others, "spider": RandomPolicy(5)}
+    assert play(bug, random_others, epochs=4, n_envs=1) == play(bug, random_others, epochs=4, n_envs=3)
+
+
+def test_a_random_learner_is_reseeded_so_runs_repeat(tiny_zoo: TinyZoo) -> None:
+    others = fixed_others(tiny_zoo.zoo_dir)
+    # Differently constructed random policies: play_test_epochs re-seeds them from its seed.
+    a = play(RandomPolicy(1), others, epochs=3, n_envs=2)
+    b = play(RandomPolicy(2), others, epochs=3, n_envs=2)
+    assert a == b
+    assert play(RandomPolicy(1), others, epochs=3, n_envs=2, seed=101) != a
+
+
+def test_every_candidate_meets_the_same_starts(tiny_zoo: TinyZoo) -> None:
+    """Epoch i starts from the reset seeded ``seed + i`` whatever the learner does (a paired comparison)."""
+    others = fixed_others(tiny_zoo.zoo_dir)
+
+    def starts(policy: Any, seed: int) -> list[np.ndarray]:
+        rec = Recorder(policy)
+        rows = play(rec, others, epochs=3, n_envs=1, seed=seed)
+        first = np.cumsum([0] + [r["steps"] for r in rows[:-1]])
+        assert len(rec.seen) == sum(r["steps"] for r in rows)
+        return [rec.seen[i] for i in first]
+
+    passive, random = starts(ZeroPolicy(), 200), starts(RandomPolicy(0), 200)
+    for p, r in zip(passive, random, strict=True):
+        np.testing.assert_array_equal(p, r)
+    assert not np.array_equal(passive[0], passive[1])  # epochs differ from each other
+    assert not np.array_equal(starts(ZeroPolicy(), 300)[0], passive[0])  # and with the seed
+
+
+def test_an_unknown_learner_is_rejected() -> None:
+    with pytest.raises(ValueError, match="learner must be one of"):
+        play_test_epochs(ZeroPolicy(), {}, "cat", 1, 0, MatchConfig(max_steps=5), n_envs=1)
+
+
+# ------------------------------------------------------------------------ evaluate
+@pytest.fixture(scope="module")
+def report(tiny_zoo: TinyZoo, tmp_path_factory: pytest.TempPathFactory) -> tuple[EvaluateConfig, dict[str, Any]]:
+    out = tmp_path_factory.mktemp("evaluation")
+    cfg = EvaluateConfig(policy=str(tiny_zoo.bug_policy), policies=("ant=zoo:ant", "spider=zoo:spider"), epochs=6,
+                         n_envs=2, steps_per_epoch=STEPS, out=str(out), progress=False)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+        summary = evaluate(cfg)
+    return cfg, summary
+
+
+def test_evaluate_writes_summary_json_with_counts_and_intervals(report: tuple[EvaluateConfig, dict]) -> None:
+    cfg, summary = report
+    saved = json.loads((Path(cfg.out) / "summary.json").read_text())
+    assert saved["candidates"] == summary["candidates"]
+    assert saved["config"]["epochs"] == 6
+    cands = saved["candidates"]
+    assert list(cands) == ["trained", "passive", "random"]
+    assert cands["trained"]["policy"] == cfg.policy
+    for label, c in cands.items():
+        assert c["n"] == 6, label
+        assert c["n_win"] + c["n_loss"] + c["n_draw"] + c["n_error"] == c["n"]
+        for kind in ("win", "loss", "draw"):
+            lo, rate, hi = c[f"{kind}_rate_lo"], c[f"{kind}_rate"], c[f"{kind}_rate_hi"]
+            assert rate == pytest.approx(c[f"n_{kind}"] / c["n"])
+            assert 0.0 <= lo <= rate <= hi <= 1.0, (label, kind)
+        assert c["mean_lwr"] == pytest.approx((c["n_win"] - c["n_loss"]) / c["n"])
+        assert c["mean_lwr_lo"] <= c["mean_lwr"] <= c["mean_lwr_hi"]
+        assert c["mean_steps_to_win"] is None or 1 <= c["mean_steps_to_win"] <= STEPS
+        for key in ("mean_total_reward", "mean_dense_reward", "mean_sparse_reward"):
+            assert math.isfinite(c[key])
+        assert c["mean_total_reward"] == pytest.approx(c["mean_dense_reward"] + c["mean_sparse_reward"])
+
+
+def test_evaluate_writes_metrics_csv_and_plots_per_candidate(report: tuple[EvaluateConfig, dict]) -> None:
+    cfg, summary = report
+    out = Path(cfg.out)
+    for name in ("compare_mwr.png", "compare_rewards.png"):
+        assert (out / name).read_bytes()[:8] == PNG, name
+    for label, c in summary["candidates"].items():
+        with (out / label / "metrics.csv").open(newline="") as fh:
+            reader = csv.DictReader(fh)
+            assert tuple(reader.fieldnames or ()) == COLUMNS
+            rows = list(reader)
+        assert [int(r["epoch"]) for r in rows] == list(range(1, 7))
+        outcomes = [r["outcome"] for r in rows]
+        assert [outcomes.count(k) for k in OUTCOMES] == [c[f"n_{k}"] for k in OUTCOMES], label
+        assert np.mean([float(r["total_reward"]) for r in rows]) == pytest.approx(c["mean_total_reward"])
+        pngs = sorted(p.name for p in (out / label / "plots").glob("*.png"))
+        assert pngs == ["mwr.png", "reward_terms.png", "rewards.png", "steps_to_win.png"], label
+        assert all((out / label / "plots" / p).read_bytes()[:8] == PNG for p in pngs)
+
+
+def test_the_baselines_play_the_same_matches_as_direct_calls(report: tuple[EvaluateConfig, dict],
+                                                              tiny_zoo: TinyZoo) -> None:
+    """The passive baseline's CSV is what play_test_epochs gives for the config's seed."""
+    cfg, _ = report
+    rows = play_test_epochs(ZeroPolicy(), fixed_others(tiny_zoo.zoo_dir), "bug", cfg.epochs, cfg.seed,
+                            MatchConfig(max_steps=STEPS), n_envs=3, n_threads=1)
+    with (Path(cfg.out) / "passive" / "metrics.csv").open(newline="") as fh:
+        saved = list(csv.DictReader(fh))
+    assert [r["outcome"] for r in saved] == [r["outcome"] for r in rows]
+    assert [int(r["steps"]) for r in saved] == [r["steps"] for r in rows]
+    assert [float(r["total_reward"]) for r in saved] == pytest.approx([r["total_reward"] for r in rows])
+
+
+def test_format_summary_has_a_header_and_one_line_per_candidate(report: tuple[EvaluateConfig, dict]) -> None:
+    _, summary = report
+    lines = format_summary(summary).splitlines()
+    assert len(lines) == 1 + len(summary["candidates"])
+    assert "test MWR" in lines[0]
+    for line, (label, c) in zip(lines[1:], summary["candidates"].items(), strict=True):
+        assert line.split()[0] == label
+        assert f"{c['mean_lwr']:+.3f}" in line
+        assert str(c["n"]) in line.split()
+
+
+def test_format_summary_survives_an_undefined_interval() -> None:
+    one = {"policy": "zero", "n": 1, "n_win": 1, "n_loss": 0, "n_draw": 0, "n_error": 0, "mean_lwr": 1.0,
+           "mean_lwr_lo": None, "mean_lwr_hi": None, "mean_steps_to_win": 12.0}
+    assert len(format_summary({"candidates": {"trained": one}}).splitlines()) == 2
+
+
+# -------------------------------------------------------------------- validation
+@pytest.mark.parametrize(("fields", "names"), [
+    ({"epochs": 0}, r"EvaluateConfig\.epochs"),
+    ({"epochs": True}, r"EvaluateConfig\.epochs"),
+    ({"steps_per_epoch": 0}, r"EvaluateConfig\.steps_per_epoch"),
+    ({"window": 0}, r"EvaluateConfig\.window"),
+    ({"n_envs": -1}, r"EvaluateConfig\.n_envs"),
+    ({"n_threads": 0}, r"EvaluateConfig\.n_threads"),
+    ({"policies": ("ant",)}, r"EvaluateConfig\.policies"),
+    ({"policies": ("ant=",)}, r"EvaluateConfig\.policies"),
+])
+def test_config_errors_name_the_field(fields: dict[str, Any], names: str) -> None:
+    with pytest.raises(ValueError, match=names):
+        EvaluateConfig(**fields)
+
+
+def test_the_learner_cannot_have_a_fixed_policy() -> None:
+    with pytest.raises(ValueError, match=r"EvaluateConfig\.policies.*'bug'"):
+        EvaluateConfig(policies=("ant=zoo:ant", "bug=random"))
+    with pytest.raises(ValueError, match=r"EvaluateConfig\.policies.*'ant'"):
+        EvaluateConfig(learner="ant", policies=("ant=random",))
