@@ -70,6 +70,7 @@ class Simulation:
         self.ctrl_low: np.ndarray = lo
         self.ctrl_high: np.ndarray = hi
         self._fatal = ""
+        self._pyramid3 = model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
         self._warn_ids = np.array(list(WATCHED_WARNINGS.values()))
         self._warn_seen = np.zeros(len(WATCHED_WARNINGS), dtype=np.int64)
 
@@ -138,7 +139,7 @@ class Simulation:
         from ``mj_contactForce`` acts on geom2 and its reaction on geom1.
         """
         out = np.zeros((len(self.agent_geoms), 3))
-        data, model, rows = self.data, self.model, self._geom_row
+        data, rows = self.data, self._geom_row
         ncon = data.ncon
         if ncon == 0:
             return out
@@ -147,9 +148,7 @@ class Simulation:
         involved = np.flatnonzero((r1 >= 0) | (r2 >= 0))
         if len(involved) == 0:
             return out
-        local = np.empty((len(involved), 6))
-        for k, i in enumerate(involved):
-            mujoco.mj_contactForce(model, data, int(i), local[k])
+        local = self._contact_frame_forces(involved)
         frames = contact.frame[involved].reshape(-1, 3, 3)
         world = np.einsum("nji,nj->ni", frames, local[:, :3])  # frame rows are the contact axes
         r1, r2 = r1[involved], r2[involved]
@@ -159,6 +158,32 @@ class Simulation:
         flat = (rows_hit[:, None] * 3 + np.arange(3)).ravel()
         out = np.bincount(flat, forces.ravel(), minlength=out.size).reshape(out.shape)
         return out
+
+    def _contact_frame_forces(self, contacts: np.ndarray) -> np.ndarray:
+        """Contact-frame forces ``(len(contacts), 3)`` (normal, tangent 1, tangent 2).
+
+        With pyramidal friction cones and condim 3 (this model's setting) this decodes
+        the four pyramid edge forces in ``efc_force`` exactly as ``mj_contactForce``
+        does (normal = sum of the edges, tangent k = (f_2k - f_2k+1) * mu_k), for all
+        contacts at once; otherwise it calls ``mj_contactForce`` per contact.
+        """
+        data, model = self.data, self.model
+        contact = data.contact
+        if self._pyramid3 and np.all(contact.dim[contacts] == 3):
+            adr = contact.efc_address[contacts]
+            active = adr >= 0
+            out = np.zeros((len(contacts), 3))
+            if active.any():
+                f = data.efc_force[adr[active, None] + np.arange(4)]
+                mu = contact.friction[contacts[active], :2]
+                out[active, 0] = f.sum(axis=1)
+                out[active, 1] = (f[:, 0] - f[:, 1]) * mu[:, 0]
+                out[active, 2] = (f[:, 2] - f[:, 3]) * mu[:, 1]
+            return out
+        local = np.empty((len(contacts), 6))
+        for k, i in enumerate(contacts):
+            mujoco.mj_contactForce(model, data, int(i), local[k])
+        return local[:, :3]
 
     # ------------------------------------------------------------- warnings
     def new_warnings(self) -> list[str]:
