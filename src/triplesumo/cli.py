@@ -91,8 +91,13 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.evaluation.plots import plot_run, read_metrics_csv
 
             run_dir = Path(args.run_dir)
+            learner = "bug"
+            if (run_dir / "config.json").exists():
+                from triplesumo.agents.policy_file import load_json
+
+                learner = str(load_json(run_dir / "config.json").get("learner", learner))
             paths = plot_run(read_metrics_csv(run_dir / "metrics.csv"), run_dir / "plots", window=args.window,
-                             title=run_dir.name)
+                             title=f"{learner} training ({run_dir.name})", label=learner.capitalize())
             print("\n".join(str(p) for p in paths))
         elif args.command == "zoo":
             import json

@@ -342,7 +342,7 @@ class Trainer:
         metrics = read_metrics_csv(self.run_dir / "metrics.csv")
         if len(metrics["epoch"]):
             plot_run(metrics, self.run_dir / "plots", window=self.cfg.window,
-                     title=f"{self.cfg.learner} training ({self.run_dir.name})", label=self.cfg.learner)
+                     title=f"{self.cfg.learner} training ({self.run_dir.name})", label=self.cfg.learner.capitalize())
 
 
 def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str, Any] | None = None) -> TrainResult:
