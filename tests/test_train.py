@@ -456,3 +456,16 @@ def test_cli_resume_of_missing_run_exits_2_naming_the_file(tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["train", "--resume", str(tmp_path / "gone")]) == 2
     assert str(tmp_path / "gone" / "config.json") in capsys.readouterr().err
+
+
+def test_resume_without_the_replay_buffer_needs_saying_so(run_copy: Path) -> None:
+    """A run committed without its replay buffer (to continue in another session) resumes
+    only with save_replay=False, from the same weights and counters, with an empty buffer."""
+    folder = checkpoint.latest(run_copy)
+    (folder / "replay.npz").unlink()
+    with pytest.raises(CheckpointError, match=re.escape(str(folder / "replay.npz"))):
+        train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": 3 * E})
+    result = train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": 3 * E, "save_replay": False})
+    assert result.epochs >= 3 * E
+    _, rows = read_rows(run_copy)
+    assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))

@@ -25,7 +25,8 @@ def _parser() -> argparse.ArgumentParser:
     train = sub.add_parser("train", help="train one agent with DDPG (the others follow given policies)")
     train.add_argument("--resume", metavar="RUN_DIR", default=None,
                        help="continue the killed or finished run in RUN_DIR (its saved config; "
-                            "--epochs and --max-minutes may be raised)")
+                            "--epochs and --max-minutes may be raised; --no-save-replay resumes from a checkpoint "
+                            "whose replay buffer was not kept, with an empty buffer: not bit-exact)")
     _dcargs.add_arguments(train, TrainConfig)
     from triplesumo.evaluation.evaluate import EvaluateConfig
 
@@ -64,13 +65,13 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.train.loop import train
 
             if args.resume:
-                allowed = ("epochs", "max_minutes", "progress")
+                allowed = ("epochs", "max_minutes", "progress", "save_replay")
                 given = {k for k in vars(args) if k not in ("command", "resume")}
                 if given - set(allowed):
                     extra = given - set(allowed)
                     flags = ", ".join(sorted("--" + k.replace("__", ".").replace("_", "-") for k in extra))
-                    raise ValueError(f"with --resume the run's saved config is used; only --epochs, --max-minutes "
-                                     f"and --progress may be given, not {flags}")
+                    raise ValueError(f"with --resume the run's saved config is used; only --epochs, --max-minutes, "
+                                     f"--progress and --no-save-replay may be given, not {flags}")
                 overrides = {k: v for k, v in vars(args).items() if k in allowed}
                 result = train(TrainConfig(), resume_dir=args.resume, overrides=overrides)
             else:

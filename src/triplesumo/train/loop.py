@@ -310,6 +310,7 @@ class Trainer:
                       arrays: dict[str, np.ndarray], replay: dict[str, np.ndarray] | None) -> None:
         saved = config_from_json(state["config"])
         for name in ("learner", "obs_mode", "n_envs", "steps_per_epoch", "policies", "reward", "ddpg", "seed"):
+            # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
             if getattr(saved, name) != getattr(self.cfg, name):
                 raise checkpoint.CheckpointError(
                     f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
