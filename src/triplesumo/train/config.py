@@ -28,7 +28,8 @@ class TrainConfig:
     """AGENT=POLICY for the other agents (zero, passive, random, zoo:NAME or a policy file);
     agents not named are passive."""
     epochs: int = 20_000
-    """Epochs (matches) to train; one epoch = one match of at most steps_per_epoch steps."""
+    """Epochs (matches) to train; one epoch = one match of at most steps_per_epoch steps. Matches
+    run n_envs at a time, so those ending on the same final step can add up to n_envs - 1 more."""
     steps_per_epoch: int = 500
     """Step limit of a match (paper: 500); reaching it is a draw."""
     n_envs: int = 16
