@@ -15,4 +15,4 @@ def register_envs() -> None:
         gym.register("TripleSumo-v0", entry_point="triplesumo.envs.single:TripleSumoEnv")
     if "TripleSumo-Paper-v0" not in gym.registry:
         # The shipped Ant and Spider drive the others; resolved lazily by the zoo.
-        gym.register("TripleSumo-Paper-v0", entry_point="triplesumo.agents.zoo:make_paper_env")
+        gym.register("TripleSumo-Paper-v0", entry_point="triplesumo.zoo:make_paper_env")

@@ -1,5 +1,27 @@
-"""``triplesumo.zoo.load("spider")``: the shipped policies (see :mod:`triplesumo.agents.zoo`)."""
+"""``triplesumo.zoo``: the shipped policies (see :mod:`triplesumo.agents.zoo`) and the
+Gymnasium factory of the paper's setup, which joins them to the env view."""
 
-from triplesumo.agents.zoo import ZOO_DIR, available, load, make_paper_env, make_policy
+from __future__ import annotations
 
-__all__ = ["ZOO_DIR", "available", "load", "make_paper_env", "make_policy"]
+from typing import Any
+
+from triplesumo.agents.zoo import ZOO_DIR, available, load, make_policy, policies_from_pairs, publish
+
+__all__ = ["ZOO_DIR", "available", "load", "make_paper_env", "make_policy", "policies_from_pairs", "publish"]
+
+
+def make_paper_env(**kwargs: Any) -> Any:
+    """``TripleSumo-Paper-v0``: Bug learns; Ant and Spider are the shipped zoo policies.
+
+    Keyword arguments are those of :class:`triplesumo.envs.single.TripleSumoEnv`;
+    ``policies`` replaces the zoo's Ant and Spider.
+    """
+    from triplesumo.envs.single import TripleSumoEnv
+
+    obs_mode = kwargs.get("obs_mode", "paper")
+    policies = kwargs.pop("policies", None) or {
+        "ant": load("ant", expect_obs_mode=obs_mode)[0],
+        "spider": load("spider", expect_obs_mode=obs_mode)[0],
+    }
+    kwargs.setdefault("learner", "bug")
+    return TripleSumoEnv(policies=policies, **kwargs)

@@ -77,18 +77,3 @@ def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str) -> dic
             raise ValueError(f"policy for {agent!r} given twice")
         out[agent] = make_policy(spec, seed=seed * 1000 + k, expect_obs_mode=obs_mode)
     return out
-
-
-def make_paper_env(**kwargs: Any) -> Any:
-    """``TripleSumo-Paper-v0``: Bug learns; Ant and Spider are the shipped zoo policies."""
-    from triplesumo.envs.single import TripleSumoEnv
-
-    obs_mode = kwargs.get("obs_mode", "paper")
-    policies = kwargs.pop("policies", None) or {
-        "ant": load("ant", expect_obs_mode=obs_mode)[0],
-        "spider": load("spider", expect_obs_mode=obs_mode)[0],
-    }
-    kwargs.setdefault("learner", "bug")
-    return TripleSumoEnv(policies=policies, **kwargs)
-
-
