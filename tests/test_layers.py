@@ -77,7 +77,8 @@ def test_agents_and_algorithms_take_array_sizes_not_envs(where: str) -> None:
     for path in sorted((SRC / where).rglob("*.py")):
         for name in _imports(path):
             parts = name.split(".")
-            assert not (parts[0] == "triplesumo" and len(parts) > 1 and parts[1] in ("envs", "sim", "rules", "model")), (
+            below = ("envs", "sim", "rules", "model")
+            assert not (parts[0] == "triplesumo" and len(parts) > 1 and parts[1] in below), (
                 f"{path.relative_to(SRC)} imports {name}")
 
 
