@@ -10,10 +10,8 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.envs.viewing import RENDER_MODES, MatchView
 from triplesumo.rules.config import MatchConfig
-from triplesumo.sim.render import FrameRenderer, HumanViewer
-
-RENDER_MODES = ("human", "rgb_array")
 
 
 class TripleSumoParallelEnv(ParallelEnv):
@@ -97,12 +95,9 @@ class TripleSumoParallelEnv(ParallelEnv):
 
     def __init__(self, config: MatchConfig | None = None, render_mode: str | None = None,
                  width: int = 480, height: int = 480) -> None:
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}")
         self.match = Match(config)
         self.config = self.match.config
         self.render_mode = render_mode
-        self._size = (width, height)
         self.possible_agents = list(self.match.agents)
         self.agents: list[str] = []
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.match.sim.dt)}
@@ -114,8 +109,7 @@ class TripleSumoParallelEnv(ParallelEnv):
         n_state = len(self.match.state())
         self.state_space = spaces.Box(-np.inf, np.inf, (n_state,), np.float32)
         self.observation_structure = self.match.observer.structure
-        self._renderer: FrameRenderer | None = None
-        self._viewer: HumanViewer | None = None
+        self._view = MatchView(self.match, render_mode, width, height)
 
     @property
     def model(self) -> Any:
@@ -162,27 +156,10 @@ class TripleSumoParallelEnv(ParallelEnv):
         return self.match.state()
 
     def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            import gymnasium
-
-            gymnasium.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'.")
-            return None
-        if self.render_mode == "human":
-            if self._viewer is None:
-                self._viewer = HumanViewer(self.match.model, self.match.data)
-            self._viewer.sync()
-            return None
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.match.model, *self._size)
-        return self._renderer.render(self.match.data)
+        return self._view.render()
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        if self._viewer is not None:
-            self._viewer.close()
-            self._viewer = None
+        self._view.close()
 
 
 def parallel_env(render_mode: str | None = None, width: int = 480, height: int = 480,

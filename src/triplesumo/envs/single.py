@@ -11,8 +11,8 @@ import numpy as np
 from gymnasium import spaces
 
 from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.envs.viewing import RENDER_MODES, MatchView
 from triplesumo.rules.config import MatchConfig
-from triplesumo.sim.render import FrameRenderer, HumanViewer
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Any callable from one observation to one normalised action in [-1, 1]^8. If it has a
@@ -55,7 +55,7 @@ class TripleSumoEnv(gym.Env):
     - v0: first release.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 20}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20}
 
     def __init__(self, learner: str = "bug", policies: Mapping[str, Policy] | None = None,
                  render_mode: str | None = None, width: int = 480, height: int = 480,
@@ -68,9 +68,6 @@ class TripleSumoEnv(gym.Env):
             if unknown:
                 raise ValueError(f"unknown MatchConfig field(s) {unknown}; known: {sorted(known)}")
             config = MatchConfig(**config_fields)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, "
-                             f"got {render_mode!r}")
         self.match = Match(config)
         if learner not in self.match.agents:
             raise ValueError(f"learner must be one of {list(self.match.agents)}, got {learner!r}")
@@ -87,14 +84,12 @@ class TripleSumoEnv(gym.Env):
         self.policies = policies
         self._others = [(i, a) for i, a in enumerate(self.match.agents) if a != learner]
         self.render_mode = render_mode
-        self._size = (width, height)
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.match.sim.dt)}
         self.observation_space = spaces.Box(-np.inf, np.inf, (self.match.observer.sizes[learner],), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
         self.observation_structure = self.match.observer.structure[learner]
         self._obs: list[np.ndarray] = []
-        self._renderer: FrameRenderer | None = None
-        self._viewer: HumanViewer | None = None
+        self._view = MatchView(self.match, render_mode, width, height)
 
     @property
     def model(self) -> Any:
@@ -137,22 +132,7 @@ class TripleSumoEnv(gym.Env):
         return self._obs[k], float(result.rewards[k]), result.terminated, result.truncated, result.infos[k]
 
     def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'.")
-            return None
-        if self.render_mode == "human":
-            if self._viewer is None:
-                self._viewer = HumanViewer(self.match.model, self.match.data)
-            self._viewer.sync()
-            return None
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.match.model, *self._size)
-        return self._renderer.render(self.match.data)
+        return self._view.render()
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        if self._viewer is not None:
-            self._viewer.close()
-            self._viewer = None
+        self._view.close()
