@@ -8,6 +8,8 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from collections.abc import Callable  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
@@ -61,3 +63,43 @@ def place() -> Callable[..., None]:
 def zeros() -> Callable[[Match], np.ndarray]:
     """``zeros(match)``: the all-zero action array of a match."""
     return lambda match: np.zeros((match.n_agents, 8))
+
+
+# ----------------------------------------------------------------- a tiny policy zoo
+@dataclass(frozen=True)
+class TinyZoo:
+    """Policies from tiny real training runs, for tests that must not depend on shipped weights."""
+
+    zoo_dir: Path
+    """Folder holding ant.{json,safetensors} and spider.{json,safetensors} (published)."""
+    ant_run: Path
+    """Run folder of the tiny Ant training."""
+    bug_policy: Path
+    """Stem of a tiny trained Bug policy file."""
+
+
+def _train_tiny(out: Path, learner: str, policies: tuple[str, ...]) -> Path:
+    from triplesumo.algos.ddpg import DDPGConfig
+    from triplesumo.train.config import TrainConfig
+    from triplesumo.train.loop import train
+
+    tiny = DDPGConfig(hidden=(16, 16), buffer_size=2000, learning_starts=20, batch_size=8, learn_every=2)
+    result = train(TrainConfig(out=str(out), name=learner, learner=learner, policies=policies, epochs=2,
+                               steps_per_epoch=20, n_envs=2, ddpg=tiny, progress=False, tensorboard=False))
+    return result.run_dir
+
+
+@pytest.fixture(scope="session")
+def tiny_zoo(tmp_path_factory: pytest.TempPathFactory) -> TinyZoo:
+    """Ant and Spider trained for 2 epochs of 20 steps (16-unit networks) and published to a
+    temporary zoo, plus a tiny Bug policy file."""
+    from triplesumo.agents.zoo import publish
+
+    root = tmp_path_factory.mktemp("tiny-zoo")
+    zoo_dir = root / "zoo"
+    runs = {}
+    for learner, policies in (("ant", ("spider=random", "bug=zero")), ("spider", ("ant=random", "bug=zero"))):
+        runs[learner] = _train_tiny(root / "runs", learner, policies)
+        publish(runs[learner] / "policy", learner, zoo_dir=zoo_dir)
+    bug = _train_tiny(root / "runs", "bug", ("ant=zero", "spider=random"))
+    return TinyZoo(zoo_dir, runs["ant"], bug / "policy")

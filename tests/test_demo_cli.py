@@ -1,11 +1,9 @@
 """The main job (``triplesumo demo``) end to end on a tiny budget, and the zoo / evaluate / play commands.
 
-The shipped zoo may be empty, so the module trains its own tiny zoo (Ant, Spider: 2
-epochs of 20 steps, 16-unit networks) and points :data:`triplesumo.agents.zoo.ZOO_DIR`
-at it. The demo has no knob for the match length or the video size, and at its own
-500-step matches and 480x480 video even its smallest budget takes most of a minute on
-2 cores; the test shortens the matches (and the video frame) by wrapping the three
-configs the demo builds, and leaves everything else as the command runs it.
+The tests use the tiny zoo of ``conftest.py`` (Ant, Spider: 2 epochs of 20 steps,
+16-unit networks), pointing :data:`triplesumo.agents.zoo.ZOO_DIR` at it, so they do not
+depend on the shipped weights. The demo runs as the command does, with its own options
+for short matches (``--steps-per-epoch``) and a small video (``--video-size``).
 """
 
 from __future__ import annotations
@@ -13,7 +11,6 @@ from __future__ import annotations
 import csv
 import json
 import re
-from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -23,45 +20,19 @@ from gymnasium.utils.env_checker import check_env
 
 import triplesumo  # noqa: F401  (registers the Gymnasium ids)
 import triplesumo.agents.zoo
+from conftest import TinyZoo
 from triplesumo.agents.policy_file import load_json, load_policy, save_policy
-from triplesumo.agents.zoo import publish
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.cli import main
 from triplesumo.evaluation.video import count_frames
-from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS
-from triplesumo.train.loop import train
 
-TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=2000, learning_starts=20, batch_size=8, learn_every=2)
 PLOTS = ["mwr.png", "reward_terms.png", "rewards.png", "steps_to_win.png"]
 PNG = b"\x89PNG\r\n\x1a\n"
 DEMO_STEPS = 40
-"""Match length the demo test plays (the demo itself always uses 500)."""
+"""Match length the demo test plays (--steps-per-epoch; the default is 500)."""
 
 
-@dataclass(frozen=True)
-class TinyZoo:
-    zoo_dir: Path
-    ant_run: Path
-    bug_policy: Path
-
-
-def train_tiny(out: Path, learner: str, policies: tuple[str, ...]) -> Path:
-    result = train(TrainConfig(out=str(out), name=learner, learner=learner, policies=policies, epochs=2,
-                               steps_per_epoch=20, n_envs=2, ddpg=TINY_DDPG, progress=False, tensorboard=False))
-    return result.run_dir
-
-
-@pytest.fixture(scope="module")
-def tiny_zoo(tmp_path_factory: pytest.TempPathFactory) -> TinyZoo:
-    root = tmp_path_factory.mktemp("tiny-zoo")
-    zoo_dir = root / "zoo"
-    runs = {}
-    for learner, policies in (("ant", ("spider=random", "bug=zero")), ("spider", ("ant=random", "bug=zero"))):
-        runs[learner] = train_tiny(root / "runs", learner, policies)
-        publish(runs[learner] / "policy", learner, zoo_dir=zoo_dir)
-    bug = train_tiny(root / "runs", "bug", ("ant=zero", "spider=random"))
-    return TinyZoo(zoo_dir, runs["ant"], bug / "policy")
 
 
 @pytest.fixture

@@ -11,7 +11,6 @@ import copy
 import csv
 import json
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -19,48 +18,21 @@ import numpy as np
 import pytest
 
 import triplesumo.agents.zoo
+from conftest import TinyZoo
 from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
 from triplesumo.agents.policy_file import load_policy
-from triplesumo.agents.zoo import publish
-from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary, play_test_epochs, write_rows
 from triplesumo.evaluation.metrics import OUTCOMES
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import DENSE_TERMS
-from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS
-from triplesumo.train.loop import train
 
-TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=2000, learning_starts=20, batch_size=8, learn_every=2)
 LWR = {"win": 1.0, "loss": -1.0, "draw": 0.0, "error": 0.0}
 STEPS = 30
 """Step limit of the test matches here."""
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
-@dataclass(frozen=True)
-class TinyZoo:
-    zoo_dir: Path
-    """Folder holding ant.{json,safetensors} and spider.{json,safetensors}."""
-    bug_policy: Path
-    """Stem of a tiny trained Bug policy file."""
-
-
-def train_tiny(out: Path, learner: str, policies: tuple[str, ...]) -> Path:
-    """A 2-epoch training run of ``learner``; returns its run folder."""
-    result = train(TrainConfig(out=str(out), name=learner, learner=learner, policies=policies, epochs=2,
-                               steps_per_epoch=20, n_envs=2, ddpg=TINY_DDPG, progress=False, tensorboard=False))
-    return result.run_dir
-
-
-@pytest.fixture(scope="module")
-def tiny_zoo(tmp_path_factory: pytest.TempPathFactory) -> TinyZoo:
-    root = tmp_path_factory.mktemp("tiny-zoo")
-    zoo_dir = root / "zoo"
-    for learner, policies in (("ant", ("spider=random", "bug=zero")), ("spider", ("ant=random", "bug=zero"))):
-        publish(train_tiny(root / "runs", learner, policies) / "policy", learner, zoo_dir=zoo_dir)
-    bug_run = train_tiny(root / "runs", "bug", ("ant=zero", "spider=random"))
-    return TinyZoo(zoo_dir, bug_run / "policy")
 
 
 def fixed_others(zoo_dir: Path) -> dict[str, Any]:

@@ -1,0 +1,55 @@
+"""The policies shipped in the package: manifests, safe loading, deterministic acting."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import triplesumo
+from triplesumo.agents import zoo
+from triplesumo.envs.match import Match
+
+SHIPPED = ("ant", "spider", "bug")
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_policy_manifest_says_how_it_was_made(name: str) -> None:
+    assert name in zoo.available()
+    manifest = json.loads((zoo.ZOO_DIR / f"{name}.json").read_text())
+    assert manifest["agent"] == name
+    assert manifest["command"].startswith("triplesumo train")
+    assert isinstance(manifest["seed"], int)
+    assert manifest["epochs"] > 0
+    assert manifest["obs_mode"] == "paper"
+    assert manifest["mujoco_version"] and manifest["env_version"] == triplesumo.ENV_VERSION
+    assert "evaluation" in manifest
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_shipped_policy_loads_by_name_and_acts_deterministically(name: str) -> None:
+    policy, manifest = triplesumo.zoo.load(name)
+    match = Match()
+    obs, _ = match.reset(seed=3)
+    i = match.agents.index(name)
+    a1, a2 = policy(obs[i]), policy(obs[i].copy())
+    assert a1.shape == (8,) and a1.dtype == np.float32
+    assert np.array_equal(a1, a2)
+    assert np.all(np.abs(a1) <= 1.0)
+    batch = policy(np.stack([obs[i], obs[i]]))
+    assert np.allclose(batch[0], a1, atol=1e-6)
+    assert manifest["obs_dim"] == obs[i].shape[0]
+
+
+def test_paper_env_uses_the_shipped_ant_and_spider() -> None:
+    import gymnasium as gym
+
+    env = gym.make("TripleSumo-Paper-v0")
+    env.reset(seed=0)
+    env.step(np.zeros(8, dtype=np.float32))
+    data, match = env.unwrapped.data, env.unwrapped.match
+    for agent in ("ant", "spider"):
+        ids = match.sim.actuator_ids[match.agents.index(agent)]
+        assert np.abs(data.ctrl[ids]).sum() > 0, agent
+    assert np.abs(data.ctrl[match.sim.actuator_ids[match.agents.index("bug")]]).sum() == 0
