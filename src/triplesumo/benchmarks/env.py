@@ -31,17 +31,16 @@ are recorded beside them: on a shared 2-core machine compare ratios, not rates.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
 from importlib import metadata
-from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
 
+from triplesumo.benchmarks import report
 from triplesumo.envs.batch import BACKENDS, MatchBatch
 from triplesumo.envs.match import ACTION_SIZE, Match
 from triplesumo.envs.parallel import TripleSumoParallelEnv
@@ -322,10 +321,5 @@ def main(argv: list[str] | None = None) -> int:
     result = run_env_benchmark(steps=args.steps, n_matches=args.matches, n_threads=args.threads,
                                integrator=args.integrator, seed=args.seed, rounds=args.rounds,
                                chunk=args.chunk)
-    print(format_table(result))
-    if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result, indent=2) + "\n")
-        print(f"wrote {path}")
+    report(format_table(result), result, args.json)
     return 0

@@ -31,7 +31,6 @@ projected wall time of the paper's 20,000 epochs uses the mean epoch length meas
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import tempfile
 import time
@@ -42,6 +41,7 @@ import numpy as np
 import torch
 
 from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.benchmarks import report
 from triplesumo.benchmarks.env import _versions
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer
@@ -235,10 +235,5 @@ def main(argv: list[str] | None = None) -> int:
     result = run_train_benchmark(steps=args.steps, n_envs=args.envs, n_threads=args.threads, rounds=args.rounds,
                                  chunk=args.chunk, policies=tuple(args.policies), seed=args.seed,
                                  learning_starts=learning_starts, sb3=not args.no_sb3)
-    print(format_table(result))
-    if args.json:
-        path = Path(args.json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(result, indent=2) + "\n")
-        print(f"wrote {path}")
+    report(format_table(result), result, args.json)
     return 0

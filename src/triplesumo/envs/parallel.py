@@ -10,11 +10,11 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from triplesumo.envs.match import ACTION_SIZE, Match
-from triplesumo.envs.viewing import RENDER_MODES, MatchView
+from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
 
 
-class TripleSumoParallelEnv(ParallelEnv):
+class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     """TripleSumo: three quadrupeds on a sumo ring, Ant and Bug against Spider.
 
     ## Description
@@ -110,16 +110,6 @@ class TripleSumoParallelEnv(ParallelEnv):
         self.state_space = spaces.Box(-np.inf, np.inf, (n_state,), np.float32)
         self.observation_structure = self.match.observer.structure
         self._view = MatchView(self.match, render_mode, width, height)
-
-    @property
-    def model(self) -> Any:
-        """The compiled ``mujoco.MjModel``."""
-        return self.match.model
-
-    @property
-    def data(self) -> Any:
-        """The live ``mujoco.MjData``."""
-        return self.match.data
 
     def observation_space(self, agent: str) -> spaces.Box:
         return self._obs_spaces[agent]

@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from triplesumo.envs.match import ACTION_SIZE, Match
-from triplesumo.envs.viewing import RENDER_MODES, MatchView
+from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -20,7 +20,7 @@ Policy = Callable[[np.ndarray], np.ndarray]
 env's seed, so seeded episodes are reproducible."""
 
 
-class TripleSumoEnv(gym.Env):
+class TripleSumoEnv(MatchAccess, gym.Env):
     """TripleSumo seen by one learner (default Bug); the others follow fixed policies.
 
     ## Description
@@ -90,16 +90,6 @@ class TripleSumoEnv(gym.Env):
         self.observation_structure = self.match.observer.structure[learner]
         self._obs: list[np.ndarray] = []
         self._view = MatchView(self.match, render_mode, width, height)
-
-    @property
-    def model(self) -> Any:
-        """The compiled ``mujoco.MjModel``."""
-        return self.match.model
-
-    @property
-    def data(self) -> Any:
-        """The live ``mujoco.MjData``."""
-        return self.match.data
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)

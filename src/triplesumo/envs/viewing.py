@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium
 import numpy as np
 
@@ -9,6 +11,22 @@ from triplesumo.envs.match import Match
 from triplesumo.sim.render import FrameRenderer, HumanViewer
 
 RENDER_MODES = ("human", "rgb_array")
+
+
+class MatchAccess:
+    """``model`` and ``data`` of the view's match (what ``env.unwrapped.model`` / ``.data`` give)."""
+
+    match: Match
+
+    @property
+    def model(self) -> Any:
+        """The compiled ``mujoco.MjModel``."""
+        return self.match.model
+
+    @property
+    def data(self) -> Any:
+        """The live ``mujoco.MjData``."""
+        return self.match.data
 
 
 class MatchView:
