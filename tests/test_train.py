@@ -469,3 +469,23 @@ def test_resume_without_the_replay_buffer_needs_saying_so(run_copy: Path) -> Non
     assert result.epochs >= 3 * E
     _, rows = read_rows(run_copy)
     assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
+
+
+def test_overlapped_learning_gives_the_same_run_as_serial_learning(tmp_path: Path) -> None:
+    """Updates run in a thread while MuJoCo steps; they read the replay as it was before the
+    step and their own sampling generator, so the run is bit for bit the serial one."""
+    serial = train(tiny(tmp_path, "serial", overlap_learning=False)).run_dir
+    overlapped = train(tiny(tmp_path, "overlap", overlap_learning=True)).run_dir
+    assert_same_tensors(serial / "policy.safetensors", overlapped / "policy.safetensors")
+    assert without_wall_time(read_rows(serial)[1]) == without_wall_time(read_rows(overlapped)[1])
+    assert_same_tensors(checkpoint.latest(serial) / "weights.safetensors",
+                        checkpoint.latest(overlapped) / "weights.safetensors")
+
+
+def test_an_error_in_the_update_thread_reaches_the_caller(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def broken(self: Any, batch: Any) -> dict[str, float]:
+        raise RuntimeError("update failed on purpose")
+
+    monkeypatch.setattr(train_loop.DDPG, "update", broken)
+    with pytest.raises(RuntimeError, match="update failed on purpose"):
+        train(tiny(tmp_path, "broken", overlap_learning=True))

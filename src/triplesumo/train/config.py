@@ -51,6 +51,8 @@ class TrainConfig:
     """Save the replay buffer in checkpoints, for an exact resume (large for long runs)."""
     window: int = 200
     """λ of the MWR and the rolling curves (paper: 200)."""
+    overlap_learning: bool = True
+    """Run the DDPG updates due at a step while MuJoCo steps the matches (same results)."""
     torch_threads: int = 1
     """torch.set_num_threads on CPU (two threads collapse when the other core is busy)."""
     progress: bool = True

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import shlex
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -84,6 +85,36 @@ def prepare_run_dir(run_dir: Path) -> Path:
     return run_dir
 
 
+class _Learner(threading.Thread):
+    """Runs the DDPG updates due at one collection step, in a thread or inline."""
+
+    def __init__(self, trainer: Trainer, due: int) -> None:
+        super().__init__(name="ddpg-updates", daemon=True)
+        self.trainer, self.due, self.seconds = trainer, due, 0.0
+        self.error: BaseException | None = None
+        self._launched = False
+
+    def start(self) -> None:
+        self._launched = True
+        super().start()
+
+    def run(self) -> None:
+        t, cfg = time.perf_counter(), self.trainer.cfg
+        try:
+            for _ in range(self.due):
+                batch = self.trainer.replay.sample(cfg.ddpg.batch_size, self.trainer.sample_rng)
+                self.trainer.last_losses = self.trainer.agent.update(batch)
+        except BaseException as exc:  # re-raised in the collecting thread by finish()
+            self.error = exc
+        self.seconds = time.perf_counter() - t
+
+    def finish(self) -> None:
+        if self._launched:
+            self.join()
+        if self.error is not None:
+            raise self.error
+
+
 class Trainer:
     """Trains ``cfg.learner`` with DDPG; :meth:`run` until ``cfg.epochs`` or ``max_minutes``."""
 
@@ -116,6 +147,8 @@ class Trainer:
         self.noise = make_noise(cfg.ddpg.noise, (cfg.n_envs, ACTION_SIZE), cfg.ddpg.noise_sigma,
                                 cfg.ddpg.noise_theta)
         self.rng = np.random.default_rng(cfg.seed)
+        self.sample_rng = np.random.default_rng([cfg.seed, 1])
+        """Replay sampling only (used by the update thread; never shared with collection)."""
         self.epochs_done = 0
         self.env_steps = 0
         self.lwr: list[float] = []
@@ -123,7 +156,9 @@ class Trainer:
         """Length of every epoch finished by this process (not restored on resume)."""
         self.acc = [self._empty_acc() for _ in range(cfg.n_envs)]
         self.obs: list[list[np.ndarray]] = []
-        self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0}
+        self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0, "wait": 0.0}
+        """Seconds collecting (physics and rules), acting, learning (busy, in the update
+        thread: overlaps "env" when overlap_learning is on) and waiting for learning."""
         self.last_losses: dict[str, float] = {}
         if resume:
             self._restore()
@@ -159,12 +194,26 @@ class Trainer:
         for i, policy in self.others:
             actions[:, i] = act_batch(policy, self._stacked_obs(i))
         t1 = time.perf_counter()
+        # The DDPG updates due at this step learn from the replay as it was before the step,
+        # so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and in
+        # torch's kernels). Overlapped or not, the result is bit for bit the same.
+        before = self.env_steps
+        after = before + n
+        due = 0
+        if after >= cfg.ddpg.learning_starts and len(self.replay) >= cfg.ddpg.batch_size:
+            due = (after // cfg.ddpg.learn_every - before // cfg.ddpg.learn_every) * cfg.ddpg.gradient_steps
+        learner = _Learner(self, due)
+        if due and cfg.overlap_learning:
+            learner.start()
+        elif due:
+            learner.run()
         results = self.batch.step(actions)
         t2 = time.perf_counter()
+        learner.finish()
+        t_joined = time.perf_counter()
         keep, rew, next_obs, done = [], [], [], []
         finished = 0
-        before = self.env_steps
-        self.env_steps += n  # counted before epochs end, so their rows include this step
+        self.env_steps = after  # counted before epochs end, so their rows include this step
         for k, res in enumerate(results):
             info = res.infos[self.L]
             acc = self.acc[k]
@@ -185,15 +234,10 @@ class Trainer:
         if keep:
             self.replay.add_batch(obs[keep], learner_act[keep], np.array(rew), np.stack(next_obs), np.array(done))
         t3 = time.perf_counter()
-        if self.env_steps >= cfg.ddpg.learning_starts and len(self.replay) >= cfg.ddpg.batch_size:
-            k_every = cfg.ddpg.learn_every
-            due = (self.env_steps // k_every - before // k_every) * cfg.ddpg.gradient_steps
-            for _ in range(due):
-                self.last_losses = self.agent.update(self.replay.sample(cfg.ddpg.batch_size, self.rng))
-        t4 = time.perf_counter()
         self.timers["act"] += t1 - t0
-        self.timers["env"] += (t2 - t1) + (t3 - t2)
-        self.timers["learn"] += t4 - t3
+        self.timers["env"] += (t2 - t1) + (t3 - t_joined)
+        self.timers["learn"] += learner.seconds  # overlapped with "env" when overlap_learning is on
+        self.timers["wait"] += t_joined - t2
         return finished
 
     def _end_epoch(self, k: int, info: dict[str, Any]) -> None:
@@ -276,6 +320,7 @@ class Trainer:
         state = {
             "config": config_to_json(self.cfg), "manifest": self.manifest(), "epochs_done": self.epochs_done,
             "env_steps": self.env_steps, "optimizer": opt_meta, "rng": self.rng.bit_generator.state,
+            "sample_rng": self.sample_rng.bit_generator.state,
             "matches": [{"steps": s["steps"], "over": s["over"], "rng": s["rng"]} for s in snaps],
             "acc": self.acc, "timers": self.timers,
             "policy_rngs": {a: p.rng.bit_generator.state for a, p in self.policies.items() if hasattr(p, "rng")},
@@ -288,7 +333,7 @@ class Trainer:
     def _restore(self) -> None:
         folder = checkpoint.latest(self.run_dir)
         tensors, state, arrays, replay = checkpoint.load(folder, need_replay=self.cfg.save_replay)
-        need_state = ("config", "optimizer", "rng", "matches", "epochs_done", "env_steps", "acc")
+        need_state = ("config", "optimizer", "rng", "sample_rng", "matches", "epochs_done", "env_steps", "acc")
         missing = [k for k in need_state if k not in state]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'state.json'}: missing entries {missing}")
@@ -322,6 +367,7 @@ class Trainer:
         if replay is not None:
             self.replay.load_state_dict(replay)
         self.rng.bit_generator.state = state["rng"]
+        self.sample_rng.bit_generator.state = state["sample_rng"]
         for k, match in enumerate(self.batch.matches):
             meta = state["matches"][k]
             match.restore({"physics": arrays[f"match{k}.physics"], "last_obs": arrays[f"match{k}.last_obs"],
@@ -334,7 +380,7 @@ class Trainer:
         self.env_steps = int(state["env_steps"])
         self.acc = state["acc"]
         self.lwr = [float(x) for x in arrays["lwr"]]
-        self.timers = state.get("timers", self.timers)
+        self.timers = {**self.timers, **state.get("timers", {})}
 
     def finish_outputs(self) -> None:
         """Plots from the metrics CSV (skipped when the run has no finished epoch)."""
