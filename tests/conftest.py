@@ -71,7 +71,7 @@ class TinyZoo:
     """Policies from tiny real training runs, for tests that must not depend on shipped weights."""
 
     zoo_dir: Path
-    """Folder holding ant.{json,safetensors} and spider.{json,safetensors} (published)."""
+    """Folder holding ant, spider and bug .{json,safetensors} (published)."""
     ant_run: Path
     """Run folder of the tiny Ant training."""
     bug_policy: Path
@@ -102,4 +102,5 @@ def tiny_zoo(tmp_path_factory: pytest.TempPathFactory) -> TinyZoo:
         runs[learner] = _train_tiny(root / "runs", learner, policies)
         publish(runs[learner] / "policy", learner, zoo_dir=zoo_dir)
     bug = _train_tiny(root / "runs", "bug", ("ant=zero", "spider=random"))
+    publish(bug / "policy", "bug", zoo_dir=zoo_dir)
     return TinyZoo(zoo_dir, runs["ant"], bug / "policy")

@@ -65,8 +65,9 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
     assert manifest["hidden"] == list(DDPGConfig().hidden)
     # 2. evaluation against both baselines, on the policy it just trained
     summary = json.loads((out / "evaluation" / "summary.json").read_text())
-    assert list(summary["candidates"]) == ["trained", "passive", "random"]
+    assert list(summary["candidates"]) == ["trained", "zoo-bug", "passive", "random"]
     assert summary["candidates"]["trained"]["policy"] == str(out / "bug" / "policy")
+    assert summary["candidates"]["zoo-bug"]["policy"] == "zoo:bug"
     assert all(c["n"] == 4 for c in summary["candidates"].values())
     assert (out / "evaluation" / "compare_mwr.png").read_bytes()[:8] == PNG
     # 3. a decodable video of one test match
@@ -78,7 +79,7 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
     for path in (out / "bug", out / "bug" / "plots", out / "evaluation", out / "evaluation" / "compare_mwr.png",
                  out / "match.mp4"):
         assert str(path) in where, path
-    for label in ("trained", "passive", "random"):
+    for label in ("trained", "zoo-bug", "passive", "random"):
         assert re.search(rf"^{label}\s", printed, re.M), label
 
 
@@ -87,8 +88,8 @@ def test_zoo_list_prints_each_entry_with_its_command_and_seed(zoo: TinyZoo,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["zoo", "list"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert [line.split()[0] for line in lines] == ["ant", "spider"]
-    for line, name in zip(lines, ("ant", "spider"), strict=True):
+    assert [line.split()[0] for line in lines] == ["ant", "bug", "spider"]
+    for line, name in zip(lines, ("ant", "bug", "spider"), strict=True):
         meta = load_json(zoo.zoo_dir / f"{name}.json")
         assert f"agent={name}" in line
         assert f"seed={meta['seed']}" in line

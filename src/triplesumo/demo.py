@@ -2,9 +2,10 @@
 
 1. Train Bug with DDPG (the paper's preset) in the shipped ongoing match: the zoo's
    trained Ant and Spider play, Bug learns to cooperate with Ant.
-2. Evaluate the Bug it trained against the passive and random Bug baselines, in the same
-   seeded test matches, with no exploration noise.
-3. Record one match of the trained Bug with Ant against Spider as mp4.
+2. Evaluate the Bug it trained, the shipped Bug (``zoo:bug``, the paper's 20,000 epochs)
+   and the passive and random Bug baselines, all in the same seeded test matches, with
+   no exploration noise.
+3. Record one match of the shipped Bug with Ant against Spider as mp4.
 
 Everything lands in one folder (default ``runs/demo``); the end of the output says
 where. The full reproduction is ``triplesumo train`` at its defaults (20,000 epochs)
@@ -77,8 +78,9 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     print(f"      {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates in "
           f"{result.seconds:.0f} s; training MWR {result.mwr:+.3f}")
     policy = str(result.run_dir / "policy")
-    print(f"[2/3] evaluating the trained Bug against passive and random Bug ({cfg.eval_epochs} test epochs each)")
-    eval_cfg = EvaluateConfig(policy=policy, epochs=cfg.eval_epochs, out=str(out / "evaluation"),
+    print(f"[2/3] evaluating this Bug, the shipped Bug (zoo:bug), passive and random Bug "
+          f"({cfg.eval_epochs} test epochs each, the same matches)")
+    eval_cfg = EvaluateConfig(policy=policy, compare=("zoo:bug",), epochs=cfg.eval_epochs, out=str(out / "evaluation"),
                               steps_per_epoch=cfg.steps_per_epoch,
                               n_envs=cfg.n_envs, progress=cfg.progress)
     summary = evaluate(eval_cfg)
@@ -86,11 +88,11 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     paths = {"run": result.run_dir, "training_plots": result.run_dir / "plots",
              "evaluation": out / "evaluation", "comparison_plot": out / "evaluation" / "compare_mwr.png"}
     if cfg.video:
-        print("[3/3] recording a test match of the trained Bug with Ant against Spider")
+        print("[3/3] recording a test match of the shipped Bug with Ant against Spider")
         video = out / "match.mp4"
         run_play(PlayConfig(seed=eval_cfg.seed, video=str(video), max_steps=cfg.steps_per_epoch,
                             width=cfg.video_size, height=cfg.video_size,
-                            policies=(f"bug={policy}", "ant=zoo:ant", "spider=zoo:spider")))
+                            policies=("bug=zoo:bug", "ant=zoo:ant", "spider=zoo:spider")))
         paths["video"] = video
     print("\nwhere to look:")
     for name, path in paths.items():

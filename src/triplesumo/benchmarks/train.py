@@ -98,7 +98,7 @@ class _SB3Variant:
         return steps, time.perf_counter() - t0
 
 
-def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 2, rounds: int = 3,
+def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1, rounds: int = 3,
                         chunk: int = 2000, policies: tuple[str, ...] = ("ant=random", "spider=random"),
                         seed: int = 0, learning_starts: int = 1000, sb3: bool = True) -> dict[str, Any]:
     """Measure env-only, paper-preset training and (optionally) SB3 DDPG; returns a JSON-able dict."""
@@ -224,7 +224,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="triplesumo bench train", description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=6000, help="env steps per variant and round (default: 6000)")
     parser.add_argument("--envs", type=int, default=16, help="matches collected at once (default: 16)")
-    parser.add_argument("--threads", type=int, default=2, help="MuJoCo threads (default: 2)")
+    parser.add_argument("--threads", type=int, default=1, help="MuJoCo threads (default: 1, the trainer's)")
     parser.add_argument("--rounds", type=int, default=3, help="repetitions; the median is reported (default: 3)")
     parser.add_argument("--chunk", type=int, default=2000, help="env steps per turn of a variant (default: 2000)")
     parser.add_argument("--policies", nargs="*", default=["ant=random", "spider=random"],

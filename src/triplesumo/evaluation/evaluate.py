@@ -47,6 +47,8 @@ class EvaluateConfig:
     """The learner's policy: zoo:NAME, a policy file (e.g. runs/bug/policy), zero or random."""
     policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider")
     """AGENT=POLICY for the other agents (fixed, no exploration noise)."""
+    compare: tuple[str, ...] = ()
+    """Other learner policies played in the same matches (e.g. zoo:bug, a policy file)."""
     baselines: tuple[str, ...] = ("passive", "random")
     """Baseline learner policies played in the same matches (built-in names)."""
     epochs: int = 2000
@@ -190,6 +192,11 @@ def _clean(value: Any) -> Any:
     return value
 
 
+def _label(spec: str) -> str:
+    """A folder-safe label for a policy spec (``zoo:bug`` -> ``zoo-bug``)."""
+    return "".join(c if c.isalnum() or c in "-_" else "-" for c in spec).strip("-") or "policy"
+
+
 def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     """Run every candidate, write CSVs, plots and ``summary.json``; returns the summary."""
     from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
@@ -197,7 +204,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     out = check_writable(Path(cfg.out))
     match_cfg = MatchConfig(max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode)
     others = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
-    candidates = {"trained": cfg.policy, **{b: b for b in cfg.baselines}}
+    candidates = {"trained": cfg.policy, **{_label(c): c for c in cfg.compare}, **{b: b for b in cfg.baselines}}
     summary: dict[str, Any] = {"config": asdict(cfg), "candidates": {}}
     curves = {}
     for label, spec in candidates.items():
