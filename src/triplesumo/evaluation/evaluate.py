@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.zoo import make_policy, policies_from_pairs
+from triplesumo.agents.zoo import check_policy_pairs, make_policy, policies_from_pairs
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import ACTION_SIZE
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
@@ -78,13 +78,7 @@ class EvaluateConfig:
         agents = [a.name for a in MatchConfig().agents]
         if self.learner not in agents:
             raise ValueError(f"EvaluateConfig.learner must be one of {agents}, got {self.learner!r}")
-        for pair in self.policies:
-            if pair.count("=") != 1 or not all(pair.split("=")):
-                raise ValueError(f"EvaluateConfig.policies: expected AGENT=POLICY, got {pair!r}")
-            if pair.split("=")[0] == self.learner:
-                raise ValueError(f"EvaluateConfig.policies: {self.learner!r} is the evaluated learner")
-            if pair.split("=")[0] not in agents:
-                raise ValueError(f"EvaluateConfig.policies: unknown agent in {pair!r}; agents are {agents}")
+        check_policy_pairs("EvaluateConfig.policies", self.policies, self.learner, agents)
         unknown = [b for b in self.baselines if b not in BUILTIN]
         if unknown:
             raise ValueError(f"EvaluateConfig.baselines must be built-in policies {sorted(BUILTIN)}, got {unknown}")

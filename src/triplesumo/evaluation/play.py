@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from triplesumo.agents.zoo import policies_from_pairs
+from triplesumo.agents.zoo import check_policy_pairs, policies_from_pairs
 from triplesumo.evaluation.runner import MatchRecord, play_match
 from triplesumo.rules.config import MatchConfig
 
@@ -31,9 +31,7 @@ class PlayConfig:
     """Video height in pixels."""
 
     def __post_init__(self) -> None:
-        for pair in self.policies:
-            if pair.count("=") != 1 or not all(pair.split("=")):
-                raise ValueError(f"PlayConfig.policies: expected AGENT=POLICY, got {pair!r}")
+        check_policy_pairs("PlayConfig.policies", self.policies)
         if self.width < 16 or self.height < 16:
             raise ValueError("PlayConfig.width and height must be >= 16")
 

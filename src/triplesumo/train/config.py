@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from triplesumo.agents.zoo import check_policy_pairs
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.rules.config import OBS_MODES, RewardConfig
 
@@ -70,11 +71,7 @@ class TrainConfig:
             object.__setattr__(self, "policies", tuple(self.policies))
         if not self.name or "/" in self.name:
             raise ValueError(f"TrainConfig.name must be a non-empty folder name, got {self.name!r}")
-        for pair in self.policies:
-            if pair.count("=") != 1 or not all(pair.split("=")):
-                raise ValueError(f"TrainConfig.policies: expected AGENT=POLICY, got {pair!r}")
-            if pair.split("=")[0] == self.learner:
-                raise ValueError(f"TrainConfig.policies: the learner {self.learner!r} cannot have a fixed policy")
+        check_policy_pairs("TrainConfig.policies", self.policies, self.learner)
         for name in ("epochs", "steps_per_epoch", "n_envs", "n_threads", "checkpoint_every", "window",
                      "torch_threads"):
             value = getattr(self, name)

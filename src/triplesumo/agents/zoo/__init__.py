@@ -68,6 +68,19 @@ def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None 
                      f"(shipped: {available()}) or the path of a policy file")
 
 
+def check_policy_pairs(field: str, pairs: tuple[str, ...], learner: str | None = None,
+                       agents: list[str] | None = None) -> None:
+    """Validate ``AGENT=POLICY`` pairs of a config field; errors name ``field``."""
+    for pair in pairs:
+        if pair.count("=") != 1 or not all(pair.split("=")):
+            raise ValueError(f"{field}: expected AGENT=POLICY, got {pair!r}")
+        agent = pair.split("=")[0]
+        if agent == learner:
+            raise ValueError(f"{field}: the learner {learner!r} cannot have a fixed policy")
+        if agents is not None and agent not in agents:
+            raise ValueError(f"{field}: unknown agent in {pair!r}; agents are {agents}")
+
+
 def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str) -> dict[str, Any]:
     """``("ant=zoo:ant", "spider=random")`` -> ``{"ant": policy, "spider": policy}``."""
     out: dict[str, Any] = {}
