@@ -133,13 +133,8 @@ class Trainer:
         self.match_cfg = MatchConfig(max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode, reward=cfg.reward)
         self.batch = MatchBatch(self.match_cfg, cfg.n_envs, cfg.n_threads)
         probe = self.batch.matches[0]
-        if cfg.learner not in probe.agents:
-            raise ValueError(f"TrainConfig.learner must be one of {list(probe.agents)}, got {cfg.learner!r}")
-        self.L = probe.agents.index(cfg.learner)
+        self.L = probe.agents.index(cfg.learner)  # learner and policy agents were checked above
         self.policies = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
-        unknown = [a for a in self.policies if a not in probe.agents]
-        if unknown:
-            raise ValueError(f"TrainConfig.policies names unknown agents {unknown}; agents are {list(probe.agents)}")
         self.others = [(probe.agents.index(a), p) for a, p in self.policies.items()]
         self.obs_dim = probe.observer.sizes[cfg.learner]
         self.agent = DDPG(self.obs_dim, ACTION_SIZE, cfg.ddpg, seed=cfg.seed)
