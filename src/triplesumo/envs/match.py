@@ -228,10 +228,7 @@ class Match:
 
     def state(self) -> np.ndarray:
         """Global state: the ``paper`` observation vector (torso states, contact forces, qpos, qvel)."""
-        sim = self.sim
-        forces = np.clip(sim.contact_forces(), -self.config.contact_force_clip, self.config.contact_force_clip)
-        return np.concatenate([sim.torso_positions().ravel(), sim.torso_velocities().ravel(),
-                               forces.ravel(), sim.data.qpos, sim.data.qvel]).astype(np.float32)
+        return self.observer.global_state()
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -62,15 +62,21 @@ class ObservationBuilder:
             self.structure[name] = s
         self.sizes = {name: sum(s.values()) for name, s in self.structure.items()}
 
+    def global_state(self) -> np.ndarray:
+        """The ``paper`` vector (float32): the match's global state."""
+        sim = self.sim
+        forces = np.clip(sim.contact_forces(), -self.force_clip, self.force_clip)
+        return np.concatenate([sim.torso_positions().ravel(), sim.torso_velocities().ravel(), forces.ravel(),
+                               sim.data.qpos, sim.data.qvel]).astype(np.float32)
+
     def build(self) -> list[np.ndarray]:
         """float32 observation of every agent, roster order."""
         sim = self.sim
+        if self.mode == "paper":
+            obs = self.global_state()
+            return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
         forces = np.clip(sim.contact_forces(), -self.force_clip, self.force_clip)
         pos, vel = sim.torso_positions(), sim.torso_velocities()
-        if self.mode == "paper":
-            obs = np.concatenate([pos.ravel(), vel.ravel(), forces.ravel(), sim.data.qpos, sim.data.qvel])
-            obs = obs.astype(np.float32)
-            return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
         quat = sim.torso_quaternions()
         yaw = yaw_of(quat)
         angvel = sim.torso_angular_velocities()
