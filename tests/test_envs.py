@@ -342,6 +342,16 @@ def test_wrong_action_shape_says_what_was_expected(shape: tuple[int, ...]) -> No
         single.step(np.zeros(shape))
 
 
+def test_actions_that_are_not_numbers_name_the_agent() -> None:
+    env = parallel_env()
+    env.reset(seed=0)
+    for bad in (["a"] * 8, [np.zeros(4), np.zeros(4)], None):
+        actions = zero_actions()
+        actions["bug"] = bad
+        with pytest.raises(ValueError, match="'bug'"):
+            env.step(actions)
+
+
 def test_wrong_array_shape_in_match_core() -> None:
     match = Match()
     match.reset(seed=0)

@@ -12,7 +12,7 @@ import pytest
 from triplesumo.model import PAPER_AGENTS, AgentSpec, PhysicsConfig
 from triplesumo.rules import DENSE_TERMS, DRAW, LOSS, TERMS, WIN, ResetNoise, RewardConfig, Teams
 from triplesumo.rules.outcome import agents_out, judge
-from triplesumo.rules.rewards import dense_terms, outcome_term, total
+from triplesumo.rules.rewards import REPORTED, RewardRule, dense_terms
 
 ANT, BUG, SPIDER = 0, 1, 2
 
@@ -274,9 +274,23 @@ def test_reward_weights_flow_through(make_match) -> None:
     assert any(info["reward_opponent_velocity"] != 0.0 for info in a.infos)
 
 
-def test_total_sums_terms_in_order() -> None:
-    terms = {name: np.array([float(k + 1), -float(k)]) for k, name in enumerate(TERMS)}
-    np.testing.assert_array_equal(total(terms), [15.0, -10.0])
+def test_reward_table_rows_and_their_sums() -> None:
+    """Rows are TERMS then dense and sparse; dense + sparse is the TERMS sum in order, bit for bit."""
+    rule = RewardRule(Teams.from_agents(PAPER_AGENTS), RewardConfig(still=-0.3))
+    rng = np.random.default_rng(5)
+    assert REPORTED == (*TERMS, "dense_reward", "sparse_reward")
+    for results, timed_out in [(None, False), (None, True), ([WIN, LOSS], False), ([DRAW, DRAW], False)]:
+        pos, vel = rng.uniform(-2, 2, (3, 3)), rng.normal(size=(3, 3))
+        table = rule.table(pos, vel, results, timed_out)
+        assert table.shape == (len(REPORTED), 3)
+        np.testing.assert_array_equal(table[:3], rule.dense(pos, vel))
+        np.testing.assert_array_equal(table[4], rule.outcome(results, timed_out))
+        in_order = table[0].copy()
+        for row in table[1:5]:
+            in_order = in_order + row
+        np.testing.assert_array_equal(table[5] + table[6], in_order)
+        np.testing.assert_array_equal(table[5], table[0] + table[1] + table[2] + table[3])
+        np.testing.assert_array_equal(table[6], table[4])
 
 
 # -------------------------------------------------------------------------- judging
@@ -313,8 +327,8 @@ def test_agents_out_is_strict_and_uses_both_axes() -> None:
 
 def test_outcome_term() -> None:
     teams = Teams.from_agents(PAPER_AGENTS)
-    cfg = RewardConfig()
-    np.testing.assert_array_equal(outcome_term(None, teams, cfg, 3, timed_out=False), [0, 0, 0])
-    np.testing.assert_array_equal(outcome_term(None, teams, RewardConfig(draw=-2.0), 3, timed_out=True), [-2] * 3)
-    np.testing.assert_array_equal(outcome_term([WIN, LOSS], teams, cfg, 3, timed_out=False), [500, 500, -400])
-    np.testing.assert_array_equal(outcome_term([DRAW, DRAW], teams, cfg, 3, timed_out=False), [0, 0, 0])
+    rule = RewardRule(teams, RewardConfig())
+    np.testing.assert_array_equal(rule.outcome(None, timed_out=False), [0, 0, 0])
+    np.testing.assert_array_equal(RewardRule(teams, RewardConfig(draw=-2.0)).outcome(None, timed_out=True), [-2] * 3)
+    np.testing.assert_array_equal(rule.outcome([WIN, LOSS], timed_out=False), [500, 500, -400])
+    np.testing.assert_array_equal(rule.outcome([DRAW, DRAW], timed_out=False), [0, 0, 0])

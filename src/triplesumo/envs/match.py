@@ -48,6 +48,8 @@ class Match:
         self.sim = Simulation(self.model, self.agents, self.config.physics.frame_skip)
         self.data = self.sim.data
         self.teams = Teams.from_agents(self.config.agents)
+        self._n_teams = len(self.teams.names)
+        self.reward_rule = rules_rewards.RewardRule(self.teams, self.config.reward)
         self.half_size = ring_half_size(self.model)
         self.observer = ObservationBuilder(
             self.sim, self.teams, self.config.obs_mode, self.half_size, self.config.contact_force_clip
@@ -96,16 +98,28 @@ class Match:
         if not isinstance(actions, Mapping):
             raise ValueError(f"actions must be a dict {{agent: action}} for agents {list(self.agents)}, "
                              f"got {type(actions).__name__}")
-        missing = [a for a in self.agents if a not in actions]
-        unknown = [a for a in actions if a not in self.agents]
-        if missing or unknown:
-            raise ValueError(f"actions must have exactly the keys {list(self.agents)}; "
+        agents = self.agents
+        if len(actions) != self.n_agents or not all(a in actions for a in agents):
+            missing = [a for a in agents if a not in actions]
+            unknown = [a for a in actions if a not in agents]
+            raise ValueError(f"actions must have exactly the keys {list(agents)}; "
                              f"missing {missing}, unknown {unknown}")
-        return np.stack([self.check_action(a, actions[a]) for a in self.agents])
+        try:
+            stacked = np.array([actions[a] for a in agents], dtype=np.float64)
+        except (TypeError, ValueError):  # ragged or not numbers: let check_action name the agent
+            stacked = None
+        if stacked is None or stacked.shape != (self.n_agents, ACTION_SIZE):
+            for a in agents:
+                self.check_action(a, actions[a])
+            raise ValueError(f"actions must stack to shape ({self.n_agents}, {ACTION_SIZE})")
+        return stacked
 
     def check_action(self, agent: str, action: Any) -> np.ndarray:
         """One agent's action as a float64 copy, or ``ValueError`` naming the agent."""
-        arr = np.array(action, dtype=np.float64, copy=True)
+        try:
+            arr = np.array(action, dtype=np.float64, copy=True)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"action of {agent!r} must be an array of numbers: {exc}") from None
         if arr.shape != (ACTION_SIZE,):
             raise ValueError(f"action of {agent!r} must have shape ({ACTION_SIZE},), got {arr.shape}")
         if not np.isfinite(arr).all():
@@ -135,8 +149,8 @@ class Match:
         actions = np.asarray(actions, dtype=np.float64)
         if actions.shape != (self.n_agents, ACTION_SIZE):
             raise ValueError(f"actions must have shape ({self.n_agents}, {ACTION_SIZE}), got {actions.shape}")
-        bad = ~np.isfinite(actions).all(axis=1)
-        if bad.any():
+        if not np.isfinite(actions).all():
+            bad = ~np.isfinite(actions).all(axis=1)
             raise ValueError(f"action of {self.agents[int(np.argmax(bad))]!r} contains NaN or inf")
         return self._ctrl_mid + np.clip(actions, -1.0, 1.0) * self._ctrl_half
 
@@ -153,26 +167,23 @@ class Match:
             return self._physics_error(trouble)
         pos, vel = self.sim.torso_positions(), self.sim.torso_velocities()
         out = rules_outcome.agents_out(pos, self.half_size)
-        results = rules_outcome.judge(out, self.teams.team_of, len(self.teams.names))
+        results = rules_outcome.judge(out, self.teams.team_of, self._n_teams) if out.any() else None
         timed_out = results is None and self.steps >= self.config.max_steps
-        cfg = self.config.reward
-        terms = rules_rewards.dense_terms(pos, vel, self.teams, cfg)
-        terms["reward_outcome"] = rules_rewards.outcome_term(results, self.teams, cfg, self.n_agents, timed_out)
-        rewards = rules_rewards.total(terms)
-        dense = sum(terms[t] for t in rules_rewards.DENSE_TERMS)
-        exited = [self.agents[i] for i in np.flatnonzero(out)]
-        columns = np.stack([terms[t] for t in rules_rewards.TERMS] + [dense, terms["reward_outcome"]]).T.tolist()
-        keys = (*rules_rewards.TERMS, "dense_reward", "sparse_reward")
+        table = self.reward_rule.table(pos, vel, results, timed_out)
+        rewards = table[-2] + table[-1]  # dense + sparse: the terms summed in TERMS order
         if results is not None:
             outcomes = [results[t] for t in self.teams.team_of]
+            exited = [self.agents[i] for i in np.flatnonzero(out)]
         else:
             outcomes = [rules_outcome.DRAW if timed_out else None] * self.n_agents
+            exited = []
+        keys, step = rules_rewards.REPORTED, self.steps
         infos = []
-        for i in range(self.n_agents):
-            info: dict[str, Any] = dict(zip(keys, columns[i], strict=True))
-            info["outcome"] = outcomes[i]
+        for column, result in zip(table.T.tolist(), outcomes, strict=True):
+            info: dict[str, Any] = dict(zip(keys, column, strict=True))
+            info["outcome"] = result
             info["out_of_ring"] = exited
-            info["step"] = self.steps
+            info["step"] = step
             infos.append(info)
         self.over = results is not None or timed_out
         self._last_obs = self.observer.build()

@@ -131,9 +131,9 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
         result = self.match.step_array(self.match.actions_from_dict(actions))
         names = self.agents
         obs = dict(zip(names, result.observations, strict=True))
-        rewards = {a: float(r) for a, r in zip(names, result.rewards, strict=True)}
-        terms = {a: result.terminated for a in names}
-        truncs = {a: result.truncated for a in names}
+        rewards = dict(zip(names, result.rewards.tolist(), strict=True))
+        terms = dict.fromkeys(names, result.terminated)
+        truncs = dict.fromkeys(names, result.truncated)
         infos = dict(zip(names, result.infos, strict=True))
         if result.terminated or result.truncated:
             self.agents = []

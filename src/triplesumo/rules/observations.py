@@ -64,10 +64,11 @@ class ObservationBuilder:
 
     def global_state(self) -> np.ndarray:
         """The ``paper`` vector (float32): the match's global state."""
-        sim = self.sim
-        forces = np.clip(sim.contact_forces(), -self.force_clip, self.force_clip)
+        sim, data = self.sim, self.sim.data
+        forces = sim.contact_forces()
+        np.clip(forces, -self.force_clip, self.force_clip, out=forces)
         return np.concatenate([sim.torso_positions().ravel(), sim.torso_velocities().ravel(), forces.ravel(),
-                               sim.data.qpos, sim.data.qvel]).astype(np.float32)
+                               data.qpos, data.qvel], dtype=np.float32)
 
     def build(self) -> list[np.ndarray]:
         """float32 observation of every agent, roster order."""

@@ -33,36 +33,70 @@ TERMS = DENSE_TERMS + SPARSE_TERMS
 """Names of the reward terms, as reported in ``info[agent]``; the reward is their sum."""
 
 
+REPORTED = (*TERMS, "dense_reward", "sparse_reward")
+"""Rows of :meth:`RewardRule.table`: every term, then ``dense`` and ``sparse``."""
+
+
+class RewardRule:
+    """The reward of every agent for one roster and :class:`RewardConfig`, computed fast.
+
+    The weights ``C1``..``C3`` and the means over opponents and partners are folded, once,
+    into one matrix, so that a step's three velocity terms are one matrix product with
+    the sign-times-velocity products (the formulas are in this module's docstring).
+    """
+
+    def __init__(self, teams: Teams, cfg: RewardConfig) -> None:
+        self.teams, self.cfg = teams, cfg
+        n = len(teams.team_of)
+        self.n_agents = n
+        # products[0, a, b, k] = s(a, b)_k * v_a,k ("a moves toward b");
+        # products[1, a, b, k] = s(a, b)_k * v_b,k ("b moves away from a").
+        a, b, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(2), indexing="ij")
+        self._velocity_index = np.stack([a * 2 + k, b * 2 + k])
+        weights = np.zeros((3, n, 2, n, n, 2))
+        w_opp, w_par = teams.opponent_weights, teams.partner_weights
+        for i in range(n):
+            weights[0, i, 1, i] = cfg.opponent_velocity * w_opp[i][:, None]
+            weights[1, i, 0, i] = cfg.self_velocity * w_opp[i][:, None]
+            weights[2, i, 0] = cfg.partner_velocity * w_par[i][:, :, None]
+        self._weights = weights.reshape(3 * n, -1)
+        self._still = float(cfg.still)
+        self._value = {WIN: float(cfg.win), LOSS: float(cfg.loss), DRAW: float(cfg.draw)}
+
+    def dense(self, pos: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        """``(3, n_agents)``: the opponent, self and partner velocity terms (``pos``, ``vel``: ``(n, >=2)``)."""
+        p = pos[:, :2]
+        direction = np.sign(p[None, :, :] - p[:, None, :])  # [a, b] = s(a, b)
+        products = direction * np.ravel(vel[:, :2])[self._velocity_index]
+        return (self._weights @ products.ravel()).reshape(3, self.n_agents)
+
+    def outcome(self, team_results: list[str] | None, timed_out: bool) -> np.ndarray:
+        """Sparse reward per agent: its team's result, a draw on time-out, else zeros."""
+        if team_results is None:
+            return np.full(self.n_agents, self._value[DRAW] if timed_out else 0.0)
+        return np.array([self._value[team_results[t]] for t in self.teams.team_of])
+
+    def table(self, pos: np.ndarray, vel: np.ndarray, team_results: list[str] | None,
+              timed_out: bool) -> np.ndarray:
+        """``(len(REPORTED), n_agents)``: each term, then dense and sparse.
+
+        ``dense = opponent + self + partner + still`` and ``sparse = outcome`` are summed
+        in that order, so ``dense + sparse`` is the sum of the terms in :data:`TERMS` order.
+        """
+        out = np.empty((len(REPORTED), self.n_agents))
+        out[:3] = self.dense(pos, vel)
+        out[3] = self._still
+        out[4] = self.outcome(team_results, timed_out)
+        out[5] = out[0] + out[1] + out[2] + out[3]
+        out[6] = out[4]
+        return out
+
+
 def dense_terms(pos: np.ndarray, vel: np.ndarray, teams: Teams, cfg: RewardConfig) -> dict[str, np.ndarray]:
-    """Dense terms for every agent; ``pos`` and ``vel`` are ``(n_agents, >=2)``."""
-    p, v = pos[:, :2], vel[:, :2]
-    direction = np.sign(p[None, :, :] - p[:, None, :])  # [a, b] = s(a, b)
-    toward = (direction * v[:, None, :]).sum(axis=2)  # [a, b]: a moving toward b
-    away = (direction * v[None, :, :]).sum(axis=2)  # [a, b]: b moving away from a
-    n = len(p)
-    opp = (teams.opponent_weights * away).sum(axis=1)
-    slf = (teams.opponent_weights * toward).sum(axis=1)
-    par = (teams.partner_weights * toward[None, :, :]).sum(axis=(1, 2))
-    return {
-        "reward_opponent_velocity": cfg.opponent_velocity * opp,
-        "reward_self_velocity": cfg.self_velocity * slf,
-        "reward_partner_velocity": cfg.partner_velocity * par,
-        "reward_still": np.full(n, float(cfg.still)),
-    }
+    """Dense terms for every agent by name; ``pos`` and ``vel`` are ``(n_agents, >=2)``.
 
-
-def outcome_term(team_results: list[str] | None, teams: Teams, cfg: RewardConfig, n_agents: int,
-                 timed_out: bool) -> np.ndarray:
-    """Sparse reward per agent: its team's result, a draw on time-out, else zeros."""
-    if team_results is None:
-        return np.full(n_agents, float(cfg.draw)) if timed_out else np.zeros(n_agents)
-    value = {WIN: cfg.win, LOSS: cfg.loss, DRAW: cfg.draw}
-    return np.array([float(value[team_results[t]]) for t in teams.team_of])
-
-
-def total(terms: dict[str, np.ndarray]) -> np.ndarray:
-    """The reward: the exact sum of the terms, in :data:`TERMS` order."""
-    out = np.zeros_like(terms[TERMS[0]])
-    for name in TERMS:
-        out = out + terms[name]
-    return out
+    A convenience around :class:`RewardRule` (which a match builds once).
+    """
+    rule = RewardRule(teams, cfg)
+    terms = rule.dense(pos, vel)
+    return {**dict(zip(DENSE_TERMS[:3], terms, strict=True)), "reward_still": np.full(rule.n_agents, rule._still)}

@@ -69,8 +69,10 @@ class Simulation:
         lo, hi = model.actuator_ctrlrange[self.actuator_ids].transpose(2, 0, 1)
         self.ctrl_low: np.ndarray = lo
         self.ctrl_high: np.ndarray = hi
+        bodies = model.geom_bodyid[self.agent_geoms]
+        self._geom_bodies = bodies if len(set(bodies.tolist())) == len(bodies) else None
+        """Body of each agent geom when no two share one (then ``cfrc_ext`` is per geom)."""
         self._fatal = ""
-        self._pyramid3 = model.opt.cone == mujoco.mjtCone.mjCONE_PYRAMIDAL
         self._warn_ids = np.array(list(WATCHED_WARNINGS.values()))
         self._warn_seen = np.zeros(len(WATCHED_WARNINGS), dtype=np.int64)
 
@@ -135,55 +137,40 @@ class Simulation:
         """``(n_agent_geoms, 3)`` world-frame contact force on each agent geom.
 
         Summed over every contact the geom takes part in (the paper's code overwrote
-        all but one). MuJoCo's contact normal points from geom1 to geom2; the force
-        from ``mj_contactForce`` acts on geom2 and its reaction on geom1.
+        all but one), from the contacts and constraint forces now in ``data``. When every
+        agent geom has a body of its own (the quadruped does), this is one call to
+        ``mj_rnePostConstraint``: the force half of ``cfrc_ext`` is exactly that sum
+        (minus ``xfrc_applied``, e.g. a viewer perturbation, which is not a contact).
+        Otherwise it is :meth:`contact_forces_reference`.
+        """
+        if self._geom_bodies is None:
+            return self.contact_forces_reference()
+        mujoco.mj_rnePostConstraint(self.model, self.data)
+        bodies = self._geom_bodies
+        return self.data.cfrc_ext[bodies, 3:] - self.data.xfrc_applied[bodies, :3]
+
+    def contact_forces_reference(self) -> np.ndarray:
+        """:meth:`contact_forces` from ``mj_contactForce``, contact by contact.
+
+        MuJoCo's contact normal points from geom1 to geom2; the force from
+        ``mj_contactForce`` (contact frame, rows of ``contact.frame`` are its axes) acts
+        on geom2 and its reaction on geom1.
         """
         out = np.zeros((len(self.agent_geoms), 3))
         data, rows = self.data, self._geom_row
-        ncon = data.ncon
-        if ncon == 0:
-            return out
-        contact = data.contact
-        r1, r2 = rows[contact.geom1[:ncon]], rows[contact.geom2[:ncon]]
-        involved = np.flatnonzero((r1 >= 0) | (r2 >= 0))
-        if len(involved) == 0:
-            return out
-        local = self._contact_frame_forces(involved)
-        frames = contact.frame[involved].reshape(-1, 3, 3)
-        world = np.einsum("nji,nj->ni", frames, local[:, :3])  # frame rows are the contact axes
-        r1, r2 = r1[involved], r2[involved]
-        on2, on1 = r2 >= 0, r1 >= 0
-        rows_hit = np.concatenate([r2[on2], r1[on1]])
-        forces = np.concatenate([world[on2], -world[on1]])
-        flat = (rows_hit[:, None] * 3 + np.arange(3)).ravel()
-        out = np.bincount(flat, forces.ravel(), minlength=out.size).reshape(out.shape)
+        local = np.empty(6)
+        for i in range(data.ncon):
+            contact = data.contact[i]
+            r1, r2 = rows[contact.geom1], rows[contact.geom2]
+            if r1 < 0 and r2 < 0:
+                continue
+            mujoco.mj_contactForce(self.model, data, i, local)
+            world = contact.frame.reshape(3, 3).T @ local[:3]
+            if r2 >= 0:
+                out[r2] += world
+            if r1 >= 0:
+                out[r1] -= world
         return out
-
-    def _contact_frame_forces(self, contacts: np.ndarray) -> np.ndarray:
-        """Contact-frame forces ``(len(contacts), 3)`` (normal, tangent 1, tangent 2).
-
-        With pyramidal friction cones and condim 3 (this model's setting) this decodes
-        the four pyramid edge forces in ``efc_force`` exactly as ``mj_contactForce``
-        does (normal = sum of the edges, tangent k = (f_2k - f_2k+1) * mu_k), for all
-        contacts at once; otherwise it calls ``mj_contactForce`` per contact.
-        """
-        data, model = self.data, self.model
-        contact = data.contact
-        if self._pyramid3 and np.all(contact.dim[contacts] == 3):
-            adr = contact.efc_address[contacts]
-            active = adr >= 0
-            out = np.zeros((len(contacts), 3))
-            if active.any():
-                f = data.efc_force[adr[active, None] + np.arange(4)]
-                mu = contact.friction[contacts[active], :2]
-                out[active, 0] = f.sum(axis=1)
-                out[active, 1] = (f[:, 0] - f[:, 1]) * mu[:, 0]
-                out[active, 2] = (f[:, 2] - f[:, 3]) * mu[:, 1]
-            return out
-        local = np.empty((len(contacts), 6))
-        for k, i in enumerate(contacts):
-            mujoco.mj_contactForce(model, data, int(i), local[k])
-        return local[:, :3]
 
     # ------------------------------------------------------------- warnings
     def new_warnings(self) -> list[str]:
