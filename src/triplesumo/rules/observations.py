@@ -46,6 +46,9 @@ class ObservationBuilder:
         self.others = tuple(
             np.concatenate([teams.partners[i], teams.opponents[i]]).astype(int) for i in range(sim.n_agents)
         )
+        self._others = np.stack(self.others)  # (n, n - 1): every other agent, partners first
+        self._joint_qpos = np.stack([a.joint_qpos for a in sim.agents])
+        self._joint_qvel = np.stack([a.joint_qvel for a in sim.agents])
         self.structure: dict[str, dict[str, int]] = {}
         for i, name in enumerate(names):
             if mode == "paper":
@@ -76,23 +79,24 @@ class ObservationBuilder:
         if self.mode == "paper":
             obs = self.global_state()
             return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
-        forces = np.clip(sim.contact_forces(), -self.force_clip, self.force_clip)
-        pos, vel = sim.torso_positions(), sim.torso_velocities()
-        quat = sim.torso_quaternions()
+        forces = sim.contact_forces()
+        np.clip(forces, -self.force_clip, self.force_clip, out=forces)
+        pos, vel, quat = sim.torso_positions(), sim.torso_velocities(), sim.torso_quaternions()
         yaw = yaw_of(quat)
-        angvel = sim.torso_angular_velocities()
-        g = sim.geoms_per_agent
-        out = []
-        for i, a in enumerate(sim.agents):
-            c, s_ = np.cos(yaw[i]), np.sin(yaw[i])
-            rot = np.array([[c, s_, 0.0], [-s_, c, 0.0], [0.0, 0.0, 1.0]])  # world -> heading frame
-            o = self.others[i]
-            rel_pos = (pos[o] - pos[i]) @ rot.T
-            rel_vel = (vel[o] - vel[i]) @ rot.T
-            others = np.concatenate([rel_pos, rel_vel], axis=1).ravel()
-            edge = self.half_size - np.max(np.abs(pos[i, :2]))
-            out.append(np.concatenate([
-                pos[i, 2:3], quat[i], sim.data.qpos[a.joint_qpos], rot @ vel[i], angvel[i],
-                sim.data.qvel[a.joint_qvel], [edge], others, (forces[i * g:(i + 1) * g] @ rot.T).ravel(),
-            ]).astype(np.float32))
-        return out
+        c, s_ = np.cos(yaw), np.sin(yaw)
+        n = sim.n_agents
+        rot = np.zeros((n, 3, 3))  # world -> heading frame of each agent
+        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = c, s_, -s_, c, 1.0
+        rot_t = rot.transpose(0, 2, 1)
+        others = self._others
+        rel_pos = (pos[others] - pos[:, None, :]) @ rot_t
+        rel_vel = (vel[others] - vel[:, None, :]) @ rot_t
+        edge = self.half_size - np.abs(pos[:, :2]).max(axis=1)
+        data = sim.data
+        out = np.concatenate([
+            pos[:, 2:3], quat, data.qpos[self._joint_qpos], (rot @ vel[:, :, None])[:, :, 0],
+            sim.torso_angular_velocities(), data.qvel[self._joint_qvel], edge[:, None],
+            np.concatenate([rel_pos, rel_vel], axis=2).reshape(n, -1),
+            (forces.reshape(n, sim.geoms_per_agent, 3) @ rot_t).reshape(n, -1),
+        ], axis=1, dtype=np.float32)
+        return list(out)
