@@ -54,6 +54,14 @@ def test_main_quick_writes_json_with_the_documented_keys(tmp_path: Path, capsys:
     assert "raw physics" in printed and "PettingZoo parallel_env" in printed and "MatchBatch" in printed
 
 
+def test_obs_mode_reaches_the_envs_and_the_setup() -> None:
+    result = run_env_benchmark(steps=4, n_matches=2, n_threads=2, rounds=1, chunk=2, obs_mode="egocentric")
+    _check(result)
+    assert result["setup"]["obs_mode"] == "egocentric"
+    with pytest.raises(ValueError, match="obs_mode"):
+        run_env_benchmark(steps=4, n_matches=2, rounds=1, obs_mode="pixels")
+
+
 def test_bad_sizes_are_value_errors() -> None:
     with pytest.raises(ValueError, match="steps"):
         run_env_benchmark(steps=0)

@@ -58,7 +58,7 @@ LABELS = {
 }
 
 def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2, integrator: str = "RK4",
-                      seed: int = 0, rounds: int = 3, chunk: int = 250) -> dict[str, Any]:
+                      seed: int = 0, rounds: int = 3, chunk: int = 250, obs_mode: str = "paper") -> dict[str, Any]:
     """Measure every variant ``rounds`` times, interleaved; return rates, ratios and the setup.
 
     Within a round the variants take turns in chunks of about ``chunk`` env steps until
@@ -75,7 +75,7 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
                         ("chunk", chunk)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-    config = MatchConfig(physics=PhysicsConfig(integrator=integrator))
+    config = MatchConfig(physics=PhysicsConfig(integrator=integrator), obs_mode=obs_mode)
     variants: dict[str, _Variant] = {
         "raw_physics": _RawPhysics(config, steps, seed),
         "parallel_env": _ParallelEnv(config, steps, seed),
@@ -106,7 +106,7 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
     return {
         "setup": {
             "steps": steps, "n_matches": n_matches, "steps_per_match": per_match, "n_threads": n_threads,
-            "rounds": rounds, "chunk": chunk, "seed": seed, "integrator": integrator,
+            "rounds": rounds, "chunk": chunk, "seed": seed, "integrator": integrator, "obs_mode": obs_mode,
             "timestep": config.physics.timestep, "frame_skip": config.physics.frame_skip,
             "versions": _versions(), "cpu_count": os.cpu_count(),
             "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
@@ -280,9 +280,9 @@ def format_table(result: dict[str, Any]) -> str:
     setup, rates, ratios = result["setup"], result["rates"], result["ratios"]
     v = setup["versions"]
     lines = [
-        f"TripleSumo env benchmark: {setup['integrator']}, timestep {setup['timestep']}, frame_skip "
-        f"{setup['frame_skip']}; median of {setup['rounds']} rounds, interleaved in chunks of "
-        f"{setup['chunk']} env steps; seed {setup['seed']}",
+        f"TripleSumo env benchmark: {setup['obs_mode']} observations, {setup['integrator']}, timestep "
+        f"{setup['timestep']}, frame_skip {setup['frame_skip']}; median of {setup['rounds']} rounds, "
+        f"interleaved in chunks of {setup['chunk']} env steps; seed {setup['seed']}",
         f"python {v['python']}, mujoco {v['mujoco']}, numpy {v['numpy']}; {setup['cpu_count']} CPUs "
         f"({setup['usable_cpus']} usable), load before {setup['load_average_before'][0]}",
         "",
@@ -312,6 +312,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=3, help="repetitions; the median is reported (default: 3)")
     parser.add_argument("--chunk", type=int, default=250, help="env steps per turn of a variant (default: 250)")
     parser.add_argument("--integrator", default="RK4", help="MuJoCo integrator (default: RK4, the paper's)")
+    parser.add_argument("--obs-mode", default="paper", help="observation mode: paper or egocentric (default: paper)")
     parser.add_argument("--seed", type=int, default=0, help="seed of starts and actions (default: 0)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
@@ -320,6 +321,6 @@ def main(argv: list[str] | None = None) -> int:
         args.steps, args.matches, args.rounds, args.chunk = 20, 2, 1, 10
     result = run_env_benchmark(steps=args.steps, n_matches=args.matches, n_threads=args.threads,
                                integrator=args.integrator, seed=args.seed, rounds=args.rounds,
-                               chunk=args.chunk)
+                               chunk=args.chunk, obs_mode=args.obs_mode)
     report(format_table(result), result, args.json)
     return 0

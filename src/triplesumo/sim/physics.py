@@ -8,6 +8,7 @@ joint state, and contact forces summed over every contact of each agent geom.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -188,7 +189,7 @@ class Simulation:
         if self._fatal:
             fired.append("arena_overflow")
             self._fatal = ""
-        if not (np.isfinite(self.data.qpos.sum()) and np.isfinite(self.data.qvel.sum())):
+        if not (math.isfinite(self.data.qpos.sum()) and math.isfinite(self.data.qvel.sum())):
             fired.append("non_finite_state")
         return fired
 
