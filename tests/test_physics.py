@@ -49,3 +49,39 @@ def test_contact_forces_of_an_agent_at_rest_carry_its_weight() -> None:
     weight = match.model.body_mass[match.sim.agents[0].torso_body:].sum() / 3 * 9.81
     np.testing.assert_allclose(forces[:, 2], weight, rtol=0.02)
     np.testing.assert_allclose(forces[:, :2], 0.0, atol=0.05 * weight)
+
+
+def test_general_paths_give_what_the_fast_paths_give() -> None:
+    """The quadruped takes the fast paths (contiguous bodies and actuators); the general ones must agree."""
+    fast, general = Match(), Match()
+    sim = general.sim
+    assert fast.sim._body_forces is not None and fast.sim._ctrl_view is not None
+    sim._body_forces, sim._ctrl_view = None, None  # fancy indexing instead of views
+    for m in (fast, general):
+        m.reset(seed=6)
+    rng = np.random.default_rng(6)
+    for _ in range(60):
+        action = rng.uniform(-1, 1, (3, 8))
+        a, b = fast.step_array(action), general.step_array(action)
+        np.testing.assert_array_equal(a.observations[0], b.observations[0])
+        np.testing.assert_array_equal(fast.data.ctrl, general.data.ctrl)
+    reference = general.sim.contact_forces_reference()
+    sim._geom_bodies = None  # geoms sharing a body: contact by contact
+    np.testing.assert_array_equal(sim.contact_forces(), reference)
+
+
+def test_only_new_watched_warnings_are_reported_once() -> None:
+    match = Match()
+    match.reset(seed=0)
+    sim = match.sim
+    number = sim.data.warning.number
+    assert sim.new_warnings() == []
+    number[int(mujoco.mjtWarning.mjWARN_INERTIA)] += 1  # not watched: not a reason to stop a match
+    assert sim.new_warnings() == []
+    number[int(mujoco.mjtWarning.mjWARN_BADQACC)] += 1
+    assert sim.new_warnings() == ["bad_qacc"]
+    assert sim.new_warnings() == []  # reported once
+    snapshot = sim.warnings_seen()
+    number[int(mujoco.mjtWarning.mjWARN_CONTACTFULL)] += 2
+    sim.set_warnings_seen(snapshot)
+    assert sim.new_warnings() == ["contact_full"]

@@ -274,23 +274,23 @@ def test_reward_weights_flow_through(make_match) -> None:
     assert any(info["reward_opponent_velocity"] != 0.0 for info in a.infos)
 
 
-def test_reward_table_rows_and_their_sums() -> None:
+def test_reward_rows_and_their_sums() -> None:
     """Rows are TERMS then dense and sparse; dense + sparse is the TERMS sum in order, bit for bit."""
     rule = RewardRule(Teams.from_agents(PAPER_AGENTS), RewardConfig(still=-0.3))
     rng = np.random.default_rng(5)
     assert REPORTED == (*TERMS, "dense_reward", "sparse_reward")
     for results, timed_out in [(None, False), (None, True), ([WIN, LOSS], False), ([DRAW, DRAW], False)]:
-        pos, vel = rng.uniform(-2, 2, (3, 3)), rng.normal(size=(3, 3))
-        table = rule.table(pos, vel, results, timed_out)
-        assert table.shape == (len(REPORTED), 3)
-        np.testing.assert_array_equal(table[:3], rule.dense(pos, vel))
-        np.testing.assert_array_equal(table[4], rule.outcome(results, timed_out))
-        in_order = table[0].copy()
-        for row in table[1:5]:
-            in_order = in_order + row
-        np.testing.assert_array_equal(table[5] + table[6], in_order)
-        np.testing.assert_array_equal(table[5], table[0] + table[1] + table[2] + table[3])
-        np.testing.assert_array_equal(table[6], table[4])
+        pos, vel = rng.uniform(-2, 2, (3, 3)).tolist(), rng.normal(size=(3, 3)).tolist()
+        rows = rule.rows(pos, vel, results, timed_out)
+        assert len(rows) == 3
+        for row, dense, sparse in zip(rows, rule.dense(pos, vel), rule.outcome(results, timed_out), strict=True):
+            assert len(row) == len(REPORTED)
+            assert row[:3] == dense and row[3] == -0.3 and row[4] == sparse == row[6]
+            assert row[5] == row[0] + row[1] + row[2] + row[3]
+            in_order = 0.0
+            for value in row[:5]:
+                in_order += value
+            assert row[5] + row[6] == in_order
 
 
 # -------------------------------------------------------------------------- judging
@@ -322,13 +322,13 @@ def test_judge_precedence(team_of, out, expected) -> None:
 
 def test_agents_out_is_strict_and_uses_both_axes() -> None:
     xy = np.array([[2.0, 0.0], [2.0001, 0.0], [0.0, -2.0001], [-1.9, 1.9], [-2.5, 3.0]])
-    assert agents_out(xy, 2.0).tolist() == [False, True, True, False, True]
+    assert agents_out(xy, 2.0) == agents_out(xy.tolist(), 2.0) == [False, True, True, False, True]
 
 
 def test_outcome_term() -> None:
     teams = Teams.from_agents(PAPER_AGENTS)
     rule = RewardRule(teams, RewardConfig())
-    np.testing.assert_array_equal(rule.outcome(None, timed_out=False), [0, 0, 0])
-    np.testing.assert_array_equal(RewardRule(teams, RewardConfig(draw=-2.0)).outcome(None, timed_out=True), [-2] * 3)
-    np.testing.assert_array_equal(rule.outcome([WIN, LOSS], timed_out=False), [500, 500, -400])
-    np.testing.assert_array_equal(rule.outcome([DRAW, DRAW], timed_out=False), [0, 0, 0])
+    assert rule.outcome(None, timed_out=False) == [0, 0, 0]
+    assert RewardRule(teams, RewardConfig(draw=-2.0)).outcome(None, timed_out=True) == [-2] * 3
+    assert rule.outcome([WIN, LOSS], timed_out=False) == [500, 500, -400]
+    assert rule.outcome([DRAW, DRAW], timed_out=False) == [0, 0, 0]

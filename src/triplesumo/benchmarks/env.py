@@ -186,7 +186,7 @@ class _RawPhysics(_Variant):
             data.ctrl[:] = ctrl[t]
             mujoco.mj_step(model, data, nstep=frame_skip)
             self.episode_length += 1
-            if self.episode_length >= limit or rules_outcome.agents_out(data.qpos[torso], half).any():
+            if self.episode_length >= limit or any(rules_outcome.agents_out(data.qpos[torso].tolist(), half)):
                 match.sim.reset(*match.start_state(self.rng))
                 self.episodes += 1
                 self.episode_length = 0

@@ -49,6 +49,7 @@ class Match:
         self.data = self.sim.data
         self.teams = Teams.from_agents(self.config.agents)
         self._n_teams = len(self.teams.names)
+        self._team_of = self.teams.team_of.tolist()
         self.reward_rule = rules_rewards.RewardRule(self.teams, self.config.reward)
         self.half_size = ring_half_size(self.model)
         self.observer = ObservationBuilder(
@@ -149,10 +150,15 @@ class Match:
         actions = np.asarray(actions, dtype=np.float64)
         if actions.shape != (self.n_agents, ACTION_SIZE):
             raise ValueError(f"actions must have shape ({self.n_agents}, {ACTION_SIZE}), got {actions.shape}")
-        if not np.isfinite(actions).all():
+        if not math.isfinite(actions.sum()):  # NaN or inf somewhere (or an overflowing sum: look closer)
             bad = ~np.isfinite(actions).all(axis=1)
-            raise ValueError(f"action of {self.agents[int(np.argmax(bad))]!r} contains NaN or inf")
-        return self._ctrl_mid + np.clip(actions, -1.0, 1.0) * self._ctrl_half
+            if bad.any():
+                raise ValueError(f"action of {self.agents[int(np.argmax(bad))]!r} contains NaN or inf")
+        ctrl = np.maximum(actions, -1.0)  # a clip; np.clip's dispatch costs several times more
+        np.minimum(ctrl, 1.0, out=ctrl)
+        ctrl *= self._ctrl_half
+        ctrl += self._ctrl_mid
+        return ctrl
 
     def finish_step(self) -> StepResult:
         """Judge the physics step just taken: outcome, rewards, observations, MuJoCo warnings.
@@ -165,29 +171,30 @@ class Match:
         trouble = self.sim.new_warnings()
         if trouble:
             return self._physics_error(trouble)
-        pos, vel = self.sim.torso_positions(), self.sim.torso_velocities()
+        pos, vel = self.sim.torso_positions().tolist(), self.sim.torso_velocities().tolist()
         out = rules_outcome.agents_out(pos, self.half_size)
-        results = rules_outcome.judge(out, self.teams.team_of, self._n_teams) if out.any() else None
+        results = rules_outcome.judge(out, self._team_of, self._n_teams)
         timed_out = results is None and self.steps >= self.config.max_steps
-        table = self.reward_rule.table(pos, vel, results, timed_out)
-        rewards = table[-2] + table[-1]  # dense + sparse: the terms summed in TERMS order
+        rows = self.reward_rule.rows(pos, vel, results, timed_out)
         if results is not None:
-            outcomes = [results[t] for t in self.teams.team_of]
-            exited = [self.agents[i] for i in np.flatnonzero(out)]
+            outcomes = [results[t] for t in self._team_of]
+            exited = [a for a, is_out in zip(self.agents, out, strict=True) if is_out]
         else:
             outcomes = [rules_outcome.DRAW if timed_out else None] * self.n_agents
             exited = []
         keys, step = rules_rewards.REPORTED, self.steps
         infos = []
-        for column, result in zip(table.T.tolist(), outcomes, strict=True):
-            info: dict[str, Any] = dict(zip(keys, column, strict=True))
+        rewards = []
+        for row, result in zip(rows, outcomes, strict=True):
+            rewards.append(row[-2] + row[-1])  # dense + sparse: the terms summed in TERMS order
+            info: dict[str, Any] = dict(zip(keys, row, strict=True))
             info["outcome"] = result
             info["out_of_ring"] = exited
             info["step"] = step
             infos.append(info)
         self.over = results is not None or timed_out
         self._last_obs = self.observer.build()
-        return StepResult(self._last_obs, rewards, results is not None, timed_out, infos)
+        return StepResult(self._last_obs, np.array(rewards), results is not None, timed_out, infos)
 
     def _physics_error(self, trouble: list[str]) -> StepResult:
         message = (f"MuJoCo reported {', '.join(trouble)} at step {self.steps}; "
@@ -216,7 +223,7 @@ class Match:
         return {
             "physics": physics,
             "last_obs": np.stack(self._last_obs) if self._last_obs else np.zeros((0,)),
-            "warnings": self.sim._warn_seen.copy(),
+            "warnings": self.sim.warnings_seen(),
             "steps": self.steps,
             "over": self.over,
             "rng": self.np_random.bit_generator.state,
@@ -230,7 +237,7 @@ class Match:
         mujoco.mj_setState(self.model, self.data, np.asarray(snap["physics"], dtype=np.float64),
                            mujoco.mjtState.mjSTATE_INTEGRATION)
         mujoco.mj_forward(self.model, self.data)
-        self.sim._warn_seen[:] = snap["warnings"]
+        self.sim.set_warnings_seen(snap["warnings"])
         self.steps = int(snap["steps"])
         self.over = bool(snap["over"])
         self._last_obs = list(np.asarray(snap["last_obs"], dtype=np.float32)) if len(snap["last_obs"]) else []

@@ -69,7 +69,7 @@ class ObservationBuilder:
         """The ``paper`` vector (float32): the match's global state."""
         sim, data = self.sim, self.sim.data
         forces = sim.contact_forces()
-        np.clip(forces, -self.force_clip, self.force_clip, out=forces)
+        _clip(forces, self.force_clip)
         return np.concatenate([sim.torso_positions().ravel(), sim.torso_velocities().ravel(), forces.ravel(),
                                data.qpos, data.qvel], dtype=np.float32)
 
@@ -80,7 +80,7 @@ class ObservationBuilder:
             obs = self.global_state()
             return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
         forces = sim.contact_forces()
-        np.clip(forces, -self.force_clip, self.force_clip, out=forces)
+        _clip(forces, self.force_clip)
         pos, vel, quat = sim.torso_positions(), sim.torso_velocities(), sim.torso_quaternions()
         yaw = yaw_of(quat)
         c, s_ = np.cos(yaw), np.sin(yaw)
@@ -100,3 +100,9 @@ class ObservationBuilder:
             (forces.reshape(n, sim.geoms_per_agent, 3) @ rot_t).reshape(n, -1),
         ], axis=1, dtype=np.float32)
         return list(out)
+
+
+def _clip(values: np.ndarray, limit: float) -> None:
+    """Clip ``values`` to ``[-limit, limit]`` in place (``np.clip``'s dispatch costs several times more)."""
+    np.maximum(values, -limit, out=values)
+    np.minimum(values, limit, out=values)

@@ -13,22 +13,28 @@ Bug out -> Spider wins; Spider and Ant/Bug out together -> draw.
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Sequence
 
 WIN, LOSS, DRAW = "win", "loss", "draw"
 
 
-def agents_out(torso_xy: np.ndarray, half_size: float) -> np.ndarray:
-    """Boolean ``(n_agents,)``: whose centre of mass is outside the ring."""
-    return (np.abs(torso_xy[:, :2]) > half_size).any(axis=1)
+def agents_out(torso_xy: Sequence[Sequence[float]], half_size: float) -> list[bool]:
+    """Whose centre of mass is outside the ring, per agent; ``torso_xy`` rows start with x, y.
+
+    Plain Python on the rows (a list, or an array's ``tolist()``): for a handful of agents
+    this is several times faster than numpy's per-call overhead.
+    """
+    return [abs(row[0]) > half_size or abs(row[1]) > half_size for row in torso_xy]
 
 
-def judge(out: np.ndarray, team_of: np.ndarray, n_teams: int) -> list[str] | None:
+def judge(out: Sequence[bool], team_of: Sequence[int], n_teams: int) -> list[str] | None:
     """Per-team result (``"win"``/``"loss"``/``"draw"``), or ``None`` while nobody is out."""
-    if not out.any():
+    if not any(out):
         return None
-    losing = np.zeros(n_teams, dtype=bool)
-    losing[team_of[out]] = True
-    if losing.all():
+    losing = [False] * n_teams
+    for is_out, team in zip(out, team_of, strict=True):
+        if is_out:
+            losing[team] = True
+    if all(losing):
         return [DRAW] * n_teams
     return [LOSS if lost else WIN for lost in losing]

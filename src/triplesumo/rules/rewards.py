@@ -21,6 +21,8 @@ and no partner (its partner term is 0). ``dense = opponent + self + partner + st
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from triplesumo.rules.config import RewardConfig
@@ -34,69 +36,91 @@ TERMS = DENSE_TERMS + SPARSE_TERMS
 
 
 REPORTED = (*TERMS, "dense_reward", "sparse_reward")
-"""Rows of :meth:`RewardRule.table`: every term, then ``dense`` and ``sparse``."""
+"""Entries of each agent's row of :meth:`RewardRule.rows`: every term, then ``dense`` and ``sparse``."""
 
 
 class RewardRule:
-    """The reward of every agent for one roster and :class:`RewardConfig`, computed fast.
+    """The reward terms of every agent for one roster and :class:`RewardConfig`.
 
-    The weights ``C1``..``C3`` and the means over opponents and partners are folded, once,
-    into one matrix, so that a step's three velocity terms are one matrix product with
-    the sign-times-velocity products (the formulas are in this module's docstring).
+    Built once per match: it lists the ordered (agent, opponent) pairs the terms need and,
+    per agent, which pairs its means run over. A step then computes each pair's
+    sign-times-velocity sums once, in plain Python floats (for a handful of agents that is
+    several times faster than numpy's per-call overhead), and averages them as the module
+    docstring says.
     """
 
     def __init__(self, teams: Teams, cfg: RewardConfig) -> None:
         self.teams, self.cfg = teams, cfg
         n = len(teams.team_of)
         self.n_agents = n
-        # products[0, a, b, k] = s(a, b)_k * v_a,k ("a moves toward b");
-        # products[1, a, b, k] = s(a, b)_k * v_b,k ("b moves away from a").
-        a, b, k = np.meshgrid(np.arange(n), np.arange(n), np.arange(2), indexing="ij")
-        self._velocity_index = np.stack([a * 2 + k, b * 2 + k])
-        weights = np.zeros((3, n, 2, n, n, 2))
-        w_opp, w_par = teams.opponent_weights, teams.partner_weights
-        for i in range(n):
-            weights[0, i, 1, i] = cfg.opponent_velocity * w_opp[i][:, None]
-            weights[1, i, 0, i] = cfg.self_velocity * w_opp[i][:, None]
-            weights[2, i, 0] = cfg.partner_velocity * w_par[i][:, :, None]
-        self._weights = weights.reshape(3 * n, -1)
+        pairs = [(a, int(o)) for a in range(n) for o in teams.opponents[a]]
+        self._pairs = pairs
+        pair_index = {pair: k for k, pair in enumerate(pairs)}
+        self._opponent_pairs = [[pair_index[i, int(o)] for o in teams.opponents[i]] for i in range(n)]
+        """``[i]``: the pairs (i, o) over the opponents ``o`` of ``i``."""
+        self._partner_pairs = [[[pair_index[int(j), int(o)] for o in teams.opponents[i]] for j in teams.partners[i]]
+                               for i in range(n)]
+        """``[i][j]``: the pairs (j, o) of partner ``j`` of ``i`` over the opponents ``o`` of ``i``."""
+        self._team_of = [int(t) for t in teams.team_of]
+        self._c = (float(cfg.opponent_velocity), float(cfg.self_velocity), float(cfg.partner_velocity))
         self._still = float(cfg.still)
         self._value = {WIN: float(cfg.win), LOSS: float(cfg.loss), DRAW: float(cfg.draw)}
 
-    def dense(self, pos: np.ndarray, vel: np.ndarray) -> np.ndarray:
-        """``(3, n_agents)``: the opponent, self and partner velocity terms (``pos``, ``vel``: ``(n, >=2)``)."""
-        p = pos[:, :2]
-        direction = np.sign(p[None, :, :] - p[:, None, :])  # [a, b] = s(a, b)
-        products = direction * np.ravel(vel[:, :2])[self._velocity_index]
-        return (self._weights @ products.ravel()).reshape(3, self.n_agents)
+    def dense(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
+        """Per agent: the (opponent, self, partner) velocity terms. Rows of ``pos`` and ``vel``
+        (lists, e.g. an array's ``tolist()``) start with the x and y components."""
+        toward, away = [], []  # per pair (a, o): a moving toward o; o moving away from a
+        for a, o in self._pairs:
+            pa, po, va, vo = pos[a], pos[o], vel[a], vel[o]
+            dx, dy = po[0] - pa[0], po[1] - pa[1]
+            sx, sy = (dx > 0) - (dx < 0), (dy > 0) - (dy < 0)
+            toward.append(sx * va[0] + sy * va[1])
+            away.append(sx * vo[0] + sy * vo[1])
+        c1, c2, c3 = self._c
+        out = []
+        for opponent_pairs, partner_pairs in zip(self._opponent_pairs, self._partner_pairs, strict=True):
+            n_opp = len(opponent_pairs)
+            sum_away = sum_toward = 0.0
+            for k in opponent_pairs:
+                sum_away += away[k]
+                sum_toward += toward[k]
+            par = 0.0
+            if partner_pairs:
+                for pairs in partner_pairs:
+                    sum_partner = 0.0
+                    for k in pairs:
+                        sum_partner += toward[k]
+                    par += sum_partner / n_opp
+                par = c3 * (par / len(partner_pairs))
+            out.append((c1 * (sum_away / n_opp), c2 * (sum_toward / n_opp), par))
+        return out
 
-    def outcome(self, team_results: list[str] | None, timed_out: bool) -> np.ndarray:
+    def outcome(self, team_results: list[str] | None, timed_out: bool) -> list[float]:
         """Sparse reward per agent: its team's result, a draw on time-out, else zeros."""
         if team_results is None:
-            return np.full(self.n_agents, self._value[DRAW] if timed_out else 0.0)
-        return np.array([self._value[team_results[t]] for t in self.teams.team_of])
+            return [self._value[DRAW] if timed_out else 0.0] * self.n_agents
+        return [self._value[team_results[t]] for t in self._team_of]
 
-    def table(self, pos: np.ndarray, vel: np.ndarray, team_results: list[str] | None,
-              timed_out: bool) -> np.ndarray:
-        """``(len(REPORTED), n_agents)``: each term, then dense and sparse.
+    def rows(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]], team_results: list[str] | None,
+             timed_out: bool) -> list[tuple[float, ...]]:
+        """Per agent, the :data:`REPORTED` values: each term, then dense and sparse.
 
         ``dense = opponent + self + partner + still`` and ``sparse = outcome`` are summed
-        in that order, so ``dense + sparse`` is the sum of the terms in :data:`TERMS` order.
+        in that order, so ``dense + sparse`` is the sum of the terms in :data:`TERMS` order,
+        bit for bit.
         """
-        out = np.empty((len(REPORTED), self.n_agents))
-        out[:3] = self.dense(pos, vel)
-        out[3] = self._still
-        out[4] = self.outcome(team_results, timed_out)
-        out[5] = out[0] + out[1] + out[2] + out[3]
-        out[6] = out[4]
-        return out
+        still = self._still
+        rows = []
+        for (opp, slf, par), sparse in zip(self.dense(pos, vel), self.outcome(team_results, timed_out), strict=True):
+            rows.append((opp, slf, par, still, sparse, opp + slf + par + still, sparse))
+        return rows
 
 
 def dense_terms(pos: np.ndarray, vel: np.ndarray, teams: Teams, cfg: RewardConfig) -> dict[str, np.ndarray]:
-    """Dense terms for every agent by name; ``pos`` and ``vel`` are ``(n_agents, >=2)``.
+    """Dense terms for every agent by name, as arrays; ``pos`` and ``vel`` are ``(n_agents, >=2)``.
 
     A convenience around :class:`RewardRule` (which a match builds once).
     """
     rule = RewardRule(teams, cfg)
-    terms = rule.dense(pos, vel)
+    terms = np.array(rule.dense(np.asarray(pos).tolist(), np.asarray(vel).tolist())).reshape(-1, 3).T
     return {**dict(zip(DENSE_TERMS[:3], terms, strict=True)), "reward_still": np.full(rule.n_agents, rule._still)}

@@ -70,12 +70,24 @@ class Simulation:
         lo, hi = model.actuator_ctrlrange[self.actuator_ids].transpose(2, 0, 1)
         self.ctrl_low: np.ndarray = lo
         self.ctrl_high: np.ndarray = hi
+        # Views into MjData, made once (each attribute access builds a new numpy view).
+        data = self.data
+        self._qpos, self._qvel, self._warn_number = data.qpos, data.qvel, data.warning.number
         bodies = model.geom_bodyid[self.agent_geoms]
         self._geom_bodies = bodies if len(set(bodies.tolist())) == len(bodies) else None
         """Body of each agent geom when no two share one (then ``cfrc_ext`` is per geom)."""
+        self._body_forces: tuple[np.ndarray, np.ndarray] | None = None
+        if self._geom_bodies is not None and np.array_equal(bodies, np.arange(bodies[0], bodies[0] + len(bodies))):
+            rows = slice(int(bodies[0]), int(bodies[0]) + len(bodies))  # contiguous: plain views
+            self._body_forces = (data.cfrc_ext[rows, 3:], data.xfrc_applied[rows, :3])
+        self._ctrl_index = self.actuator_ids.ravel()
+        self._ctrl_view = data.ctrl if np.array_equal(self._ctrl_index, np.arange(model.nu)) else None
         self._fatal = ""
         self._warn_ids = np.array(list(WATCHED_WARNINGS.values()))
         self._warn_seen = np.zeros(len(WATCHED_WARNINGS), dtype=np.int64)
+        """Counts of the watched warnings as of the last check (set by snapshots too)."""
+        self._warn_all: list[int] | None = None
+        """Every warning counter at the last check; ``None`` forces a full comparison."""
 
     @property
     def dt(self) -> float:
@@ -108,11 +120,15 @@ class Simulation:
         self.data.qvel[:] = qvel
         mujoco.mj_forward(self.model, self.data)
         self._warn_seen[:] = 0
+        self._warn_all = None
         self._fatal = ""
 
     def step(self, ctrl: np.ndarray) -> None:
         """Apply ``ctrl`` (shape ``(n_agents, n_motors)``, already in control units) for one env step."""
-        self.data.ctrl[self.actuator_ids.ravel()] = ctrl.ravel()
+        if self._ctrl_view is not None:
+            self._ctrl_view[:] = ctrl.ravel()
+        else:
+            self.data.ctrl[self._ctrl_index] = ctrl.ravel()
         try:
             mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         except mujoco.FatalError as exc:  # e.g. the arena stack overflows: reported by new_warnings()
@@ -147,6 +163,8 @@ class Simulation:
         if self._geom_bodies is None:
             return self.contact_forces_reference()
         mujoco.mj_rnePostConstraint(self.model, self.data)
+        if self._body_forces is not None:
+            return self._body_forces[0] - self._body_forces[1]
         bodies = self._geom_bodies
         return self.data.cfrc_ext[bodies, 3:] - self.data.xfrc_applied[bodies, :3]
 
@@ -174,6 +192,15 @@ class Simulation:
         return out
 
     # ------------------------------------------------------------- warnings
+    def warnings_seen(self) -> np.ndarray:
+        """Counts of the :data:`WATCHED_WARNINGS` already reported (a copy, for snapshots)."""
+        return self._warn_seen.copy()
+
+    def set_warnings_seen(self, counts: np.ndarray) -> None:
+        """Continue from a snapshot whose reported counts were ``counts``."""
+        self._warn_seen[:] = counts
+        self._warn_all = None
+
     def new_warnings(self) -> list[str]:
         """Names of watched MuJoCo warnings raised since the last call or reset.
 
@@ -181,15 +208,17 @@ class Simulation:
         ``arena_overflow`` when ``mj_step`` failed with a MuJoCo fatal error (out of arena
         memory).
         """
-        counts = self.data.warning.number[self._warn_ids]
         fired = []
-        if (counts > self._warn_seen).any():
+        every = self._warn_number.tolist()
+        if every != self._warn_all:  # rare: compare the watched counters one by one
+            counts = self._warn_number[self._warn_ids]
             fired = [n for n, c, s in zip(WATCHED_WARNINGS, counts, self._warn_seen, strict=True) if c > s]
             self._warn_seen[:] = counts
+            self._warn_all = every
         if self._fatal:
             fired.append("arena_overflow")
             self._fatal = ""
-        if not (math.isfinite(self.data.qpos.sum()) and math.isfinite(self.data.qvel.sum())):
+        if not (math.isfinite(self._qpos.sum()) and math.isfinite(self._qvel.sum())):
             fired.append("non_finite_state")
         return fired
 
