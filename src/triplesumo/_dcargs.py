@@ -48,11 +48,11 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "",
     for f in dataclasses.fields(cls):
         if f.name in skip:
             continue
-        tp = hints[f.name]
+        tp: Any = hints[f.name]
         default = getattr(defaults, f.name)
         dest = (prefix + f.name).replace(".", "__")
         if dataclasses.is_dataclass(tp):
-            add_arguments(parser, tp, prefix=f"{prefix}{f.name}.")
+            add_arguments(parser, typing.cast(type, tp), prefix=f"{prefix}{f.name}.")
             continue
         help_text = f"{docs.get(f.name, '')} (default: {default!r})".strip()
         kwargs: dict[str, Any] = {"dest": dest, "default": argparse.SUPPRESS, "help": help_text}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import imageio.v2 as imageio
 import numpy as np
@@ -27,7 +28,8 @@ def write_mp4(frames: Iterable[np.ndarray], path: Path, fps: int) -> int:
     """Encode ``(H, W, 3)`` uint8 frames as H.264 mp4; returns the number of frames written."""
     path = check_writable(Path(path))
     n = 0
-    with imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=8) as writer:
+    writer: Any = imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=8)
+    with writer:
         for frame in frames:
             writer.append_data(np.asarray(frame, dtype=np.uint8))
             n += 1
@@ -39,5 +41,6 @@ def write_mp4(frames: Iterable[np.ndarray], path: Path, fps: int) -> int:
 
 def count_frames(path: Path) -> int:
     """Decode an mp4 and count its frames (used to check recordings)."""
-    with imageio.get_reader(path) as reader:
+    reader: Any = imageio.get_reader(path)
+    with reader:
         return sum(1 for _ in reader)

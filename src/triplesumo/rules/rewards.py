@@ -110,7 +110,7 @@ class RewardRule:
         bit for bit.
         """
         still = self._still
-        rows = []
+        rows: list[tuple[float, ...]] = []
         for (opp, slf, par), sparse in zip(self.dense(pos, vel), self.outcome(team_results, timed_out), strict=True):
             rows.append((opp, slf, par, still, sparse, opp + slf + par + still, sparse))
         return rows

@@ -52,7 +52,8 @@ def _fsync_dir(path: Path) -> None:
 
 def _save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
     with open(path, "wb") as fh:
-        np.savez(fh, **arrays)
+        named: dict[str, Any] = dict(arrays)  # keyword names, not savez's own options
+        np.savez(fh, **named)
         fh.flush()
         os.fsync(fh.fileno())
 
