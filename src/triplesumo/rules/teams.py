@@ -21,10 +21,6 @@ class Teams:
     """``partners[i]``: indices of agent ``i``'s team-mates (not ``i`` itself)."""
     opponents: tuple[np.ndarray, ...]
     """``opponents[i]``: indices of every agent in another team."""
-    opponent_weights: np.ndarray
-    """``(n, n)``: ``1/|O_i|`` where ``j`` is an opponent of ``i``, else 0 (a mean over opponents)."""
-    partner_weights: np.ndarray
-    """``(n, n, n)``: ``[i, j, o] = 1/(|P_i| |O_i|)`` for partner ``j`` and opponent ``o`` of ``i``."""
 
     @classmethod
     def from_agents(cls, agents: tuple[AgentSpec, ...]) -> Teams:
@@ -33,11 +29,4 @@ class Teams:
         idx = np.arange(len(agents))
         partners = tuple(idx[(team_of == team_of[i]) & (idx != i)] for i in idx)
         opponents = tuple(idx[team_of != team_of[i]] for i in idx)
-        n = len(agents)
-        w_opp = np.zeros((n, n))
-        w_par = np.zeros((n, n, n))
-        for i in range(n):
-            w_opp[i, opponents[i]] = 1.0 / len(opponents[i])
-            if len(partners[i]):
-                w_par[i][np.ix_(partners[i], opponents[i])] = 1.0 / (len(partners[i]) * len(opponents[i]))
-        return cls(tuple(labels), team_of, partners, opponents, w_opp, w_par)
+        return cls(tuple(labels), team_of, partners, opponents)
