@@ -56,18 +56,16 @@ def test_general_paths_give_what_the_fast_paths_give() -> None:
     fast, general = Match(), Match()
     sim = general.sim
     assert fast.sim._body_forces is not None and fast.sim._ctrl_view is not None
-    sim._body_forces, sim._ctrl_view = None, None  # fancy indexing instead of views
+    sim._body_forces, sim._ctrl_view = None, None  # contact by contact; controls by fancy indexing
     for m in (fast, general):
         m.reset(seed=6)
     rng = np.random.default_rng(6)
     for _ in range(60):
         action = rng.uniform(-1, 1, (3, 8))
         a, b = fast.step_array(action), general.step_array(action)
-        np.testing.assert_array_equal(a.observations[0], b.observations[0])
+        np.testing.assert_allclose(a.observations[0], b.observations[0], rtol=1e-6, atol=1e-6)
         np.testing.assert_array_equal(fast.data.ctrl, general.data.ctrl)
-    reference = general.sim.contact_forces_reference()
-    sim._geom_bodies = None  # geoms sharing a body: contact by contact
-    np.testing.assert_array_equal(sim.contact_forces(), reference)
+        np.testing.assert_array_equal(fast.data.qpos, general.data.qpos)
 
 
 def test_only_new_watched_warnings_are_reported_once() -> None:

@@ -74,11 +74,11 @@ class Simulation:
         data = self.data
         self._qpos, self._qvel, self._warn_number = data.qpos, data.qvel, data.warning.number
         bodies = model.geom_bodyid[self.agent_geoms]
-        self._geom_bodies = bodies if len(set(bodies.tolist())) == len(bodies) else None
-        """Body of each agent geom when no two share one (then ``cfrc_ext`` is per geom)."""
         self._body_forces: tuple[np.ndarray, np.ndarray] | None = None
-        if self._geom_bodies is not None and np.array_equal(bodies, np.arange(bodies[0], bodies[0] + len(bodies))):
-            rows = slice(int(bodies[0]), int(bodies[0]) + len(bodies))  # contiguous: plain views
+        """``cfrc_ext`` force and ``xfrc_applied`` force rows of the agent geoms' bodies, when each
+        agent geom has a body of its own and those bodies are consecutive (the quadruped's are)."""
+        if np.array_equal(bodies, np.arange(bodies[0], bodies[0] + len(bodies))):
+            rows = slice(int(bodies[0]), int(bodies[0]) + len(bodies))
             self._body_forces = (data.cfrc_ext[rows, 3:], data.xfrc_applied[rows, :3])
         self._ctrl_index = self.actuator_ids.ravel()
         self._ctrl_view = data.ctrl if np.array_equal(self._ctrl_index, np.arange(model.nu)) else None
@@ -155,18 +155,15 @@ class Simulation:
 
         Summed over every contact the geom takes part in (the paper's code overwrote
         all but one), from the contacts and constraint forces now in ``data``. When every
-        agent geom has a body of its own (the quadruped does), this is one call to
-        ``mj_rnePostConstraint``: the force half of ``cfrc_ext`` is exactly that sum
+        agent geom has a body of its own, in consecutive bodies (the quadruped's), this is one
+        call to ``mj_rnePostConstraint``: the force half of ``cfrc_ext`` is exactly that sum
         (minus ``xfrc_applied``, e.g. a viewer perturbation, which is not a contact).
         Otherwise it is :meth:`contact_forces_reference`.
         """
-        if self._geom_bodies is None:
+        if self._body_forces is None:
             return self.contact_forces_reference()
         mujoco.mj_rnePostConstraint(self.model, self.data)
-        if self._body_forces is not None:
-            return self._body_forces[0] - self._body_forces[1]
-        bodies = self._geom_bodies
-        return self.data.cfrc_ext[bodies, 3:] - self.data.xfrc_applied[bodies, :3]
+        return self._body_forces[0] - self._body_forces[1]
 
     def contact_forces_reference(self) -> np.ndarray:
         """:meth:`contact_forces` from ``mj_contactForce``, contact by contact.
