@@ -43,10 +43,9 @@ class ObservationBuilder:
         self.sim, self.teams, self.mode = sim, teams, mode
         self.half_size, self.force_clip = half_size, force_clip
         names = sim.agent_names
-        self.others = tuple(
-            np.concatenate([teams.partners[i], teams.opponents[i]]).astype(int) for i in range(sim.n_agents)
-        )
-        self._others = np.stack(self.others)  # (n, n - 1): every other agent, partners first
+        self._others = np.stack([np.concatenate([teams.partners[i], teams.opponents[i]]).astype(int)
+                                 for i in range(sim.n_agents)])
+        """``(n, n - 1)``: for each agent, every other agent, partners first, then opponents."""
         self._joint_qpos = np.stack([a.joint_qpos for a in sim.agents])
         self._joint_qvel = np.stack([a.joint_qvel for a in sim.agents])
         self.structure: dict[str, dict[str, int]] = {}
@@ -58,7 +57,7 @@ class ObservationBuilder:
             else:
                 s = {"self_height": 1, "self_orientation": 4, "self_joint_position": 8, "self_velocity": 3,
                      "self_angular_velocity": 3, "self_joint_velocity": 8, "edge_distance": 1}
-                for j in self.others[i]:
+                for j in self._others[i]:
                     s[f"{names[j]}_position"] = 3
                     s[f"{names[j]}_velocity"] = 3
                 s["contact_force"] = 3 * sim.geoms_per_agent
