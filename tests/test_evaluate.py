@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import copy
 import csv
+import dataclasses
 import json
 import math
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +23,14 @@ import triplesumo.agents.zoo
 from conftest import TinyZoo
 from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
 from triplesumo.agents.policy_file import load_policy
-from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary, play_test_epochs, write_rows
+from triplesumo.evaluation.evaluate import (
+    EvaluateConfig,
+    RowAppender,
+    evaluate,
+    finished_rows,
+    format_summary,
+    play_test_epochs,
+)
 from triplesumo.evaluation.metrics import OUTCOMES
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import DENSE_TERMS
@@ -84,11 +93,14 @@ def test_rows_are_one_per_epoch_in_order_with_the_metrics_schema(tiny_zoo: TinyZ
         assert r["sparse_reward"] == pytest.approx(r["reward_outcome"])
     # Seeded reset noise: the test matches differ from each other.
     assert len({round(r["total_reward"], 9) for r in rows}) > 1
-    write_rows(tmp_path / "m.csv", rows)
+    with RowAppender(tmp_path / "m.csv", fresh=True) as append:
+        for r in rows:
+            append(r)
     with (tmp_path / "m.csv").open(newline="") as fh:
         reader = csv.DictReader(fh)
         assert tuple(reader.fieldnames or ()) == COLUMNS
         assert [int(r["epoch"]) for r in reader] == [1, 2, 3, 4, 5]
+    assert finished_rows(tmp_path / "m.csv", 5) == 5
 
 
 class PerRow:
@@ -219,6 +231,92 @@ def test_the_baselines_play_the_same_matches_as_direct_calls(report: tuple[Evalu
     assert [r["outcome"] for r in saved] == [r["outcome"] for r in rows]
     assert [int(r["steps"]) for r in saved] == [r["steps"] for r in rows]
     assert [float(r["total_reward"]) for r in saved] == pytest.approx([r["total_reward"] for r in rows])
+
+
+def test_play_test_epochs_from_a_later_epoch_gives_the_tail_of_the_full_run(tiny_zoo: TinyZoo) -> None:
+    others = fixed_others(tiny_zoo.zoo_dir)
+    full = play(ZeroPolicy(), others, epochs=5, n_envs=2)
+    handed: list[dict] = []
+    tail = play_test_epochs(ZeroPolicy(), others, "bug", 5, 100, MatchConfig(max_steps=STEPS), n_envs=3,
+                            n_threads=1, first=2, on_row=handed.append)
+    assert tail == full[2:]
+    assert handed == tail  # on_row sees every row once, in epoch order
+    with pytest.raises(ValueError, match="first"):
+        play_test_epochs(ZeroPolicy(), others, "bug", 5, 100, MatchConfig(max_steps=STEPS), first=5)
+
+
+def _kill_midway(folder: Path, keep: int) -> None:
+    """What a kill leaves: each candidate's CSV cut after ``keep`` rows, plus half a line."""
+    for path in folder.glob("*/metrics.csv"):
+        lines = path.read_text().splitlines(keepends=True)
+        path.write_text("".join(lines[:1 + keep]) + lines[1 + keep][:7])
+    (folder / "summary.json").unlink()
+
+
+def test_a_killed_evaluation_resumes_to_exactly_the_uninterrupted_rows(
+        report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    cfg, summary = report
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    folder = tmp_path / "killed"
+    shutil.copytree(cfg.out, folder)
+    _kill_midway(folder, keep=2)
+    assert finished_rows(folder / "passive" / "metrics.csv", cfg.epochs) == 2  # the half line is cut off
+    resumed = evaluate(dataclasses.replace(cfg, out=str(folder), resume=True, n_envs=3))
+    assert resumed["candidates"] == summary["candidates"]
+    for label in summary["candidates"]:
+        assert (folder / label / "metrics.csv").read_bytes() == (Path(cfg.out) / label / "metrics.csv").read_bytes()
+
+
+def test_resume_extends_a_finished_evaluation_to_more_epochs(
+        report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    cfg, _ = report
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    folder = tmp_path / "longer"
+    shutil.copytree(cfg.out, folder)
+    longer = evaluate(dataclasses.replace(cfg, out=str(folder), resume=True, epochs=cfg.epochs + 2))
+    assert longer["candidates"]["passive"]["n"] == cfg.epochs + 2
+    with (folder / "passive" / "metrics.csv").open(newline="") as fh:
+        outcomes = [r["outcome"] for r in csv.DictReader(fh)]
+    direct = play(ZeroPolicy(), fixed_others(tiny_zoo.zoo_dir), epochs=cfg.epochs + 2, n_envs=2, seed=cfg.seed)
+    assert outcomes == [r["outcome"] for r in direct]
+    with pytest.raises(ValueError, match="more than epochs"):
+        evaluate(dataclasses.replace(cfg, out=str(folder), resume=True))
+
+
+def test_resume_refuses_what_would_change_the_rows(
+        report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    cfg, _ = report
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    with pytest.raises(ValueError, match="seed was 10000, now 7"):
+        evaluate(dataclasses.replace(cfg, resume=True, seed=7))
+    with pytest.raises(ValueError, match="candidate 'trained'"):
+        evaluate(dataclasses.replace(cfg, resume=True, policy="zoo:bug"))
+    # The same path, other contents: the policy file was retrained in place.
+    stem = tmp_path / "bug"
+    for suffix in (".json", ".safetensors"):
+        shutil.copy(tiny_zoo.bug_policy.with_suffix(suffix), stem.with_suffix(suffix))
+    small = dataclasses.replace(cfg, policy=str(stem), baselines=(), epochs=2, out=str(tmp_path / "e"))
+    evaluate(small)
+    manifest = json.loads(stem.with_suffix(".json").read_text())
+    stem.with_suffix(".json").write_text(json.dumps({**manifest, "note": "retrained"}))
+    with pytest.raises(ValueError, match="files changed"):
+        evaluate(dataclasses.replace(small, resume=True))
+    with pytest.raises(FileNotFoundError, match="nothing to resume"):
+        evaluate(dataclasses.replace(small, resume=True, out=str(tmp_path / "empty")))
+    (tmp_path / "e" / "evaluation.json").write_text("{not json")
+    with pytest.raises(ValueError, match="corrupt"):
+        evaluate(dataclasses.replace(small, resume=True))
+
+
+def test_finished_rows_rejects_files_that_are_not_evaluation_csvs(tmp_path: Path) -> None:
+    path = tmp_path / "metrics.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="not a metrics CSV"):
+        finished_rows(path, 5)
+    assert finished_rows(tmp_path / "missing.csv", 5) == 0
 
 
 def test_format_summary_has_a_header_and_one_line_per_candidate(report: tuple[EvaluateConfig, dict]) -> None:

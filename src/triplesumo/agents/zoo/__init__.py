@@ -9,6 +9,7 @@ path to a policy file (``runs/x/policy`` or ``runs/x/policy.json``).
 
 from __future__ import annotations
 
+import hashlib
 import re
 from importlib import resources
 from pathlib import Path
@@ -66,6 +67,18 @@ def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None 
         return load_policy(path, expect_obs_mode=expect_obs_mode)[0]
     raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' "
                      f"(shipped: {available()}) or the path of a policy file")
+
+
+def policy_fingerprint(spec: str) -> str:
+    """sha256 of the files behind a policy spec (``builtin:NAME`` for a built-in), to tell if it changed."""
+    if spec in BUILTIN:
+        return f"builtin:{spec}"
+    path = ZOO_DIR / spec[4:] if spec.startswith("zoo:") else Path(spec)
+    stem = path.with_suffix("") if path.suffix in (".json", ".safetensors") else path
+    digest = hashlib.sha256()
+    for suffix in (".json", ".safetensors"):
+        digest.update(stem.with_name(stem.name + suffix).read_bytes())
+    return digest.hexdigest()
 
 
 def check_policy_pairs(field: str, pairs: tuple[str, ...], learner: str | None = None,
