@@ -27,7 +27,6 @@ import copy
 import csv
 import json
 import math
-import os
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
+from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, make_policy, policies_from_pairs, policy_fingerprint
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import ACTION_SIZE
@@ -281,9 +281,7 @@ def finished_rows(path: Path, epochs: int) -> int:
         raise ValueError(f"{path} already holds {good} test epochs, more than epochs={epochs}: "
                          "raise epochs, or evaluate into a new out folder")
     if good + 1 < len(lines):  # drop the partial or invalid tail
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text("\n".join(complete[:good + 1]) + "\n", encoding="utf-8")
-        os.replace(tmp, path)
+        atomic_write_bytes(path, ("\n".join(complete[:good + 1]) + "\n").encode("utf-8"))
     return good
 
 
@@ -357,9 +355,7 @@ def _previous_candidates(path: Path, record: dict[str, Any]) -> dict[str, Any]:
 
 
 def _write_json(path: Path, value: dict[str, Any]) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(value, indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    atomic_write_bytes(path, (json.dumps(value, indent=2) + "\n").encode("utf-8"))
 
 
 def format_summary(summary: dict[str, Any]) -> str:
