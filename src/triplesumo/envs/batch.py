@@ -53,7 +53,7 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from triplesumo.envs.match import ACTION_SIZE, Match, StepResult
+from triplesumo.envs.match import Match, StepResult
 from triplesumo.rules.config import MatchConfig
 from triplesumo.sim.physics import PhysicsError
 
@@ -83,6 +83,8 @@ class MatchBatch:
         self.config = first.config
         self.agents = first.agents
         self.n_agents = first.n_agents
+        self.action_width = first.action_width
+        """Columns of each match's action array (see :attr:`Match.action_width`)."""
         self.n_matches = n_matches
         self.n_threads = n_threads
         self.backend = backend
@@ -132,7 +134,7 @@ class MatchBatch:
 
     # ------------------------------------------------------------------- step
     def step(self, actions: np.ndarray) -> list[StepResult]:
-        """One env step of every match with ``(n_matches, n_agents, 8)`` normalised actions.
+        """One env step of every match with ``(n_matches, n_agents, action_width)`` normalised actions.
 
         Raises before any physics runs: ``ValueError`` for a wrong shape, or for NaN or inf
         (naming the match and the agent); ``RuntimeError`` if a match is over. With
@@ -141,7 +143,7 @@ class MatchBatch:
         """
         self._check_open()
         actions = np.asarray(actions, dtype=np.float64)
-        expected = (self.n_matches, self.n_agents, ACTION_SIZE)
+        expected = (self.n_matches, self.n_agents, self.action_width)
         if actions.shape != expected:
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
         finished = [k for k, m in enumerate(self.matches) if m.over]

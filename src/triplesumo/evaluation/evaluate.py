@@ -38,7 +38,6 @@ from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, make_policy, policies_from_pairs, policy_fingerprint
 from triplesumo.envs.batch import MatchBatch
-from triplesumo.envs.match import ACTION_SIZE
 from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
@@ -118,7 +117,7 @@ def play_test_epochs(
         raise ValueError(f"first must be in [0, epochs={epochs}), got {first}")
     n_envs = min(n_envs, epochs - first)
     batch = MatchBatch(match_cfg, n_envs, n_threads)
-    agents = batch.matches[0].agents
+    agents, sizes = batch.matches[0].agents, batch.matches[0].action_sizes
     if learner not in agents:
         raise ValueError(f"learner must be one of {list(agents)}, got {learner!r}")
     L = agents.index(learner)
@@ -158,10 +157,11 @@ def play_test_epochs(
     try:
         with batch:
             while len(rows) < epochs - first:
-                actions = np.zeros((n_envs, len(agents), ACTION_SIZE))
+                actions = np.zeros((n_envs, len(agents), batch.action_width))
                 for i, per_slot in drivers:
+                    size = sizes[i]
                     for k in range(n_envs):
-                        actions[k, i] = per_slot[k](obs[k][i])
+                        actions[k, i, :size] = per_slot[k](obs[k][i])
                 for k, res in enumerate(batch.step(actions)):
                     info = res.infos[L]
                     for key in acc[k]:

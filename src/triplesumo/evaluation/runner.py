@@ -55,11 +55,11 @@ def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | 
     terms: dict[str, dict[str, float]] = {a: {} for a in match.agents}
     try:
         while True:
-            actions = np.zeros((match.n_agents, 8))
+            actions = np.zeros((match.n_agents, match.action_width))
             for i, name in enumerate(match.agents):
                 policy = policies.get(name)
                 if policy is not None:
-                    actions[i] = match.check_action(name, policy(obs[i]))
+                    actions[i, :match.action_sizes[i]] = match.check_action(name, policy(obs[i]))
             result = match.step_array(actions)
             obs = result.observations
             for i, name in enumerate(match.agents):
