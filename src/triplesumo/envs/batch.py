@@ -89,7 +89,9 @@ class MatchBatch:
         self.n_threads = n_threads
         self.backend = backend
         self._frame_skip = first.sim.frame_skip
-        self._actuators = first.sim.actuator_ids.ravel()
+        motors = first.sim.actuator_ids >= 0  # padding columns of smaller bodies drive nothing
+        self._motor_columns = None if motors.all() else motors.ravel()
+        self._actuators = first.sim.actuator_ids[motors]
         self._batch: mujoco.batch.Batch | None = None
         self._pool: ThreadPoolExecutor | None = None
         self._closed = False
@@ -169,7 +171,8 @@ class MatchBatch:
 
     def _step_batch(self, ctrls: list[np.ndarray]) -> list[StepResult | PhysicsError]:
         assert self._batch is not None
-        self._ctrl[:, self._actuators] = np.reshape(ctrls, (self.n_matches, -1))
+        flat = np.reshape(ctrls, (self.n_matches, -1))
+        self._ctrl[:, self._actuators] = flat if self._motor_columns is None else flat[:, self._motor_columns]
         self._batch.step(nstep=self._frame_skip)
         outcomes = []
         for k, match in enumerate(self.matches):
