@@ -193,3 +193,21 @@ def test_layout_gaps_equal_mujocos_geom_distances(kind_a: str, kind_b: str, pose
     ours = gap_between(kind_a, (0.0, 0.0, 0.0), kind_b, pose_b)
     assert ours == pytest.approx(mj, abs=1e-6)
     assert set(BODIES) == {"ant", "bug", "spider"}
+
+
+@pytest.mark.parametrize("backend", ["mujoco", "threads"])
+def test_a_batch_of_mixed_body_matches_steps_like_single_matches(backend: str) -> None:
+    from triplesumo.envs.batch import MatchBatch
+
+    cfg = MatchConfig(agents=BODIES_AGENTS, max_steps=30)
+    actions = np.random.default_rng(1).uniform(-1, 1, (5, 2, 3, 16))
+    singles = [Match(cfg) for _ in range(2)]
+    with MatchBatch(cfg, 2, 1, backend=backend) as batch:
+        for k in range(2):
+            batch.reset_one(k, seed=k)
+            singles[k].reset(seed=k)
+        for step in actions:
+            results = batch.step(step)
+            for k, match in enumerate(singles):
+                want = match.step_array(step[k]).observations
+                assert all(np.array_equal(a, b) for a, b in zip(results[k].observations, want, strict=True))
