@@ -111,10 +111,10 @@ class Match:
             raise ValueError(f"actions must have exactly the keys {list(agents)}; "
                              f"missing {missing}, unknown {unknown}")
         if self._pad is not None:
-            stacked = np.zeros((self.n_agents, self.action_width))
+            padded = np.zeros((self.n_agents, self.action_width))
             for i, a in enumerate(agents):
-                stacked[i, :self.action_sizes[i]] = self.check_action(a, actions[a])
-            return stacked
+                padded[i, :self.action_sizes[i]] = self.check_action(a, actions[a])
+            return padded
         try:
             stacked = np.array([actions[a] for a in agents], dtype=np.float64)
         except (TypeError, ValueError):  # ragged or not numbers: let check_action name the agent
