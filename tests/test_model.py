@@ -69,13 +69,13 @@ def test_no_hand_suffixed_copies_of_the_paper_code(model: mujoco.MjModel) -> Non
         assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name) == -1
 
 
-def test_exactly_one_quadruped_mjcf_in_assets() -> None:
+def test_exactly_one_body_mjcf_in_assets_and_no_hand_written_legs() -> None:
     xmls = sorted(mjcf_names.ASSETS.glob("*.xml"))
-    with_motors = [p for p in xmls if "<motor" in p.read_text()]
-    assert with_motors == [mjcf_names.QUADRUPED_XML]
-    body = mujoco.MjModel.from_xml_path(str(mjcf_names.QUADRUPED_XML))
-    assert body.nu == 8
-    assert body.njnt == 9  # one free joint + 8 hinges
+    assert xmls == sorted([mjcf_names.BODY_XML, mjcf_names.TATAMI_XML])
+    assert not any("<actuator" in p.read_text() or "type=\"hinge\"" in p.read_text() for p in xmls)
+    body = mujoco.MjModel.from_xml_path(str(mjcf_names.BODY_XML))
+    assert body.nu == 0
+    assert body.njnt == 1  # the free joint: legs are grown by triplesumo.model.bodies
 
 
 # -------------------------------------------------------------------------- colours
@@ -218,7 +218,7 @@ def test_agents_at_rest_never_touch_and_stand_on_the_tatami(make_match, zeros) -
     assert (match.sim.torso_positions()[:, 2] > 0.5).all()
     # At rest, the contact forces summed over every geom of an agent carry its weight.
     forces = match.sim.contact_forces()
-    g = match.sim.geoms_per_agent
+    g = match.sim.geom_counts[0]
     gravity = -match.model.opt.gravity[2]
     for i, a in enumerate(match.sim.agents):
         weight = match.model.body_subtreemass[a.torso_body] * gravity

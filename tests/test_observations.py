@@ -15,7 +15,7 @@ def reference_egocentric(match: Match) -> list[np.ndarray]:
     sim, obs = match.sim, []
     forces = np.clip(sim.contact_forces_reference(), -match.config.contact_force_clip, match.config.contact_force_clip)
     pos, vel, quat = sim.torso_positions(), sim.torso_velocities(), sim.torso_quaternions()
-    g = sim.geoms_per_agent
+    g = sim.geom_counts[0]
     for i, a in enumerate(sim.agents):
         w, x, y, z = quat[i]
         yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))

@@ -41,6 +41,12 @@ def _parser() -> argparse.ArgumentParser:
     zoo.add_argument("policy", nargs="?", help="publish: the run's policy file (e.g. runs/ant/policy)")
     zoo.add_argument("name", nargs="?", help="publish: the zoo name (e.g. ant)")
     zoo.add_argument("--evaluation", default=None, help="publish: a JSON file of evaluation results to record")
+    from triplesumo.evaluation.recording import ReplayConfig
+
+    replay = sub.add_parser("replay", help="re-render a match file from play/evaluate --record (--video FILE), "
+                                           "checking it re-simulates bit for bit")
+    replay.add_argument("file", help="match file (.npz)")
+    _dcargs.add_arguments(replay, ReplayConfig)
     bench = sub.add_parser("bench", help="benchmarks: 'bench env' or 'bench train' (--help for each)")
     bench.add_argument("which", choices=["env", "train"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
@@ -116,6 +122,12 @@ def main(argv: list[str] | None = None) -> int:
                     raise ValueError("zoo publish needs POLICY and NAME")
                 evaluation = json.loads(Path(args.evaluation).read_text()) if args.evaluation else None
                 print(zoo_module.publish(Path(args.policy), args.name, evaluation))
+        elif args.command == "replay":
+            from pathlib import Path
+
+            from triplesumo.evaluation.recording import ReplayConfig, run_replay
+
+            run_replay(Path(args.file), _dcargs.build(ReplayConfig, args))
         elif args.command == "bench":
             if args.which == "env":
                 from triplesumo.benchmarks.env import main as bench_env

@@ -1,7 +1,8 @@
 """Built-in policies that need no weights: passive (zero action) and uniform random.
 
-A policy is any callable from one observation to one normalised action in [-1, 1]^8;
-one with a ``reset(seed)`` method is re-seeded by the env at every reset.
+A policy is any callable from one observation to one normalised action in [-1, 1]^n
+(n = 8 motors for an ant body, 12 for a bug, 16 for a spider); one with a ``reset(seed)``
+method is re-seeded by the env at every reset.
 """
 
 from __future__ import annotations
@@ -9,33 +10,38 @@ from __future__ import annotations
 import numpy as np
 
 ACTION_SIZE = 8
+"""Action size of the default (ant) body."""
 
 
 class ZeroPolicy:
     """Passive: zero torque on every motor (the legs hold no pose)."""
 
+    def __init__(self, action_size: int = ACTION_SIZE) -> None:
+        self.action_size = action_size
+
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return np.zeros(ACTION_SIZE, dtype=np.float32)
+        return np.zeros(self.action_size, dtype=np.float32)
 
 
 class RandomPolicy:
-    """Uniform random actions in [-1, 1]^8 from its own seeded generator."""
+    """Uniform random actions in [-1, 1]^n from its own seeded generator."""
 
-    def __init__(self, seed: int | None = None) -> None:
+    def __init__(self, seed: int | None = None, action_size: int = ACTION_SIZE) -> None:
         self.rng = np.random.default_rng(seed)
+        self.action_size = action_size
 
     def reset(self, seed: int | None = None) -> None:
         self.rng = np.random.default_rng(seed)
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return self.rng.uniform(-1.0, 1.0, ACTION_SIZE).astype(np.float32)
+        return self.rng.uniform(-1.0, 1.0, self.action_size).astype(np.float32)
 
 
 BUILTIN = {"zero": ZeroPolicy, "passive": ZeroPolicy, "random": RandomPolicy}
 
 
 def act_batch(policy: object, obs: np.ndarray) -> np.ndarray:
-    """Actions for a batch ``(n, obs_dim)`` of observations, as float64 ``(n, 8)``.
+    """Actions for a batch ``(n, obs_dim)`` of observations, as float64 ``(n, action_size)``.
 
     Batched policies (trained actors, which have an ``obs_dim``) are called once;
     others once per row.

@@ -42,7 +42,7 @@ import numpy as np
 
 from triplesumo.benchmarks import report
 from triplesumo.envs.batch import BACKENDS, MatchBatch
-from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.envs.match import Match
 from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules import outcome as rules_outcome
@@ -139,9 +139,11 @@ def _one_round(variants: dict[str, _Variant], chunk: int) -> dict[str, float]:
 
 
 # ----------------------------------------------------------------- variants
-def _actions(n_agents: int, steps: int, seed: int) -> np.ndarray:
-    """``(steps, n_agents, 8)`` float32 actions, uniform in [-1, 1], the same for every single-match variant."""
-    return np.random.default_rng(seed).uniform(-1.0, 1.0, (steps, n_agents, ACTION_SIZE)).astype(np.float32)
+def _actions(match: Match, steps: int, seed: int) -> np.ndarray:
+    """``(steps, n_agents, action_width)`` float32 actions, uniform in [-1, 1], the same for every
+    single-match variant."""
+    shape = (steps, match.n_agents, match.action_width)
+    return np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32)
 
 
 class _Variant:
@@ -168,10 +170,11 @@ class _RawPhysics(_Variant):
     def __init__(self, config: MatchConfig, steps: int, seed: int) -> None:
         self.match, self.length, self.seed = Match(config), steps, seed
         sim = self.match.sim
-        actions = _actions(self.match.n_agents, steps, seed).astype(np.float64)
+        actions = _actions(self.match, steps, seed).astype(np.float64)
         mid, half_range = (sim.ctrl_high + sim.ctrl_low) / 2.0, (sim.ctrl_high - sim.ctrl_low) / 2.0  # as Match
         self.ctrl = np.zeros((steps, self.match.model.nu))  # actuator order: a step writes data.ctrl whole
-        self.ctrl[:, sim.actuator_ids.ravel()] = (mid + actions * half_range).reshape(steps, -1)
+        motors = sim.actuator_ids >= 0  # padding columns of smaller bodies drive nothing
+        self.ctrl[:, sim.actuator_ids[motors]] = (mid + actions * half_range)[:, motors]
 
     def start(self) -> None:
         self.rng = np.random.default_rng(self.seed)  # the starts Match.reset(seed), then reset(), draw
@@ -195,8 +198,10 @@ class _RawPhysics(_Variant):
 class _ParallelEnv(_Variant):
     def __init__(self, config: MatchConfig, steps: int, seed: int) -> None:
         self.env, self.length, self.seed = TripleSumoParallelEnv(config), steps, seed
-        actions = _actions(len(self.env.possible_agents), steps, seed)
-        self.actions = [dict(zip(self.env.possible_agents, a, strict=True)) for a in actions]
+        match = self.env.match
+        actions = _actions(match, steps, seed)
+        self.actions = [{name: row[i, :match.action_sizes[i]] for i, name in enumerate(match.agents)}
+                        for row in actions]
 
     def start(self) -> None:
         self.env.reset(seed=self.seed)
@@ -217,7 +222,7 @@ class _ParallelEnv(_Variant):
 class _MatchCore(_Variant):
     def __init__(self, config: MatchConfig, steps: int, seed: int) -> None:
         self.match, self.length, self.seed = Match(config), steps, seed
-        self.actions = _actions(self.match.n_agents, steps, seed)
+        self.actions = _actions(self.match, steps, seed)
 
     def start(self) -> None:
         self.match.reset(self.seed)
@@ -235,7 +240,7 @@ class _MatchCore(_Variant):
 class _Batch(_Variant):
     def __init__(self, batch: MatchBatch, per_match: int, seed: int) -> None:
         self.batch, self.length, self.width, self.seed = batch, per_match, batch.n_matches, seed
-        shape = (per_match, batch.n_matches, batch.n_agents, ACTION_SIZE)
+        shape = (per_match, batch.n_matches, batch.n_agents, batch.action_width)
         self.actions = np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32)
 
     def start(self) -> None:

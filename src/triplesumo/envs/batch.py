@@ -53,7 +53,7 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from triplesumo.envs.match import ACTION_SIZE, Match, StepResult
+from triplesumo.envs.match import Match, StepResult
 from triplesumo.rules.config import MatchConfig
 from triplesumo.sim.physics import PhysicsError
 
@@ -83,11 +83,15 @@ class MatchBatch:
         self.config = first.config
         self.agents = first.agents
         self.n_agents = first.n_agents
+        self.action_width = first.action_width
+        """Columns of each match's action array (see :attr:`Match.action_width`)."""
         self.n_matches = n_matches
         self.n_threads = n_threads
         self.backend = backend
         self._frame_skip = first.sim.frame_skip
-        self._actuators = first.sim.actuator_ids.ravel()
+        motors = first.sim.actuator_ids >= 0  # padding columns of smaller bodies drive nothing
+        self._motor_columns = None if motors.all() else motors.ravel()
+        self._actuators = first.sim.actuator_ids[motors]
         self._batch: mujoco.batch.Batch | None = None
         self._pool: ThreadPoolExecutor | None = None
         self._closed = False
@@ -132,7 +136,7 @@ class MatchBatch:
 
     # ------------------------------------------------------------------- step
     def step(self, actions: np.ndarray) -> list[StepResult]:
-        """One env step of every match with ``(n_matches, n_agents, 8)`` normalised actions.
+        """One env step of every match with ``(n_matches, n_agents, action_width)`` normalised actions.
 
         Raises before any physics runs: ``ValueError`` for a wrong shape, or for NaN or inf
         (naming the match and the agent); ``RuntimeError`` if a match is over. With
@@ -141,7 +145,7 @@ class MatchBatch:
         """
         self._check_open()
         actions = np.asarray(actions, dtype=np.float64)
-        expected = (self.n_matches, self.n_agents, ACTION_SIZE)
+        expected = (self.n_matches, self.n_agents, self.action_width)
         if actions.shape != expected:
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
         finished = [k for k, m in enumerate(self.matches) if m.over]
@@ -167,7 +171,8 @@ class MatchBatch:
 
     def _step_batch(self, ctrls: list[np.ndarray]) -> list[StepResult | PhysicsError]:
         assert self._batch is not None
-        self._ctrl[:, self._actuators] = np.reshape(ctrls, (self.n_matches, -1))
+        flat = np.reshape(ctrls, (self.n_matches, -1))
+        self._ctrl[:, self._actuators] = flat if self._motor_columns is None else flat[:, self._motor_columns]
         self._batch.step(nstep=self._frame_skip)
         outcomes = []
         for k, match in enumerate(self.matches):

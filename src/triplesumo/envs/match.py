@@ -15,15 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from triplesumo.model import build_model, names, ring_half_size
+from triplesumo.model import build_model, ring_half_size
 from triplesumo.rules import outcome as rules_outcome
 from triplesumo.rules import rewards as rules_rewards
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.observations import ObservationBuilder
 from triplesumo.rules.teams import Teams
 from triplesumo.sim.physics import PhysicsError, Simulation
-
-ACTION_SIZE = len(names.LEG_JOINTS)
 
 
 @dataclass
@@ -55,6 +53,12 @@ class Match:
         self.observer = ObservationBuilder(
             self.sim, self.teams, self.config.obs_mode, self.half_size, self.config.contact_force_clip
         )
+        self.action_sizes = self.sim.action_sizes
+        """Each agent's action size (its motors: 8 ant, 12 bug, 16 spider), roster order."""
+        self.action_width = self.sim.action_width
+        """Columns of the ``(n_agents, action_width)`` action arrays; an agent with fewer motors
+        ignores the columns past its own action size."""
+        self._pad = self.sim.action_mask
         self._ctrl_mid = (self.sim.ctrl_high + self.sim.ctrl_low) / 2.0
         self._ctrl_half = (self.sim.ctrl_high - self.sim.ctrl_low) / 2.0
         self.np_random = np.random.default_rng()
@@ -95,7 +99,8 @@ class Match:
 
     # ------------------------------------------------------------------- step
     def actions_from_dict(self, actions: Mapping[str, Any]) -> np.ndarray:
-        """Validate a ``{agent: action}`` mapping and stack it in roster order (a copy)."""
+        """Validate a ``{agent: action}`` mapping and stack it in roster order (a copy), padded with
+        zeros to ``action_width`` columns where bodies differ."""
         if not isinstance(actions, Mapping):
             raise ValueError(f"actions must be a dict {{agent: action}} for agents {list(self.agents)}, "
                              f"got {type(actions).__name__}")
@@ -105,14 +110,19 @@ class Match:
             unknown = [a for a in actions if a not in agents]
             raise ValueError(f"actions must have exactly the keys {list(agents)}; "
                              f"missing {missing}, unknown {unknown}")
+        if self._pad is not None:
+            padded = np.zeros((self.n_agents, self.action_width))
+            for i, a in enumerate(agents):
+                padded[i, :self.action_sizes[i]] = self.check_action(a, actions[a])
+            return padded
         try:
             stacked = np.array([actions[a] for a in agents], dtype=np.float64)
         except (TypeError, ValueError):  # ragged or not numbers: let check_action name the agent
             stacked = None
-        if stacked is None or stacked.shape != (self.n_agents, ACTION_SIZE):
+        if stacked is None or stacked.shape != (self.n_agents, self.action_width):
             for a in agents:
                 self.check_action(a, actions[a])
-            raise ValueError(f"actions must stack to shape ({self.n_agents}, {ACTION_SIZE})")
+            raise ValueError(f"actions must stack to shape ({self.n_agents}, {self.action_width})")
         return stacked
 
     def check_action(self, agent: str, action: Any) -> np.ndarray:
@@ -121,14 +131,15 @@ class Match:
             arr = np.array(action, dtype=np.float64, copy=True)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"action of {agent!r} must be an array of numbers: {exc}") from None
-        if arr.shape != (ACTION_SIZE,):
-            raise ValueError(f"action of {agent!r} must have shape ({ACTION_SIZE},), got {arr.shape}")
+        size = self.action_sizes[self.agents.index(agent)]
+        if arr.shape != (size,):
+            raise ValueError(f"action of {agent!r} must have shape ({size},), got {arr.shape}")
         if not np.isfinite(arr).all():
             raise ValueError(f"action of {agent!r} contains NaN or inf: {arr.tolist()}")
         return arr
 
     def step_array(self, actions: np.ndarray) -> StepResult:
-        """One env step with ``(n_agents, 8)`` normalised actions in roster order.
+        """One env step with ``(n_agents, action_width)`` normalised actions in roster order.
 
         Finite values beyond [-1, 1] are clipped; each agent's action is scaled to its
         motors' control range. NaN or inf raises ``ValueError`` naming the agent.
@@ -139,7 +150,7 @@ class Match:
         return self.finish_step()
 
     def prepare(self, actions: np.ndarray) -> np.ndarray:
-        """Check ``(n_agents, 8)`` normalised actions and return the ``(n_agents, 8)`` controls.
+        """Check ``(n_agents, action_width)`` normalised actions and return the controls (same shape).
 
         The first half of :meth:`step_array`, with its errors; it changes nothing, so a
         runner that steps the physics of many matches together
@@ -148,8 +159,10 @@ class Match:
         if self.over:
             raise RuntimeError("the match is over (or was never started): call reset() first")
         actions = np.asarray(actions, dtype=np.float64)
-        if actions.shape != (self.n_agents, ACTION_SIZE):
-            raise ValueError(f"actions must have shape ({self.n_agents}, {ACTION_SIZE}), got {actions.shape}")
+        if actions.shape != (self.n_agents, self.action_width):
+            raise ValueError(f"actions must have shape ({self.n_agents}, {self.action_width}), got {actions.shape}")
+        if self._pad is not None:  # columns past an agent's motors are ignored, whatever they hold
+            actions = np.where(self._pad, actions, 0.0)
         if not math.isfinite(actions.sum()):  # NaN or inf somewhere (or an overflowing sum: look closer)
             bad = ~np.isfinite(actions).all(axis=1)
             if bad.any():

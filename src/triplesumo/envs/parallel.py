@@ -9,7 +9,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
 
@@ -31,6 +31,9 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     ## Action Space
     ``Box(-1, 1, (8,), float32)`` per agent: hip and ankle torques of the four legs (order
     hip_1, ankle_1, ..., hip_4, ankle_4), scaled linearly to the agent's control range.
+    With ``AgentSpec.body`` an agent may be RoboSumo's bug (6 legs, 12 values) or spider
+    (8 legs, 16 values) instead (``triplesumo.model.BODIES_AGENTS``: the paper's match with
+    Ant, Bug and Spider bodies).
     Finite values beyond +-1 are clipped. NaN or inf raises ``ValueError`` naming the
     agent; wrong shapes, missing or unknown agents raise ``ValueError`` saying what was
     expected. Actions are copied.
@@ -105,7 +108,8 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
             a: spaces.Box(-np.inf, np.inf, (self.match.observer.sizes[a],), np.float32)
             for a in self.possible_agents
         }
-        self._act_spaces = {a: spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32) for a in self.possible_agents}
+        self._act_spaces = {a: spaces.Box(-1.0, 1.0, (size,), np.float32)
+                            for a, size in zip(self.possible_agents, self.match.action_sizes, strict=True)}
         n_state = len(self.match.state())
         self.state_space = spaces.Box(-np.inf, np.inf, (n_state,), np.float32)
         self.observation_structure = self.match.observer.structure

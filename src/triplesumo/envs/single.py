@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from triplesumo.envs.match import ACTION_SIZE, Match
+from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
 
@@ -86,7 +86,8 @@ class TripleSumoEnv(MatchAccess, gym.Env):
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.match.sim.dt)}
         self.observation_space = spaces.Box(-np.inf, np.inf, (self.match.observer.sizes[learner],), np.float32)
-        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
+        size = self.match.action_sizes[self._learner_index]
+        self.action_space = spaces.Box(-1.0, 1.0, (size,), np.float32)
         self.observation_structure = self.match.observer.structure[learner]
         self._obs: list[np.ndarray] = []
         self._view = MatchView(self.match, render_mode, width, height)
@@ -108,12 +109,13 @@ class TripleSumoEnv(MatchAccess, gym.Env):
         return self._obs[self._learner_index], infos[self._learner_index]
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
-        actions = np.zeros((self.match.n_agents, ACTION_SIZE))
-        actions[self._learner_index] = self.match.check_action(self.learner, action)
+        sizes = self.match.action_sizes
+        actions = np.zeros((self.match.n_agents, self.match.action_width))
+        actions[self._learner_index, :sizes[self._learner_index]] = self.match.check_action(self.learner, action)
         for i, name in self._others:
             policy = self.policies.get(name)
             if policy is not None:
-                actions[i] = self.match.check_action(name, policy(self._obs[i]))
+                actions[i, :sizes[i]] = self.match.check_action(name, policy(self._obs[i]))
         result = self.match.step_array(actions)
         self._obs = result.observations
         k = self._learner_index

@@ -38,8 +38,8 @@ from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, make_policy, policies_from_pairs, policy_fingerprint
 from triplesumo.envs.batch import MatchBatch
-from triplesumo.envs.match import ACTION_SIZE
 from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
+from triplesumo.evaluation.recording import MatchRecorder
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.rewards import TERMS
@@ -80,8 +80,13 @@ class EvaluateConfig:
     """Show a progress bar."""
     resume: bool = False
     """Continue the evaluation in ``out`` (killed, or to more epochs): finished epochs are kept."""
+    record: int = 0
+    """Write the first K test epochs of every candidate as replayable match files
+    (``OUT/CANDIDATE/matches/epoch_00001.npz`` ...; ``triplesumo replay`` re-renders them)."""
 
     def __post_init__(self) -> None:
+        if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
+            raise ValueError(f"EvaluateConfig.record must be an int >= 0, got {self.record!r}")
         for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -110,15 +115,19 @@ def play_test_epochs(
     progress: bool = False,
     first: int = 0,
     on_row: Callable[[dict[str, Any]], None] | None = None,
+    record: int = 0,
+    record_dir: Path | None = None,
+    policy_names: dict[str, str] | None = None,
 ) -> list[dict[str, Any]]:
     """Play test epochs ``first .. epochs - 1`` (epoch ``i`` seeded ``seed + i``); one metrics row per
     epoch, in order. ``on_row`` is called with each row in epoch order as soon as it and every
-    earlier one have finished (matches end out of order)."""
+    earlier one have finished (matches end out of order). Epochs ``< record`` are written to
+    ``record_dir/epoch_NNNNN.npz`` as match files (``policy_names`` stored in them)."""
     if not 0 <= first < epochs:
         raise ValueError(f"first must be in [0, epochs={epochs}), got {first}")
     n_envs = min(n_envs, epochs - first)
     batch = MatchBatch(match_cfg, n_envs, n_threads)
-    agents = batch.matches[0].agents
+    agents, sizes = batch.matches[0].agents, batch.matches[0].action_sizes
     if learner not in agents:
         raise ValueError(f"learner must be one of {list(agents)}, got {learner!r}")
     L = agents.index(learner)
@@ -132,6 +141,7 @@ def play_test_epochs(
     slot_epoch = [-1] * n_envs
     obs: list[list[np.ndarray]] = [[] for _ in range(n_envs)]
     acc = [dict.fromkeys(("dense_reward", "sparse_reward", *TERMS), 0.0) for _ in range(n_envs)]
+    recorders: list[MatchRecorder | None] = [None] * n_envs
     next_epoch = first
     next_row = first  # the next row to hand to on_row
 
@@ -145,6 +155,8 @@ def play_test_epochs(
             if callable(reset):
                 reset(seed=int(np.random.SeedSequence([seed + max(epoch, 0), i]).generate_state(1)[0]))
         obs[k] = batch.reset_one(k, seed=seed + epoch if epoch >= 0 else seed - 1 - k)[0]
+        recorders[k] = (MatchRecorder(batch.matches[k], seed + epoch, policy_names)
+                        if record_dir is not None and 0 <= epoch < record else None)
         acc[k] = dict.fromkeys(acc[k], 0.0)
 
     bar = None
@@ -158,11 +170,19 @@ def play_test_epochs(
     try:
         with batch:
             while len(rows) < epochs - first:
-                actions = np.zeros((n_envs, len(agents), ACTION_SIZE))
+                actions = np.zeros((n_envs, len(agents), batch.action_width))
                 for i, per_slot in drivers:
+                    size = sizes[i]
                     for k in range(n_envs):
-                        actions[k, i] = per_slot[k](obs[k][i])
+                        actions[k, i, :size] = per_slot[k](obs[k][i])
                 for k, res in enumerate(batch.step(actions)):
+                    recorder = recorders[k]
+                    if recorder is not None:
+                        recorder.step(actions[k])
+                        if res.terminated or res.truncated:
+                            outcomes = {a: i["outcome"] for a, i in zip(agents, res.infos, strict=True)}
+                            assert record_dir is not None
+                            recorder.finish(outcomes).save(record_dir / f"epoch_{slot_epoch[k] + 1:05d}.npz")
                     info = res.infos[L]
                     for key in acc[k]:
                         acc[k][key] += info[key]
@@ -240,7 +260,8 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             with RowAppender(path, fresh=done == 0) as append:
                 play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.n_envs,
                                  cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress, first=done,
-                                 on_row=append)
+                                 on_row=append, record=cfg.record, record_dir=out / label / "matches",
+                                 policy_names={**dict(p.split("=") for p in cfg.policies), cfg.learner: spec})
         metrics = read_metrics_csv(path)
         plot_run(
             metrics, out / label / "plots", window=cfg.window, title=f"test: {cfg.learner}={spec}", label=cfg.learner

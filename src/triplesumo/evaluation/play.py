@@ -21,6 +21,9 @@ class PlayConfig:
     Agents not named are passive."""
     video: str | None = None
     """Write the match as mp4 to this path."""
+    record: str | None = None
+    """Write the match as a replayable match file (.npz: seed, config, actions, MuJoCo states) to this
+    path; ``triplesumo replay FILE --video out.mp4`` re-renders it."""
     max_steps: int = 500
     """Step limit of the match (a draw when reached)."""
     obs_mode: str = "paper"
@@ -34,6 +37,8 @@ class PlayConfig:
         check_policy_pairs("PlayConfig.policies", self.policies)
         if self.width < 16 or self.height < 16:
             raise ValueError("PlayConfig.width and height must be >= 16")
+        if self.record is not None and not self.record.endswith(".npz"):
+            raise ValueError(f"PlayConfig.record must be a .npz path, got {self.record!r}")
 
 
 def run_play(cfg: PlayConfig) -> MatchRecord:
@@ -41,11 +46,16 @@ def run_play(cfg: PlayConfig) -> MatchRecord:
     match_cfg = MatchConfig(max_steps=cfg.max_steps, obs_mode=cfg.obs_mode)
     policies = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
     video = Path(cfg.video) if cfg.video else None
-    record = play_match(policies, seed=cfg.seed, config=match_cfg, video=video, width=cfg.width, height=cfg.height)
-    who = ", ".join(f"{a}: {o}" for a, o in record.outcomes.items())
-    out = f"; out of the ring: {', '.join(record.out_of_ring)}" if record.out_of_ring else ""
-    print(f"match seed {cfg.seed}: {record.steps} steps; {who}{out}")
-    print("returns: " + ", ".join(f"{a} {r:+.1f}" for a, r in record.returns.items()))
+    names = dict(pair.split("=") for pair in cfg.policies)
+    file = Path(cfg.record) if cfg.record else None
+    played = play_match(policies, seed=cfg.seed, config=match_cfg, video=video, width=cfg.width, height=cfg.height,
+                        record=file, policy_names=names)
+    who = ", ".join(f"{a}: {o}" for a, o in played.outcomes.items())
+    out = f"; out of the ring: {', '.join(played.out_of_ring)}" if played.out_of_ring else ""
+    print(f"match seed {cfg.seed}: {played.steps} steps; {who}{out}")
+    print("returns: " + ", ".join(f"{a} {r:+.1f}" for a, r in played.returns.items()))
     if video is not None:
-        print(f"video: {video} ({record.frames} frames)")
-    return record
+        print(f"video: {video} ({played.frames} frames)")
+    if file is not None:
+        print(f"match file: {file} (replay: triplesumo replay {file} --video out.mp4)")
+    return played

@@ -1,4 +1,4 @@
-"""Run matches between fixed policies: one seeded match, optionally recorded."""
+"""Run matches between fixed policies: one seeded match, optionally filmed and recorded."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from triplesumo.envs.match import Match
+from triplesumo.evaluation.recording import MatchRecorder
 from triplesumo.evaluation.video import check_writable, write_mp4
 from triplesumo.rules.config import MatchConfig
 from triplesumo.sim.render import FrameRenderer
@@ -32,35 +33,41 @@ class MatchRecord:
 
 def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | None = None,
                video: Path | None = None, width: int = 480, height: int = 480,
-               match: Match | None = None) -> MatchRecord:
+               match: Match | None = None, record: Path | None = None,
+               policy_names: Mapping[str, str] | None = None) -> MatchRecord:
     """Play one match to its end; agents without a policy are passive.
 
     With ``video`` the match is rendered from the overview camera and written as mp4
-    (one frame per env step, plus the start).
+    (one frame per env step, plus the start). With ``record`` it is written as a replayable
+    match file (:mod:`triplesumo.evaluation.recording`); ``policy_names`` are stored in it.
     """
     match = match or Match(config)
     unknown = [a for a in policies if a not in match.agents]
     if unknown:
         raise ValueError(f"policies for unknown agents {unknown}; agents are {list(match.agents)}")
-    if video is not None:
-        check_writable(Path(video))
+    for out in (video, record):
+        if out is not None:
+            check_writable(Path(out))
     for k, name in enumerate(match.agents):
         reset = getattr(policies.get(name), "reset", None)
         if callable(reset):
             reset(seed=seed * 1000 + k + 1)
     obs, _ = match.reset(seed=seed)
+    recorder = MatchRecorder(match, seed, dict(policy_names or {})) if record is not None else None
     renderer = FrameRenderer(match.model, width, height) if video is not None else None
     frames = [renderer.render(match.data)] if renderer else []
     returns = dict.fromkeys(match.agents, 0.0)
     terms: dict[str, dict[str, float]] = {a: {} for a in match.agents}
     try:
         while True:
-            actions = np.zeros((match.n_agents, 8))
+            actions = np.zeros((match.n_agents, match.action_width))
             for i, name in enumerate(match.agents):
                 policy = policies.get(name)
                 if policy is not None:
-                    actions[i] = match.check_action(name, policy(obs[i]))
+                    actions[i, :match.action_sizes[i]] = match.check_action(name, policy(obs[i]))
             result = match.step_array(actions)
+            if recorder:
+                recorder.step(actions)
             obs = result.observations
             for i, name in enumerate(match.agents):
                 returns[name] += float(result.rewards[i])
@@ -74,9 +81,12 @@ def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | 
     finally:
         if renderer:
             renderer.close()
+    outcomes = {a: result.infos[i]["outcome"] for i, a in enumerate(match.agents)}
+    if recorder is not None and record is not None:
+        recorder.finish(outcomes).save(Path(record))
     n_frames = write_mp4(frames, Path(video), fps=round(1.0 / match.sim.dt)) if video is not None else 0
     return MatchRecord(
-        outcomes={a: result.infos[i]["outcome"] for i, a in enumerate(match.agents)},
+        outcomes=outcomes,
         steps=match.steps, returns=returns, out_of_ring=list(result.infos[0]["out_of_ring"]),
         terms=terms, frames=n_frames,
     )

@@ -1,10 +1,11 @@
-"""Compile the match's ``MjModel`` from the tatami scene and one quadruped body.
+"""Compile the match's ``MjModel`` from the tatami scene and one body per agent.
 
-The quadruped is attached once per agent with ``mujoco.MjSpec.attach`` under the
-agent's name prefix (as dm_control's composer attaches PyMJCF models), then given
-the agent's colour and control range. Start poses: agents evenly spaced on a circle
-of ``PhysicsConfig.start_radius``, the first at angle 0, each facing the centre; the
-compiled ``qpos0`` is that start pose.
+Each agent's body (:mod:`triplesumo.model.bodies`: ant, bug or spider) is attached with
+``mujoco.MjSpec.attach`` under the agent's name prefix (as dm_control's composer attaches
+PyMJCF models), then given the agent's colour and control range. Start poses
+(:mod:`triplesumo.model.layout`): agents evenly spaced on a circle of
+``PhysicsConfig.start_radius``, the first at angle 0, each facing the centre, widened
+and turned only where bodies would touch; the compiled ``qpos0`` is that start pose.
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ import mujoco
 import numpy as np
 
 from triplesumo.model import names
+from triplesumo.model.bodies import TORSO_HEIGHT, body_spec
+from triplesumo.model.layout import start_layout
 from triplesumo.model.specs import AgentSpec, PhysicsConfig, validate_roster
 
 _INTEGRATOR = {
@@ -25,32 +28,23 @@ _INTEGRATOR = {
 }
 
 
-def start_layout(n_agents: int, radius: float) -> list[tuple[float, float, float]]:
-    """``(x, y, yaw)`` of each agent: evenly spaced on a circle, facing the centre."""
-    poses = []
-    for i in range(n_agents):
-        angle = 2.0 * math.pi * i / n_agents
-        poses.append((radius * math.cos(angle), radius * math.sin(angle), angle + math.pi))
-    return poses
+START_MARGIN = 0.15
+"""Torsos start at least this far (m) inside the ring's edge."""
 
 
 def build_spec(agents: tuple[AgentSpec, ...], physics: PhysicsConfig) -> mujoco.MjSpec:
-    """The uncompiled scene: tatami plus one prefixed quadruped per agent."""
+    """The uncompiled scene: tatami plus one prefixed body per agent."""
     validate_roster(agents)
     spec = mujoco.MjSpec.from_file(str(names.TATAMI_XML))
     spec.option.timestep = physics.timestep
     spec.option.integrator = _INTEGRATOR[physics.integrator]
     spec.memory = _memory_bytes(physics.memory)
-    torso_rest_z = 0.75  # torso height inside quadruped.xml
-    for agent, (x, y, yaw) in zip(
-        agents, start_layout(len(agents), physics.start_radius), strict=True
-    ):
-        body = mujoco.MjSpec.from_file(str(names.QUADRUPED_XML))
+    half_size = abs(float(spec.geom(names.RING_MARKER_GEOM).fromto[0]))
+    poses = start_layout([a.body for a in agents], physics.start_radius, half_size - START_MARGIN)
+    for agent, (x, y, yaw) in zip(agents, poses, strict=True):
         quat = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
-        frame = spec.worldbody.add_frame(
-            pos=[x, y, physics.start_height - torso_rest_z], quat=quat
-        )
-        spec.attach(body, prefix=names.prefix(agent.name), frame=frame)
+        frame = spec.worldbody.add_frame(pos=[x, y, physics.start_height - TORSO_HEIGHT], quat=quat)
+        spec.attach(body_spec(agent.body), prefix=names.prefix(agent.name), frame=frame)
     pre = {a.name: names.prefix(a.name) for a in agents}
     by_prefix = {a.name: a for a in agents}
     for geom in spec.geoms:

@@ -1,6 +1,6 @@
 """Every MJCF name the code looks up, in one place.
 
-Agent names are prefixes: the quadruped body is attached once per agent under
+Agent names are prefixes: each agent's body is attached once per agent under
 ``"<agent>/"``, so Spider's torso body is ``spider/torso`` and its free joint
 ``spider/root``. Nothing outside :mod:`triplesumo.model` spells a name itself.
 """
@@ -12,7 +12,7 @@ from pathlib import Path
 
 ASSETS = Path(str(resources.files("triplesumo") / "assets"))
 TATAMI_XML = ASSETS / "tatami.xml"
-QUADRUPED_XML = ASSETS / "quadruped.xml"
+BODY_XML = ASSETS / "body.xml"
 
 # Arena (tatami.xml)
 FLOOR_GEOM = "floor"
@@ -21,11 +21,19 @@ RING_MARKER_GEOM = "border_right"
 """Border marker at x = +half-size; its position defines the ring's playable half-size."""
 CAMERA_OVERVIEW = "overview"
 
-# Quadruped (quadruped.xml), unprefixed
+# A body (body.xml and the legs triplesumo.model.bodies grows on it), unprefixed
 TORSO_BODY = "torso"
 ROOT_JOINT = "root"
-LEG_JOINTS = ("hip_1", "ankle_1", "hip_2", "ankle_2", "hip_3", "ankle_3", "hip_4", "ankle_4")
-"""Hinge joints in actuator order: one motor per joint, named like the joint."""
+
+
+def hip(leg: int) -> str:
+    """Name of leg ``leg``'s (1-based) hip hinge and of its motor."""
+    return f"hip_{leg}"
+
+
+def ankle(leg: int) -> str:
+    """Name of leg ``leg``'s (1-based) ankle hinge and of its motor."""
+    return f"ankle_{leg}"
 
 
 def prefix(agent: str) -> str:

@@ -1,15 +1,18 @@
 """Who is in a match: agent specs, teams, and the physics options of the model.
 
 These are plain frozen dataclasses with no knowledge of rewards or RL. The paper's
-2-vs-1 roster is :data:`PAPER_AGENTS`; free-for-all or M-vs-1 rosters are other
-tuples of :class:`AgentSpec`.
+2-vs-1 roster is :data:`PAPER_AGENTS` (three identical ant bodies); :data:`BODIES_AGENTS`
+is the same match with RoboSumo's ant, bug and spider bodies; free-for-all or M-vs-1
+rosters are other tuples of :class:`AgentSpec`.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+from triplesumo.model.bodies import BODIES
 
 RED = (0.85, 0.15, 0.15, 1.0)
 BLUE = (0.15, 0.3, 0.9, 1.0)
@@ -21,7 +24,7 @@ INTEGRATORS = ("RK4", "Euler", "implicit", "implicitfast")
 
 @dataclass(frozen=True)
 class AgentSpec:
-    """One quadruped in the match."""
+    """One agent in the match: its name, team, motors, colour and body."""
 
     name: str
     """Agent name and MJCF prefix (lower-case identifier), e.g. ``"bug"``."""
@@ -31,6 +34,8 @@ class AgentSpec:
     """Symmetric motor control range: every motor's ctrl lies in [-ctrl_range, ctrl_range]."""
     rgba: tuple[float, float, float, float] = (0.8, 0.6, 0.4, 1.0)
     """Colour of the agent's geoms."""
+    body: str = "ant"
+    """RoboSumo body: "ant" (4 legs, 8 motors), "bug" (6 legs, 12) or "spider" (8 legs, 16)."""
 
     def __post_init__(self) -> None:
         if not _NAME.match(self.name):
@@ -43,6 +48,8 @@ class AgentSpec:
             )
         if len(self.rgba) != 4 or not all(0.0 <= c <= 1.0 for c in self.rgba):
             raise ValueError(f"AgentSpec.rgba of {self.name!r} must be 4 values in [0, 1]")
+        if self.body not in BODIES:
+            raise ValueError(f"AgentSpec.body of {self.name!r} must be one of {sorted(BODIES)}, got {self.body!r}")
 
 
 PAPER_AGENTS: tuple[AgentSpec, ...] = (
@@ -50,7 +57,12 @@ PAPER_AGENTS: tuple[AgentSpec, ...] = (
     AgentSpec("bug", "team", 0.18, BLUE),
     AgentSpec("spider", "spider", 0.22, GREEN),
 )
-"""The paper's roster: Ant (red, ±0.20) and Bug (blue, ±0.18) against Spider (green, ±0.22)."""
+"""The paper's roster: Ant (red, ±0.20) and Bug (blue, ±0.18) against Spider (green, ±0.22),
+three identical ant (quadruped) bodies."""
+
+BODIES_AGENTS: tuple[AgentSpec, ...] = tuple(replace(a, body=a.name) for a in PAPER_AGENTS)
+"""The paper's match with RoboSumo's bodies: Ant a quadruped, Bug a hexapod, Spider an octopod
+(8, 12 and 16 motors); names, teams, colours and control ranges as :data:`PAPER_AGENTS`."""
 
 
 def validate_roster(agents: tuple[AgentSpec, ...]) -> None:

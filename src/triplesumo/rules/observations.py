@@ -12,12 +12,13 @@
 ``egocentric`` -- for agent ``i``, in its heading frame (rotated by minus its yaw about z,
 origin at its torso):
 
-    self_height (1), self_orientation (4, quaternion w x y z), self_joint_position (8),
-    self_velocity (3), self_angular_velocity (3, torso frame), self_joint_velocity (8),
+    self_height (1), self_orientation (4, quaternion w x y z), self_joint_position (one per
+    motor: 8 for an ant, 12 for a bug, 16 for a spider), self_velocity (3),
+    self_angular_velocity (3, torso frame), self_joint_velocity (one per motor),
     edge_distance (1, half_size - max(|x|, |y|), negative once out),
     <other>_position (3) and <other>_velocity (3) relative to the agent, for each partner
     then each opponent in roster order,
-    contact_force (13 * 3, the agent's own geoms, heading frame, clipped).
+    contact_force (3 per own geom: 13, 19 or 25 geoms; heading frame, clipped).
 
 ``observation_structure(mode)`` gives the ordered block sizes.
 """
@@ -46,8 +47,12 @@ class ObservationBuilder:
         self._others = np.stack([np.concatenate([teams.partners[i], teams.opponents[i]]).astype(int)
                                  for i in range(sim.n_agents)])
         """``(n, n - 1)``: for each agent, every other agent, partners first, then opponents."""
-        self._joint_qpos = np.stack([a.joint_qpos for a in sim.agents])
-        self._joint_qvel = np.stack([a.joint_qvel for a in sim.agents])
+        self._uniform = len(set(sim.action_sizes)) == 1 and len(set(sim.geom_counts)) == 1
+        """Every agent has the same body size: one array op per block instead of one per agent."""
+        self._joint_qpos = np.concatenate([a.joint_qpos for a in sim.agents])
+        self._joint_qvel = np.concatenate([a.joint_qvel for a in sim.agents])
+        self._joint_split = np.cumsum([len(a.joint_qpos) for a in sim.agents])[:-1]
+        self._geom_split = np.cumsum(sim.geom_counts)[:-1]
         self.structure: dict[str, dict[str, int]] = {}
         for i, name in enumerate(names):
             if mode == "paper":
@@ -55,12 +60,13 @@ class ObservationBuilder:
                 s = {"torso_position": 3 * n, "torso_velocity": 3 * n, "contact_force": 3 * g,
                      "qpos": sim.model.nq, "qvel": sim.model.nv}
             else:
-                s = {"self_height": 1, "self_orientation": 4, "self_joint_position": 8, "self_velocity": 3,
-                     "self_angular_velocity": 3, "self_joint_velocity": 8, "edge_distance": 1}
+                joints = len(sim.agents[i].joint_qpos)
+                s = {"self_height": 1, "self_orientation": 4, "self_joint_position": joints, "self_velocity": 3,
+                     "self_angular_velocity": 3, "self_joint_velocity": joints, "edge_distance": 1}
                 for j in self._others[i]:
                     s[f"{names[j]}_position"] = 3
                     s[f"{names[j]}_velocity"] = 3
-                s["contact_force"] = 3 * sim.geoms_per_agent
+                s["contact_force"] = 3 * sim.geom_counts[i]
             self.structure[name] = s
         self.sizes = {name: sum(s.values()) for name, s in self.structure.items()}
 
@@ -92,13 +98,21 @@ class ObservationBuilder:
         rel_vel = (vel[others] - vel[:, None, :]) @ rot_t
         edge = self.half_size - np.abs(pos[:, :2]).max(axis=1)
         data = sim.data
-        out = np.concatenate([
-            pos[:, 2:3], quat, data.qpos[self._joint_qpos], (rot @ vel[:, :, None])[:, :, 0],
-            sim.torso_angular_velocities(), data.qvel[self._joint_qvel], edge[:, None],
-            np.concatenate([rel_pos, rel_vel], axis=2).reshape(n, -1),
-            (forces.reshape(n, sim.geoms_per_agent, 3) @ rot_t).reshape(n, -1),
-        ], axis=1, dtype=np.float32)
-        return list(out)
+        head_vel = (rot @ vel[:, :, None])[:, :, 0]
+        ang_vel = sim.torso_angular_velocities()
+        rel = np.concatenate([rel_pos, rel_vel], axis=2).reshape(n, -1)
+        if self._uniform:
+            out = np.concatenate([
+                pos[:, 2:3], quat, data.qpos[self._joint_qpos].reshape(n, -1), head_vel, ang_vel,
+                data.qvel[self._joint_qvel].reshape(n, -1), edge[:, None], rel,
+                (forces.reshape(n, -1, 3) @ rot_t).reshape(n, -1),
+            ], axis=1, dtype=np.float32)
+            return list(out)
+        qpos = np.split(data.qpos[self._joint_qpos], self._joint_split)
+        qvel = np.split(data.qvel[self._joint_qvel], self._joint_split)
+        own = np.split(forces, self._geom_split)
+        return [np.concatenate([pos[i, 2:3], quat[i], qpos[i], head_vel[i], ang_vel[i], qvel[i], edge[i:i + 1],
+                                rel[i], (own[i] @ rot_t[i]).ravel()], dtype=np.float32) for i in range(n)]
 
 
 def _clip(values: np.ndarray, limit: float) -> None:

@@ -61,26 +61,44 @@ class Simulation:
         self.torso_qvel = np.array([[a.root_qvel + k for k in range(3)] for a in self.agents])
         self.quat_qpos = np.array([[a.root_qpos + 3 + k for k in range(4)] for a in self.agents])
         self.angvel_qvel = np.array([[a.root_qvel + 3 + k for k in range(3)] for a in self.agents])
-        self.actuator_ids = np.stack([a.actuators for a in self.agents])
+        self.action_sizes = tuple(len(a.actuators) for a in self.agents)
+        """Motors of each agent (8, 12 or 16 for an ant, bug or spider)."""
+        self.action_width = max(self.action_sizes)
+        """Columns of the ``(n_agents, action_width)`` control arrays: agents with fewer motors
+        leave the columns past their own count unused (padding)."""
+        self.actuator_ids = np.full((self.n_agents, self.action_width), -1, dtype=np.int64)
+        """Actuator ids per agent in its action order, ``-1`` in padding."""
+        for row, a in zip(self.actuator_ids, self.agents, strict=True):
+            row[:len(a.actuators)] = a.actuators
+        self.action_mask: np.ndarray | None = None
+        """``(n_agents, action_width)`` True where a column is a motor; ``None`` when every agent has
+        ``action_width`` motors (no padding)."""
+        if len(set(self.action_sizes)) > 1:
+            self.action_mask = self.actuator_ids >= 0
         self.agent_geoms = np.concatenate([a.geoms for a in self.agents])
         """All agent geom ids, agent by agent; rows of :meth:`contact_forces`."""
-        self.geoms_per_agent = len(self.agents[0].geoms)
+        self.geom_counts = tuple(len(a.geoms) for a in self.agents)
+        """Geoms of each agent (13, 19 or 25 for an ant, bug or spider)."""
         self._geom_row = np.full(model.ngeom, -1, dtype=np.int64)
         self._geom_row[self.agent_geoms] = np.arange(len(self.agent_geoms))
         lo, hi = model.actuator_ctrlrange[self.actuator_ids].transpose(2, 0, 1)
-        self.ctrl_low: np.ndarray = lo
-        self.ctrl_high: np.ndarray = hi
+        real = self.actuator_ids >= 0
+        self.ctrl_low: np.ndarray = np.where(real, lo, 0.0)
+        """``(n_agents, action_width)`` lower control limits read from the model (0 in padding)."""
+        self.ctrl_high: np.ndarray = np.where(real, hi, 0.0)
+        """``(n_agents, action_width)`` upper control limits read from the model (0 in padding)."""
         # Views into MjData, made once (each attribute access builds a new numpy view).
         data = self.data
         self._qpos, self._qvel, self._warn_number = data.qpos, data.qvel, data.warning.number
         bodies = model.geom_bodyid[self.agent_geoms]
         self._body_forces: tuple[np.ndarray, np.ndarray] | None = None
         """``cfrc_ext`` force and ``xfrc_applied`` force rows of the agent geoms' bodies, when each
-        agent geom has a body of its own and those bodies are consecutive (the quadruped's are)."""
+        agent geom has a body of its own and those bodies are consecutive (every RoboSumo body's are)."""
         if np.array_equal(bodies, np.arange(bodies[0], bodies[0] + len(bodies))):
             rows = slice(int(bodies[0]), int(bodies[0]) + len(bodies))
             self._body_forces = (data.cfrc_ext[rows, 3:], data.xfrc_applied[rows, :3])
-        self._ctrl_index = self.actuator_ids.ravel()
+        self._ctrl_index = self.actuator_ids[real]
+        self._ctrl_flat = None if self.action_mask is None else self.action_mask.ravel()
         self._ctrl_view = data.ctrl if np.array_equal(self._ctrl_index, np.arange(model.nu)) else None
         self._fatal = ""
         self._warn_ids = np.array(list(WATCHED_WARNINGS.values()))
@@ -96,10 +114,17 @@ class Simulation:
 
     @staticmethod
     def _index(model: mujoco.MjModel, agent: str) -> AgentIndex:
+        """The agent's hinges in model order (hip_1, ankle_1, hip_2, ...) and the motor of each."""
         root = model.joint(names.scoped(agent, names.ROOT_JOINT))
-        joints = [model.joint(names.scoped(agent, j)) for j in names.LEG_JOINTS]
-        acts = [model.actuator(names.scoped(agent, j)).id for j in names.LEG_JOINTS]
         torso = model.body(names.scoped(agent, names.TORSO_BODY)).id
+        joints = [model.joint(j) for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE
+                  and _body_root(model, int(model.jnt_bodyid[j])) == torso]
+        motor_of = {int(model.actuator_trnid[i, 0]): i for i in range(model.nu)
+                    if model.actuator_trntype[i] == mujoco.mjtTrn.mjTRN_JOINT}
+        missing = [j.name for j in joints if j.id not in motor_of]
+        if missing:
+            raise RuntimeError(f"joints {missing} of agent {agent!r} have no motor")
+        acts = [motor_of[j.id] for j in joints]
         geoms = [g for g in range(model.ngeom) if _body_root(model, int(model.geom_bodyid[g])) == torso]
         return AgentIndex(
             name=agent,
@@ -124,11 +149,12 @@ class Simulation:
         self._fatal = ""
 
     def step(self, ctrl: np.ndarray) -> None:
-        """Apply ``ctrl`` (shape ``(n_agents, n_motors)``, already in control units) for one env step."""
+        """Apply ``ctrl`` (shape ``(n_agents, action_width)``, in control units; padding ignored) for one env step."""
+        flat = ctrl.ravel() if self._ctrl_flat is None else ctrl.ravel()[self._ctrl_flat]
         if self._ctrl_view is not None:
-            self._ctrl_view[:] = ctrl.ravel()
+            self._ctrl_view[:] = flat
         else:
-            self.data.ctrl[self._ctrl_index] = ctrl.ravel()
+            self.data.ctrl[self._ctrl_index] = flat
         try:
             mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         except mujoco.FatalError as exc:  # e.g. the arena stack overflows: reported by new_warnings()

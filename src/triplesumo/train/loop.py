@@ -30,7 +30,6 @@ from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.algos.noise import make_noise
 from triplesumo.algos.replay import ReplayBuffer
 from triplesumo.envs.batch import MatchBatch
-from triplesumo.envs.match import ACTION_SIZE
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.rules.config import MatchConfig, RewardConfig
 from triplesumo.rules.rewards import TERMS
@@ -137,9 +136,10 @@ class Trainer:
         self.policies = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
         self.others = [(probe.agents.index(a), p) for a, p in self.policies.items()]
         self.obs_dim = probe.observer.sizes[cfg.learner]
-        self.agent = DDPG(self.obs_dim, ACTION_SIZE, cfg.ddpg, seed=cfg.seed)
-        self.replay = ReplayBuffer(cfg.ddpg.buffer_size, self.obs_dim, ACTION_SIZE)
-        self.noise = make_noise(cfg.ddpg.noise, (cfg.n_envs, ACTION_SIZE), cfg.ddpg.noise_sigma,
+        self.act_dim = probe.action_sizes[self.L]
+        self.agent = DDPG(self.obs_dim, self.act_dim, cfg.ddpg, seed=cfg.seed)
+        self.replay = ReplayBuffer(cfg.ddpg.buffer_size, self.obs_dim, self.act_dim)
+        self.noise = make_noise(cfg.ddpg.noise, (cfg.n_envs, self.act_dim), cfg.ddpg.noise_sigma,
                                 cfg.ddpg.noise_theta)
         self.rng = np.random.default_rng(cfg.seed)
         self.sample_rng = np.random.default_rng([cfg.seed, 1])
@@ -180,14 +180,15 @@ class Trainer:
         cfg, n = self.cfg, self.cfg.n_envs
         t0 = time.perf_counter()
         obs = self._stacked_obs(self.L)
-        actions = np.zeros((n, self.batch.matches[0].n_agents, ACTION_SIZE))
+        probe = self.batch.matches[0]
+        actions = np.zeros((n, probe.n_agents, probe.action_width))
         if self.env_steps < cfg.ddpg.learning_starts:
-            learner_act = self.rng.uniform(-1.0, 1.0, (n, ACTION_SIZE))  # warm-up: the learner only
+            learner_act = self.rng.uniform(-1.0, 1.0, (n, self.act_dim))  # warm-up: the learner only
         else:
             learner_act = np.clip(self.agent.act(obs) + self.noise.sample(self.rng), -1.0, 1.0)
-        actions[:, self.L] = learner_act
+        actions[:, self.L, :self.act_dim] = learner_act
         for i, policy in self.others:
-            actions[:, i] = act_batch(policy, self._stacked_obs(i))
+            actions[:, i, :probe.action_sizes[i]] = act_batch(policy, self._stacked_obs(i))
         t1 = time.perf_counter()
         # The DDPG updates due at this step learn from the replay as it was before the step,
         # so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and in

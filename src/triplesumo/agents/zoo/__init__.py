@@ -15,7 +15,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from triplesumo.agents.builtin import BUILTIN
+from triplesumo.agents.builtin import ACTION_SIZE, BUILTIN
 from triplesumo.agents.policy_file import load_policy, save_policy
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
@@ -55,11 +55,15 @@ def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = No
     return zoo_dir / f"{name}.json"
 
 
-def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None) -> Any:
-    """A policy callable from its name: built-in, ``zoo:NAME`` or a policy-file path."""
+def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None,
+                action_size: int = ACTION_SIZE) -> Any:
+    """A policy callable from its name: built-in, ``zoo:NAME`` or a policy-file path.
+
+    ``action_size`` sizes a built-in policy's actions (the agent's motors); trained
+    policies have theirs in their file."""
     if spec in BUILTIN:
         cls = BUILTIN[spec]
-        return cls(seed) if spec == "random" else cls()
+        return cls(seed, action_size=action_size) if spec == "random" else cls(action_size=action_size)
     if spec.startswith("zoo:"):
         return load(spec[4:], expect_obs_mode=expect_obs_mode)[0]
     path = Path(spec)
@@ -94,12 +98,15 @@ def check_policy_pairs(field: str, pairs: tuple[str, ...], learner: str | None =
             raise ValueError(f"{field}: unknown agent in {pair!r}; agents are {agents}")
 
 
-def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str) -> dict[str, Any]:
-    """``("ant=zoo:ant", "spider=random")`` -> ``{"ant": policy, "spider": policy}``."""
+def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str,
+                        action_sizes: dict[str, int] | None = None) -> dict[str, Any]:
+    """``("ant=zoo:ant", "spider=random")`` -> ``{"ant": policy, "spider": policy}``; ``action_sizes``
+    (agent -> motors, default 8 each) sizes built-in policies."""
     out: dict[str, Any] = {}
     for k, pair in enumerate(pairs):
         agent, spec = pair.split("=")
         if agent in out:
             raise ValueError(f"policy for {agent!r} given twice")
-        out[agent] = make_policy(spec, seed=seed * 1000 + k, expect_obs_mode=obs_mode)
+        size = (action_sizes or {}).get(agent, ACTION_SIZE)
+        out[agent] = make_policy(spec, seed=seed * 1000 + k, expect_obs_mode=obs_mode, action_size=size)
     return out
