@@ -13,10 +13,9 @@ import triplesumo
 from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.registration import ENV_IDS
 from triplesumo.rules import TERMS
+from triplesumo.rules.config import ResetNoise
 from triplesumo.rules.outcome import DRAW, LOSS, WIN, place_value
 from triplesumo.rules.scenarios import SCENARIOS, get_scenario
-
-from triplesumo.rules.config import ResetNoise
 
 ALL = triplesumo.scenarios()
 NO_NOISE = ResetNoise(position=0.0, yaw=0.0, joints=0.0, velocity=0.0)

@@ -91,8 +91,8 @@ class Match:
         self.steps = 0
         self.over = False
         self.alive = [True] * self.n_agents
-        self._places: list[int] = [0] * self.n_agents
-        self._outcomes: list[str | None] = [None] * self.n_agents
+        self._places = [0] * self.n_agents
+        self._outcomes = [None] * self.n_agents
         self._last_obs = self._observe()
         infos = [{"step": 0, "outcome": None, "place": 0, "eliminated": False} for _ in self.agents]
         return self._last_obs, infos

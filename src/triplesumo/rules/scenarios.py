@@ -108,12 +108,12 @@ class Scenario:
             sizes = f"; roster sizes: {sorted(self.sizes)}" if self.sizes else ""
             raise ValueError(f"scenario {self.name!r}: unknown option(s) {unknown}; MatchConfig fields: "
                              f"{sorted(known)}{sizes}")
-        sizes = {k: overrides.pop(k) for k in list(overrides) if k in self.sizes}
-        if sizes and "agents" in overrides:
-            raise ValueError(f"scenario {self.name!r}: give either agents or {sorted(sizes)}, not both")
+        given = {k: overrides.pop(k) for k in list(overrides) if k in self.sizes}
+        if given and "agents" in overrides:
+            raise ValueError(f"scenario {self.name!r}: give either agents or {sorted(given)}, not both")
         fields = dict(self.fields)
         if "agents" not in overrides and self.roster is not None:
-            fields["agents"] = self.roster(**{**self.sizes, **sizes})
+            fields["agents"] = self.roster(**{**self.sizes, **given})
         fields.update(overrides)
         try:
             return MatchConfig(**fields)
