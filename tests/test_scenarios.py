@@ -294,3 +294,24 @@ def test_gymnasium_view_ends_when_the_learner_is_eliminated(place) -> None:
 def test_every_scenario_id_is_documented_and_defaults_fit() -> None:
     for sc in SCENARIOS.values():
         assert sc.learner in sc.config().agent_names
+
+
+def test_ffa_everyone_out_together_is_a_shared_draw(place) -> None:
+    env = make("ffa")
+    for agent, x in (("ant", 2.5), ("bug", -2.5), ("spider", 2.6)):
+        place(env.match, agent, x=x)
+    _, rewards, terms, _, infos = env.step(zero_actions(env))
+    assert all(terms.values()) and env.agents == []
+    for info in infos.values():
+        assert info["place"] == 1 and info["outcome"] == DRAW
+        assert info["reward_outcome"] == pytest.approx((500.0 + 50.0 - 400.0) / 3)
+
+
+def test_ffa_of_two_is_a_duel(place) -> None:
+    env = make("ffa", n_agents=2)
+    assert env.possible_agents == ["ant", "bug"]
+    place(env.match, "bug", y=2.5)
+    _, rewards, terms, _, infos = env.step(zero_actions(env))
+    assert all(terms.values())
+    assert (infos["ant"]["outcome"], infos["ant"]["reward_outcome"]) == (WIN, 500.0)
+    assert (infos["bug"]["outcome"], infos["bug"]["reward_outcome"]) == (LOSS, -400.0)
