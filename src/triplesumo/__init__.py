@@ -29,6 +29,8 @@ _LAZY = {
     "MatchConfig": "triplesumo.rules.config",
     "ResetNoise": "triplesumo.rules.config",
     "RewardConfig": "triplesumo.rules.config",
+    "scenarios": "triplesumo.rules.scenarios",
+    "scenario_config": "triplesumo.rules.scenarios",
 }
 
 __all__ = ["ENV_VERSION", "__version__", *_LAZY]

@@ -10,6 +10,10 @@
 Everything lands in one folder (default ``runs/demo``); the end of the output says
 where. The full reproduction is ``triplesumo train`` at its defaults (20,000 epochs)
 followed by ``triplesumo evaluate`` (see docs/REPRODUCTION.md).
+
+``--scenario NAME`` runs the same three steps in another named game: its default learner
+(``ffa``: Bug, ``pursuit``: the evader, ``2v2``: Ant) trains against random others, is
+evaluated against the passive and random baselines, and plays the recorded match.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 from triplesumo.evaluation.play import PlayConfig, run_play
 from triplesumo.evaluation.video import check_writable
+from triplesumo.rules.scenarios import get_scenario
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import train
 
@@ -52,8 +57,11 @@ class DemoConfig:
     """Width and height of the video in pixels."""
     progress: bool = True
     """Show progress bars."""
+    scenario: str = "paper"
+    """Named game (paper, ffa, pursuit, 2v2); outside the paper its learner trains against random others."""
 
     def __post_init__(self) -> None:
+        get_scenario(self.scenario)
         for name in ("train_epochs", "eval_epochs", "n_envs", "steps_per_epoch"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -67,6 +75,8 @@ class DemoConfig:
 
 
 def run_demo(cfg: DemoConfig) -> dict[str, Path]:
+    if cfg.scenario != "paper":
+        return _run_scenario_demo(cfg)
     out = check_writable(Path(cfg.out))
     print(f"[1/3] training Bug with DDPG (paper preset) in the shipped ongoing match -> {out / 'bug'}")
     train_cfg = TrainConfig(name="bug", out=str(out), epochs=cfg.train_epochs, max_minutes=cfg.max_minutes,
@@ -93,6 +103,41 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
         run_play(PlayConfig(seed=eval_cfg.seed, video=str(video), max_steps=cfg.steps_per_epoch,
                             width=cfg.video_size, height=cfg.video_size,
                             policies=("bug=zoo:bug", "ant=zoo:ant", "spider=zoo:spider")))
+        paths["video"] = video
+    print("\nwhere to look:")
+    for name, path in paths.items():
+        print(f"  {name:16s} {path}")
+    return paths
+
+
+def _run_scenario_demo(cfg: DemoConfig) -> dict[str, Path]:
+    """The demo in a named game other than the paper's: its learner against random others."""
+    learner = get_scenario(cfg.scenario).learner
+    out = check_writable(Path(cfg.out))
+    print(f"[1/3] training {learner} with DDPG (paper preset) in scenario {cfg.scenario!r} against random "
+          f"others -> {out / learner}")
+    train_cfg = TrainConfig(name=learner, out=str(out), learner=learner, policies=("*=random",),
+                            scenario=cfg.scenario, epochs=cfg.train_epochs, max_minutes=cfg.max_minutes,
+                            steps_per_epoch=cfg.steps_per_epoch, seed=cfg.seed, n_envs=cfg.n_envs,
+                            progress=cfg.progress, checkpoint_every=max(cfg.train_epochs // 4, 1),
+                            ddpg=dataclasses.replace(DDPGConfig(), learning_starts=cfg.learning_starts))
+    result = train(train_cfg)
+    print(f"      {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates in "
+          f"{result.seconds:.0f} s; training MWR {result.mwr:+.3f}")
+    policy = str(result.run_dir / "policy")
+    print(f"[2/3] evaluating this {learner}, passive and random {learner} ({cfg.eval_epochs} test epochs each)")
+    eval_cfg = EvaluateConfig(policy=policy, learner=learner, policies=("*=random",), scenario=cfg.scenario,
+                              epochs=cfg.eval_epochs, out=str(out / "evaluation"),
+                              steps_per_epoch=cfg.steps_per_epoch, n_envs=cfg.n_envs, progress=cfg.progress)
+    print(format_summary(evaluate(eval_cfg)))
+    paths = {"run": result.run_dir, "training_plots": result.run_dir / "plots",
+             "evaluation": out / "evaluation", "comparison_plot": out / "evaluation" / "compare_mwr.png"}
+    if cfg.video:
+        print(f"[3/3] recording a test match of the trained {learner}")
+        video = out / "match.mp4"
+        run_play(PlayConfig(seed=eval_cfg.seed, video=str(video), max_steps=cfg.steps_per_epoch,
+                            width=cfg.video_size, height=cfg.video_size, scenario=cfg.scenario,
+                            policies=(f"{learner}={policy}", "*=random")))
         paths["video"] = video
     print("\nwhere to look:")
     for name, path in paths.items():

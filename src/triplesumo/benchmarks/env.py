@@ -20,6 +20,10 @@ Variants, each on its own compiled model of the same :class:`MatchConfig`:
     those matches stepped one after another (``Match.step_array``'s work), the baseline
     of ``..._vs_sequential``; ``..._vs_one_match`` compares with ``match_core``.
 
+``--scenario NAME`` measures a named game (``triplesumo.scenarios()``; default ``paper``).
+Under ``elimination`` rules ``raw_physics`` still restarts on the first ring exit (it is the
+physics reference rate), while the env variants play on until one side is left.
+
 Actions are uniform in [-1, 1], drawn in advance from ``np.random.default_rng(seed)``.
 In each of ``rounds`` rounds every variant replays the same seeded work, the variants
 taking turns in chunks of about ``chunk`` env steps (A, B, C, ..., A, B, C, ...) so that
@@ -47,6 +51,7 @@ from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules import outcome as rules_outcome
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.scenarios import scenario_config
 
 TARGET_ENV_VS_RAW = 0.85
 """Issue 2: the PettingZoo view must run at >= 0.85 x the raw physics rate (RK4)."""
@@ -58,7 +63,8 @@ LABELS = {
 }
 
 def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2, integrator: str = "RK4",
-                      seed: int = 0, rounds: int = 3, chunk: int = 250, obs_mode: str = "paper") -> dict[str, Any]:
+                      seed: int = 0, rounds: int = 3, chunk: int = 250, obs_mode: str = "paper",
+                      scenario: str = "paper") -> dict[str, Any]:
     """Measure every variant ``rounds`` times, interleaved; return rates, ratios and the setup.
 
     Within a round the variants take turns in chunks of about ``chunk`` env steps until
@@ -75,7 +81,7 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
                         ("chunk", chunk)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-    config = MatchConfig(physics=PhysicsConfig(integrator=integrator), obs_mode=obs_mode)
+    config = scenario_config(scenario, physics=PhysicsConfig(integrator=integrator), obs_mode=obs_mode)
     variants: dict[str, _Variant] = {
         "raw_physics": _RawPhysics(config, steps, seed),
         "parallel_env": _ParallelEnv(config, steps, seed),
@@ -107,6 +113,7 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
         "setup": {
             "steps": steps, "n_matches": n_matches, "steps_per_match": per_match, "n_threads": n_threads,
             "rounds": rounds, "chunk": chunk, "seed": seed, "integrator": integrator, "obs_mode": obs_mode,
+            "scenario": scenario,
             "timestep": config.physics.timestep, "frame_skip": config.physics.frame_skip,
             "versions": _versions(), "cpu_count": os.cpu_count(),
             "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
@@ -208,9 +215,10 @@ class _ParallelEnv(_Variant):
         self.episodes = 0
 
     def run(self, t0: int, t1: int) -> None:
-        env = self.env
+        env, n = self.env, len(self.env.possible_agents)
         for t in range(t0, t1):
-            env.step(self.actions[t])
+            actions = self.actions[t]
+            env.step(actions if len(env.agents) == n else {a: actions[a] for a in env.agents})
             if not env.agents:
                 env.reset()
                 self.episodes += 1
@@ -285,7 +293,8 @@ def format_table(result: dict[str, Any]) -> str:
     setup, rates, ratios = result["setup"], result["rates"], result["ratios"]
     v = setup["versions"]
     lines = [
-        f"TripleSumo env benchmark: {setup['obs_mode']} observations, {setup['integrator']}, timestep "
+        f"TripleSumo env benchmark: scenario {setup.get('scenario', 'paper')}, {setup['obs_mode']} observations, "
+        f"{setup['integrator']}, timestep "
         f"{setup['timestep']}, frame_skip {setup['frame_skip']}; median of {setup['rounds']} rounds, "
         f"interleaved in chunks of {setup['chunk']} env steps; seed {setup['seed']}",
         f"python {v['python']}, mujoco {v['mujoco']}, numpy {v['numpy']}; {setup['cpu_count']} CPUs "
@@ -319,6 +328,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--integrator", default="RK4", help="MuJoCo integrator (default: RK4, the paper's)")
     parser.add_argument("--obs-mode", default="paper", help="observation mode: paper or egocentric (default: paper)")
     parser.add_argument("--seed", type=int, default=0, help="seed of starts and actions (default: 0)")
+    parser.add_argument("--scenario", default="paper", help="named game: paper, ffa, pursuit, 2v2 (default: paper)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
     args = parser.parse_args(argv)
@@ -326,6 +336,6 @@ def main(argv: list[str] | None = None) -> int:
         args.steps, args.matches, args.rounds, args.chunk = 20, 2, 1, 10
     result = run_env_benchmark(steps=args.steps, n_matches=args.matches, n_threads=args.threads,
                                integrator=args.integrator, seed=args.seed, rounds=args.rounds,
-                               chunk=args.chunk, obs_mode=args.obs_mode)
+                               chunk=args.chunk, obs_mode=args.obs_mode, scenario=args.scenario)
     report(format_table(result), result, args.json)
     return 0

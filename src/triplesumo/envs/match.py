@@ -2,7 +2,9 @@
 
 :class:`Match` ties the simulation to the rules: it validates and scales actions,
 steps the physics, judges ring exits, computes every agent's reward terms and
-observation, and watches MuJoCo for trouble. The PettingZoo and Gymnasium views
+observation, and watches MuJoCo for trouble. Under ``elimination`` rules
+(:mod:`triplesumo.rules.outcome`) it keeps who is still in play: an eliminated agent's
+body gets zero control and its rows of a step are zeros. The PettingZoo and Gymnasium views
 wrap it; batch runners and benchmarks use it directly through :meth:`Match.step_array`.
 """
 
@@ -33,6 +35,9 @@ class StepResult:
     terminated: bool
     truncated: bool
     infos: list[dict[str, Any]]
+    eliminated: list[bool] | None = None
+    """Per agent: eliminated on this step (``None`` if nobody was: the match went on, or it
+    ended under ``first_out`` rules, where ``terminated`` covers everyone)."""
 
 
 class Match:
@@ -61,6 +66,16 @@ class Match:
         self._pad = self.sim.action_mask
         self._ctrl_mid = (self.sim.ctrl_high + self.sim.ctrl_low) / 2.0
         self._ctrl_half = (self.sim.ctrl_high - self.sim.ctrl_low) / 2.0
+        self.elimination = self.config.rules == "elimination"
+        self.alive = [True] * self.n_agents
+        """Who is in play (always everyone under ``first_out`` rules)."""
+        self._places = [0] * self.n_agents
+        self._outcomes: list[str | None] = [None] * self.n_agents
+        self._evader = self.agents.index(self.config.evader) if self.config.evader is not None else None
+        self._timeout_team = self._team_of[self._evader] if self._evader is not None else None
+        if self._evader is not None:
+            self.observer.set_evader(self._evader)
+        self._obs_noise = float(self.config.evader_obs_noise)
         self.np_random = np.random.default_rng()
         self.steps = 0
         self.over = True
@@ -79,9 +94,23 @@ class Match:
         self.sim.reset(qpos, qvel)
         self.steps = 0
         self.over = False
-        self._last_obs = self.observer.build()
-        infos = [{"step": 0, "outcome": None} for _ in self.agents]
+        self.alive = [True] * self.n_agents
+        self._places = [0] * self.n_agents
+        self._outcomes = [None] * self.n_agents
+        self._last_obs = self._observe()
+        infos = [{"step": 0, "outcome": None, "place": 0, "eliminated": False} for _ in self.agents]
         return self._last_obs, infos
+
+    @property
+    def agents_in_play(self) -> list[str]:
+        """Names of the agents still in play, roster order."""
+        return [a for a, playing in zip(self.agents, self.alive, strict=True) if playing]
+
+    def _observe(self) -> list[np.ndarray]:
+        obs = self.observer.build()
+        if self._obs_noise > 0:
+            self.observer.add_evader_noise(obs, self.np_random, self._obs_noise)
+        return obs
 
     def start_state(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """Start pose (``model.qpos0``) with the configured noise drawn from ``rng``."""
@@ -100,7 +129,9 @@ class Match:
     # ------------------------------------------------------------------- step
     def actions_from_dict(self, actions: Mapping[str, Any]) -> np.ndarray:
         """Validate a ``{agent: action}`` mapping and stack it in roster order (a copy), padded with
-        zeros to ``action_width`` columns where bodies differ."""
+        zeros to ``action_width`` columns where bodies differ (zeros too for agents no longer in play)."""
+        if not all(self.alive):
+            return self._actions_in_play(actions)
         if not isinstance(actions, Mapping):
             raise ValueError(f"actions must be a dict {{agent: action}} for agents {list(self.agents)}, "
                              f"got {type(actions).__name__}")
@@ -123,6 +154,22 @@ class Match:
             for a in agents:
                 self.check_action(a, actions[a])
             raise ValueError(f"actions must stack to shape ({self.n_agents}, {self.action_width})")
+        return stacked
+
+    def _actions_in_play(self, actions: Mapping[str, Any]) -> np.ndarray:
+        playing = self.agents_in_play
+        if not isinstance(actions, Mapping):
+            raise ValueError(f"actions must be a dict {{agent: action}} for agents {playing}, "
+                             f"got {type(actions).__name__}")
+        if set(actions) != set(playing):
+            gone = [a for a in actions if a in self.agents and a not in playing]
+            raise ValueError(f"actions must have exactly the keys of the agents in play {playing}; "
+                             f"missing {[a for a in playing if a not in actions]}, "
+                             f"unknown {[a for a in actions if a not in self.agents]}, eliminated {gone}")
+        stacked = np.zeros((self.n_agents, self.action_width))
+        for i, name in enumerate(self.agents):
+            if name in actions:
+                stacked[i, :self.action_sizes[i]] = self.check_action(name, actions[name])
         return stacked
 
     def check_action(self, agent: str, action: Any) -> np.ndarray:
@@ -171,6 +218,8 @@ class Match:
         np.minimum(ctrl, 1.0, out=ctrl)
         ctrl *= self._ctrl_half
         ctrl += self._ctrl_mid
+        if not all(self.alive):  # an eliminated body no longer acts
+            ctrl[[not playing for playing in self.alive]] = 0.0
         return ctrl
 
     def finish_step(self) -> StepResult:
@@ -186,28 +235,70 @@ class Match:
             return self._physics_error(trouble)
         pos, vel = self.sim.torso_positions().tolist(), self.sim.torso_velocities().tolist()
         out = rules_outcome.agents_out(pos, self.half_size)
+        if self.elimination:
+            return self._finish_elimination(pos, vel, out)
         results = rules_outcome.judge(out, self._team_of, self._n_teams)
         timed_out = results is None and self.steps >= self.config.max_steps
         rows = self.reward_rule.rows(pos, vel, results, timed_out)
         if results is not None:
             outcomes = [results[t] for t in self._team_of]
             exited = [a for a, is_out in zip(self.agents, out, strict=True) if is_out]
+            places = rules_outcome.first_out_places(results, self._team_of)
         else:
             outcomes = [rules_outcome.DRAW if timed_out else None] * self.n_agents
             exited = []
+            places = [1 if timed_out else 0] * self.n_agents
         keys, step = rules_rewards.REPORTED, self.steps
         infos = []
         rewards = []
-        for row, result in zip(rows, outcomes, strict=True):
+        for row, result, place, is_out in zip(rows, outcomes, places, out, strict=True):
             rewards.append(row[-2] + row[-1])  # dense + sparse: the terms summed in TERMS order
             info: dict[str, Any] = dict(zip(keys, row, strict=True))
             info["outcome"] = result
             info["out_of_ring"] = exited
             info["step"] = step
+            info["place"] = place
+            info["eliminated"] = is_out
             infos.append(info)
         self.over = results is not None or timed_out
-        self._last_obs = self.observer.build()
+        self._last_obs = self._observe()
         return StepResult(self._last_obs, np.array(rewards), results is not None, timed_out, infos)
+
+    def _finish_elimination(self, pos: list[list[float]], vel: list[list[float]], out: list[bool]) -> StepResult:
+        """:meth:`finish_step` under ``elimination`` rules."""
+        before = self.alive
+        judged = rules_outcome.judge_elimination(before, out, self._team_of, self.steps >= self.config.max_steps,
+                                                 self._timeout_team)
+        reward = self.config.reward
+        n_places = self._n_teams
+        sparse = [rules_outcome.place_value(reward.win, reward.loss, low, high, n_places) if low else 0.0
+                  for low, high in judged.spans]
+        rows = self.reward_rule.rows_in_play(pos, vel, before, sparse)
+        exited = [a for a, leaving in zip(self.agents, judged.leaving, strict=True) if leaving]
+        keys, step = rules_rewards.REPORTED, self.steps
+        infos, rewards = [], []
+        for i, row in enumerate(rows):
+            rewards.append(row[-2] + row[-1])
+            info: dict[str, Any] = dict(zip(keys, row, strict=True))
+            info["out_of_ring"] = exited
+            info["step"] = step
+            if before[i]:
+                info["outcome"], info["place"] = judged.outcomes[i], judged.places[i]
+            else:  # decided on an earlier step
+                info["outcome"], info["place"] = self._outcomes[i], self._places[i]
+            info["eliminated"] = not judged.alive[i]
+            infos.append(info)
+        self._places = [info["place"] for info in infos]
+        self._outcomes = [info["outcome"] for info in infos]
+        self.alive = judged.alive
+        self.over = judged.over
+        all_out = not any(judged.alive)
+        terminated = judged.over and (all_out or len({self._team_of[i] for i in range(self.n_agents)
+                                                       if judged.alive[i]}) <= 1)
+        truncated = judged.over and not terminated
+        self._last_obs = self._observe()
+        return StepResult(self._last_obs, np.array(rewards), terminated, truncated, infos,
+                          judged.leaving if any(judged.leaving) else None)
 
     def _physics_error(self, trouble: list[str]) -> StepResult:
         message = (f"MuJoCo reported {', '.join(trouble)} at step {self.steps}; "
@@ -216,10 +307,10 @@ class Match:
         if self.config.on_physics_error == "raise":
             raise PhysicsError(message)
         infos = []
-        for _ in self.agents:
+        for playing in self.alive:
             info: dict[str, Any] = {name: 0.0 for name in rules_rewards.TERMS}
             info.update(dense_reward=0.0, sparse_reward=0.0, outcome="error", out_of_ring=[],
-                        step=self.steps, physics_error=message)
+                        step=self.steps, place=0, eliminated=not playing, physics_error=message)
             infos.append(info)
         # The last trustworthy observation: never the NaN or auto-reset state.
         return StepResult(self._last_obs, np.zeros(self.n_agents), False, True, infos)
@@ -240,6 +331,9 @@ class Match:
             "steps": self.steps,
             "over": self.over,
             "rng": self.np_random.bit_generator.state,
+            "alive": list(self.alive),
+            "places": list(self._places),
+            "outcomes": list(self._outcomes),
         }
 
     def restore(self, snap: dict[str, Any]) -> None:
@@ -256,10 +350,19 @@ class Match:
         self._last_obs = list(np.asarray(snap["last_obs"], dtype=np.float32)) if len(snap["last_obs"]) else []
         self.np_random = np.random.default_rng()
         self.np_random.bit_generator.state = snap["rng"]
+        self.alive = [bool(a) for a in snap.get("alive", [True] * self.n_agents)]
+        self._places = [int(p) for p in snap.get("places", [0] * self.n_agents)]
+        self._outcomes = list(snap.get("outcomes", [None] * self.n_agents))
 
     def state(self) -> np.ndarray:
-        """Global state: the ``paper`` observation vector (torso states, contact forces, qpos, qvel)."""
-        return self.observer.global_state()
+        """Global state: the ``paper`` observation vector (torso states, contact forces, qpos, qvel),
+        exact (no evader noise); under ``elimination`` rules followed by one flag per agent,
+        1.0 once it is eliminated, so the size stays fixed for the whole match."""
+        state = self.observer.global_state()
+        if self.elimination:
+            flags = np.array([0.0 if playing else 1.0 for playing in self.alive], dtype=np.float32)
+            return np.concatenate([state, flags])
+        return state
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import numpy as np
@@ -12,6 +11,7 @@ from pettingzoo import ParallelEnv
 from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.scenarios import get_scenario, scenarios_doc
 
 
 class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
@@ -87,7 +87,15 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     ``triplesumo.parallel_env(render_mode=None, **config)`` where ``config`` are fields of
     :class:`triplesumo.rules.MatchConfig` (``max_steps``, ``obs_mode``, ``reward``,
     ``physics``, ``reset_noise``, ``agents``, ``contact_force_clip``,
-    ``on_physics_error``), plus ``width``/``height`` of rendered frames.
+    ``on_physics_error``, ``rules``, ``evader``, ``evader_obs_noise``), plus ``width``/``height``
+    of rendered frames. ``scenario`` (default ``"paper"``) picks a named game
+    (``triplesumo.scenarios()``); the config fields and its roster sizes override it.
+
+    ## Agents That Leave
+    Under ``elimination`` rules (``ffa``, ``pursuit``) an agent out is terminated on that step
+    with its placement reward and is absent from ``env.agents`` from the next step; ``step``
+    then takes actions of the agents in play only. ``state()`` keeps its size: the ``paper``
+    vector plus one flag per agent (1.0 once eliminated).
 
     ## Version History
     - v0: first release.
@@ -97,13 +105,15 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
                 "render_fps": 20}
 
     def __init__(self, config: MatchConfig | None = None, render_mode: str | None = None,
-                 width: int = 480, height: int = 480) -> None:
+                 width: int = 480, height: int = 480, scenario: str = "paper") -> None:
+        self.scenario = get_scenario(scenario).name
         self.match = Match(config)
         self.config = self.match.config
         self.render_mode = render_mode
         self.possible_agents = list(self.match.agents)
         self.agents: list[str] = []
-        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.match.sim.dt)}
+        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.match.sim.dt),
+                         "name": get_scenario(scenario).pettingzoo_name}
         self._obs_spaces = {
             a: spaces.Box(-np.inf, np.inf, (self.match.observer.sizes[a],), np.float32)
             for a in self.possible_agents
@@ -134,19 +144,31 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
             raise RuntimeError("the match is over: call reset() before step()")
         result = self.match.step_array(self.match.actions_from_dict(actions))
         names = self.agents
-        obs = dict(zip(names, result.observations, strict=True))
-        rewards = dict(zip(names, result.rewards.tolist(), strict=True))
+        if len(names) == self.match.n_agents:
+            obs = dict(zip(names, result.observations, strict=True))
+            rewards = dict(zip(names, result.rewards.tolist(), strict=True))
+            infos = dict(zip(names, result.infos, strict=True))
+        else:  # some left on earlier steps
+            index = [self.possible_agents.index(a) for a in names]
+            obs = {a: result.observations[i] for a, i in zip(names, index, strict=True)}
+            rewards = {a: float(result.rewards[i]) for a, i in zip(names, index, strict=True)}
+            infos = {a: result.infos[i] for a, i in zip(names, index, strict=True)}
         terms = dict.fromkeys(names, result.terminated)
         truncs = dict.fromkeys(names, result.truncated)
-        infos = dict(zip(names, result.infos, strict=True))
         if result.terminated or result.truncated:
             self.agents = []
+        elif result.eliminated is not None:
+            for a, leaving in zip(self.possible_agents, result.eliminated, strict=True):
+                if leaving:
+                    terms[a] = True
+            self.agents = self.match.agents_in_play
         if self.render_mode == "human":
             self.render()
         return obs, rewards, terms, truncs, infos
 
     def state(self) -> np.ndarray:
-        """The global state (the ``paper`` observation vector)."""
+        """The global state: the ``paper`` observation vector (plus elimination flags under
+        ``elimination`` rules)."""
         return self.match.state()
 
     def render(self) -> np.ndarray | None:
@@ -156,11 +178,12 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
         self._view.close()
 
 
-def parallel_env(render_mode: str | None = None, width: int = 480, height: int = 480,
+TripleSumoParallelEnv.__doc__ = (TripleSumoParallelEnv.__doc__ or "") + "\n## Scenarios\n" + scenarios_doc()
+
+
+def parallel_env(render_mode: str | None = None, width: int = 480, height: int = 480, scenario: str = "paper",
                  **config: Any) -> TripleSumoParallelEnv:
-    """Make the PettingZoo ``ParallelEnv``; ``config`` are :class:`MatchConfig` fields."""
-    known = {f.name for f in dataclasses.fields(MatchConfig)}
-    unknown = sorted(set(config) - known)
-    if unknown:
-        raise ValueError(f"unknown MatchConfig field(s) {unknown}; known: {sorted(known)}")
-    return TripleSumoParallelEnv(MatchConfig(**config), render_mode=render_mode, width=width, height=height)
+    """Make the PettingZoo ``ParallelEnv`` of a named scenario (``triplesumo.scenarios()``);
+    ``config`` are :class:`MatchConfig` fields or the scenario's roster sizes."""
+    return TripleSumoParallelEnv(get_scenario(scenario).config(**config), render_mode=render_mode, width=width,
+                                 height=height, scenario=scenario)

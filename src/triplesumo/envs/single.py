@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -13,6 +12,7 @@ from gymnasium import spaces
 from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.scenarios import get_scenario
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Any callable from one observation to one normalised action in [-1, 1]^8. If it has a
@@ -42,14 +42,20 @@ class TripleSumoEnv(MatchAccess, gym.Env):
 
     ## Episode End
     As the match: termination on a ring exit, truncation at the step limit (draw) or on a
-    physics error. ``info["outcome"]`` is the learner's side's result.
+    physics error. ``info["outcome"]`` is the learner's side's result. Under ``elimination``
+    rules the episode terminates when the learner is eliminated (with its placement reward)
+    or the match ends; agents eliminated before it stop acting and their policies are no
+    longer asked.
 
     ## Arguments
-    ``learner`` (``"bug"``), ``policies`` (``{agent: callable}`` for the others; an agent
+    ``scenario`` (``"paper"``; any of ``triplesumo.scenarios()``), ``learner`` (default: the
+    scenario's, ``"bug"`` for the paper), ``policies`` (``{agent: callable}`` for the others; an agent
     without a policy is passive: zero action), ``render_mode`` (``"rgb_array"`` or
     ``"human"``), ``width``, ``height``, and any :class:`MatchConfig` field as a keyword.
     Registered ids: ``TripleSumo-v0`` (others passive unless given) and
-    ``TripleSumo-Paper-v0`` (Ant and Spider from the shipped policy zoo).
+    ``TripleSumo-Paper-v0`` (Ant and Spider from the shipped policy zoo), and one per other
+    scenario with the others passive: ``TripleSumo-FFA-v0``, ``TripleSumo-Pursuit-v0``
+    (learner: the evader), ``TripleSumo-2v2-v0``.
 
     ## Version History
     - v0: first release.
@@ -57,17 +63,16 @@ class TripleSumoEnv(MatchAccess, gym.Env):
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20}
 
-    def __init__(self, learner: str = "bug", policies: Mapping[str, Policy] | None = None,
+    def __init__(self, learner: str | None = None, policies: Mapping[str, Policy] | None = None,
                  render_mode: str | None = None, width: int = 480, height: int = 480,
-                 config: MatchConfig | None = None, **config_fields: Any) -> None:
+                 config: MatchConfig | None = None, scenario: str = "paper", **config_fields: Any) -> None:
         if config is not None and config_fields:
             raise ValueError("pass either config=MatchConfig(...) or MatchConfig fields, not both")
+        chosen = get_scenario(scenario)
         if config is None:
-            known = {f.name for f in dataclasses.fields(MatchConfig)}
-            unknown = sorted(set(config_fields) - known)
-            if unknown:
-                raise ValueError(f"unknown MatchConfig field(s) {unknown}; known: {sorted(known)}")
-            config = MatchConfig(**config_fields)
+            config = chosen.config(**config_fields)
+        learner = chosen.learner if learner is None else learner
+        self.scenario = chosen.name
         self.match = Match(config)
         if learner not in self.match.agents:
             raise ValueError(f"learner must be one of {list(self.match.agents)}, got {learner!r}")
@@ -112,16 +117,19 @@ class TripleSumoEnv(MatchAccess, gym.Env):
         sizes = self.match.action_sizes
         actions = np.zeros((self.match.n_agents, self.match.action_width))
         actions[self._learner_index, :sizes[self._learner_index]] = self.match.check_action(self.learner, action)
+        alive = self.match.alive
         for i, name in self._others:
             policy = self.policies.get(name)
-            if policy is not None:
+            if policy is not None and alive[i]:
                 actions[i, :sizes[i]] = self.match.check_action(name, policy(self._obs[i]))
         result = self.match.step_array(actions)
         self._obs = result.observations
         k = self._learner_index
+        terminated = result.terminated or (result.eliminated is not None and result.eliminated[k])
+        truncated = result.truncated and not terminated
         if self.render_mode == "human":
             self.render()
-        return self._obs[k], float(result.rewards[k]), result.terminated, result.truncated, result.infos[k]
+        return self._obs[k], float(result.rewards[k]), terminated, truncated, result.infos[k]
 
     def render(self) -> np.ndarray | None:
         return self._view.render()

@@ -36,13 +36,15 @@ import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
-from triplesumo.agents.zoo import check_policy_pairs, make_policy, policies_from_pairs, policy_fingerprint
+from triplesumo.agents.zoo import check_policy_pairs, expand_pairs, make_policy, policies_from_pairs, policy_fingerprint
 from triplesumo.envs.batch import MatchBatch
+from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
 from triplesumo.evaluation.recording import MatchRecorder
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.rewards import TERMS
+from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train.logger import COLUMNS
 
 
@@ -83,6 +85,9 @@ class EvaluateConfig:
     record: int = 0
     """Write the first K test epochs of every candidate as replayable match files
     (``OUT/CANDIDATE/matches/epoch_00001.npz`` ...; ``triplesumo replay`` re-renders them)."""
+    scenario: str = "paper"
+    """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
+    for every other agent. Under elimination rules a test epoch ends when the learner is out."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
@@ -91,9 +96,10 @@ class EvaluateConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"EvaluateConfig.{name} must be an int >= 1, got {value!r}")
-        agents = [a.name for a in MatchConfig().agents]
+        agents = list(scenario_config(self.scenario).agent_names)  # names the scenario if unknown
         if self.learner not in agents:
-            raise ValueError(f"EvaluateConfig.learner must be one of {agents}, got {self.learner!r}")
+            raise ValueError(f"EvaluateConfig.learner must be one of {agents} (scenario {self.scenario!r}), "
+                             f"got {self.learner!r}")
         check_policy_pairs("EvaluateConfig.policies", self.policies, self.learner, agents)
         unknown = [b for b in self.baselines if b not in BUILTIN]
         if unknown:
@@ -186,7 +192,7 @@ def play_test_epochs(
                     info = res.infos[L]
                     for key in acc[k]:
                         acc[k][key] += info[key]
-                    if res.terminated or res.truncated:
+                    if res.terminated or res.truncated or (res.eliminated is not None and res.eliminated[L]):
                         e = slot_epoch[k]
                         if e >= 0:
                             a = acc[k]
@@ -240,11 +246,19 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
 
     out = check_writable(Path(cfg.out))
-    match_cfg = MatchConfig(max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode)
-    others = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
+    match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode)
+    probe = Match(match_cfg)
+    sizes = probe.observer.sizes
+    motors = dict(zip(probe.agents, probe.action_sizes, strict=True))
+    pairs = expand_pairs(cfg.policies, [a for a in match_cfg.agent_names if a != cfg.learner])
     candidates = {"trained": cfg.policy, **{_label(c): c for c in cfg.compare}, **{b: b for b in cfg.baselines}}
-    policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode)
-                for label, spec in candidates.items()}  # every file checked before any epoch is played
+    try:
+        others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes)
+        policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
+                                       action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner])
+                    for label, spec in candidates.items()}  # every file checked before any epoch is played
+    except ValueError as err:
+        raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
     record = _record(cfg, candidates)
     kept: dict[str, Any] = {}
     if cfg.resume:
@@ -342,6 +356,8 @@ class RowAppender:
 def _record(cfg: EvaluateConfig, candidates: dict[str, str]) -> dict[str, Any]:
     """What the rows depend on: the ROW_FIELDS and the sha256 of every policy's files."""
     fields = json.loads(json.dumps({f: getattr(cfg, f) for f in ROW_FIELDS}))  # tuples as JSON lists
+    if cfg.scenario != "paper":  # (records of the paper's matches stay as they were)
+        fields["scenario"] = cfg.scenario
     return {
         "rows_depend_on": fields,
         "others": {pair: policy_fingerprint(pair.split("=", 1)[1]) for pair in cfg.policies},

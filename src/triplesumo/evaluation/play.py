@@ -5,9 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from triplesumo.agents.zoo import check_policy_pairs, policies_from_pairs
+from triplesumo.agents.zoo import check_policy_pairs, expand_pairs, policies_from_pairs
+from triplesumo.envs.match import Match
 from triplesumo.evaluation.runner import MatchRecord, play_match
-from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.scenarios import get_scenario
 
 
 @dataclass(frozen=True)
@@ -16,9 +17,9 @@ class PlayConfig:
 
     seed: int = 0
     """Seed of the match's reset noise (and of random policies)."""
-    policies: tuple[str, ...] = ("ant=random", "bug=random", "spider=random")
-    """AGENT=POLICY pairs; POLICY is zero, passive, random, zoo:NAME or a policy-file path.
-    Agents not named are passive."""
+    policies: tuple[str, ...] = ("*=random",)
+    """AGENT=POLICY pairs; POLICY is zero, passive, random, zoo:NAME or a policy-file path;
+    ``*=POLICY`` stands for every agent not named. Agents not named are passive."""
     video: str | None = None
     """Write the match as mp4 to this path."""
     record: str | None = None
@@ -32,8 +33,11 @@ class PlayConfig:
     """Video width in pixels."""
     height: int = 480
     """Video height in pixels."""
+    scenario: str = "paper"
+    """Named game (paper, ffa, pursuit, 2v2; ``triplesumo.scenarios()``) with its default roster."""
 
     def __post_init__(self) -> None:
+        get_scenario(self.scenario)
         check_policy_pairs("PlayConfig.policies", self.policies)
         if self.width < 16 or self.height < 16:
             raise ValueError("PlayConfig.width and height must be >= 16")
@@ -43,14 +47,20 @@ class PlayConfig:
 
 def run_play(cfg: PlayConfig) -> MatchRecord:
     """Play the match, print its outcome, and return its record."""
-    match_cfg = MatchConfig(max_steps=cfg.max_steps, obs_mode=cfg.obs_mode)
-    policies = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
+    match = Match(get_scenario(cfg.scenario).config(max_steps=cfg.max_steps, obs_mode=cfg.obs_mode))
+    pairs = expand_pairs(cfg.policies, match.agents)
+    check_policy_pairs("PlayConfig.policies", pairs, agents=list(match.agents))
+    try:
+        policies = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, obs_dims=match.observer.sizes,
+                                       action_sizes=dict(zip(match.agents, match.action_sizes, strict=True)))
+    except ValueError as err:
+        raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
     video = Path(cfg.video) if cfg.video else None
-    names = dict(pair.split("=") for pair in cfg.policies)
     file = Path(cfg.record) if cfg.record else None
-    played = play_match(policies, seed=cfg.seed, config=match_cfg, video=video, width=cfg.width, height=cfg.height,
+    names = dict(pair.split("=") for pair in pairs)
+    played = play_match(policies, seed=cfg.seed, video=video, width=cfg.width, height=cfg.height, match=match,
                         record=file, policy_names=names)
-    who = ", ".join(f"{a}: {o}" for a, o in played.outcomes.items())
+    who = ", ".join(f"{a}: {o} (place {played.places.get(a, 0)})" for a, o in played.outcomes.items())
     out = f"; out of the ring: {', '.join(played.out_of_ring)}" if played.out_of_ring else ""
     print(f"match seed {cfg.seed}: {played.steps} steps; {who}{out}")
     print("returns: " + ", ".join(f"{a} {r:+.1f}" for a, r in played.returns.items()))

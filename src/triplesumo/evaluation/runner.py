@@ -29,6 +29,8 @@ class MatchRecord:
     terms: dict[str, dict[str, float]] = field(default_factory=dict)
     """Per agent, the sum over the match of each reward term and of dense/sparse reward."""
     frames: int = 0
+    places: dict[str, int] = field(default_factory=dict)
+    """Each agent's final place (1 = winner; 0 if the match ended in a physics error)."""
 
 
 def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | None = None,
@@ -63,7 +65,7 @@ def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | 
             actions = np.zeros((match.n_agents, match.action_width))
             for i, name in enumerate(match.agents):
                 policy = policies.get(name)
-                if policy is not None:
+                if policy is not None and match.alive[i]:  # an eliminated agent no longer acts
                     actions[i, :match.action_sizes[i]] = match.check_action(name, policy(obs[i]))
             result = match.step_array(actions)
             if recorder:
@@ -88,5 +90,5 @@ def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | 
     return MatchRecord(
         outcomes=outcomes,
         steps=match.steps, returns=returns, out_of_ring=list(result.infos[0]["out_of_ring"]),
-        terms=terms, frames=n_frames,
+        terms=terms, frames=n_frames, places={a: int(result.infos[i]["place"]) for i, a in enumerate(match.agents)},
     )

@@ -14,6 +14,9 @@ from triplesumo.model.specs import PAPER_AGENTS, AgentSpec, PhysicsConfig, valid
 
 OBS_MODES = ("paper", "egocentric")
 PHYSICS_ERROR_MODES = ("truncate", "raise")
+RULES = ("first_out", "elimination")
+"""Rule sets (:mod:`triplesumo.rules.outcome`): the paper's first ring exit ends the match, or
+agents leave one by one until one team is left."""
 
 
 @dataclass(frozen=True)
@@ -29,9 +32,11 @@ class RewardConfig:
     still: float = -4.0
     """Still punishment added every step (paper's code: -4); must be <= 0."""
     win: float = 500.0
-    """Sparse reward to every agent of the winning side."""
+    """Sparse reward to every agent of the winning side (elimination rules: place 1, the last
+    team standing)."""
     loss: float = -400.0
-    """Sparse reward to every agent of a losing side."""
+    """Sparse reward to every agent of a losing side (elimination rules: the last place, first
+    out; places between are interpolated linearly)."""
     draw: float = 0.0
     """Sparse reward when the step limit is reached, or when both sides exit together."""
 
@@ -84,6 +89,16 @@ class MatchConfig:
     """Contact forces in observations are clipped to +-this many newtons."""
     on_physics_error: str = "truncate"
     """On a MuJoCo warning: "truncate" the match (info["physics_error"]) or "raise"."""
+    rules: str = "first_out"
+    """Rule set: "first_out" (the paper: the first ring exit ends the match) or "elimination"
+    (an agent out leaves; the match goes on until one team is left or the step limit)."""
+    evader: str | None = None
+    """Agent name of a pursuit's evader (elimination rules only): its team wins at the step
+    limit instead of sharing a draw, and ``evader_obs_noise`` applies to it."""
+    evader_obs_noise: float = 0.0
+    """Standard deviation of Gaussian noise (seeded from ``reset``) on the evader's torso
+    position and velocity (and its free joint's qpos/qvel entries) in what its opponents
+    observe; 0 observes it exactly."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.agents, tuple) or not all(isinstance(a, AgentSpec) for a in self.agents):
@@ -102,6 +117,19 @@ class MatchConfig:
                 f"MatchConfig.on_physics_error must be one of {PHYSICS_ERROR_MODES}, "
                 f"got {self.on_physics_error!r}"
             )
+        if self.rules not in RULES:
+            raise ValueError(f"MatchConfig.rules must be one of {RULES}, got {self.rules!r}")
+        if self.evader is not None:
+            if self.evader not in self.agent_names:
+                raise ValueError(f"MatchConfig.evader must be one of the agents {list(self.agent_names)}, "
+                                 f"got {self.evader!r}")
+            if self.rules != "elimination":
+                raise ValueError("MatchConfig.evader needs rules='elimination'")
+        if not (isinstance(self.evader_obs_noise, int | float) and math.isfinite(self.evader_obs_noise)
+                and self.evader_obs_noise >= 0):
+            raise ValueError(f"MatchConfig.evader_obs_noise must be finite and >= 0, got {self.evader_obs_noise!r}")
+        if self.evader_obs_noise > 0 and self.evader is None:
+            raise ValueError("MatchConfig.evader_obs_noise needs an evader (MatchConfig.evader)")
 
     @property
     def agent_names(self) -> tuple[str, ...]:

@@ -21,6 +21,12 @@ origin at its torso):
     contact_force (3 per own geom: 13, 19 or 25 geoms; heading frame, clipped).
 
 ``observation_structure(mode)`` gives the ordered block sizes.
+
+Pursuit's "probabilistic observations": with an evader and ``sigma > 0``,
+:meth:`ObservationBuilder.add_evader_noise` adds Gaussian noise to every entry of an
+opponent's observation that holds the evader's torso position or velocity (``paper``: its
+torso blocks and its free joint's first three qpos and qvel entries; ``egocentric``:
+``<evader>_position`` and ``<evader>_velocity``).
 """
 
 from __future__ import annotations
@@ -69,6 +75,35 @@ class ObservationBuilder:
                 s["contact_force"] = 3 * sim.geom_counts[i]
             self.structure[name] = s
         self.sizes = {name: sum(s.values()) for name, s in self.structure.items()}
+        self.evader_entries: dict[int, np.ndarray] = {}
+        """Per opponent of the evader (set by :meth:`set_evader`): its observation's entries
+        that hold the evader's torso position and velocity."""
+
+    def set_evader(self, evader: int) -> None:
+        """Mark agent ``evader``: :meth:`add_evader_noise` perturbs what its opponents see of it."""
+        sim = self.sim
+        self.evader_entries = {}
+        for i in (int(o) for o in self.teams.opponents[evader]):
+            s = self.structure[sim.agent_names[i]]
+            if self.mode == "paper":
+                n, g, a = sim.n_agents, len(sim.agent_geoms), sim.agents[evader]
+                q0, v0 = 6 * n + 3 * g, 6 * n + 3 * g + sim.model.nq
+                idx = [*range(3 * evader, 3 * evader + 3), *range(3 * n + 3 * evader, 3 * n + 3 * evader + 3),
+                       *range(q0 + a.root_qpos, q0 + a.root_qpos + 3), *range(v0 + a.root_qvel, v0 + a.root_qvel + 3)]
+            else:
+                offsets, start = {}, 0
+                for block, size in s.items():
+                    offsets[block] = start
+                    start += size
+                evader_name = sim.agent_names[evader]
+                p0, v0 = offsets[f"{evader_name}_position"], offsets[f"{evader_name}_velocity"]
+                idx = [*range(p0, p0 + 3), *range(v0, v0 + 3)]
+            self.evader_entries[i] = np.array(idx)
+
+    def add_evader_noise(self, obs: list[np.ndarray], rng: np.random.Generator, sigma: float) -> None:
+        """Add ``N(0, sigma)`` noise, drawn from ``rng``, in place to what each opponent sees of the evader."""
+        for i, idx in self.evader_entries.items():
+            obs[i][idx] += rng.normal(0.0, sigma, len(idx)).astype(np.float32)
 
     def global_state(self) -> np.ndarray:
         """The ``paper`` vector (float32): the match's global state."""

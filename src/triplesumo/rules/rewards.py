@@ -17,6 +17,12 @@ axis, as the paper describes. Where the paper has one opponent and one partner (
 Bug), the means are over one element. Spider has two opponents (mean over Ant and Bug)
 and no partner (its partner term is 0). ``dense = opponent + self + partner + still``,
 ``sparse = outcome``, ``reward = dense + sparse``, summed in this order.
+
+Under ``elimination`` rules the opponents and partners of a step are those in play at its
+start (an agent leaving on this step still counts; one gone before does not); an agent
+left without opponents gets 0 for the velocity terms; the outcome term is the placement
+reward (:func:`triplesumo.rules.outcome.place_value`); an agent no longer in play gets
+all zeros.
 """
 
 from __future__ import annotations
@@ -94,6 +100,44 @@ class RewardRule:
                 par = c3 * (par / len(partner_pairs))
             out.append((c1 * (sum_away / n_opp), c2 * (sum_toward / n_opp), par))
         return out
+
+    def dense_in_play(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]],
+                      alive: Sequence[bool]) -> list[tuple[float, float, float]]:
+        """:meth:`dense` over the agents in play only; ``(0, 0, 0)`` for an agent not in play."""
+        if all(alive):
+            return self.dense(pos, vel)
+        c1, c2, c3 = self._c
+        team_of = self._team_of
+
+        def toward(a: int, o: int, mover: int) -> float:
+            dx, dy = pos[o][0] - pos[a][0], pos[o][1] - pos[a][1]
+            return ((dx > 0) - (dx < 0)) * vel[mover][0] + ((dy > 0) - (dy < 0)) * vel[mover][1]
+
+        out = []
+        for i in range(self.n_agents):
+            opponents = [o for o in range(self.n_agents) if alive[o] and team_of[o] != team_of[i]]
+            if not alive[i] or not opponents:
+                out.append((0.0, 0.0, 0.0))
+                continue
+            partners = [j for j in range(self.n_agents) if alive[j] and j != i and team_of[j] == team_of[i]]
+            n_opp = len(opponents)
+            opp = c1 * sum(toward(i, o, o) for o in opponents) / n_opp
+            slf = c2 * sum(toward(i, o, i) for o in opponents) / n_opp
+            par = 0.0
+            if partners:
+                par = c3 * sum(sum(toward(j, o, j) for o in opponents) / n_opp for j in partners) / len(partners)
+            out.append((opp, slf, par))
+        return out
+
+    def rows_in_play(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]], alive: Sequence[bool],
+                     sparse: Sequence[float]) -> list[tuple[float, ...]]:
+        """:meth:`rows` under ``elimination`` rules: ``alive`` at the step's start and each
+        agent's placement reward ``sparse``; all zeros for an agent not in play."""
+        rows: list[tuple[float, ...]] = []
+        for (opp, slf, par), outcome, playing in zip(self.dense_in_play(pos, vel, alive), sparse, alive, strict=True):
+            still = self._still if playing else 0.0
+            rows.append((opp, slf, par, still, outcome, opp + slf + par + still, outcome))
+        return rows
 
     def outcome(self, team_results: list[str] | None, timed_out: bool) -> list[float]:
         """Sparse reward per agent: its team's result, a draw on time-out, else zeros."""

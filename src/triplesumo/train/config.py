@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from triplesumo.agents.zoo import check_policy_pairs
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.rules.config import OBS_MODES, RewardConfig
+from triplesumo.rules.scenarios import scenarios
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,9 @@ class TrainConfig:
     """Write TensorBoard events beside the CSV."""
     max_minutes: float = 0.0
     """Stop (after a checkpoint) once this many minutes have passed; 0 = no limit."""
+    scenario: str = "paper"
+    """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
+    for every other agent. Under elimination rules the learner's epoch ends when it is out."""
 
     def __post_init__(self) -> None:
         if isinstance(self.policies, list):
@@ -81,3 +85,5 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
         if not (math.isfinite(self.max_minutes) and self.max_minutes >= 0):
             raise ValueError(f"TrainConfig.max_minutes must be >= 0, got {self.max_minutes!r}")
+        if self.scenario not in scenarios():
+            raise ValueError(f"TrainConfig.scenario must be one of {scenarios()}, got {self.scenario!r}")

@@ -25,14 +25,15 @@ import torch
 from triplesumo import ENV_VERSION, __version__
 from triplesumo.agents.builtin import act_batch
 from triplesumo.agents.policy_file import save_policy
-from triplesumo.agents.zoo import policies_from_pairs
+from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.algos.noise import make_noise
 from triplesumo.algos.replay import ReplayBuffer
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
-from triplesumo.rules.config import MatchConfig, RewardConfig
+from triplesumo.rules.config import RewardConfig
 from triplesumo.rules.rewards import TERMS
+from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import MetricsLog
@@ -120,20 +121,28 @@ class Trainer:
     def __init__(self, cfg: TrainConfig, run_dir: Path | None = None, resume: bool = False,
                  command: str | None = None) -> None:
         self.cfg = cfg
-        agent_names = [a.name for a in MatchConfig().agents]
+        self.match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
+                                         reward=cfg.reward)
+        agent_names = list(self.match_cfg.agent_names)
         if cfg.learner not in agent_names:
-            raise ValueError(f"TrainConfig.learner must be one of {agent_names}, got {cfg.learner!r}")
-        unknown = [p.split("=")[0] for p in cfg.policies if p.split("=")[0] not in agent_names]
+            raise ValueError(f"TrainConfig.learner must be one of {agent_names} (scenario {cfg.scenario!r}), "
+                             f"got {cfg.learner!r}")
+        pairs = expand_pairs(cfg.policies, [a for a in agent_names if a != cfg.learner])
+        unknown = [p.split("=")[0] for p in pairs if p.split("=")[0] not in agent_names]
         if unknown:
             raise ValueError(f"TrainConfig.policies names unknown agents {unknown}; agents are {agent_names}")
         self.run_dir = prepare_run_dir(Path(run_dir) if run_dir else Path(cfg.out) / cfg.name)
         self.command = command or command_for(cfg)
         torch.set_num_threads(cfg.torch_threads)
-        self.match_cfg = MatchConfig(max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode, reward=cfg.reward)
         self.batch = MatchBatch(self.match_cfg, cfg.n_envs, cfg.n_threads)
         probe = self.batch.matches[0]
         self.L = probe.agents.index(cfg.learner)  # learner and policy agents were checked above
-        self.policies = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
+        try:
+            self.policies = policies_from_pairs(
+                pairs, cfg.seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
+                action_sizes=dict(zip(probe.agents, probe.action_sizes, strict=True)))
+        except ValueError as err:
+            raise ValueError(f"TrainConfig.policies (scenario {cfg.scenario!r}): {err}") from None
         self.others = [(probe.agents.index(a), p) for a, p in self.policies.items()]
         self.obs_dim = probe.observer.sizes[cfg.learner]
         self.act_dim = probe.action_sizes[self.L]
@@ -219,8 +228,9 @@ class Trainer:
                 keep.append(k)
                 rew.append(res.rewards[self.L])
                 next_obs.append(res.observations[self.L])
-                done.append(1.0 if res.terminated else 0.0)  # bootstrap through a draw by time limit
-            if res.terminated or res.truncated:
+                out = res.eliminated is not None and res.eliminated[self.L]  # the learner left the match
+                done.append(1.0 if res.terminated or out else 0.0)  # bootstrap through a draw by time limit
+            if res.terminated or res.truncated or (res.eliminated is not None and res.eliminated[self.L]):
                 finished += 1
                 self._end_epoch(k, info)
                 self.obs[k] = self.batch.reset_one(k, seed=self._episode_seed())[0]
@@ -350,7 +360,8 @@ class Trainer:
     def _restore_from(self, folder: Path, tensors: dict[str, torch.Tensor], state: dict[str, Any],
                       arrays: dict[str, np.ndarray], replay: dict[str, np.ndarray] | None) -> None:
         saved = config_from_json(state["config"])
-        for name in ("learner", "obs_mode", "n_envs", "steps_per_epoch", "policies", "reward", "ddpg", "seed"):
+        for name in ("learner", "obs_mode", "n_envs", "steps_per_epoch", "policies", "reward", "ddpg", "seed",
+                     "scenario"):
             # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
             if getattr(saved, name) != getattr(self.cfg, name):
                 raise checkpoint.CheckpointError(

@@ -56,19 +56,23 @@ def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = No
 
 
 def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None,
-                action_size: int = ACTION_SIZE) -> Any:
+                action_size: int = ACTION_SIZE, expect_obs_dim: int | None = None) -> Any:
     """A policy callable from its name: built-in, ``zoo:NAME`` or a policy-file path.
 
     ``action_size`` sizes a built-in policy's actions (the agent's motors); trained
-    policies have theirs in their file."""
+    policies have theirs in their file. ``expect_obs_dim`` (the match's observation size for
+    the agent) makes a policy file that expects another size fail here, with both sizes named.
+    """
     if spec in BUILTIN:
         cls = BUILTIN[spec]
         return cls(seed, action_size=action_size) if spec == "random" else cls(action_size=action_size)
     if spec.startswith("zoo:"):
-        return load(spec[4:], expect_obs_mode=expect_obs_mode)[0]
+        if spec[4:] not in available():
+            raise FileNotFoundError(f"no policy {spec[4:]!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
+        return load_policy(ZOO_DIR / spec[4:], expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
     path = Path(spec)
     if path.suffix in ("", ".json", ".safetensors") and (path.with_suffix(".json").exists() or path.exists()):
-        return load_policy(path, expect_obs_mode=expect_obs_mode)[0]
+        return load_policy(path, expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
     raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' "
                      f"(shipped: {available()}) or the path of a policy file")
 
@@ -92,21 +96,49 @@ def check_policy_pairs(field: str, pairs: tuple[str, ...], learner: str | None =
         if pair.count("=") != 1 or not all(pair.split("=")):
             raise ValueError(f"{field}: expected AGENT=POLICY, got {pair!r}")
         agent = pair.split("=")[0]
+        if agent == "*":
+            continue
         if agent == learner:
             raise ValueError(f"{field}: the learner {learner!r} cannot have a fixed policy")
         if agents is not None and agent not in agents:
             raise ValueError(f"{field}: unknown agent in {pair!r}; agents are {agents}")
 
 
+def expand_pairs(pairs: tuple[str, ...], agents: list[str] | tuple[str, ...]) -> tuple[str, ...]:
+    """Replace a ``*=POLICY`` pair by one ``AGENT=POLICY`` pair per agent not named elsewhere,
+    in roster order and in the wildcard's place (``("*=random",)`` for the paper's roster is
+    ``("ant=random", "bug=random", "spider=random")``)."""
+    named = {p.split("=")[0] for p in pairs if not p.startswith("*=")}
+    out: list[str] = []
+    for pair in pairs:
+        if pair.startswith("*="):
+            out += [f"{a}={pair[2:]}" for a in agents if a not in named and f"{a}={pair[2:]}" not in out]
+        else:
+            out.append(pair)
+    return tuple(out)
+
+
 def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str,
-                        action_sizes: dict[str, int] | None = None) -> dict[str, Any]:
-    """``("ant=zoo:ant", "spider=random")`` -> ``{"ant": policy, "spider": policy}``; ``action_sizes``
-    (agent -> motors, default 8 each) sizes built-in policies."""
+                        action_sizes: dict[str, int] | None = None,
+                        obs_dims: dict[str, int] | None = None) -> dict[str, Any]:
+    """``("ant=zoo:ant", "spider=random")`` -> ``{"ant": policy, "spider": policy}``.
+
+    ``action_sizes`` (agent -> motors, default 8 each) sizes built-in policies; ``obs_dims``
+    (agent -> the match's observation size) checks every policy file against the roster; the
+    error names the agent and both sizes.
+    """
     out: dict[str, Any] = {}
     for k, pair in enumerate(pairs):
         agent, spec = pair.split("=")
         if agent in out:
             raise ValueError(f"policy for {agent!r} given twice")
         size = (action_sizes or {}).get(agent, ACTION_SIZE)
-        out[agent] = make_policy(spec, seed=seed * 1000 + k, expect_obs_mode=obs_mode, action_size=size)
+        expect = obs_dims.get(agent) if obs_dims is not None else None
+        try:
+            out[agent] = make_policy(spec, seed=seed * 1000 + k, expect_obs_mode=obs_mode, action_size=size,
+                                     expect_obs_dim=expect)
+        except ValueError as err:
+            if expect is None:
+                raise
+            raise ValueError(f"policy {spec!r} for {agent!r} does not fit this roster: {err}") from None
     return out
