@@ -23,7 +23,6 @@ finished run to more epochs.
 
 from __future__ import annotations
 
-import copy
 import csv
 import json
 import math
@@ -37,12 +36,10 @@ import numpy as np
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, make_policy, policies_from_pairs, policy_fingerprint
-from triplesumo.envs.batch import MatchBatch
-from triplesumo.envs.match import ACTION_SIZE
 from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
+from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
-from triplesumo.rules.rewards import TERMS
 from triplesumo.train.logger import COLUMNS
 
 
@@ -113,85 +110,25 @@ def play_test_epochs(
 ) -> list[dict[str, Any]]:
     """Play test epochs ``first .. epochs - 1`` (epoch ``i`` seeded ``seed + i``); one metrics row per
     epoch, in order. ``on_row`` is called with each row in epoch order as soon as it and every
-    earlier one have finished (matches end out of order)."""
-    if not 0 <= first < epochs:
-        raise ValueError(f"first must be in [0, epochs={epochs}), got {first}")
-    n_envs = min(n_envs, epochs - first)
-    batch = MatchBatch(match_cfg, n_envs, n_threads)
-    agents = batch.matches[0].agents
+    earlier one have finished (matches end out of order). The matches are played by
+    :func:`~triplesumo.evaluation.runner.play_matches`: each row depends on its seed only."""
+    agents = match_cfg.agent_names
     if learner not in agents:
         raise ValueError(f"learner must be one of {list(agents)}, got {learner!r}")
     L = agents.index(learner)
-    named = [*others.items(), (learner, learner_policy)]
-    # Stateful policies (with reset(seed)) get one copy per match slot, re-seeded from
-    # (test epoch, agent) at every epoch start, and every policy is called one observation
-    # at a time: so each test epoch's result depends on its seed only, never on n_envs.
-    drivers = [(agents.index(name), [copy.deepcopy(p) for _ in range(n_envs)] if callable(getattr(p, "reset", None))
-                else [p] * n_envs) for name, p in named]
-    rows: dict[int, dict[str, Any]] = {}
-    slot_epoch = [-1] * n_envs
-    obs: list[list[np.ndarray]] = [[] for _ in range(n_envs)]
-    acc = [dict.fromkeys(("dense_reward", "sparse_reward", *TERMS), 0.0) for _ in range(n_envs)]
-    next_epoch = first
-    next_row = first  # the next row to hand to on_row
+    seats = {**others, learner: learner_policy}
+    lineup = [seats.get(name) for name in agents]
 
-    def start(k: int) -> None:
-        nonlocal next_epoch
-        epoch = next_epoch if next_epoch < epochs else -1  # -1: a filler match, discarded
-        next_epoch += 1
-        slot_epoch[k] = epoch
-        for i, per_slot in drivers:
-            reset = getattr(per_slot[k], "reset", None)
-            if callable(reset):
-                reset(seed=int(np.random.SeedSequence([seed + max(epoch, 0), i]).generate_state(1)[0]))
-        obs[k] = batch.reset_one(k, seed=seed + epoch if epoch >= 0 else seed - 1 - k)[0]
-        acc[k] = dict.fromkeys(acc[k], 0.0)
+    def row(result: SeatedResult) -> dict[str, Any]:
+        a, outcome = result.terms[L], result.outcomes[L]
+        return {"epoch": result.index + 1, "outcome": outcome,
+                "local_winning_rate": float(local_winning_rate([outcome])[0]), "steps": result.steps,
+                "total_reward": a["dense_reward"] + a["sparse_reward"], **a, "env_steps": 0, "wall_time": 0.0}
 
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=epochs, initial=first, unit="epoch", desc=f"evaluate {label}".strip(),
-                   dynamic_ncols=True)
-    for k in range(n_envs):
-        start(k)
-    try:
-        with batch:
-            while len(rows) < epochs - first:
-                actions = np.zeros((n_envs, len(agents), ACTION_SIZE))
-                for i, per_slot in drivers:
-                    for k in range(n_envs):
-                        actions[k, i] = per_slot[k](obs[k][i])
-                for k, res in enumerate(batch.step(actions)):
-                    info = res.infos[L]
-                    for key in acc[k]:
-                        acc[k][key] += info[key]
-                    if res.terminated or res.truncated:
-                        e = slot_epoch[k]
-                        if e >= 0:
-                            a = acc[k]
-                            rows[e] = {
-                                "epoch": e + 1,
-                                "outcome": info["outcome"],
-                                "local_winning_rate": float(local_winning_rate([info["outcome"]])[0]),
-                                "steps": info["step"],
-                                "total_reward": a["dense_reward"] + a["sparse_reward"],
-                                **a,
-                                "env_steps": 0,
-                                "wall_time": 0.0,
-                            }
-                            if bar is not None:
-                                bar.update(1)
-                            while on_row is not None and next_row in rows:
-                                on_row(rows[next_row])
-                                next_row += 1
-                        start(k)
-                    else:
-                        obs[k] = res.observations
-    finally:
-        if bar is not None:
-            bar.close()
-    return [rows[e] for e in range(first, epochs)]
+    results = play_matches(lambda i: lineup, lambda i: seed + i, epochs, match_cfg, n_envs, n_threads, first,
+                           on_result=None if on_row is None else lambda r: on_row(row(r)), terms_of=(L,),
+                           progress=f"evaluate {label}".strip() if progress else None)
+    return [row(r) for r in results]
 
 
 def _clean(value: Any) -> Any:
@@ -258,37 +195,39 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     return summary
 
 
-def finished_rows(path: Path, epochs: int) -> int:
-    """How many test epochs ``path`` (a candidate's ``metrics.csv``) holds, in order from epoch 1.
+def finished_rows(path: Path, epochs: int, columns: tuple[str, ...] = COLUMNS,
+                  valid_row: Callable[[dict[str, str], int], bool] | None = None,
+                  what: tuple[str, str, str] = ("metrics CSV of an evaluation", "test epochs", "epochs")) -> int:
+    """How many rows (numbered 1, 2, ...) ``path`` holds, in order from row 1.
 
     A run killed while writing leaves a partial last line, and the file is cut back to
-    its last complete, valid row (rewritten atomically). ``ValueError`` if the file is
-    not a metrics CSV or holds more than ``epochs`` epochs.
+    its last complete, valid row (rewritten atomically). ``ValueError`` if the file does
+    not have the header ``columns`` or holds more than ``epochs`` rows. By default the
+    file is a candidate's metrics CSV; other row-appended tables pass their ``columns``
+    and ``valid_row(values, number)``; ``what`` names the table, its rows and the limit in errors.
     """
     if not path.exists():
         return 0
+    valid_row = valid_row or _valid_row
     lines = path.read_text(encoding="utf-8").split("\n")
     complete = lines[:-1]  # a file ending in a newline leaves "" last; anything else is cut off
     rows = list(csv.reader(complete))
-    if not rows or tuple(rows[0]) != COLUMNS:
-        raise ValueError(f"{path}: not a metrics CSV of an evaluation (expected the header {list(COLUMNS)})")
+    if not rows or tuple(rows[0]) != columns:
+        raise ValueError(f"{path}: not a {what[0]} (expected the header {list(columns)})")
     good = 0
     for row in rows[1:]:
-        if not _valid_row(row, good + 1):
+        if len(row) != len(columns) or not valid_row(dict(zip(columns, row, strict=True)), good + 1):
             break
         good += 1
     if good > epochs:
-        raise ValueError(f"{path} already holds {good} test epochs, more than epochs={epochs}: "
-                         "raise epochs, or evaluate into a new out folder")
+        raise ValueError(f"{path} already holds {good} {what[1]}, more than {what[2]}={epochs}: "
+                         f"raise {what[2]}, or write into a new out folder")
     if good + 1 < len(lines):  # drop the partial or invalid tail
         atomic_write_bytes(path, ("\n".join(complete[:good + 1]) + "\n").encode("utf-8"))
     return good
 
 
-def _valid_row(row: list[str], epoch: int) -> bool:
-    if len(row) != len(COLUMNS):
-        return False
-    values = dict(zip(COLUMNS, row, strict=True))
+def _valid_row(values: dict[str, str], epoch: int) -> bool:
     if values["epoch"] != str(epoch) or values["outcome"] not in OUTCOMES:
         return False
     try:
@@ -298,12 +237,13 @@ def _valid_row(row: list[str], epoch: int) -> bool:
 
 
 class RowAppender:
-    """Appends rows to a metrics CSV, flushed one by one (a killed run keeps what it finished)."""
+    """Appends rows to a CSV (by default a metrics CSV), flushed one by one (a killed run keeps
+    what it finished)."""
 
-    def __init__(self, path: Path, fresh: bool) -> None:
+    def __init__(self, path: Path, fresh: bool, columns: tuple[str, ...] = COLUMNS) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = path.open("w" if fresh else "a", newline="", encoding="utf-8")
-        self._writer = csv.DictWriter(self._fh, COLUMNS, lineterminator="\n")
+        self._writer = csv.DictWriter(self._fh, columns, lineterminator="\n")
         if fresh:
             self._writer.writeheader()
 
