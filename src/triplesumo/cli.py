@@ -33,6 +33,11 @@ def _parser() -> argparse.ArgumentParser:
     evaluate = sub.add_parser("evaluate", help="test epochs of a policy (no exploration) against passive and "
                                                "random baselines in the same matches")
     _dcargs.add_arguments(evaluate, EvaluateConfig)
+    from triplesumo.evaluation.tournament import TournamentConfig
+
+    tournament = sub.add_parser("tournament", help="seeded matches between named policies in every seat they can "
+                                                   "take: openskill leaderboard and cross-play matrix")
+    _dcargs.add_arguments(tournament, TournamentConfig)
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
@@ -86,6 +91,13 @@ def main(argv: list[str] | None = None) -> int:
             summary = evaluate(cfg)
             print(format_summary(summary))
             print(f"report: {cfg.out}/summary.json; plots: {cfg.out}/compare_mwr.png, {cfg.out}/*/plots/")
+        elif args.command == "tournament":
+            from triplesumo.evaluation.tournament import TournamentConfig, format_leaderboard, run_tournament
+
+            tcfg = _dcargs.build(TournamentConfig, args)
+            print(format_leaderboard(run_tournament(tcfg)))
+            print(f"tables: {tcfg.out}/leaderboard.csv, crossplay.csv, results.json; "
+                  f"plots: {tcfg.out}/leaderboard.png, crossplay.png")
         elif args.command == "plot":
             from pathlib import Path
 
