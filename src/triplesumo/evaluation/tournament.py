@@ -228,9 +228,7 @@ class Tournament:
     def record(self) -> dict[str, Any]:
         """What the rows depend on (see the module docstring)."""
         c = self.cfg
-        return {"rows_depend_on": {"roster": [asdict(a) for a in self.match_cfg.agents], "schedule": c.schedule,
-                                   "seed": c.seed, "steps_per_epoch": self.match_cfg.max_steps,
-                                   "obs_mode": self.match_cfg.obs_mode},
+        return {"rows_depend_on": {"schedule": c.schedule, "seed": c.seed, "match": asdict(self.match_cfg)},
                 "entries": {n: {"policy": s, "sha256": policy_fingerprint(s), "seats": self.seats_of[n]}
                             for n, s in self.entries.items()}}
 
