@@ -71,6 +71,24 @@ def test_passive_ends_rated_above_random_with_non_overlapping_intervals(duel: tu
     assert int(lb[0]["a_win"]) + int(lb[0]["b_win"]) == board["passive"]["n_win"]
 
 
+def test_rating_by_seat_re_rates_a_finished_tournament_without_playing(duel: tuple[Path, dict]) -> None:
+    out, by_policy = duel
+    before = (out / "matches.csv").read_bytes()
+    by_seat = run_tournament(duel_cfg(out, rate_by="seat", resume=True), DUEL)
+    assert (out / "matches.csv").read_bytes() == before
+    board = {e["policy"]: e for e in by_seat["leaderboard"]}
+    assert set(board) == {"passive@a", "passive@b", "random@a", "random@b"}
+    assert all(e["matches"] == 24 for e in board.values())
+    assert board["passive@a"]["seats"]["b"] == {"win": 0, "loss": 0, "draw": 0, "error": 0}
+    assert board["passive@a"]["n_win"] + board["passive@b"]["n_win"] == by_policy["leaderboard"][0]["n_win"]
+    assert min(board["passive@a"]["mu"], board["passive@b"]["mu"]) > max(board["random@a"]["mu"],
+                                                                          board["random@b"]["mu"])
+    cross = {(c["row"], c["column"]): c["n"] for c in by_seat["crossplay"]}
+    assert cross[("passive@a", "random@b")] == 24 and cross[("passive@a", "random@a")] == 0
+    assert (out / "leaderboard_by_seat.png").read_bytes().startswith(PNG)
+    assert [r["policy"] for r in rows(out / "leaderboard.csv")] == ["passive", "random"]  # kept
+
+
 def test_same_seed_same_rows_whatever_the_batch(duel: tuple[Path, dict], tmp_path: Path) -> None:
     """The first 2 rounds again, one match at a time: the very same rows as 8 at once."""
     out, _ = duel
@@ -168,6 +186,7 @@ def test_tournament_command_in_the_paper_scenario(tiny_zoo_dir: Path, tmp_path: 
     ({"schedule": "swiss"}, "schedule must be one of"),
     ({"rounds": 0}, "rounds must be an int >= 1"),
     ({"rating_model": "Glicko"}, "rating_model must be one of"),
+    ({"rate_by": "team"}, "rate_by must be one of"),
     ({"confidence": 1.5}, "confidence must be in"),
 ])
 def test_bad_configs_name_the_field(fields: dict, message: str) -> None:

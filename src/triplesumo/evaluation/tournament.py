@@ -24,7 +24,11 @@ Writes into ``out``: ``matches.csv`` (one row per match, appended as matches fin
 ``tournament.json`` (what the rows depend on, with the sha256 of every policy's files),
 ``leaderboard.csv``, ``crossplay.csv``, ``results.json`` and ``leaderboard.png``,
 ``crossplay.png``. Ratings are openskill's (:mod:`~triplesumo.evaluation.ratings`),
-computed from the rows in match order: the same rows give the same table. With
+computed from the rows in match order: the same rows give the same table. A policy's
+rating pools its seats, so where seats are unequal (the paper's Spider seat wins more
+often than either team seat, whoever sits in it) ``rate_by="seat"`` rates each policy in
+each seat apart (``passive@spider``) and writes the tables as ``*_by_seat.*``; it changes
+no match, so ``resume=True`` re-rates a finished tournament without playing. With
 ``resume=True`` the rows already in ``out`` are kept (a torn last row is cut off) and
 the rest are played, exactly the rows of an uninterrupted run.
 """
@@ -58,6 +62,7 @@ from triplesumo.rules.teams import Teams
 SCENARIOS: dict[str, tuple[AgentSpec, ...]] = {"paper": PAPER_AGENTS}
 """Rosters by scenario name (the paper's 2-vs-1 today; other scenarios plug in here)."""
 SCHEDULES = ("round-robin", "sampled")
+RATE_BY = ("policy", "seat")
 RECORD_FILE = "tournament.json"
 ROWS_FILE = "matches.csv"
 
@@ -86,6 +91,9 @@ class TournamentConfig:
     rating_model: str = "PlackettLuce"
     """openskill model: PlackettLuce, BradleyTerryFull, BradleyTerryPart, ThurstoneMostellerFull or
     ThurstoneMostellerPart."""
+    rate_by: str = "policy"
+    """Who is rated: "policy" (one rating per policy, whatever its seat) or "seat" (one per policy and
+    seat, e.g. passive@spider: fairer where seats are unequal, as in the paper's 2-vs-1)."""
     confidence: float = 0.95
     """Confidence of the rating intervals and of the cross-play win-rate intervals."""
     out: str = "runs/tournament"
@@ -113,6 +121,8 @@ class TournamentConfig:
         if self.rating_model not in MODELS:
             raise ValueError(f"TournamentConfig.rating_model must be one of {sorted(MODELS)}, "
                              f"got {self.rating_model!r}")
+        if self.rate_by not in RATE_BY:
+            raise ValueError(f"TournamentConfig.rate_by must be one of {RATE_BY}, got {self.rate_by!r}")
         if not 0.0 < self.confidence < 1.0:
             raise ValueError(f"TournamentConfig.confidence must be in (0, 1), got {self.confidence!r}")
         entries = parse_entries(self.policies)
@@ -292,17 +302,26 @@ def _check_resumable(path: Path, record: dict[str, Any]) -> None:
 
 
 def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -> dict[str, Any]:
-    """Ratings, per-seat win/loss/draw counts and the cross-play matrix from the match rows."""
-    names = list(t.entries)
+    """Ratings, per-seat win/loss/draw counts and the cross-play matrix from the match rows.
+
+    The players are the policies, or with ``rate_by="seat"`` each policy in each seat it took
+    (``NAME@SEAT``).
+    """
+    def player(name: str, seat: str) -> str:
+        return name if cfg.rate_by == "policy" else f"{name}@{seat}"
+
+    names = [player(n, seat) for n in t.entries for seat in
+             ([t.agents[0]] if cfg.rate_by == "policy" else [a for a in t.agents if a in t.seats_of[n]])]
     table = RatingTable(cfg.rating_model, names)
     counts = {n: {a: dict.fromkeys(OUTCOMES, 0) for a in t.agents} for n in names}
+    policy_of = {player(n, seat): n for n in t.entries for seat in t.agents}
     wins = np.zeros((len(names), len(names)), dtype=np.int64)
     draws = np.zeros_like(wins)
     games = np.zeros_like(wins)
     idx = {n: i for i, n in enumerate(names)}
     team_members = [[int(i) for i in np.flatnonzero(t.teams.team_of == k)] for k in range(len(t.teams.names))]
     for row in rows:
-        seated = [row[a] for a in t.agents]
+        seated = [player(row[a], a) for a in t.agents]
         outcome = [row[f"{a}_outcome"] for a in t.agents]
         for name, agent, o in zip(seated, t.agents, outcome, strict=True):
             counts[name][agent][o] += 1
@@ -321,9 +340,9 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
         r = table[name]
         lo, hi = r.interval(cfg.confidence)
         total = {o: sum(counts[name][a][o] for a in t.agents) for o in OUTCOMES}
-        board.append({"policy": name, "spec": t.entries[name], "mu": r.mu, "sigma": r.sigma, "lo": lo, "hi": hi,
-                      "ordinal": r.ordinal, "matches": sum(total.values()), **{f"n_{o}": total[o] for o in OUTCOMES},
-                      "seats": counts[name]})
+        board.append({"policy": name, "spec": t.entries[policy_of[name]], "mu": r.mu, "sigma": r.sigma, "lo": lo,
+                      "hi": hi, "ordinal": r.ordinal, "matches": sum(total.values()),
+                      **{f"n_{o}": total[o] for o in OUTCOMES}, "seats": counts[name]})
     cross = []
     for a, b in itertools.permutations(names, 2):
         n, w = int(games[idx[a], idx[b]]), int(wins[idx[a], idx[b]])
@@ -331,7 +350,7 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
         cross.append({"row": a, "column": b, "n": n, "wins": w, "draws": int(draws[idx[a], idx[b]]),
                       "win_rate": w / n if n else None, "lo": None if math.isnan(lo) else lo,
                       "hi": None if math.isnan(hi) else hi})
-    return {"scenario": cfg.scenario, "seats": list(t.agents), "n_matches": len(rows),
+    return {"scenario": cfg.scenario, "seats": list(t.agents), "n_matches": len(rows), "rate_by": cfg.rate_by,
             "rating_model": cfg.rating_model, "confidence": cfg.confidence, "leaderboard": board,
             "crossplay": cross}
 
@@ -344,6 +363,7 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
     from triplesumo.evaluation.league_plots import plot_crossplay, plot_leaderboard
 
     seats = results["seats"]
+    tag = "" if cfg.rate_by == "policy" else "_by_seat"
     buf = io.StringIO()
     seat_cols = [f"{a}_{o}" for a in seats for o in OUTCOMES]
     w = csv.writer(buf, lineterminator="\n")
@@ -353,18 +373,18 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
         w.writerow([rank, e["policy"], e["spec"], *(f"{e[k]:.4f}" for k in ("mu", "sigma", "lo", "hi", "ordinal")),
                     e["matches"], *(e[f"n_{o}"] for o in OUTCOMES),
                     *(e["seats"][a][o] for a in seats for o in OUTCOMES)])
-    atomic_write_bytes(out / "leaderboard.csv", buf.getvalue().encode())
+    atomic_write_bytes(out / f"leaderboard{tag}.csv", buf.getvalue().encode())
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["row", "column", "n", "wins", "draws", "win_rate", "lo", "hi"])
     for c in results["crossplay"]:
         w.writerow([c["row"], c["column"], c["n"], c["wins"], c["draws"],
                     *("" if c[k] is None else f"{c[k]:.4f}" for k in ("win_rate", "lo", "hi"))])
-    atomic_write_bytes(out / "crossplay.csv", buf.getvalue().encode())
-    atomic_write_bytes(out / "results.json", (json.dumps(results, indent=2) + "\n").encode())
+    atomic_write_bytes(out / f"crossplay{tag}.csv", buf.getvalue().encode())
+    atomic_write_bytes(out / f"results{tag}.json", (json.dumps(results, indent=2) + "\n").encode())
     title = f"{cfg.scenario}: {results['n_matches']} matches"
-    plot_leaderboard(results, out / "leaderboard.png", title=title)
-    plot_crossplay(results, out / "crossplay.png", title=title)
+    plot_leaderboard(results, out / f"leaderboard{tag}.png", title=title)
+    plot_crossplay(results, out / f"crossplay{tag}.png", title=title)
 
 
 def format_leaderboard(results: dict[str, Any]) -> str:
