@@ -96,8 +96,9 @@ def main(argv: list[str] | None = None) -> int:
 
             tcfg = _dcargs.build(TournamentConfig, args)
             print(format_leaderboard(run_tournament(tcfg)))
-            print(f"tables: {tcfg.out}/leaderboard.csv, crossplay.csv, results.json; "
-                  f"plots: {tcfg.out}/leaderboard.png, crossplay.png")
+            tag = "" if tcfg.rate_by == "policy" else "_by_seat"
+            print(f"tables: {tcfg.out}/leaderboard{tag}.csv, crossplay{tag}.csv, results{tag}.json; "
+                  f"plots: {tcfg.out}/leaderboard{tag}.png, crossplay{tag}.png")
         elif args.command == "plot":
             from pathlib import Path
 

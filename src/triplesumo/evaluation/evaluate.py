@@ -49,8 +49,9 @@ class EvaluateConfig:
 
     learner: str = "bug"
     """The agent whose policy is evaluated."""
-    policy: str = "zoo:bug"
-    """The learner's policy: zoo:NAME, a policy file (e.g. runs/bug/policy), zero or random."""
+    policy: tuple[str, ...] = ("zoo:bug",)
+    """The learner's policy: zoo:NAME, a policy file (e.g. runs/bug/policy), zero or random; or several,
+    one per training seed (runs/s0/policy runs/s1/policy, or a quoted glob 'runs/s*/policy')."""
     policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider")
     """AGENT=POLICY for the other agents (fixed, no exploration noise)."""
     compare: tuple[str, ...] = ()
@@ -90,6 +91,10 @@ class EvaluateConfig:
         unknown = [b for b in self.baselines if b not in BUILTIN]
         if unknown:
             raise ValueError(f"EvaluateConfig.baselines must be built-in policies {sorted(BUILTIN)}, got {unknown}")
+        if isinstance(self.policy, str):  # one spec given as a plain string
+            object.__setattr__(self, "policy", (self.policy,))
+        if not self.policy:
+            raise ValueError("EvaluateConfig.policy needs at least one policy")
         if self.obs_mode not in OBS_MODES:
             raise ValueError(f"EvaluateConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
 
@@ -159,7 +164,11 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     out = check_writable(Path(cfg.out))
     match_cfg = MatchConfig(max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode)
     others = policies_from_pairs(cfg.policies, cfg.seed, cfg.obs_mode)
-    candidates = {"trained": cfg.policy, **{_label(c): c for c in cfg.compare}, **{b: b for b in cfg.baselines}}
+    trained = expand_policies(cfg.policy)
+    seeds = {"trained": trained[0]} if len(trained) == 1 else {f"trained-{_label(p)}": p for p in trained}
+    if len(seeds) < len(trained):
+        raise ValueError(f"EvaluateConfig.policy names a policy twice: {list(trained)}")
+    candidates = {**seeds, **{_label(c): c for c in cfg.compare}, **{b: b for b in cfg.baselines}}
     policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode)
                 for label, spec in candidates.items()}  # every file checked before any epoch is played
     record = _record(cfg, candidates)
@@ -186,13 +195,76 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         stats = summarize(metrics["outcome"].tolist(), metrics["steps"])
         summary["candidates"][label] = {
             "policy": spec,
+            "group": "trained" if label in seeds else label,
             **{k: _clean(v) for k, v in dict(stats).items()},
             **{f"mean_{name}": float(np.mean(metrics[name].astype(np.float64)))
                for name in ("total_reward", "dense_reward", "sparse_reward")},
         }
     plot_comparison(curves, out, window=cfg.window)
     _write_json(out / "summary.json", summary)
+    _write_per_seed(out / PER_SEED_FILE, summary, record)
     return summary
+
+
+PER_SEED_FILE = "per_seed.csv"
+"""One row per candidate policy of an evaluation (each training seed its own row): what ``compare`` reads."""
+PER_SEED_COLUMNS = ("group", "candidate", "policy", "sha256", "algo", "train_seed", "learner", "eval_seed",
+                    "epochs", "n_win", "n_loss", "n_draw", "test_mwr", "test_mwr_lo", "test_mwr_hi")
+
+
+def expand_policies(specs: tuple[str, ...]) -> list[str]:
+    """Policy specs with globs (``runs/s*/policy``) expanded to the policy files they match, sorted."""
+    import glob
+
+    out: list[str] = []
+    for spec in specs:
+        if not any(c in spec for c in "*?["):
+            out.append(spec)
+            continue
+        stems = sorted({str(Path(p).with_suffix("")) for p in glob.glob(spec) + glob.glob(spec + ".json")
+                        if p.endswith(".json") or Path(p + ".json").exists()})
+        if not stems:
+            raise ValueError(f"EvaluateConfig.policy: {spec!r} matches no policy file")
+        out += stems
+    return out
+
+
+def _manifest_of(spec: str) -> dict[str, Any]:
+    """A policy file's manifest; ``{}`` for a built-in policy."""
+    from triplesumo.agents.policy_file import load_json
+    from triplesumo.agents.zoo import ZOO_DIR
+
+    if spec in BUILTIN:
+        return {}
+    path = ZOO_DIR / spec[4:] if spec.startswith("zoo:") else Path(spec)
+    return load_json(path if path.suffix == ".json" else path.with_suffix(".json"))
+
+
+def algo_of(spec: str) -> str:
+    """The algorithm that made a policy: its manifest's ``algo``; ``ddpg`` for ``triplesumo train``
+    policies that predate the field; a built-in policy's own name."""
+    if spec in BUILTIN:
+        return spec
+    manifest = _manifest_of(spec)
+    if "algo" in manifest:
+        return str(manifest["algo"])
+    return "ddpg" if str(manifest.get("command", "")).startswith("triplesumo train") else "unknown"
+
+
+def _write_per_seed(path: Path, summary: dict[str, Any], record: dict[str, Any]) -> None:
+    import io
+
+    cfg = summary["config"]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, PER_SEED_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for label, c in summary["candidates"].items():
+        writer.writerow({"group": c["group"], "candidate": label, "policy": c["policy"],
+                         "sha256": record["candidates"][label]["sha256"], "algo": algo_of(c["policy"]),
+                         "train_seed": _manifest_of(c["policy"]).get("seed", ""), "learner": cfg["learner"], "eval_seed": cfg["seed"],
+                         "epochs": c["n"], "n_win": c["n_win"], "n_loss": c["n_loss"], "n_draw": c["n_draw"],
+                         "test_mwr": c["mean_lwr"], "test_mwr_lo": c["mean_lwr_lo"], "test_mwr_hi": c["mean_lwr_hi"]})
+    atomic_write_bytes(path, buf.getvalue().encode("utf-8"))
 
 
 def finished_rows(path: Path, epochs: int, columns: tuple[str, ...] = COLUMNS,

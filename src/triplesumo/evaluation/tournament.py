@@ -391,12 +391,12 @@ def format_leaderboard(results: dict[str, Any]) -> str:
     """A readable leaderboard with per-seat win/loss/draw."""
     seats = results["seats"]
     pct = round(100 * results["confidence"])
-    head = f"{'#':>2s} {'policy':12s} {'mu':>7s} {'sigma':>6s} {f'{pct}% interval':>17s} {'matches':>7s} " + " ".join(
+    head = f"{'#':>2s} {'policy':16s} {'mu':>7s} {'sigma':>6s} {f'{pct}% interval':>17s} {'matches':>7s} " + " ".join(
         f"{a + ' W/L/D':>14s}" for a in seats)
     lines = [head]
     for rank, e in enumerate(results["leaderboard"], 1):
         per_seat = " ".join(f"{'{}/{}/{}'.format(*(e['seats'][a][o] for o in ('win', 'loss', 'draw'))):>14s}"
                             for a in seats)
-        lines.append(f"{rank:2d} {e['policy'][:12]:12s} {e['mu']:7.2f} {e['sigma']:6.2f} "
+        lines.append(f"{rank:2d} {e['policy'][:16]:16s} {e['mu']:7.2f} {e['sigma']:6.2f} "
                      f"[{e['lo']:6.2f}, {e['hi']:6.2f}] {e['matches']:7d} {per_seat}")
     return "\n".join(lines)
