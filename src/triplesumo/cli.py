@@ -38,6 +38,12 @@ def _parser() -> argparse.ArgumentParser:
     tournament = sub.add_parser("tournament", help="seeded matches between named policies in every seat they can "
                                                    "take: openskill leaderboard and cross-play matrix")
     _dcargs.add_arguments(tournament, TournamentConfig)
+    from triplesumo.evaluation.compare import CompareConfig
+
+    compare = sub.add_parser("compare", help="statistics across seeds from evaluation folders: IQM with stratified "
+                                             "bootstrap intervals, probability of improvement (rliable)")
+    compare.add_argument("folders", nargs="+", help="evaluation folders (each holds per_seed.csv)")
+    _dcargs.add_arguments(compare, CompareConfig, skip=("folders",))
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
@@ -99,6 +105,12 @@ def main(argv: list[str] | None = None) -> int:
             tag = "" if tcfg.rate_by == "policy" else "_by_seat"
             print(f"tables: {tcfg.out}/leaderboard{tag}.csv, crossplay{tag}.csv, results{tag}.json; "
                   f"plots: {tcfg.out}/leaderboard{tag}.png, crossplay{tag}.png")
+        elif args.command == "compare":
+            from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
+
+            ccfg = _dcargs.build(CompareConfig, args)
+            print(format_compare(compare(ccfg)))
+            print(f"tables: {ccfg.out}/compare.csv, improvement.csv, compare.json; plot: {ccfg.out}/compare.png")
         elif args.command == "plot":
             from pathlib import Path
 
