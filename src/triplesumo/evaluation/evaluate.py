@@ -261,7 +261,8 @@ def _write_per_seed(path: Path, summary: dict[str, Any], record: dict[str, Any])
     for label, c in summary["candidates"].items():
         writer.writerow({"group": c["group"], "candidate": label, "policy": c["policy"],
                          "sha256": record["candidates"][label]["sha256"], "algo": algo_of(c["policy"]),
-                         "train_seed": _manifest_of(c["policy"]).get("seed", ""), "learner": cfg["learner"], "eval_seed": cfg["seed"],
+                         "train_seed": _manifest_of(c["policy"]).get("seed", ""), "learner": cfg["learner"],
+                         "eval_seed": cfg["seed"],
                          "epochs": c["n"], "n_win": c["n_win"], "n_loss": c["n_loss"], "n_draw": c["n_draw"],
                          "test_mwr": c["mean_lwr"], "test_mwr_lo": c["mean_lwr_lo"], "test_mwr_hi": c["mean_lwr_hi"]})
     atomic_write_bytes(path, buf.getvalue().encode("utf-8"))

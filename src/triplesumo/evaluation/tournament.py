@@ -331,10 +331,10 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
         table.record_outcomes(teams, [outcome[members[0]] for members in team_members])
         for i, j in itertools.permutations(range(len(seated)), 2):
             if t.teams.team_of[i] != t.teams.team_of[j]:
-                a, b = idx[seated[i]], idx[seated[j]]
-                games[a, b] += 1
-                wins[a, b] += outcome[i] == "win"
-                draws[a, b] += outcome[i] == "draw"
+                row_i, col_j = idx[seated[i]], idx[seated[j]]
+                games[row_i, col_j] += 1
+                wins[row_i, col_j] += outcome[i] == "win"
+                draws[row_i, col_j] += outcome[i] == "draw"
     board = []
     for name in table.ranking():
         r = table[name]
