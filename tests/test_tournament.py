@@ -50,6 +50,8 @@ def test_passive_ends_rated_above_random_with_non_overlapping_intervals(duel: tu
     board = {e["policy"]: e for e in results["leaderboard"]}
     assert [e["policy"] for e in results["leaderboard"]] == ["passive", "random"]
     assert board["passive"]["lo"] > board["random"]["hi"]
+    assert board["passive"]["elo"] > 1500.0 > board["random"]["elo"]  # 1-vs-1: plain Elo beside openskill
+    assert board["passive"]["elo"] + board["random"]["elo"] == pytest.approx(3000.0)
     # Every lineup in every round: 2 lineups (each policy in each seat) x 24 rounds.
     table = rows(out / "matches.csv")
     assert len(table) == 48 == results["n_matches"]
@@ -80,6 +82,7 @@ def test_rating_by_seat_re_rates_a_finished_tournament_without_playing(duel: tup
     assert set(board) == {"passive@a", "passive@b", "random@a", "random@b"}
     assert all(e["matches"] == 24 for e in board.values())
     assert board["passive@a"]["seats"]["b"] == {"win": 0, "loss": 0, "draw": 0, "error": 0}
+    assert board["passive@a"]["elo"] is not None
     assert board["passive@a"]["n_win"] + board["passive@b"]["n_win"] == by_policy["leaderboard"][0]["n_win"]
     assert min(board["passive@a"]["mu"], board["passive@b"]["mu"]) > max(board["random@a"]["mu"],
                                                                           board["random@b"]["mu"])
@@ -174,6 +177,7 @@ def test_tournament_command_in_the_paper_scenario(tiny_zoo_dir: Path, tmp_path: 
     assert [(r["ant"], r["bug"], r["spider"]) for r in table] == [("passive", "random", "spider"),
                                                                   ("random", "passive", "spider")]
     assert all(r["spider"] == "spider" for r in table)
+    assert all(r["elo"] == "" for r in rows(out / "leaderboard.csv"))  # no Elo in a 2-vs-1
     assert (out / "crossplay.png").read_bytes().startswith(PNG)
 
 

@@ -23,7 +23,8 @@ tournament without changing the matches already played.
 Writes into ``out``: ``matches.csv`` (one row per match, appended as matches finish),
 ``tournament.json`` (what the rows depend on, with the sha256 of every policy's files),
 ``leaderboard.csv``, ``crossplay.csv``, ``results.json`` and ``leaderboard.png``,
-``crossplay.png``. Ratings are openskill's (:mod:`~triplesumo.evaluation.ratings`),
+``crossplay.png``. In 1-vs-1 rosters the leaderboard also gives plain Elo (K = 32, from
+1500). Ratings are openskill's (:mod:`~triplesumo.evaluation.ratings`),
 computed from the rows in match order: the same rows give the same table. A policy's
 rating pools its seats, so where seats are unequal (the paper's Spider seat wins more
 often than either team seat, whoever sits in it) ``rate_by="seat"`` rates each policy in
@@ -51,7 +52,7 @@ from triplesumo.agents.zoo import make_policy, policy_fingerprint
 from triplesumo.envs.match import ACTION_SIZE, Match
 from triplesumo.evaluation.evaluate import RowAppender, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
-from triplesumo.evaluation.ratings import MODELS, RatingTable
+from triplesumo.evaluation.ratings import MODELS, Elo, RatingTable
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import wilson_interval
 from triplesumo.evaluation.video import check_writable
@@ -320,6 +321,8 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
     games = np.zeros_like(wins)
     idx = {n: i for i, n in enumerate(names)}
     team_members = [[int(i) for i in np.flatnonzero(t.teams.team_of == k)] for k in range(len(t.teams.names))]
+    duel = len(team_members) == 2 and all(len(m) == 1 for m in team_members)
+    elo = Elo() if duel else None  # plain Elo beside openskill where users expect it: 1-vs-1
     for row in rows:
         seated = [player(row[a], a) for a in t.agents]
         outcome = [row[f"{a}_outcome"] for a in t.agents]
@@ -329,6 +332,8 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
             continue  # a physics error decides nothing: counted, not rated
         teams = [[seated[i] for i in members] for members in team_members]
         table.record_outcomes(teams, [outcome[members[0]] for members in team_members])
+        if elo is not None:
+            elo.record(seated[0], seated[1], {"win": 1.0, "draw": 0.5, "loss": 0.0}[outcome[0]])
         for i, j in itertools.permutations(range(len(seated)), 2):
             if t.teams.team_of[i] != t.teams.team_of[j]:
                 row_i, col_j = idx[seated[i]], idx[seated[j]]
@@ -340,8 +345,9 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
         r = table[name]
         lo, hi = r.interval(cfg.confidence)
         total = {o: sum(counts[name][a][o] for a in t.agents) for o in OUTCOMES}
+        elo_rating = None if elo is None else elo.ratings.get(name, elo.initial)
         board.append({"policy": name, "spec": t.entries[policy_of[name]], "mu": r.mu, "sigma": r.sigma, "lo": lo,
-                      "hi": hi, "ordinal": r.ordinal, "matches": sum(total.values()),
+                      "hi": hi, "ordinal": r.ordinal, "elo": elo_rating, "matches": sum(total.values()),
                       **{f"n_{o}": total[o] for o in OUTCOMES}, "seats": counts[name]})
     cross = []
     for a, b in itertools.permutations(names, 2):
@@ -367,11 +373,11 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
     buf = io.StringIO()
     seat_cols = [f"{a}_{o}" for a in seats for o in OUTCOMES]
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["rank", "policy", "spec", "mu", "sigma", "lo", "hi", "ordinal", "matches",
+    w.writerow(["rank", "policy", "spec", "mu", "sigma", "lo", "hi", "ordinal", "elo", "matches",
                 *(f"n_{o}" for o in OUTCOMES), *seat_cols])
     for rank, e in enumerate(results["leaderboard"], 1):
         w.writerow([rank, e["policy"], e["spec"], *(f"{e[k]:.4f}" for k in ("mu", "sigma", "lo", "hi", "ordinal")),
-                    e["matches"], *(e[f"n_{o}"] for o in OUTCOMES),
+                    "" if e["elo"] is None else f"{e['elo']:.1f}", e["matches"], *(e[f"n_{o}"] for o in OUTCOMES),
                     *(e["seats"][a][o] for a in seats for o in OUTCOMES)])
     atomic_write_bytes(out / f"leaderboard{tag}.csv", buf.getvalue().encode())
     buf = io.StringIO()
