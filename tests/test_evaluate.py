@@ -170,7 +170,7 @@ def test_an_unknown_learner_is_rejected() -> None:
 @pytest.fixture(scope="module")
 def report(tiny_zoo: TinyZoo, tmp_path_factory: pytest.TempPathFactory) -> tuple[EvaluateConfig, dict[str, Any]]:
     out = tmp_path_factory.mktemp("evaluation")
-    cfg = EvaluateConfig(policy=str(tiny_zoo.bug_policy), policies=("ant=zoo:ant", "spider=zoo:spider"), epochs=6,
+    cfg = EvaluateConfig(policy=(str(tiny_zoo.bug_policy),), policies=("ant=zoo:ant", "spider=zoo:spider"), epochs=6,
                          n_envs=2, steps_per_epoch=STEPS, out=str(out), progress=False)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
@@ -185,7 +185,7 @@ def test_evaluate_writes_summary_json_with_counts_and_intervals(report: tuple[Ev
     assert saved["config"]["epochs"] == 6
     cands = saved["candidates"]
     assert list(cands) == ["trained", "passive", "random"]
-    assert cands["trained"]["policy"] == cfg.policy
+    assert cands["trained"]["policy"] == cfg.policy[0]
     for label, c in cands.items():
         assert c["n"] == 6, label
         assert c["n_win"] + c["n_loss"] + c["n_draw"] + c["n_error"] == c["n"]
@@ -293,12 +293,12 @@ def test_resume_refuses_what_would_change_the_rows(
     with pytest.raises(ValueError, match="seed was 10000, now 7"):
         evaluate(dataclasses.replace(cfg, resume=True, seed=7))
     with pytest.raises(ValueError, match="candidate 'trained'"):
-        evaluate(dataclasses.replace(cfg, resume=True, policy="zoo:bug"))
+        evaluate(dataclasses.replace(cfg, resume=True, policy=("zoo:bug",)))
     # The same path, other contents: the policy file was retrained in place.
     stem = tmp_path / "bug"
     for suffix in (".json", ".safetensors"):
         shutil.copy(tiny_zoo.bug_policy.with_suffix(suffix), stem.with_suffix(suffix))
-    small = dataclasses.replace(cfg, policy=str(stem), baselines=(), epochs=2, out=str(tmp_path / "e"))
+    small = dataclasses.replace(cfg, policy=(str(stem),), baselines=(), epochs=2, out=str(tmp_path / "e"))
     evaluate(small)
     manifest = json.loads(stem.with_suffix(".json").read_text())
     stem.with_suffix(".json").write_text(json.dumps({**manifest, "note": "retrained"}))

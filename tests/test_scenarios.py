@@ -84,7 +84,8 @@ def test_reward_is_sum_of_terms_and_infos_keep_their_keys(scenario: str) -> None
     n_state = env.state_space.shape[0]
     left = 0
     while env.agents:
-        obs, rewards, terms, truncs, infos = env.step({a: rng.uniform(-1, 1, env.action_space(a).shape) for a in env.agents})
+        actions = {a: rng.uniform(-1, 1, env.action_space(a).shape) for a in env.agents}
+        obs, rewards, terms, truncs, infos = env.step(actions)
         assert env.state().shape == (n_state,)
         for agent, info in infos.items():
             assert rewards[agent] == sum(info[t] for t in TERMS)

@@ -33,6 +33,17 @@ def _parser() -> argparse.ArgumentParser:
     evaluate = sub.add_parser("evaluate", help="test epochs of a policy (no exploration) against passive and "
                                                "random baselines in the same matches")
     _dcargs.add_arguments(evaluate, EvaluateConfig)
+    from triplesumo.evaluation.tournament import TournamentConfig
+
+    tournament = sub.add_parser("tournament", help="seeded matches between named policies in every seat they can "
+                                                   "take: openskill leaderboard and cross-play matrix")
+    _dcargs.add_arguments(tournament, TournamentConfig)
+    from triplesumo.evaluation.compare import CompareConfig
+
+    compare = sub.add_parser("compare", help="statistics across seeds from evaluation folders: IQM with stratified "
+                                             "bootstrap intervals, probability of improvement (rliable)")
+    compare.add_argument("folders", nargs="+", help="evaluation folders (each holds per_seed.csv)")
+    _dcargs.add_arguments(compare, CompareConfig, skip=("folders",))
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
@@ -92,6 +103,20 @@ def main(argv: list[str] | None = None) -> int:
             summary = evaluate(cfg)
             print(format_summary(summary))
             print(f"report: {cfg.out}/summary.json; plots: {cfg.out}/compare_mwr.png, {cfg.out}/*/plots/")
+        elif args.command == "tournament":
+            from triplesumo.evaluation.tournament import TournamentConfig, format_leaderboard, run_tournament
+
+            tcfg = _dcargs.build(TournamentConfig, args)
+            print(format_leaderboard(run_tournament(tcfg)))
+            tag = "" if tcfg.rate_by == "policy" else "_by_seat"
+            print(f"tables: {tcfg.out}/leaderboard{tag}.csv, crossplay{tag}.csv, results{tag}.json; "
+                  f"plots: {tcfg.out}/leaderboard{tag}.png, crossplay{tag}.png")
+        elif args.command == "compare":
+            from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
+
+            ccfg = _dcargs.build(CompareConfig, args)
+            print(format_compare(compare(ccfg)))
+            print(f"tables: {ccfg.out}/compare.csv, improvement.csv, compare.json; plot: {ccfg.out}/compare.png")
         elif args.command == "plot":
             from pathlib import Path
 

@@ -90,8 +90,8 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     policy = str(result.run_dir / "policy")
     print(f"[2/3] evaluating this Bug, the shipped Bug (zoo:bug), passive and random Bug "
           f"({cfg.eval_epochs} test epochs each, the same matches)")
-    eval_cfg = EvaluateConfig(policy=policy, compare=("zoo:bug",), epochs=cfg.eval_epochs, out=str(out / "evaluation"),
-                              steps_per_epoch=cfg.steps_per_epoch,
+    eval_cfg = EvaluateConfig(policy=(policy,), compare=("zoo:bug",), epochs=cfg.eval_epochs,
+                              out=str(out / "evaluation"), steps_per_epoch=cfg.steps_per_epoch,
                               n_envs=cfg.n_envs, progress=cfg.progress)
     summary = evaluate(eval_cfg)
     print(format_summary(summary))

@@ -23,7 +23,6 @@ finished run to more epochs.
 
 from __future__ import annotations
 
-import copy
 import csv
 import json
 import math
@@ -37,13 +36,11 @@ import numpy as np
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, expand_pairs, make_policy, policies_from_pairs, policy_fingerprint
-from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
-from triplesumo.evaluation.recording import MatchRecorder
+from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
-from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train.logger import COLUMNS
 
@@ -54,8 +51,9 @@ class EvaluateConfig:
 
     learner: str = "bug"
     """The agent whose policy is evaluated."""
-    policy: str = "zoo:bug"
-    """The learner's policy: zoo:NAME, a policy file (e.g. runs/bug/policy), zero or random."""
+    policy: tuple[str, ...] = ("zoo:bug",)
+    """The learner's policy: zoo:NAME, a policy file (e.g. runs/bug/policy), zero or random; or several,
+    one per training seed (runs/s0/policy runs/s1/policy, or a quoted glob 'runs/s*/policy')."""
     policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider")
     """AGENT=POLICY for the other agents (fixed, no exploration noise)."""
     compare: tuple[str, ...] = ()
@@ -104,6 +102,10 @@ class EvaluateConfig:
         unknown = [b for b in self.baselines if b not in BUILTIN]
         if unknown:
             raise ValueError(f"EvaluateConfig.baselines must be built-in policies {sorted(BUILTIN)}, got {unknown}")
+        if isinstance(self.policy, str):  # one spec given as a plain string
+            object.__setattr__(self, "policy", (self.policy,))
+        if not self.policy:
+            raise ValueError("EvaluateConfig.policy needs at least one policy")
         if self.obs_mode not in OBS_MODES:
             raise ValueError(f"EvaluateConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
 
@@ -127,97 +129,28 @@ def play_test_epochs(
 ) -> list[dict[str, Any]]:
     """Play test epochs ``first .. epochs - 1`` (epoch ``i`` seeded ``seed + i``); one metrics row per
     epoch, in order. ``on_row`` is called with each row in epoch order as soon as it and every
-    earlier one have finished (matches end out of order). Epochs ``< record`` are written to
-    ``record_dir/epoch_NNNNN.npz`` as match files (``policy_names`` stored in them)."""
-    if not 0 <= first < epochs:
-        raise ValueError(f"first must be in [0, epochs={epochs}), got {first}")
-    n_envs = min(n_envs, epochs - first)
-    batch = MatchBatch(match_cfg, n_envs, n_threads)
-    agents, sizes = batch.matches[0].agents, batch.matches[0].action_sizes
+    earlier one have finished (matches end out of order). The matches are played by
+    :func:`~triplesumo.evaluation.runner.play_matches`: each row depends on its seed only.
+    Under elimination rules a test epoch ends when the learner is out. Epochs ``< record`` are
+    written to ``record_dir/epoch_NNNNN.npz`` as match files (``policy_names`` stored in them)."""
+    agents = match_cfg.agent_names
     if learner not in agents:
         raise ValueError(f"learner must be one of {list(agents)}, got {learner!r}")
     L = agents.index(learner)
-    named = [*others.items(), (learner, learner_policy)]
-    # Stateful policies (with reset(seed)) get one copy per match slot, re-seeded from
-    # (test epoch, agent) at every epoch start, and every policy is called one observation
-    # at a time: so each test epoch's result depends on its seed only, never on n_envs.
-    drivers = [(agents.index(name), [copy.deepcopy(p) for _ in range(n_envs)] if callable(getattr(p, "reset", None))
-                else [p] * n_envs) for name, p in named]
-    rows: dict[int, dict[str, Any]] = {}
-    slot_epoch = [-1] * n_envs
-    obs: list[list[np.ndarray]] = [[] for _ in range(n_envs)]
-    acc = [dict.fromkeys(("dense_reward", "sparse_reward", *TERMS), 0.0) for _ in range(n_envs)]
-    recorders: list[MatchRecorder | None] = [None] * n_envs
-    next_epoch = first
-    next_row = first  # the next row to hand to on_row
+    seats = {**others, learner: learner_policy}
+    lineup = [seats.get(name) for name in agents]
 
-    def start(k: int) -> None:
-        nonlocal next_epoch
-        epoch = next_epoch if next_epoch < epochs else -1  # -1: a filler match, discarded
-        next_epoch += 1
-        slot_epoch[k] = epoch
-        for i, per_slot in drivers:
-            reset = getattr(per_slot[k], "reset", None)
-            if callable(reset):
-                reset(seed=int(np.random.SeedSequence([seed + max(epoch, 0), i]).generate_state(1)[0]))
-        obs[k] = batch.reset_one(k, seed=seed + epoch if epoch >= 0 else seed - 1 - k)[0]
-        recorders[k] = (MatchRecorder(batch.matches[k], seed + epoch, policy_names)
-                        if record_dir is not None and 0 <= epoch < record else None)
-        acc[k] = dict.fromkeys(acc[k], 0.0)
+    def row(result: SeatedResult) -> dict[str, Any]:
+        a, outcome = result.terms[L], result.outcomes[L]
+        return {"epoch": result.index + 1, "outcome": outcome,
+                "local_winning_rate": float(local_winning_rate([outcome])[0]), "steps": result.steps,
+                "total_reward": a["dense_reward"] + a["sparse_reward"], **a, "env_steps": 0, "wall_time": 0.0}
 
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=epochs, initial=first, unit="epoch", desc=f"evaluate {label}".strip(),
-                   dynamic_ncols=True)
-    for k in range(n_envs):
-        start(k)
-    try:
-        with batch:
-            while len(rows) < epochs - first:
-                actions = np.zeros((n_envs, len(agents), batch.action_width))
-                for i, per_slot in drivers:
-                    size = sizes[i]
-                    for k in range(n_envs):
-                        actions[k, i, :size] = per_slot[k](obs[k][i])
-                for k, res in enumerate(batch.step(actions)):
-                    recorder = recorders[k]
-                    if recorder is not None:
-                        recorder.step(actions[k])
-                        if res.terminated or res.truncated:
-                            outcomes = {a: i["outcome"] for a, i in zip(agents, res.infos, strict=True)}
-                            assert record_dir is not None
-                            recorder.finish(outcomes).save(record_dir / f"epoch_{slot_epoch[k] + 1:05d}.npz")
-                    info = res.infos[L]
-                    for key in acc[k]:
-                        acc[k][key] += info[key]
-                    if res.terminated or res.truncated or (res.eliminated is not None and res.eliminated[L]):
-                        e = slot_epoch[k]
-                        if e >= 0:
-                            a = acc[k]
-                            rows[e] = {
-                                "epoch": e + 1,
-                                "outcome": info["outcome"],
-                                "local_winning_rate": float(local_winning_rate([info["outcome"]])[0]),
-                                "steps": info["step"],
-                                "total_reward": a["dense_reward"] + a["sparse_reward"],
-                                **a,
-                                "env_steps": 0,
-                                "wall_time": 0.0,
-                            }
-                            if bar is not None:
-                                bar.update(1)
-                            while on_row is not None and next_row in rows:
-                                on_row(rows[next_row])
-                                next_row += 1
-                        start(k)
-                    else:
-                        obs[k] = res.observations
-    finally:
-        if bar is not None:
-            bar.close()
-    return [rows[e] for e in range(first, epochs)]
+    results = play_matches(lambda i: lineup, lambda i: seed + i, epochs, match_cfg, n_envs, n_threads, first,
+                           on_result=None if on_row is None else lambda r: on_row(row(r)), terms_of=(L,),
+                           progress=f"evaluate {label}".strip() if progress else None, end_seat=L,
+                           record=record, record_dir=record_dir, policy_names=policy_names)
+    return [row(r) for r in results]
 
 
 def _clean(value: Any) -> Any:
@@ -251,7 +184,11 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     sizes = probe.observer.sizes
     motors = dict(zip(probe.agents, probe.action_sizes, strict=True))
     pairs = expand_pairs(cfg.policies, [a for a in match_cfg.agent_names if a != cfg.learner])
-    candidates = {"trained": cfg.policy, **{_label(c): c for c in cfg.compare}, **{b: b for b in cfg.baselines}}
+    trained = expand_policies(cfg.policy)
+    seeds = {"trained": trained[0]} if len(trained) == 1 else {f"trained-{_label(p)}": p for p in trained}
+    if len(seeds) < len(trained):
+        raise ValueError(f"EvaluateConfig.policy names a policy twice: {list(trained)}")
+    candidates = {**seeds, **{_label(c): c for c in cfg.compare}, **{b: b for b in cfg.baselines}}
     try:
         others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes)
         policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
@@ -275,7 +212,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
                 play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.n_envs,
                                  cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress, first=done,
                                  on_row=append, record=cfg.record, record_dir=out / label / "matches",
-                                 policy_names={**dict(p.split("=") for p in cfg.policies), cfg.learner: spec})
+                                 policy_names={**dict(p.split("=") for p in pairs), cfg.learner: spec})
         metrics = read_metrics_csv(path)
         plot_run(
             metrics, out / label / "plots", window=cfg.window, title=f"test: {cfg.learner}={spec}", label=cfg.learner
@@ -284,46 +221,112 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         stats = summarize(metrics["outcome"].tolist(), metrics["steps"])
         summary["candidates"][label] = {
             "policy": spec,
+            "group": "trained" if label in seeds else label,
             **{k: _clean(v) for k, v in dict(stats).items()},
             **{f"mean_{name}": float(np.mean(metrics[name].astype(np.float64)))
                for name in ("total_reward", "dense_reward", "sparse_reward")},
         }
     plot_comparison(curves, out, window=cfg.window)
     _write_json(out / "summary.json", summary)
+    _write_per_seed(out / PER_SEED_FILE, summary, record)
     return summary
 
 
-def finished_rows(path: Path, epochs: int) -> int:
-    """How many test epochs ``path`` (a candidate's ``metrics.csv``) holds, in order from epoch 1.
+PER_SEED_FILE = "per_seed.csv"
+"""One row per candidate policy of an evaluation (each training seed its own row): what ``compare`` reads."""
+PER_SEED_COLUMNS = ("group", "candidate", "policy", "sha256", "algo", "train_seed", "learner", "eval_seed",
+                    "epochs", "n_win", "n_loss", "n_draw", "test_mwr", "test_mwr_lo", "test_mwr_hi")
+
+
+def expand_policies(specs: tuple[str, ...]) -> list[str]:
+    """Policy specs with globs (``runs/s*/policy``) expanded to the policy files they match, sorted."""
+    import glob
+
+    out: list[str] = []
+    for spec in specs:
+        if not any(c in spec for c in "*?["):
+            out.append(spec)
+            continue
+        stems = sorted({str(Path(p).with_suffix("")) for p in glob.glob(spec) + glob.glob(spec + ".json")
+                        if p.endswith(".json") or Path(p + ".json").exists()})
+        if not stems:
+            raise ValueError(f"EvaluateConfig.policy: {spec!r} matches no policy file")
+        out += stems
+    return out
+
+
+def _manifest_of(spec: str) -> dict[str, Any]:
+    """A policy file's manifest; ``{}`` for a built-in policy."""
+    from triplesumo.agents.policy_file import load_json
+    from triplesumo.agents.zoo import ZOO_DIR
+
+    if spec in BUILTIN:
+        return {}
+    path = ZOO_DIR / spec[4:] if spec.startswith("zoo:") else Path(spec)
+    return load_json(path if path.suffix == ".json" else path.with_suffix(".json"))
+
+
+def algo_of(spec: str) -> str:
+    """The algorithm that made a policy: its manifest's ``algo``; ``ddpg`` for ``triplesumo train``
+    policies that predate the field; a built-in policy's own name."""
+    if spec in BUILTIN:
+        return spec
+    manifest = _manifest_of(spec)
+    if "algo" in manifest:
+        return str(manifest["algo"])
+    return "ddpg" if str(manifest.get("command", "")).startswith("triplesumo train") else "unknown"
+
+
+def _write_per_seed(path: Path, summary: dict[str, Any], record: dict[str, Any]) -> None:
+    import io
+
+    cfg = summary["config"]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, PER_SEED_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    for label, c in summary["candidates"].items():
+        writer.writerow({"group": c["group"], "candidate": label, "policy": c["policy"],
+                         "sha256": record["candidates"][label]["sha256"], "algo": algo_of(c["policy"]),
+                         "train_seed": _manifest_of(c["policy"]).get("seed", ""), "learner": cfg["learner"],
+                         "eval_seed": cfg["seed"],
+                         "epochs": c["n"], "n_win": c["n_win"], "n_loss": c["n_loss"], "n_draw": c["n_draw"],
+                         "test_mwr": c["mean_lwr"], "test_mwr_lo": c["mean_lwr_lo"], "test_mwr_hi": c["mean_lwr_hi"]})
+    atomic_write_bytes(path, buf.getvalue().encode("utf-8"))
+
+
+def finished_rows(path: Path, epochs: int, columns: tuple[str, ...] = COLUMNS,
+                  valid_row: Callable[[dict[str, str], int], bool] | None = None,
+                  what: tuple[str, str, str] = ("metrics CSV of an evaluation", "test epochs", "epochs")) -> int:
+    """How many rows (numbered 1, 2, ...) ``path`` holds, in order from row 1.
 
     A run killed while writing leaves a partial last line, and the file is cut back to
-    its last complete, valid row (rewritten atomically). ``ValueError`` if the file is
-    not a metrics CSV or holds more than ``epochs`` epochs.
+    its last complete, valid row (rewritten atomically). ``ValueError`` if the file does
+    not have the header ``columns`` or holds more than ``epochs`` rows. By default the
+    file is a candidate's metrics CSV; other row-appended tables pass their ``columns``
+    and ``valid_row(values, number)``; ``what`` names the table, its rows and the limit in errors.
     """
     if not path.exists():
         return 0
+    valid_row = valid_row or _valid_row
     lines = path.read_text(encoding="utf-8").split("\n")
     complete = lines[:-1]  # a file ending in a newline leaves "" last; anything else is cut off
     rows = list(csv.reader(complete))
-    if not rows or tuple(rows[0]) != COLUMNS:
-        raise ValueError(f"{path}: not a metrics CSV of an evaluation (expected the header {list(COLUMNS)})")
+    if not rows or tuple(rows[0]) != columns:
+        raise ValueError(f"{path}: not a {what[0]} (expected the header {list(columns)})")
     good = 0
     for row in rows[1:]:
-        if not _valid_row(row, good + 1):
+        if len(row) != len(columns) or not valid_row(dict(zip(columns, row, strict=True)), good + 1):
             break
         good += 1
     if good > epochs:
-        raise ValueError(f"{path} already holds {good} test epochs, more than epochs={epochs}: "
-                         "raise epochs, or evaluate into a new out folder")
+        raise ValueError(f"{path} already holds {good} {what[1]}, more than {what[2]}={epochs}: "
+                         f"raise {what[2]}, or write into a new out folder")
     if good + 1 < len(lines):  # drop the partial or invalid tail
         atomic_write_bytes(path, ("\n".join(complete[:good + 1]) + "\n").encode("utf-8"))
     return good
 
 
-def _valid_row(row: list[str], epoch: int) -> bool:
-    if len(row) != len(COLUMNS):
-        return False
-    values = dict(zip(COLUMNS, row, strict=True))
+def _valid_row(values: dict[str, str], epoch: int) -> bool:
     if values["epoch"] != str(epoch) or values["outcome"] not in OUTCOMES:
         return False
     try:
@@ -333,12 +336,13 @@ def _valid_row(row: list[str], epoch: int) -> bool:
 
 
 class RowAppender:
-    """Appends rows to a metrics CSV, flushed one by one (a killed run keeps what it finished)."""
+    """Appends rows to a CSV (by default a metrics CSV), flushed one by one (a killed run keeps
+    what it finished)."""
 
-    def __init__(self, path: Path, fresh: bool) -> None:
+    def __init__(self, path: Path, fresh: bool, columns: tuple[str, ...] = COLUMNS) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = path.open("w" if fresh else "a", newline="", encoding="utf-8")
-        self._writer = csv.DictWriter(self._fh, COLUMNS, lineterminator="\n")
+        self._writer = csv.DictWriter(self._fh, columns, lineterminator="\n")
         if fresh:
             self._writer.writeheader()
 

@@ -1,10 +1,13 @@
-"""Run matches between fixed policies: one seeded match, optionally filmed and recorded."""
+"""Run matches between fixed policies: one seeded match, optionally filmed and recorded, or a
+seeded schedule of matches with any policy in any seat, played many at a time."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import copy
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -92,3 +95,140 @@ def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | 
         steps=match.steps, returns=returns, out_of_ring=list(result.infos[0]["out_of_ring"]),
         terms=terms, frames=n_frames, places={a: int(result.infos[i]["place"]) for i, a in enumerate(match.agents)},
     )
+
+
+@dataclass
+class SeatedResult:
+    """One finished match of :func:`play_matches`."""
+
+    index: int
+    """The match's index in the schedule."""
+    outcomes: list[str]
+    """Each seat's side's result (win, loss, draw or error), roster order."""
+    steps: int
+    """Env steps the match lasted."""
+    terms: dict[int, dict[str, float]]
+    """For each seat asked for in ``terms_of``: the match's sums of ``dense_reward``,
+    ``sparse_reward`` and every reward term."""
+
+
+def play_matches(
+    lineup: Callable[[int], Sequence[Policy | None]],
+    reset_seed: Callable[[int], int],
+    n: int,
+    match_cfg: MatchConfig,
+    n_envs: int = 16,
+    n_threads: int = 2,
+    first: int = 0,
+    on_result: Callable[[SeatedResult], None] | None = None,
+    terms_of: tuple[int, ...] = (),
+    progress: str | None = None,
+    end_seat: int | None = None,
+    record: int = 0,
+    record_dir: Path | None = None,
+    policy_names: Mapping[str, str] | None = None,
+) -> list[SeatedResult]:
+    """Play matches ``first .. n - 1`` of a schedule, ``n_envs`` at a time; results in schedule order.
+
+    Match ``i`` seats ``lineup(i)`` (one policy per agent in roster order; ``None`` is
+    passive) and resets with seed ``reset_seed(i)``. Stateful policies (with
+    ``reset(seed)``) get one copy per match slot and seat, re-seeded from
+    ``(reset_seed(i), seat)`` at every match start, and every policy is called one
+    observation at a time: so each match's result depends on its lineup and seed only,
+    never on ``n_envs`` or on which matches ran beside it. ``on_result`` is called with
+    each result in schedule order as soon as it and every earlier one have finished
+    (matches end out of order). ``progress`` is a progress-bar label (``None``: no bar).
+
+    Under elimination rules a match's result is taken when seat ``end_seat`` is eliminated
+    (its own match is over), if given. Matches ``< record`` are written as replayable match
+    files ``record_dir/epoch_NNNNN.npz`` (``policy_names`` stored in them).
+    """
+    from triplesumo.envs.batch import MatchBatch
+    from triplesumo.rules.rewards import TERMS
+
+    if not 0 <= first < n:
+        raise ValueError(f"first must be in [0, n={n}), got {first}")
+    n_envs = min(n_envs, n - first)
+    batch = MatchBatch(match_cfg, n_envs, n_threads)
+    n_agents = len(match_cfg.agents)
+    copies: list[dict[tuple[int, int], Any]] = [{} for _ in range(n_envs)]
+    seated: list[list[Any]] = [[] for _ in range(n_envs)]
+    slot_match = [-1] * n_envs
+    obs: list[list[np.ndarray]] = [[] for _ in range(n_envs)]
+    keys = ("dense_reward", "sparse_reward", *TERMS)
+    acc: list[dict[int, dict[str, float]]] = [{} for _ in range(n_envs)]
+    recorders: list[MatchRecorder | None] = [None] * n_envs
+    sizes, width = batch.matches[0].action_sizes, batch.action_width
+    results: dict[int, SeatedResult] = {}
+    next_match, next_result = first, first
+
+    def start(k: int) -> None:
+        nonlocal next_match
+        i = next_match if next_match < n else -1  # -1: a filler match, discarded
+        next_match += 1
+        policies = list(lineup(i if i >= 0 else n - 1))
+        if len(policies) != n_agents:
+            raise ValueError(f"lineup({i}) has {len(policies)} policies for {n_agents} seats")
+        seed = reset_seed(i if i >= 0 else n - 1)
+        for seat, p in enumerate(policies):
+            if p is not None and callable(getattr(p, "reset", None)):
+                p = copies[k].setdefault((seat, id(p)), copy.deepcopy(p))
+                p.reset(seed=int(np.random.SeedSequence([seed, seat]).generate_state(1)[0]))
+                policies[seat] = p
+        seated[k] = policies
+        slot_match[k] = i
+        obs[k] = batch.reset_one(k, seed=seed if i >= 0 else seed + 1 + k)[0]
+        acc[k] = {seat: dict.fromkeys(keys, 0.0) for seat in terms_of}
+        recorders[k] = (MatchRecorder(batch.matches[k], seed, dict(policy_names or {}))
+                        if record_dir is not None and 0 <= i < record else None)
+
+    def finish_record(k: int, res: Any) -> None:
+        recorder = recorders[k]
+        if recorder is not None and record_dir is not None:
+            outcomes = {a: info["outcome"] for a, info in zip(batch.matches[k].agents, res.infos, strict=True)}
+            recorder.finish(outcomes).save(record_dir / f"epoch_{slot_match[k] + 1:05d}.npz")
+            recorders[k] = None
+
+    bar = None
+    if progress is not None:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n, initial=first, unit="match", desc=progress, dynamic_ncols=True)
+    for k in range(n_envs):
+        start(k)
+    try:
+        with batch:
+            while len(results) < n - first:
+                actions = np.zeros((n_envs, n_agents, width))
+                for k in range(n_envs):
+                    alive = batch.matches[k].alive
+                    for seat, p in enumerate(seated[k]):
+                        if p is not None and alive[seat]:  # an eliminated agent no longer acts
+                            actions[k, seat, :sizes[seat]] = p(obs[k][seat])
+                for k, res in enumerate(batch.step(actions)):
+                    recorder = recorders[k]
+                    if recorder is not None:
+                        recorder.step(actions[k])
+                    for seat, sums in acc[k].items():
+                        info = res.infos[seat]
+                        for key in sums:
+                            sums[key] += info[key]
+                    gone = end_seat is not None and res.eliminated is not None and res.eliminated[end_seat]
+                    if res.terminated or res.truncated or gone:
+                        finish_record(k, res)
+                        i = slot_match[k]
+                        if i >= 0:
+                            results[i] = SeatedResult(i, [info["outcome"] for info in res.infos],
+                                                      int(res.infos[0]["step"]), acc[k])
+                            if bar is not None:
+                                bar.update(1)
+                            while on_result is not None and next_result in results:
+                                on_result(results[next_result])
+                                next_result += 1
+                        start(k)
+                    else:
+                        obs[k] = res.observations
+    finally:
+        if bar is not None:
+            bar.close()
+    return [results[i] for i in range(first, n)]

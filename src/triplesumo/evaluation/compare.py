@@ -1,0 +1,201 @@
+"""``triplesumo compare``: statistics across seeds, the ``rliable`` recipe.
+
+Reads the ``per_seed.csv`` of evaluation folders (written by ``triplesumo evaluate``,
+one row per candidate policy: each training seed of ``--policy runs/s0/policy
+runs/s1/policy ...`` is its own row) and groups the rows (``by``: the candidate group,
+``trained``/``passive``/``random``/...; the algorithm that made the policy; or the folder).
+For each group it reports the test MWR of each seed, their **interquartile mean** (IQM,
+the 25 % trimmed mean, :func:`rliable.metrics.aggregate_iqm`) with a **stratified
+bootstrap** percentile interval, and for each pair of groups the **probability of
+improvement** P(X > Y) (:func:`rliable.metrics.probability_of_improvement`, the
+Mann-Whitney U statistic over ``n_x n_y``; ties count one half) with its bootstrap
+interval (Agarwal et al., 2021, "Deep RL at the Edge of the Statistical Precipice").
+
+The bootstrap follows ``rliable.library.StratifiedBootstrap``: scores are a
+``(runs, tasks)`` matrix (here one task, the test match) and each resample draws runs
+with replacement within each task. It is computed here with numpy, vectorised over
+resamples and seeded from ``seed`` (rliable's ``get_interval_estimates`` draws from
+numpy's global generator, so its intervals are not reproducible from a seed); the point
+estimates are rliable's own functions, and a test holds the intervals to
+``rliable.library.get_interval_estimates`` on the same scores.
+
+An evaluation repeated in several folders (same policy files by sha256, same test seed
+and epochs) is counted once: identical evaluations are not independent seeds.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from rliable import metrics as rly_metrics
+
+from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, PER_SEED_FILE
+from triplesumo.evaluation.video import check_writable
+
+BY = ("group", "algo", "folder")
+
+
+@dataclass(frozen=True)
+class CompareConfig:
+    """Interquartile means with bootstrap intervals and probabilities of improvement across seeds."""
+
+    folders: tuple[str, ...] = ()
+    """Evaluation folders (each holds per_seed.csv from triplesumo evaluate)."""
+    by: str = "group"
+    """Group the seeds by: group (trained, passive, random, ...), algo (from the policy manifest) or folder."""
+    reps: int = 10_000
+    """Bootstrap resamples."""
+    confidence: float = 0.95
+    """Confidence of the intervals."""
+    seed: int = 0
+    """Seed of the bootstrap."""
+    out: str = "runs/compare"
+    """Folder for compare.csv, compare.json, improvement.csv and compare.png."""
+
+    def __post_init__(self) -> None:
+        if self.by not in BY:
+            raise ValueError(f"CompareConfig.by must be one of {BY}, got {self.by!r}")
+        if isinstance(self.reps, bool) or not isinstance(self.reps, int) or self.reps < 100:
+            raise ValueError(f"CompareConfig.reps must be an int >= 100, got {self.reps!r}")
+        if not 0.0 < self.confidence < 1.0:
+            raise ValueError(f"CompareConfig.confidence must be in (0, 1), got {self.confidence!r}")
+
+
+def iqm(scores: NDArray[np.float64]) -> float:
+    """Interquartile mean of a ``(runs, tasks)`` score matrix (rliable's ``aggregate_iqm``)."""
+    return float(rly_metrics.aggregate_iqm(np.asarray(scores, dtype=np.float64)))
+
+
+def probability_of_improvement(x: NDArray[np.float64], y: NDArray[np.float64]) -> float:
+    """P(X > Y) + P(X = Y) / 2, averaged over tasks (rliable's ``probability_of_improvement``)."""
+    return float(rly_metrics.probability_of_improvement(np.asarray(x, dtype=np.float64),
+                                                        np.asarray(y, dtype=np.float64)))
+
+
+def stratified_resamples(scores: NDArray[np.float64], reps: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    """``reps`` stratified bootstrap resamples ``(reps, runs, tasks)`` of a ``(runs, tasks)`` matrix:
+    runs drawn with replacement within each task (``rliable.library.StratifiedBootstrap``)."""
+    runs, tasks = scores.shape
+    picks = rng.integers(runs, size=(reps, runs, tasks))
+    return scores[picks, np.arange(tasks)]
+
+
+def _iqm_rows(samples: NDArray[np.float64]) -> NDArray[np.float64]:
+    """IQM of each resample ``(reps, runs, tasks)``: the 25 % trimmed mean over runs and tasks together."""
+    from scipy.stats import trim_mean
+
+    return np.asarray(trim_mean(samples.reshape(len(samples), -1), 0.25, axis=1), dtype=np.float64)
+
+
+def _poi_rows(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Probability of improvement of each resample pair ``(reps, runs_x, tasks)``, ``(reps, runs_y, tasks)``."""
+    out = np.empty(len(x))
+    for start in range(0, len(x), 1000):  # in chunks: the pairwise comparison is reps x runs_x x runs_y
+        a, b = x[start:start + 1000, :, None, :], y[start:start + 1000, None, :, :]
+        out[start:start + 1000] = ((a > b).mean(axis=(1, 2)) + 0.5 * (a == b).mean(axis=(1, 2))).mean(axis=1)
+    return out
+
+
+def interval_estimates(scores: dict[str, NDArray[np.float64]], reps: int = 10_000, confidence: float = 0.95,
+                       seed: int = 0) -> dict[str, Any]:
+    """IQM with stratified-bootstrap percentile intervals per group, and the probability of improvement
+    (with its interval) of every ordered pair of groups."""
+    rng = np.random.default_rng(seed)
+    alpha = 100.0 * (1.0 - confidence) / 2.0
+    samples = {g: stratified_resamples(np.asarray(s, dtype=np.float64), reps, rng) for g, s in scores.items()}
+    groups = {}
+    for g, s in scores.items():
+        lo, hi = np.percentile(_iqm_rows(samples[g]), [alpha, 100.0 - alpha])
+        groups[g] = {"iqm": iqm(s), "lo": float(lo), "hi": float(hi)}
+    pairs = {}
+    for gx, gy in itertools.permutations(scores, 2):
+        lo, hi = np.percentile(_poi_rows(samples[gx], samples[gy]), [alpha, 100.0 - alpha])
+        pairs[(gx, gy)] = {"poi": probability_of_improvement(scores[gx], scores[gy]), "lo": float(lo),
+                           "hi": float(hi)}
+    return {"groups": groups, "pairs": pairs}
+
+
+def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str, str]]]:
+    """The per-seed rows of evaluation folders, grouped; repeated evaluations counted once."""
+    if not folders:
+        raise ValueError("compare needs at least one evaluation folder")
+    grouped: dict[str, list[dict[str, str]]] = {}
+    seen: set[tuple[str, ...]] = set()
+    for folder in folders:
+        path = Path(folder) / PER_SEED_FILE
+        if not path.is_file():
+            raise FileNotFoundError(f"{path} not found: {folder} is not an evaluation folder of triplesumo evaluate "
+                                    "(run evaluate there, with one --policy per seed)")
+        with path.open(newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            if tuple(reader.fieldnames or ()) != PER_SEED_COLUMNS:
+                raise ValueError(f"{path}: expected the columns {list(PER_SEED_COLUMNS)}, got {reader.fieldnames}")
+            rows = list(reader)
+        for row in rows:
+            key = (row["sha256"], row["learner"], row["eval_seed"], row["epochs"])
+            if key in seen:
+                continue
+            seen.add(key)
+            name = {"group": row["group"], "algo": row["algo"], "folder": f"{Path(folder).name}/{row['group']}"}[by]
+            grouped.setdefault(name, []).append({**row, "folder": str(folder)})
+    return grouped
+
+
+def compare(cfg: CompareConfig) -> dict[str, Any]:
+    """Group the per-seed rows, estimate, write ``compare.csv``, ``improvement.csv``, ``compare.json``
+    and ``compare.png``; returns the table."""
+    from triplesumo.evaluation.league_plots import plot_compare
+
+    out = check_writable(Path(cfg.out))
+    grouped = read_per_seed(cfg.folders, cfg.by)
+    scores = {g: np.array([[float(r["test_mwr"])] for r in rows]) for g, rows in grouped.items()}
+    est = interval_estimates(scores, cfg.reps, cfg.confidence, cfg.seed)
+    table: dict[str, Any] = {"config": asdict(cfg), "by": cfg.by, "confidence": cfg.confidence, "groups": [],
+                             "improvement": []}
+    for g, rows in sorted(grouped.items(), key=lambda kv: -est["groups"][kv[0]]["iqm"]):
+        table["groups"].append({"group": g, "n_seeds": len(rows), "scores": [float(r["test_mwr"]) for r in rows],
+                                "policies": [r["policy"] for r in rows], "mean": float(np.mean(scores[g])),
+                                **est["groups"][g]})
+    for (gx, gy), p in est["pairs"].items():
+        table["improvement"].append({"x": gx, "y": gy, **p})
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["group", "n_seeds", "iqm", "lo", "hi", "mean", "seed_scores"])
+    for g in table["groups"]:
+        w.writerow([g["group"], g["n_seeds"], f"{g['iqm']:.4f}", f"{g['lo']:.4f}", f"{g['hi']:.4f}",
+                    f"{g['mean']:.4f}", " ".join(f"{s:.4f}" for s in g["scores"])])
+    atomic_write_bytes(out / "compare.csv", buf.getvalue().encode())
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["x", "y", "probability_of_improvement", "lo", "hi"])
+    for p in table["improvement"]:
+        w.writerow([p["x"], p["y"], f"{p['poi']:.4f}", f"{p['lo']:.4f}", f"{p['hi']:.4f}"])
+    atomic_write_bytes(out / "improvement.csv", buf.getvalue().encode())
+    atomic_write_bytes(out / "compare.json", (json.dumps(table, indent=2) + "\n").encode())
+    plot_compare(table, out / "compare.png", title=f"test MWR across seeds, by {cfg.by}")
+    return table
+
+
+def format_compare(table: dict[str, Any]) -> str:
+    """The table printed by ``triplesumo compare``."""
+    pct = round(100 * table["confidence"])
+    lines = [f"{'group':24s} {'seeds':>5s} {f'IQM [{pct}% CI]':>26s}  per-seed test MWR"]
+    for g in table["groups"]:
+        ci = f"{g['iqm']:+.3f} [{g['lo']:+.3f}, {g['hi']:+.3f}]"
+        lines.append(f"{g['group'][:24]:24s} {g['n_seeds']:5d} {ci:>26s}  "
+                     + " ".join(f"{s:+.3f}" for s in g["scores"]))
+    if table["improvement"]:
+        lines.append("")
+        lines.append(f"{'P(X > Y)':48s} {f'[{pct}% CI]':>18s}")
+        for p in table["improvement"]:
+            lines.append(f"{p['x'][:22]:>22s} > {p['y'][:22]:22s}  {p['poi']:.3f} [{p['lo']:.3f}, {p['hi']:.3f}]")
+    return "\n".join(lines)

@@ -1,0 +1,410 @@
+"""``triplesumo tournament``: seeded matches between named policies in every seat they can take.
+
+The *entries* are named policies (``NAME=SPEC``: ``ant=zoo:ant``, ``passive=passive``,
+``mine=runs/x/policy``). A scenario gives the roster (today ``"paper"``: Ant and Bug
+against Spider); a *lineup* puts one entry in every seat, each entry at most once per
+match (a policy is one player and cannot play on both sides). Which seats an entry can
+take:
+
+* built-in policies (``passive``/``zero``, ``random``) take any seat;
+* a policy file takes a seat whose observation size is its ``obs_dim``, in the
+  observation mode it was trained with; with ``paper`` observations (one global vector,
+  the same for every agent, not relative to the seat) only the seat it was trained in,
+  in the roster it was trained in, since nothing in the vector tells it which quadruped
+  it drives.
+
+Schedules: ``round-robin`` plays every lineup once per round for ``rounds`` rounds; in
+round ``r`` every match resets with seed ``seed + r``, so all lineups meet the same
+starts (a paired comparison). ``sampled`` plays ``matches`` matches; match ``m`` draws
+its lineup uniformly from ``SeedSequence([seed, m])`` and resets with ``seed + m``.
+Either way match ``m`` depends on ``m`` alone, so more rounds (or matches) extend a
+tournament without changing the matches already played.
+
+Writes into ``out``: ``matches.csv`` (one row per match, appended as matches finish),
+``tournament.json`` (what the rows depend on, with the sha256 of every policy's files),
+``leaderboard.csv``, ``crossplay.csv``, ``results.json`` and ``leaderboard.png``,
+``crossplay.png``. In 1-vs-1 rosters the leaderboard also gives plain Elo (K = 32, from
+1500). Ratings are openskill's (:mod:`~triplesumo.evaluation.ratings`),
+computed from the rows in match order: the same rows give the same table. A policy's
+rating pools its seats, so where seats are unequal (the paper's Spider seat wins more
+often than either team seat, whoever sits in it) ``rate_by="seat"`` rates each policy in
+each seat apart (``passive@spider``) and writes the tables as ``*_by_seat.*``; it changes
+no match, so ``resume=True`` re-rates a finished tournament without playing. With
+``resume=True`` the rows already in ``out`` are kept (a torn last row is cut off) and
+the rest are played, exactly the rows of an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from triplesumo.agents.builtin import BUILTIN
+from triplesumo.agents.policy_file import load_policy
+from triplesumo.agents.zoo import load as zoo_load
+from triplesumo.agents.zoo import make_policy, policy_fingerprint
+from triplesumo.envs.match import Match
+from triplesumo.evaluation.evaluate import RowAppender, finished_rows
+from triplesumo.evaluation.metrics import OUTCOMES
+from triplesumo.evaluation.ratings import MODELS, Elo, RatingTable
+from triplesumo.evaluation.runner import SeatedResult, play_matches
+from triplesumo.evaluation.stats import wilson_interval
+from triplesumo.evaluation.video import check_writable
+from triplesumo.model.specs import PAPER_AGENTS, AgentSpec
+from triplesumo.rules.config import OBS_MODES, MatchConfig
+from triplesumo.rules.teams import Teams
+
+SCENARIOS: dict[str, tuple[AgentSpec, ...]] = {"paper": PAPER_AGENTS}
+"""Rosters by scenario name (the paper's 2-vs-1 today; other scenarios plug in here)."""
+SCHEDULES = ("round-robin", "sampled")
+RATE_BY = ("policy", "seat")
+RECORD_FILE = "tournament.json"
+ROWS_FILE = "matches.csv"
+
+
+@dataclass(frozen=True)
+class TournamentConfig:
+    """A tournament of seeded matches between named policies, rated with openskill."""
+
+    scenario: str = "paper"
+    """Which game: its roster gives the seats (today: paper)."""
+    policies: tuple[str, ...] = ("ant=zoo:ant", "bug=zoo:bug", "spider=zoo:spider", "passive=passive",
+                                 "random=random")
+    """NAME=SPEC entries; SPEC is zero, passive, random, zoo:NAME or a policy-file path."""
+    schedule: str = "round-robin"
+    """round-robin (every lineup once per round) or sampled (lineups drawn at random)."""
+    rounds: int = 10
+    """round-robin: rounds (each plays every lineup once, all from the same start seed)."""
+    matches: int = 200
+    """sampled: number of matches."""
+    seed: int = 20_000
+    """Seed of the schedule and the matches' reset noise."""
+    steps_per_epoch: int = 500
+    """Step limit of a match (a draw when reached)."""
+    obs_mode: str = "paper"
+    """Observation mode of the matches."""
+    rating_model: str = "PlackettLuce"
+    """openskill model: PlackettLuce, BradleyTerryFull, BradleyTerryPart, ThurstoneMostellerFull or
+    ThurstoneMostellerPart."""
+    rate_by: str = "policy"
+    """Who is rated: "policy" (one rating per policy, whatever its seat) or "seat" (one per policy and
+    seat, e.g. passive@spider: fairer where seats are unequal, as in the paper's 2-vs-1)."""
+    confidence: float = 0.95
+    """Confidence of the rating intervals and of the cross-play win-rate intervals."""
+    out: str = "runs/tournament"
+    """Folder for the tables and plots."""
+    n_envs: int = 16
+    """Matches played at once."""
+    n_threads: int = 2
+    """MuJoCo threads."""
+    progress: bool = True
+    """Show a progress bar."""
+    resume: bool = False
+    """Continue the tournament in ``out`` (killed, or to more rounds/matches): finished matches are kept."""
+
+    def __post_init__(self) -> None:
+        for name in ("rounds", "matches", "steps_per_epoch", "n_envs", "n_threads"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"TournamentConfig.{name} must be an int >= 1, got {value!r}")
+        if self.scenario not in SCENARIOS:
+            raise ValueError(f"TournamentConfig.scenario must be one of {sorted(SCENARIOS)}, got {self.scenario!r}")
+        if self.schedule not in SCHEDULES:
+            raise ValueError(f"TournamentConfig.schedule must be one of {SCHEDULES}, got {self.schedule!r}")
+        if self.obs_mode not in OBS_MODES:
+            raise ValueError(f"TournamentConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
+        if self.rating_model not in MODELS:
+            raise ValueError(f"TournamentConfig.rating_model must be one of {sorted(MODELS)}, "
+                             f"got {self.rating_model!r}")
+        if self.rate_by not in RATE_BY:
+            raise ValueError(f"TournamentConfig.rate_by must be one of {RATE_BY}, got {self.rate_by!r}")
+        if not 0.0 < self.confidence < 1.0:
+            raise ValueError(f"TournamentConfig.confidence must be in (0, 1), got {self.confidence!r}")
+        entries = parse_entries(self.policies)
+        if len(entries) < 2:
+            raise ValueError(f"TournamentConfig.policies needs at least 2 entries, got {list(self.policies)}")
+
+    def match_config(self) -> MatchConfig:
+        """The scenario's match."""
+        return MatchConfig(agents=SCENARIOS[self.scenario], max_steps=self.steps_per_epoch, obs_mode=self.obs_mode)
+
+
+def parse_entries(pairs: tuple[str, ...]) -> dict[str, str]:
+    """``("ant=zoo:ant", ...)`` -> ``{"ant": "zoo:ant", ...}``; errors name the bad entry."""
+    entries: dict[str, str] = {}
+    for pair in pairs:
+        name, sep, spec = pair.partition("=")
+        if not sep or not name or not spec or "=" in spec:
+            raise ValueError(f"TournamentConfig.policies: expected NAME=SPEC, got {pair!r}")
+        if not all(c.isalnum() or c in "-_." for c in name):
+            raise ValueError(f"TournamentConfig.policies: NAME may hold letters, digits, - _ . only, got {name!r}")
+        if name in entries:
+            raise ValueError(f"TournamentConfig.policies: entry {name!r} given twice")
+        entries[name] = spec
+    return entries
+
+
+def _manifest(spec: str, obs_mode: str) -> dict[str, Any] | None:
+    """A policy file's manifest (``None`` for built-ins); errors name the spec."""
+    if spec in BUILTIN:
+        return None
+    if spec.startswith("zoo:"):
+        return zoo_load(spec[4:])[1]
+    path = Path(spec)
+    if not (path.with_suffix(".json").exists() or path.exists()):
+        raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' or the path of a "
+                         "policy file")
+    return load_policy(path)[1]
+
+
+def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> list[str]:
+    """The seats of ``match`` that policy ``spec`` (with its ``manifest``) can take (module docstring)."""
+    if manifest is None:
+        return list(match.agents)
+    if manifest["obs_mode"] != match.config.obs_mode:
+        return []
+    motors = dict(zip(match.agents, match.action_sizes, strict=True))
+    seats = [a for a in match.agents
+             if match.observer.sizes[a] == int(manifest["obs_dim"]) and motors[a] == int(manifest["act_dim"])]
+    if match.config.obs_mode == "paper":
+        trained_roster = manifest.get("agents")
+        if trained_roster is not None and list(trained_roster) != list(match.agents):
+            return []
+        seats = [a for a in seats if a == manifest.get("agent")]
+    return seats
+
+
+def lineups(seats_of: dict[str, list[str]], agents: tuple[str, ...]) -> list[tuple[str, ...]]:
+    """Every assignment of one entry per seat (roster order), each entry at most once, in a fixed order."""
+    options = [[name for name, seats in seats_of.items() if agent in seats] for agent in agents]
+    return [combo for combo in itertools.product(*options) if len(set(combo)) == len(combo)]
+
+
+def columns_of(agents: tuple[str, ...]) -> tuple[str, ...]:
+    """The columns of ``matches.csv`` for a roster."""
+    return ("match", "seed", *agents, *(f"{a}_outcome" for a in agents), "steps")
+
+
+class Tournament:
+    """The schedule of a :class:`TournamentConfig`: entries, their seats, the lineups and the matches."""
+
+    def __init__(self, cfg: TournamentConfig, match_cfg: MatchConfig | None = None) -> None:
+        self.cfg = cfg
+        self.match_cfg = match_cfg or cfg.match_config()
+        self.entries = parse_entries(cfg.policies)
+        match = Match(self.match_cfg)
+        self.agents = match.agents
+        self.teams = Teams.from_agents(self.match_cfg.agents)
+        self.seats_of = {name: eligible_seats(spec, _manifest(spec, self.match_cfg.obs_mode), match)
+                         for name, spec in self.entries.items()}
+        idle = [f"{n}={self.entries[n]}" for n, s in self.seats_of.items() if not s]
+        if idle:
+            raise ValueError(f"policies {idle} fit no seat of the {cfg.scenario!r} scenario (seats "
+                             f"{list(self.agents)}, obs_mode {self.match_cfg.obs_mode!r}, observation sizes "
+                             f"{[match.observer.sizes[a] for a in self.agents]})")
+        self.lineups = lineups(self.seats_of, self.agents)
+        if not self.lineups:
+            raise ValueError(f"no lineup fills every seat {list(self.agents)} with different policies; "
+                             f"seats each policy can take: {self.seats_of}")
+        self.n_matches = cfg.rounds * len(self.lineups) if cfg.schedule == "round-robin" else cfg.matches
+        self.columns = columns_of(self.agents)
+
+    def lineup_of(self, m: int) -> tuple[str, ...]:
+        """Entry names in each seat of match ``m``."""
+        if self.cfg.schedule == "round-robin":
+            return self.lineups[m % len(self.lineups)]
+        draw = np.random.default_rng(np.random.SeedSequence([self.cfg.seed, m])).integers(len(self.lineups))
+        return self.lineups[int(draw)]
+
+    def seed_of(self, m: int) -> int:
+        """Reset seed of match ``m``."""
+        return self.cfg.seed + (m // len(self.lineups) if self.cfg.schedule == "round-robin" else m)
+
+    def row(self, result: SeatedResult) -> dict[str, Any]:
+        m = result.index
+        return {"match": m + 1, "seed": self.seed_of(m), **dict(zip(self.agents, self.lineup_of(m), strict=True)),
+                **{f"{a}_outcome": o for a, o in zip(self.agents, result.outcomes, strict=True)},
+                "steps": result.steps}
+
+    def valid_row(self, values: dict[str, str], number: int) -> bool:
+        m = number - 1
+        return (values["match"] == str(number) and values["seed"] == str(self.seed_of(m))
+                and tuple(values[a] for a in self.agents) == self.lineup_of(m)
+                and all(values[f"{a}_outcome"] in OUTCOMES for a in self.agents) and values["steps"].isdigit())
+
+    def record(self) -> dict[str, Any]:
+        """What the rows depend on (see the module docstring)."""
+        c = self.cfg
+        return {"rows_depend_on": {"schedule": c.schedule, "seed": c.seed, "match": asdict(self.match_cfg)},
+                "entries": {n: {"policy": s, "sha256": policy_fingerprint(s), "seats": self.seats_of[n]}
+                            for n, s in self.entries.items()}}
+
+
+def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) -> dict[str, Any]:
+    """Play (or resume) the tournament, write its tables and plots; returns the results.
+
+    ``match_cfg`` replaces the scenario's match (a roster of any teams), for tests and
+    scenarios not yet named.
+    """
+    out = check_writable(Path(cfg.out))
+    t = Tournament(cfg, match_cfg)
+    policies = {n: make_policy(s, seed=cfg.seed, expect_obs_mode=t.match_cfg.obs_mode) for n, s in t.entries.items()}
+    record = json.loads(json.dumps(t.record()))
+    rows_path = out / ROWS_FILE
+    done = 0
+    if cfg.resume:
+        _check_resumable(out / RECORD_FILE, record)
+        done = finished_rows(rows_path, t.n_matches, t.columns, t.valid_row,
+                             ("table of tournament matches", "matches", "matches of this schedule"))
+    from triplesumo.agents.policy_file import atomic_write_bytes
+
+    atomic_write_bytes(out / RECORD_FILE, (json.dumps(record, indent=2) + "\n").encode())
+    if done < t.n_matches:
+        with RowAppender(rows_path, fresh=done == 0, columns=t.columns) as append:
+            play_matches(lambda m: [policies[n] for n in t.lineup_of(m)], t.seed_of, t.n_matches, t.match_cfg,
+                         cfg.n_envs, cfg.n_threads, first=done, on_result=lambda r: append(t.row(r)),
+                         progress="tournament" if cfg.progress else None)
+    rows = read_rows(rows_path)
+    results = tabulate(rows, t, cfg)
+    results["config"] = asdict(cfg)
+    _write_outputs(out, results, cfg)
+    return results
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    import csv
+
+    with path.open(newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _check_resumable(path: Path, record: dict[str, Any]) -> None:
+    folder = path.parent
+    if not path.exists():
+        raise FileNotFoundError(f"nothing to resume in {folder}: {path.name} not found (run without resume to "
+                                "start a tournament there)")
+    try:
+        old = json.loads(path.read_text(encoding="utf-8"))
+        old_fields, old_entries = old["rows_depend_on"], old["entries"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"cannot resume {folder}: {path} is unreadable or corrupt ({exc})") from None
+    for name, value in record["rows_depend_on"].items():
+        if old_fields.get(name) != value:
+            raise ValueError(f"cannot resume {folder}: {name} was {old_fields.get(name)!r}, now {value!r}")
+    if old_entries != record["entries"]:
+        changed = sorted(n for n in {*old_entries, *record["entries"]}
+                         if old_entries.get(n) != record["entries"].get(n))
+        raise ValueError(f"cannot resume {folder}: entries {changed} changed (another policy, its files, or the "
+                         "set of entries)")
+
+
+def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -> dict[str, Any]:
+    """Ratings, per-seat win/loss/draw counts and the cross-play matrix from the match rows.
+
+    The players are the policies, or with ``rate_by="seat"`` each policy in each seat it took
+    (``NAME@SEAT``).
+    """
+    def player(name: str, seat: str) -> str:
+        return name if cfg.rate_by == "policy" else f"{name}@{seat}"
+
+    names = [player(n, seat) for n in t.entries for seat in
+             ([t.agents[0]] if cfg.rate_by == "policy" else [a for a in t.agents if a in t.seats_of[n]])]
+    table = RatingTable(cfg.rating_model, names)
+    counts = {n: {a: dict.fromkeys(OUTCOMES, 0) for a in t.agents} for n in names}
+    policy_of = {player(n, seat): n for n in t.entries for seat in t.agents}
+    wins = np.zeros((len(names), len(names)), dtype=np.int64)
+    draws = np.zeros_like(wins)
+    games = np.zeros_like(wins)
+    idx = {n: i for i, n in enumerate(names)}
+    team_members = [[int(i) for i in np.flatnonzero(t.teams.team_of == k)] for k in range(len(t.teams.names))]
+    duel = len(team_members) == 2 and all(len(m) == 1 for m in team_members)
+    elo = Elo() if duel else None  # plain Elo beside openskill where users expect it: 1-vs-1
+    for row in rows:
+        seated = [player(row[a], a) for a in t.agents]
+        outcome = [row[f"{a}_outcome"] for a in t.agents]
+        for name, agent, o in zip(seated, t.agents, outcome, strict=True):
+            counts[name][agent][o] += 1
+        if "error" in outcome:
+            continue  # a physics error decides nothing: counted, not rated
+        teams = [[seated[i] for i in members] for members in team_members]
+        table.record_outcomes(teams, [outcome[members[0]] for members in team_members])
+        if elo is not None:
+            elo.record(seated[0], seated[1], {"win": 1.0, "draw": 0.5, "loss": 0.0}[outcome[0]])
+        for i, j in itertools.permutations(range(len(seated)), 2):
+            if t.teams.team_of[i] != t.teams.team_of[j]:
+                row_i, col_j = idx[seated[i]], idx[seated[j]]
+                games[row_i, col_j] += 1
+                wins[row_i, col_j] += outcome[i] == "win"
+                draws[row_i, col_j] += outcome[i] == "draw"
+    board = []
+    for name in table.ranking():
+        r = table[name]
+        lo, hi = r.interval(cfg.confidence)
+        total = {o: sum(counts[name][a][o] for a in t.agents) for o in OUTCOMES}
+        elo_rating = None if elo is None else elo.ratings.get(name, elo.initial)
+        board.append({"policy": name, "spec": t.entries[policy_of[name]], "mu": r.mu, "sigma": r.sigma, "lo": lo,
+                      "hi": hi, "ordinal": r.ordinal, "elo": elo_rating, "matches": sum(total.values()),
+                      **{f"n_{o}": total[o] for o in OUTCOMES}, "seats": counts[name]})
+    cross = []
+    for a, b in itertools.permutations(names, 2):
+        n, w = int(games[idx[a], idx[b]]), int(wins[idx[a], idx[b]])
+        lo, hi = wilson_interval(w, n, cfg.confidence)
+        cross.append({"row": a, "column": b, "n": n, "wins": w, "draws": int(draws[idx[a], idx[b]]),
+                      "win_rate": w / n if n else None, "lo": None if math.isnan(lo) else lo,
+                      "hi": None if math.isnan(hi) else hi})
+    return {"scenario": cfg.scenario, "seats": list(t.agents), "n_matches": len(rows), "rate_by": cfg.rate_by,
+            "rating_model": cfg.rating_model, "confidence": cfg.confidence, "leaderboard": board,
+            "crossplay": cross}
+
+
+def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) -> None:
+    import csv
+    import io
+
+    from triplesumo.agents.policy_file import atomic_write_bytes
+    from triplesumo.evaluation.league_plots import plot_crossplay, plot_leaderboard
+
+    seats = results["seats"]
+    tag = "" if cfg.rate_by == "policy" else "_by_seat"
+    buf = io.StringIO()
+    seat_cols = [f"{a}_{o}" for a in seats for o in OUTCOMES]
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["rank", "policy", "spec", "mu", "sigma", "lo", "hi", "ordinal", "elo", "matches",
+                *(f"n_{o}" for o in OUTCOMES), *seat_cols])
+    for rank, e in enumerate(results["leaderboard"], 1):
+        w.writerow([rank, e["policy"], e["spec"], *(f"{e[k]:.4f}" for k in ("mu", "sigma", "lo", "hi", "ordinal")),
+                    "" if e["elo"] is None else f"{e['elo']:.1f}", e["matches"], *(e[f"n_{o}"] for o in OUTCOMES),
+                    *(e["seats"][a][o] for a in seats for o in OUTCOMES)])
+    atomic_write_bytes(out / f"leaderboard{tag}.csv", buf.getvalue().encode())
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["row", "column", "n", "wins", "draws", "win_rate", "lo", "hi"])
+    for c in results["crossplay"]:
+        w.writerow([c["row"], c["column"], c["n"], c["wins"], c["draws"],
+                    *("" if c[k] is None else f"{c[k]:.4f}" for k in ("win_rate", "lo", "hi"))])
+    atomic_write_bytes(out / f"crossplay{tag}.csv", buf.getvalue().encode())
+    atomic_write_bytes(out / f"results{tag}.json", (json.dumps(results, indent=2) + "\n").encode())
+    title = f"{cfg.scenario}: {results['n_matches']} matches"
+    plot_leaderboard(results, out / f"leaderboard{tag}.png", title=title)
+    plot_crossplay(results, out / f"crossplay{tag}.png", title=title)
+
+
+def format_leaderboard(results: dict[str, Any]) -> str:
+    """A readable leaderboard with per-seat win/loss/draw."""
+    seats = results["seats"]
+    pct = round(100 * results["confidence"])
+    head = f"{'#':>2s} {'policy':16s} {'mu':>7s} {'sigma':>6s} {f'{pct}% interval':>17s} {'matches':>7s} " + " ".join(
+        f"{a + ' W/L/D':>14s}" for a in seats)
+    lines = [head]
+    for rank, e in enumerate(results["leaderboard"], 1):
+        per_seat = " ".join(f"{'{}/{}/{}'.format(*(e['seats'][a][o] for o in ('win', 'loss', 'draw'))):>14s}"
+                            for a in seats)
+        lines.append(f"{rank:2d} {e['policy'][:16]:16s} {e['mu']:7.2f} {e['sigma']:6.2f} "
+                     f"[{e['lo']:6.2f}, {e['hi']:6.2f}] {e['matches']:7d} {per_seat}")
+    return "\n".join(lines)

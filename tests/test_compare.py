@@ -1,0 +1,171 @@
+"""``triplesumo compare``: IQM, stratified bootstrap intervals, probability of improvement; and the
+per-seed rows that ``evaluate`` writes for it over several policies."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rliable import metrics as rly_metrics
+
+import triplesumo.agents.zoo
+from conftest import TinyZoo
+from triplesumo.cli import main
+from triplesumo.evaluation.compare import (
+    CompareConfig,
+    _iqm_rows,
+    _poi_rows,
+    compare,
+    interval_estimates,
+    iqm,
+    probability_of_improvement,
+    stratified_resamples,
+)
+from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, EvaluateConfig, evaluate
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def col(values: list[float]) -> np.ndarray:
+    return np.asarray(values, dtype=np.float64)[:, None]
+
+
+def test_iqm_of_a_known_array_is_the_mean_of_its_middle_half() -> None:
+    assert iqm(col([1, 2, 3, 4, 5, 6, 7, 8])) == pytest.approx(4.5)  # mean of 3, 4, 5, 6
+    assert iqm(col([0, 0, 1, 1, 1, 1, 100, -100])) == pytest.approx(0.75)  # outliers trimmed: 0, 1, 1, 1
+    assert iqm(np.array([[1.0, 5.0], [2.0, 6.0], [3.0, 7.0], [4.0, 8.0]])) == pytest.approx(4.5)  # runs x tasks
+
+
+def test_intervals_hold_the_estimate_and_narrow_with_more_seeds() -> None:
+    rng = np.random.default_rng(3)
+    few, many = col(list(rng.normal(0.2, 0.1, 5))), col(list(rng.normal(0.2, 0.1, 60)))
+    est = interval_estimates({"few": few, "many": many}, reps=4000, seed=1)["groups"]
+    for g, scores in (("few", few), ("many", many)):
+        assert est[g]["lo"] <= est[g]["iqm"] <= est[g]["hi"]
+        assert est[g]["iqm"] == pytest.approx(rly_metrics.aggregate_iqm(scores))
+    assert est["many"]["hi"] - est["many"]["lo"] < 0.6 * (est["few"]["hi"] - est["few"]["lo"])
+    assert est["many"]["lo"] < 0.2 < est["many"]["hi"]
+    again = interval_estimates({"few": few, "many": many}, reps=4000, seed=1)["groups"]
+    assert again == est  # seeded
+
+
+def test_probability_of_improvement_is_one_for_separated_groups_and_a_half_for_identical_ones() -> None:
+    good, bad = col([0.5, 0.6, 0.55, 0.7, 0.65]), col([-0.2, -0.1, 0.0, -0.3, -0.15])
+    assert probability_of_improvement(good, bad) == 1.0
+    assert probability_of_improvement(bad, good) == 0.0
+    assert probability_of_improvement(good, good.copy()) == 0.5
+    pairs = interval_estimates({"good": good, "bad": bad, "same": good.copy()}, reps=2000, seed=0)["pairs"]
+    assert pairs[("good", "bad")] == {"poi": 1.0, "lo": 1.0, "hi": 1.0}
+    same = pairs[("good", "same")]
+    assert same["poi"] == 0.5 and same["lo"] < 0.5 < same["hi"]
+    overlapping = interval_estimates({"a": col([0.1, 0.3, 0.5]), "b": col([0.2, 0.4, 0.6])}, reps=2000)["pairs"]
+    assert overlapping[("a", "b")]["poi"] == pytest.approx(3 / 9)  # 0.3 > 0.2, 0.5 > 0.2, 0.5 > 0.4
+
+
+def test_vectorised_bootstrap_statistics_are_rliables_functions_per_resample() -> None:
+    rng = np.random.default_rng(0)
+    x, y = rng.normal(size=(7, 2)), rng.normal(size=(4, 2)).round(1)
+    xs, ys = stratified_resamples(x, 50, rng), stratified_resamples(y, 50, rng)
+    np.testing.assert_allclose(_iqm_rows(xs), [rly_metrics.aggregate_iqm(s) for s in xs])
+    np.testing.assert_allclose(_poi_rows(xs, ys), [rly_metrics.probability_of_improvement(a, b)
+                                                   for a, b in zip(xs, ys, strict=True)])
+
+
+def test_stratified_resamples_draw_runs_within_each_task() -> None:
+    scores = np.array([[0.0, 100.0], [1.0, 101.0], [2.0, 102.0]])
+    samples = stratified_resamples(scores, 500, np.random.default_rng(0))
+    assert samples.shape == (500, 3, 2)
+    assert set(np.unique(samples[:, :, 0])) == {0.0, 1.0, 2.0}
+    assert set(np.unique(samples[:, :, 1])) == {100.0, 101.0, 102.0}
+
+
+def test_bootstrap_agrees_with_rliable_library_where_it_imports() -> None:
+    try:
+        from rliable import library as rly
+    except TypeError as exc:  # rliable 1.2 -> arch 7 -> pandas 3: `deprecate_kwarg` changed
+        pytest.skip(f"rliable.library does not import here: {exc}")
+    rng = np.random.default_rng(5)
+    scores = {"a": rng.normal(0.3, 0.2, (10, 1)), "b": rng.normal(0.0, 0.2, (10, 1))}
+    ours = interval_estimates(scores, reps=20_000, seed=0)["groups"]
+    np.random.seed(0)  # noqa: NPY002  (rliable's bootstrap draws from numpy's global generator)
+    points, intervals = rly.get_interval_estimates(scores, lambda s: np.array([rly_metrics.aggregate_iqm(s)]),
+                                                   reps=20_000)
+    for g in scores:
+        assert ours[g]["iqm"] == pytest.approx(points[g][0])
+        assert ours[g]["lo"] == pytest.approx(intervals[g][0, 0], abs=0.02)
+        assert ours[g]["hi"] == pytest.approx(intervals[g][1, 0], abs=0.02)
+
+
+# ------------------------------------------------------------------- end to end
+@pytest.fixture
+def seeds_eval(tiny_zoo: TinyZoo, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """An evaluation of two 'seeds' (the tiny Bug and its published zoo copy) plus passive and random."""
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    out = tmp_path / "eval"
+    evaluate(EvaluateConfig(policy=(str(tiny_zoo.bug_policy), "zoo:bug"), epochs=4, steps_per_epoch=30,
+                            out=str(out), n_envs=4, n_threads=1, progress=False))
+    return out
+
+
+def per_seed(folder: Path) -> list[dict[str, str]]:
+    with (folder / "per_seed.csv").open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_evaluate_writes_one_row_per_seed_and_compare_reads_them(seeds_eval: Path, tmp_path: Path,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    rows = per_seed(seeds_eval)
+    assert tuple(rows[0]) == PER_SEED_COLUMNS
+    assert [r["group"] for r in rows] == ["trained", "trained", "passive", "random"]
+    assert rows[1]["candidate"] == "trained-zoo-bug" and rows[1]["policy"] == "zoo:bug"
+    assert [r["algo"] for r in rows] == ["ddpg", "ddpg", "passive", "random"]
+    summary = json.loads((seeds_eval / "summary.json").read_text())
+    for r in rows:
+        c = summary["candidates"][r["candidate"]]
+        assert float(r["test_mwr"]) == pytest.approx(c["mean_lwr"])
+        assert int(r["n_win"]) + int(r["n_loss"]) + int(r["n_draw"]) <= int(r["epochs"]) == 4
+    out = tmp_path / "cmp"
+    # The folder twice: its evaluations are counted once.
+    assert main(["compare", str(seeds_eval), str(seeds_eval), "--out", str(out), "--reps", "500"]) == 0
+    printed = capsys.readouterr().out
+    assert "IQM" in printed and "P(X > Y)" in printed
+    table = json.loads((out / "compare.json").read_text())
+    groups = {g["group"]: g for g in table["groups"]}
+    assert set(groups) == {"trained", "passive", "random"}
+    assert groups["trained"]["n_seeds"] == 2 and groups["passive"]["n_seeds"] == 1
+    assert sorted(groups["trained"]["scores"]) == sorted(float(r["test_mwr"]) for r in rows[:2])
+    assert groups["trained"]["iqm"] == pytest.approx(np.mean(groups["trained"]["scores"]))
+    assert len(table["improvement"]) == 6
+    assert (out / "compare.png").read_bytes().startswith(PNG)
+    with (out / "compare.csv").open(newline="") as fh:
+        assert {r["group"] for r in csv.DictReader(fh)} == set(groups)
+    by_algo = compare(CompareConfig(folders=(str(seeds_eval),), by="algo", reps=200, out=str(tmp_path / "a")))
+    assert {g["group"] for g in by_algo["groups"]} == {"ddpg", "passive", "random"}
+
+
+def test_evaluate_expands_a_glob_of_policy_files(tiny_zoo: TinyZoo, tmp_path: Path) -> None:
+    from triplesumo.evaluation.evaluate import expand_policies
+
+    stem = str(tiny_zoo.zoo_dir / "*")
+    found = expand_policies((stem,))
+    assert [Path(p).name for p in found] == ["ant", "bug", "spider"]
+    with pytest.raises(ValueError, match="matches no policy file"):
+        expand_policies((str(tmp_path / "nothing-*"),))
+
+
+def test_bad_input_gives_clear_errors(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="by must be one of"):
+        CompareConfig(by="colour")
+    with pytest.raises(ValueError, match="reps must be an int >= 100"):
+        CompareConfig(reps=5)
+    with pytest.raises(FileNotFoundError, match="per_seed.csv not found"):
+        compare(CompareConfig(folders=(str(tmp_path),), out=str(tmp_path / "o")))
+    (tmp_path / "per_seed.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="expected the columns"):
+        compare(CompareConfig(folders=(str(tmp_path),), out=str(tmp_path / "o")))
+    assert main(["compare", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    with pytest.raises(ValueError, match="at least one policy"):
+        EvaluateConfig(policy=())

@@ -1,0 +1,207 @@
+"""``triplesumo tournament``: seats, schedule, ratings of real matches, determinism, resume, errors.
+
+Real matches, kept short: a 1-vs-1 roster (two quadrupeds, passive against random, whose
+random legs walk it off the ring) for the ratings, and the paper scenario over a tiny
+trained zoo for seats and the command line.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+import triplesumo.agents.zoo
+from conftest import TinyZoo
+from triplesumo.cli import main
+from triplesumo.envs.match import Match
+from triplesumo.evaluation.tournament import Tournament, TournamentConfig, run_tournament
+from triplesumo.model.specs import AgentSpec, PhysicsConfig
+from triplesumo.rules.config import MatchConfig
+
+PNG = b"\x89PNG\r\n\x1a\n"
+DUEL = MatchConfig(agents=(AgentSpec("a", "a", 0.2), AgentSpec("b", "b", 0.2)), max_steps=1000,
+                   physics=PhysicsConfig(integrator="Euler"))
+"""1-vs-1: two quadrupeds, one per team (Euler: about 4 x cheaper than RK4, and a match all the same;
+at 1,000 steps the random quadruped leaves the ring in most matches, so few end drawn)."""
+
+
+def duel_cfg(out: Path, **fields: object) -> TournamentConfig:
+    base = TournamentConfig(policies=("passive=passive", "random=random"), rounds=24, steps_per_epoch=1000,
+                            out=str(out), n_envs=8, n_threads=1, progress=False)
+    return dataclasses.replace(base, **fields)  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def duel(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("duel")
+    return out, run_tournament(duel_cfg(out), DUEL)
+
+
+def rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_passive_ends_rated_above_random_with_non_overlapping_intervals(duel: tuple[Path, dict]) -> None:
+    out, results = duel
+    board = {e["policy"]: e for e in results["leaderboard"]}
+    assert [e["policy"] for e in results["leaderboard"]] == ["passive", "random"]
+    assert board["passive"]["lo"] > board["random"]["hi"]
+    assert board["passive"]["elo"] > 1500.0 > board["random"]["elo"]  # 1-vs-1: plain Elo beside openskill
+    assert board["passive"]["elo"] + board["random"]["elo"] == pytest.approx(3000.0)
+    # Every lineup in every round: 2 lineups (each policy in each seat) x 24 rounds.
+    table = rows(out / "matches.csv")
+    assert len(table) == 48 == results["n_matches"]
+    assert {(r["a"], r["b"]) for r in table} == {("passive", "random"), ("random", "passive")}
+    # Win/loss/draw per seat adds up to the matches, and mirrors the opponent's.
+    for e in results["leaderboard"]:
+        assert sum(sum(s.values()) for s in e["seats"].values()) == e["matches"] == 48
+    assert board["passive"]["n_win"] == board["random"]["n_loss"]
+    assert board["passive"]["n_win"] > 36
+    cross = {(c["row"], c["column"]): c for c in results["crossplay"]}
+    pr = cross[("passive", "random")]
+    assert pr["n"] == 48 and pr["wins"] == board["passive"]["n_win"]
+    assert pr["lo"] <= pr["win_rate"] <= pr["hi"] and pr["lo"] > 0.5
+    assert cross[("random", "passive")]["wins"] == board["random"]["n_win"]
+    for name in ("leaderboard.png", "crossplay.png"):
+        assert (out / name).read_bytes().startswith(PNG)
+    lb = rows(out / "leaderboard.csv")
+    assert [r["policy"] for r in lb] == ["passive", "random"]
+    assert int(lb[0]["a_win"]) + int(lb[0]["b_win"]) == board["passive"]["n_win"]
+
+
+def test_rating_by_seat_re_rates_a_finished_tournament_without_playing(duel: tuple[Path, dict]) -> None:
+    out, by_policy = duel
+    before = (out / "matches.csv").read_bytes()
+    by_seat = run_tournament(duel_cfg(out, rate_by="seat", resume=True), DUEL)
+    assert (out / "matches.csv").read_bytes() == before
+    board = {e["policy"]: e for e in by_seat["leaderboard"]}
+    assert set(board) == {"passive@a", "passive@b", "random@a", "random@b"}
+    assert all(e["matches"] == 24 for e in board.values())
+    assert board["passive@a"]["seats"]["b"] == {"win": 0, "loss": 0, "draw": 0, "error": 0}
+    assert board["passive@a"]["elo"] is not None
+    assert board["passive@a"]["n_win"] + board["passive@b"]["n_win"] == by_policy["leaderboard"][0]["n_win"]
+    assert min(board["passive@a"]["mu"], board["passive@b"]["mu"]) > max(board["random@a"]["mu"],
+                                                                          board["random@b"]["mu"])
+    cross = {(c["row"], c["column"]): c["n"] for c in by_seat["crossplay"]}
+    assert cross[("passive@a", "random@b")] == 24 and cross[("passive@a", "random@a")] == 0
+    assert (out / "leaderboard_by_seat.png").read_bytes().startswith(PNG)
+    assert [r["policy"] for r in rows(out / "leaderboard.csv")] == ["passive", "random"]  # kept
+
+
+def test_same_seed_same_rows_whatever_the_batch(duel: tuple[Path, dict], tmp_path: Path) -> None:
+    """The first 2 rounds again, one match at a time: the very same rows as 8 at once."""
+    out, _ = duel
+    run_tournament(duel_cfg(tmp_path, rounds=2, n_envs=1), DUEL)
+    assert rows(tmp_path / "matches.csv") == rows(out / "matches.csv")[:4]
+    other = tmp_path / "other-seed"
+    run_tournament(duel_cfg(other, rounds=2, seed=7), DUEL)
+    assert [r["steps"] for r in rows(other / "matches.csv")] != [r["steps"] for r in rows(tmp_path / "matches.csv")]
+
+
+def test_a_killed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(duel: tuple[Path, dict],
+                                                                       tmp_path: Path) -> None:
+    out, _ = duel
+    whole, part = tmp_path / "whole", tmp_path / "part"
+    run_tournament(duel_cfg(whole, rounds=6, n_envs=1), DUEL)
+    run_tournament(duel_cfg(part, rounds=3), DUEL)
+    with (part / "matches.csv").open("a") as fh:
+        fh.write("7,20003,passive,ran")  # a row torn by the kill
+    run_tournament(duel_cfg(part, rounds=6, resume=True), DUEL)
+    done = (part / "matches.csv").read_bytes()
+    assert done == (whole / "matches.csv").read_bytes()
+    assert done.splitlines() == (out / "matches.csv").read_bytes().splitlines()[:13]  # header + 12 matches
+    for name in ("leaderboard.csv", "crossplay.csv"):
+        assert (part / name).read_bytes() == (whole / name).read_bytes()
+    # Resuming a finished tournament plays nothing and changes nothing.
+    run_tournament(duel_cfg(part, rounds=6, resume=True), DUEL)
+    assert (part / "matches.csv").read_bytes() == done
+
+
+def test_resume_refuses_what_changed(tmp_path: Path) -> None:
+    part = tmp_path / "r"
+    run_tournament(duel_cfg(part, rounds=2), DUEL)
+    with pytest.raises(ValueError, match="seed was 20000, now 5"):
+        run_tournament(duel_cfg(part, seed=5, resume=True), DUEL)
+    with pytest.raises(ValueError, match="schedule was 'round-robin', now 'sampled'"):
+        run_tournament(duel_cfg(part, schedule="sampled", resume=True), DUEL)
+    with pytest.raises(ValueError, match=r"entries \['random', 'zero'\] changed"):
+        run_tournament(duel_cfg(part, policies=("passive=passive", "zero=zero"), resume=True), DUEL)
+    with pytest.raises(ValueError, match="cannot resume .*match was"):
+        run_tournament(duel_cfg(part, resume=True), dataclasses.replace(DUEL, max_steps=999))
+    with pytest.raises(ValueError, match="already holds 4 matches, more than matches of this schedule=2"):
+        run_tournament(duel_cfg(part, rounds=1, resume=True), DUEL)
+    with pytest.raises(FileNotFoundError, match="nothing to resume"):
+        run_tournament(duel_cfg(tmp_path / "empty", resume=True), DUEL)
+
+
+def test_sampled_schedule_draws_lineups_from_the_seed(tmp_path: Path) -> None:
+    cfg = duel_cfg(tmp_path, schedule="sampled", matches=40)
+    t = Tournament(cfg, DUEL)
+    drawn = [t.lineup_of(m) for m in range(40)]
+    assert set(drawn) == set(t.lineups)
+    assert drawn == [Tournament(cfg, DUEL).lineup_of(m) for m in range(40)]
+    assert [t.seed_of(m) for m in range(3)] == [cfg.seed, cfg.seed + 1, cfg.seed + 2]
+
+
+@pytest.fixture
+def tiny_zoo_dir(tiny_zoo: TinyZoo, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    return tiny_zoo.zoo_dir
+
+
+def test_paper_seats_zoo_policies_where_they_were_trained_and_built_ins_anywhere(tiny_zoo_dir: Path) -> None:
+    t = Tournament(TournamentConfig(progress=False))
+    assert t.seats_of == {"ant": ["ant"], "bug": ["bug"], "spider": ["spider"],
+                          "passive": ["ant", "bug", "spider"], "random": ["ant", "bug", "spider"]}
+    assert ("ant", "bug", "spider") in t.lineups
+    assert all(len(set(lineup)) == 3 for lineup in t.lineups)
+    assert len(t.lineups) == 13  # 3 x 3 x 3 seatings, less those with a policy twice
+    assert t.n_matches == 10 * 13
+    with pytest.raises(ValueError, match=r"policies \['spider=zoo:spider'\] fit no seat"):
+        Tournament(TournamentConfig(policies=("spider=zoo:spider", "p=passive"), obs_mode="egocentric"))
+
+
+def test_tournament_command_in_the_paper_scenario(tiny_zoo_dir: Path, tmp_path: Path,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "t"
+    assert main(["tournament", "--scenario", "paper", "--policies", "spider=zoo:spider", "passive=passive",
+                 "random=random", "--rounds", "1", "--steps-per-epoch", "20", "--out", str(out),
+                 "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "spider W/L/D" in printed and "passive" in printed
+    table = rows(out / "matches.csv")
+    assert [(r["ant"], r["bug"], r["spider"]) for r in table] == [("passive", "random", "spider"),
+                                                                  ("random", "passive", "spider")]
+    assert all(r["spider"] == "spider" for r in table)
+    assert all(r["elo"] == "" for r in rows(out / "leaderboard.csv"))  # no Elo in a 2-vs-1
+    assert (out / "crossplay.png").read_bytes().startswith(PNG)
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"policies": ("ant",)}, "expected NAME=SPEC"),
+    ({"policies": ("a=passive", "a=random")}, "entry 'a' given twice"),
+    ({"policies": ("a=passive",)}, "at least 2 entries"),
+    ({"policies": ("a b=passive", "c=random")}, "NAME may hold"),
+    ({"scenario": "chess"}, "scenario must be one of"),
+    ({"schedule": "swiss"}, "schedule must be one of"),
+    ({"rounds": 0}, "rounds must be an int >= 1"),
+    ({"rating_model": "Glicko"}, "rating_model must be one of"),
+    ({"rate_by": "team"}, "rate_by must be one of"),
+    ({"confidence": 1.5}, "confidence must be in"),
+])
+def test_bad_configs_name_the_field(fields: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        TournamentConfig(**fields)
+
+
+def test_unknown_policies_and_rosters_without_a_lineup_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="unknown policy 'runs/nowhere/policy'"):
+        Tournament(TournamentConfig(policies=("x=runs/nowhere/policy", "p=passive")))
+    with pytest.raises(ValueError, match="no lineup fills every seat"):
+        Tournament(TournamentConfig(policies=("p=passive", "r=random")))  # 3 seats, 2 policies
+    assert main(["tournament", "--policies", "bad", "--out", str(tmp_path)]) == 2
+    assert Match(DUEL).agents == ("a", "b")
