@@ -194,9 +194,7 @@ class Trainer:
         # torch's kernels). Overlapped or not, the result is bit for bit the same.
         before = self.env_steps
         after = before + n
-        due = 0
-        if after >= cfg.ddpg.learning_starts and len(self.replay) >= cfg.ddpg.batch_size:
-            due = (after // cfg.ddpg.learn_every - before // cfg.ddpg.learn_every) * cfg.ddpg.gradient_steps
+        due = self.agent.updates_due(before, after, len(self.replay))
         learner = _Learner(self, due)
         if due and cfg.overlap_learning:
             learner.start()
