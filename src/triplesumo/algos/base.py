@@ -25,7 +25,7 @@ import copy
 import math
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import torch
@@ -33,6 +33,8 @@ from torch import nn
 
 from triplesumo.agents.networks import Actor, ActorPolicy, GaussianActor
 from triplesumo.agents.normalizer import ObsNormalizer
+
+M = TypeVar("M", bound=nn.Module)
 
 
 class DivergedError(FloatingPointError):
@@ -98,7 +100,7 @@ class Algorithm:
 
     # ------------------------------------------------------------------------ helpers
 
-    def target_copy(self, module: nn.Module) -> nn.Module:
+    def target_copy(self, module: M) -> M:
         """A frozen deep copy of ``module`` (a target network)."""
         return copy.deepcopy(module).requires_grad_(False)
 
@@ -283,3 +285,8 @@ def frozen(*modules: nn.Module) -> Iterator[None]:
     finally:
         for module in modules:
             module.requires_grad_(True)
+
+
+def adam(params: Any, lr: float, weight_decay: float = 0.0, eps: float = 1e-8) -> torch.optim.Adam:
+    """The Adam optimiser every learner uses."""
+    return torch.optim.Adam(params, lr=lr, weight_decay=weight_decay, eps=eps)

@@ -31,10 +31,10 @@ from dataclasses import dataclass
 import torch
 
 from triplesumo.agents.networks import Actor, Critic
-from triplesumo.algos.base import frozen
+from triplesumo.algos.base import adam, frozen
 from triplesumo.algos.config import OffPolicyConfig, real, require
 from triplesumo.algos.noise import NOISE_KINDS
-from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, adam, min_q
+from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
 
 
 @dataclass(frozen=True)
@@ -75,9 +75,9 @@ class DDPG(OffPolicyAlgorithm):
 
     config: DDPGConfig
     actor: Actor
-    modules = ("actor", "critic", "actor_target", "critic_target")
+    modules: tuple[str, ...] = ("actor", "critic", "actor_target", "critic_target")
     optimizers = ("actor_optimizer", "critic_optimizer")
-    target_pairs = (("actor", "actor_target"), ("critic", "critic_target"))
+    target_pairs: tuple[tuple[str, str], ...] = (("actor", "actor_target"), ("critic", "critic_target"))
 
     def __init__(self, obs_dim: int, act_dim: int, config: DDPGConfig, seed: int,
                  device: str | torch.device = "cpu") -> None:
@@ -92,8 +92,8 @@ class DDPG(OffPolicyAlgorithm):
         self.critic = Critic(self.obs_dim, self.act_dim, hidden)
         self.actor_target = self.target_copy(self.actor)
         self.critic_target = self.target_copy(self.critic)
-        self.critics = [self.critic]
-        self.critic_targets = [self.critic_target]
+        self.critics: list[Critic] = [self.critic]
+        self.critic_targets: list[Critic] = [self.critic_target]
 
     def target_action(self, next_obs: torch.Tensor) -> torch.Tensor:
         """The action the TD target evaluates at s': the TARGET actor's μ'(s')."""

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 import torch
@@ -136,7 +135,3 @@ class _PreparedBatch(dict[str, torch.Tensor]):
 
     prepared = True
 
-
-def adam(params: Any, lr: float, weight_decay: float = 0.0) -> torch.optim.Adam:
-    """The Adam optimiser every learner uses."""
-    return torch.optim.Adam(params, lr=lr, weight_decay=weight_decay)
