@@ -13,6 +13,7 @@ import pytest
 import torch
 from safetensors.torch import load_file, save_file
 
+from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t  # the same random batches
 from triplesumo.agents.networks import ActorPolicy, GaussianActor, gaussian_log_prob, tanh_log_det_jacobian
 from triplesumo.agents.normalizer import ObsNormalizer
 from triplesumo.agents.policy_file import load_policy, save_policy
@@ -25,37 +26,14 @@ from triplesumo.algos.td3 import TD3, TD3Config
 
 torch.set_num_threads(1)
 
-OBS_DIM, ACT_DIM, BATCH = 5, 2, 16
 TD3_CFG = TD3Config(hidden=(32, 16), batch_size=BATCH, buffer_size=100)
 SAC_CFG = SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100)
 PPO_CFG = PPOConfig(hidden=(32, 16), n_steps=8, n_minibatches=4, n_epochs=2)
 
 
-def _batch(seed: int, n: int = BATCH) -> dict[str, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    return {
-        "obs": rng.standard_normal((n, OBS_DIM)).astype(np.float32),
-        "act": rng.uniform(-1, 1, (n, ACT_DIM)).astype(np.float32),
-        "rew": rng.standard_normal(n).astype(np.float32),
-        "next_obs": rng.standard_normal((n, OBS_DIM)).astype(np.float32),
-        "done": (rng.random(n) < 0.3).astype(np.float32),
-    }
-
-
-def _perturb(module: torch.nn.Module, seed: int, size: float = 0.5) -> None:
-    gen = torch.Generator().manual_seed(seed)
-    with torch.no_grad():
-        for p in module.parameters():
-            p.add_(size * torch.randn(p.shape, generator=gen))
-
-
 def _copy_generator(agent: Algorithm) -> torch.Generator:
     assert agent.generator is not None
     return torch.Generator().set_state(agent.generator.get_state())
-
-
-def _t(x: np.ndarray) -> torch.Tensor:
-    return torch.as_tensor(x)
 
 
 # ----------------------------------------------------------------------------------- TD3
@@ -241,6 +219,35 @@ def test_ppo_rollout_bootstraps_truncation_and_first_ratio_is_one() -> None:
     stats = agent.update(last)
     assert set(stats) == {"actor_loss", "critic_loss", "entropy", "approx_kl", "clip_fraction"}
     assert agent.step == 0 and agent.num_updates == 1 and not agent.rollout_full
+
+
+def test_ppo_resume_mid_rollout_is_bit_for_bit(tmp_path: Path) -> None:
+    rng_a, rng_b = np.random.default_rng(1), np.random.default_rng(2)
+    uninterrupted, resumed = _make("ppo"), _make("ppo", seed=5)
+
+    def steps(agent: PPO, rng: np.random.Generator, n: int) -> None:
+        for _ in range(n):
+            obs = rng.standard_normal((3, OBS_DIM))
+            agent.observe(obs)
+            agent.explore(obs, rng)
+            agent.record(rng.standard_normal(3), rng.random(3) < 0.2, np.zeros(3))
+
+    assert isinstance(uninterrupted, PPO) and isinstance(resumed, PPO)
+    steps(uninterrupted, rng_a, 5)
+    np.savez(tmp_path / "rollout.npz", **uninterrupted.rollout_state())
+    save_file(uninterrupted.state_dict(), tmp_path / "w.safetensors")
+    tensors, meta = uninterrupted.optimizer_state()
+    resumed.load_state_dict(load_file(tmp_path / "w.safetensors"))
+    resumed.load_optimizer_state(tensors, meta)
+    with np.load(tmp_path / "rollout.npz", allow_pickle=False) as data:
+        resumed.load_rollout_state({k: data[k] for k in data.files})
+    rng_b.bit_generator.state = rng_a.bit_generator.state  # the trainer restores its rng too
+    steps(uninterrupted, rng_a, 3)
+    steps(resumed, rng_b, 3)
+    last = np.ones((3, OBS_DIM))
+    assert uninterrupted.update(last) == resumed.update(last)
+    for key, value in uninterrupted.state_dict().items():
+        assert torch.equal(resumed.state_dict()[key], value), key
 
 
 def test_ppo_record_errors() -> None:

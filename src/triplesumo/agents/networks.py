@@ -136,13 +136,14 @@ def tanh_log_det_jacobian(u: torch.Tensor) -> torch.Tensor:
     return (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(-1)
 
 
-class GaussianActor(nn.Module):
+class GaussianActor(Actor):
     """Diagonal Gaussian policy over a pre-squash action ``u``; the action is ``tanh(u)``.
 
-    The mean path ``net`` has exactly :class:`Actor`'s layers, so the deterministic policy
-    ``tanh(mean(s))`` (:meth:`forward`) is an :class:`Actor` (:meth:`to_actor`). log σ is
-    either a head on the last hidden layer (``state_dependent_std``, SAC's; squashed into
-    [:data:`LOG_STD_MIN`, :data:`LOG_STD_MAX`]) or one learned vector (PPO's, CleanRL's).
+    An :class:`Actor` (its mean path ``net`` and deterministic :meth:`forward`,
+    ``tanh(mean(s))``) plus a log σ: either a head on the last hidden layer
+    (``state_dependent_std``, SAC's; squashed into [:data:`LOG_STD_MIN`,
+    :data:`LOG_STD_MAX`]) or one learned vector (PPO's, CleanRL's). :meth:`to_actor` drops
+    the log σ, leaving the deterministic policy that policy files hold.
 
     Args:
         obs_dim: Size of the (flat) observation.
@@ -154,18 +155,12 @@ class GaussianActor(nn.Module):
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256),
                  state_dependent_std: bool = True, log_std_init: float = 0.0) -> None:
-        super().__init__()
-        hidden = tuple(hidden)
-        _check_sizes(obs_dim, act_dim, hidden)
-        self.obs_dim = obs_dim
-        self.act_dim = act_dim
-        self.hidden = hidden
+        super().__init__(obs_dim, act_dim, hidden)
         self.state_dependent_std = state_dependent_std
-        self.net = _mlp(obs_dim, hidden, act_dim)
         self.log_std_head: nn.Linear | None = None
         self.log_std: nn.Parameter | None = None
         if state_dependent_std:
-            self.log_std_head = nn.Linear(hidden[-1], act_dim)
+            self.log_std_head = nn.Linear(self.hidden[-1], act_dim)
         else:
             self.log_std = nn.Parameter(torch.full((act_dim,), float(log_std_init)))
 
@@ -180,10 +175,6 @@ class GaussianActor(nn.Module):
             assert self.log_std is not None
             log_std = self.log_std.expand_as(mean)
         return mean, log_std
-
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        """The deterministic action ``tanh(mean(s))`` in [-1, 1] (what a policy file holds)."""
-        return torch.tanh(self.net(obs))
 
     def sample(self, obs: torch.Tensor, generator: torch.Generator | None = None
                ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -139,7 +139,7 @@ class Algorithm:
     def export_actor(self) -> Actor:
         """The deterministic policy as a plain :class:`Actor` (a copy), for policy files."""
         if isinstance(self.actor, GaussianActor):
-            return self.actor.to_actor()
+            return self.actor.to_actor()  # drop the log σ
         return copy.deepcopy(self.actor)
 
     # --------------------------------------------------------------------- checkpoints

@@ -214,6 +214,34 @@ class PPO(Algorithm):
         self.step += 1
         self._pending = None
 
+    def rollout_state(self) -> dict[str, np.ndarray]:
+        """The rollout collected so far as numpy arrays (for a checkpoint's npz; no pickle).
+
+        Saved between a :meth:`record` and the next :meth:`explore` (no step pending), it
+        lets a resumed run finish the rollout exactly.
+        """
+        if self._pending is not None:
+            raise RuntimeError("a step is pending (explore() without record()): checkpoint after record()")
+        state = {k: v[: self.step].cpu().numpy() for k, v in self.rollout.items()}
+        return state | {"step": np.asarray(self.step, dtype=np.int64)}
+
+    def load_rollout_state(self, state: dict[str, np.ndarray]) -> None:
+        """Restore :meth:`rollout_state` (``KeyError``/``ValueError`` name what does not fit)."""
+        step = int(np.asarray(state["step"]))
+        if not 0 <= step <= self.config.n_steps:
+            raise ValueError(f"rollout step {step} is outside [0, {self.config.n_steps}]")
+        self.rollout, self.step, self._pending = {}, step, None
+        if step == 0:
+            return
+        for key in self._ROLLOUT:
+            if key not in state:
+                raise KeyError(f"rollout state is missing {key!r}")
+            value = self.tensor(state[key])
+            if value.shape[0] != step:
+                raise ValueError(f"rollout {key!r} has {value.shape[0]} steps, expected {step}")
+            self.rollout[key] = torch.zeros((self.config.n_steps, *value.shape[1:]), device=self.device)
+            self.rollout[key][:step] = value
+
     # ------------------------------------------------------------------------ learning
 
     def advantages(self, next_obs: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
