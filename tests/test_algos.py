@@ -460,3 +460,15 @@ def test_ppo_solves_a_bandit() -> None:
             s = rng.uniform(-1, 1, (32, 1))
         agent.update(s)
     assert before > 0.2 and _bandit_error(agent) < 0.1
+
+
+def test_trainer_feeds_and_saves_the_normaliser(tmp_path: Path) -> None:
+    from test_train import TINY_DDPG, tiny
+    from triplesumo.train.loop import Trainer
+
+    cfg = tiny(tmp_path, epochs=1, ddpg=dataclasses.replace(TINY_DDPG, normalize_obs=True))
+    result = Trainer(cfg).run()
+    policy, manifest = load_policy(result.run_dir / "policy")
+    assert manifest["obs_norm"] and policy.obs_norm is not None
+    assert float(policy.obs_norm.count) == result.env_steps  # every learner observation, once
+    assert float(policy.obs_norm.var.min()) != 1.0  # the statistics moved

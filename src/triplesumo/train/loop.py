@@ -180,6 +180,7 @@ class Trainer:
         cfg, n = self.cfg, self.cfg.n_envs
         t0 = time.perf_counter()
         obs = self._stacked_obs(self.L)
+        self.agent.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
         actions = np.zeros((n, self.batch.matches[0].n_agents, ACTION_SIZE))
         if self.env_steps < cfg.ddpg.learning_starts:
             learner_act = self.rng.uniform(-1.0, 1.0, (n, ACTION_SIZE))  # warm-up: the learner only
@@ -320,7 +321,7 @@ class Trainer:
         }
         folder = checkpoint.save(self.run_dir, self.epochs_done, tensors, state, arrays,
                                  self.replay.state_dict() if self.cfg.save_replay else None)
-        save_policy(self.run_dir / "policy", self.agent.actor, self.manifest())
+        save_policy(self.run_dir / "policy", self.agent.actor, self.manifest(), obs_norm=self.agent.obs_norm)
         return folder
 
     def _restore(self) -> None:
