@@ -229,12 +229,12 @@ class ActorPolicy:
     (frozen at evaluation).
 
     Args:
-        actor: The actor network (any module mapping observations to actions in [-1, 1]
-            with ``obs_dim`` and ``act_dim``); its device is taken from its parameters.
+        actor: The actor network (an :class:`Actor`, or a :class:`GaussianActor`, acting by
+            its mean); its device is taken from its parameters.
         obs_norm: Optional running observation normaliser, applied before the actor.
     """
 
-    def __init__(self, actor: Actor | GaussianActor, obs_norm: ObsNormalizer | None = None) -> None:
+    def __init__(self, actor: Actor, obs_norm: ObsNormalizer | None = None) -> None:
         self.actor = actor
         self.obs_norm = obs_norm
 

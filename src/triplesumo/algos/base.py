@@ -60,7 +60,7 @@ class Algorithm:
     uses_generator = False
     """Whether updates draw random numbers (then the generator is part of the checkpoint)."""
 
-    actor: Actor | GaussianActor
+    actor: Actor
 
     def __init__(self, obs_dim: int, act_dim: int, config: Any, seed: int,
                  device: str | torch.device = "cpu") -> None:

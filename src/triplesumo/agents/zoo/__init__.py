@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.networks import Actor
 from triplesumo.agents.policy_file import load_policy, save_policy
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
@@ -51,7 +50,6 @@ def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = No
     manifest = {**manifest, "zoo_name": name}
     if evaluation is not None:
         manifest["evaluation"] = evaluation
-    assert isinstance(policy.actor, Actor)  # policy files always hold a plain actor
     save_policy(zoo_dir / name, policy.actor, {k: v for k, v in manifest.items()
                                                if k not in ("format", "obs_dim", "act_dim", "hidden", "obs_norm")},
                 obs_norm=policy.obs_norm)
