@@ -287,6 +287,16 @@ def frozen(*modules: nn.Module) -> Iterator[None]:
             module.requires_grad_(True)
 
 
+def descend(optimizer: torch.optim.Optimizer, loss: torch.Tensor, max_grad_norm: float | None = None) -> None:
+    """One optimiser step on ``loss``: zero the gradients, backpropagate, (clip,) step."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if max_grad_norm is not None:
+        params = [p for group in optimizer.param_groups for p in group["params"]]
+        torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
+    optimizer.step()
+
+
 def adam(params: Any, lr: float, weight_decay: float = 0.0, eps: float = 1e-8) -> torch.optim.Adam:
     """The Adam optimiser every learner uses."""
     return torch.optim.Adam(params, lr=lr, weight_decay=weight_decay, eps=eps)

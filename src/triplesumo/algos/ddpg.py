@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import torch
 
 from triplesumo.agents.networks import Actor, Critic
-from triplesumo.algos.base import adam, frozen
+from triplesumo.algos.base import descend, frozen
 from triplesumo.algos.config import OffPolicyConfig, real, require
 from triplesumo.algos.noise import NOISE_KINDS
 from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
@@ -65,23 +65,14 @@ class DDPGConfig(OffPolicyConfig):
 class DDPG(OffPolicyAlgorithm):
     """DDPG learner for one agent: networks, targets, optimisers and the update rule.
 
-    Args:
-        obs_dim: Size of the agent's (flat) observation.
-        act_dim: Size of its normalized action (in [-1, 1]).
-        config: Hyper-parameters.
-        seed: Seeds the network initialisation (the global torch RNG is left untouched).
-        device: Torch device of all networks.
+    Built as every learner is (:class:`~triplesumo.algos.base.Algorithm`:
+    ``DDPG(obs_dim, act_dim, config, seed, device="cpu")``).
     """
 
     config: DDPGConfig
     actor: Actor
     modules: tuple[str, ...] = ("actor", "critic", "actor_target", "critic_target")
-    optimizers = ("actor_optimizer", "critic_optimizer")
     target_pairs: tuple[tuple[str, str], ...] = (("actor", "actor_target"), ("critic", "critic_target"))
-
-    def __init__(self, obs_dim: int, act_dim: int, config: DDPGConfig, seed: int,
-                 device: str | torch.device = "cpu") -> None:
-        super().__init__(obs_dim, act_dim, config, seed, device)
 
     # ------------------------------------------------------ the places TD3 changes
 
@@ -92,8 +83,8 @@ class DDPG(OffPolicyAlgorithm):
         self.critic = Critic(self.obs_dim, self.act_dim, hidden)
         self.actor_target = self.target_copy(self.actor)
         self.critic_target = self.target_copy(self.critic)
-        self.critics: list[Critic] = [self.critic]
-        self.critic_targets: list[Critic] = [self.critic_target]
+        self.critics = [self.critic]
+        self.critic_targets = [self.critic_target]
 
     def target_action(self, next_obs: torch.Tensor) -> torch.Tensor:
         """The action the TD target evaluates at s': the TARGET actor's μ'(s')."""
@@ -104,11 +95,6 @@ class DDPG(OffPolicyAlgorithm):
         return True
 
     # ------------------------------------------------------------------------ learning
-
-    def build_optimizers(self) -> None:
-        critic_params = [p for critic in self.critics for p in critic.parameters()]
-        self.actor_optimizer = adam(self.actor.parameters(), self.config.actor_lr)
-        self.critic_optimizer = adam(critic_params, self.config.critic_lr, self.config.weight_decay)
 
     def td_target(self, batch: Batch) -> torch.Tensor:
         """Critic regression target ``y = r + γ (1 - done) Q'(s', μ'(s'))``, shape ``(B,)``.
@@ -139,9 +125,7 @@ class DDPG(OffPolicyAlgorithm):
         obs = self.batch(batch)["obs"]
         with frozen(self.critic):  # no critic weight gradients: the critic is fixed here
             loss = -self.critic(obs, self.actor(obs)).mean()
-            self.actor_optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            self.actor_optimizer.step()
+            descend(self.actor_optimizer, loss)
         return {"actor_loss": loss.item()}
 
     def train_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:

@@ -29,7 +29,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from triplesumo.agents.networks import Critic
-from triplesumo.algos.base import Algorithm
+from triplesumo.algos.base import Algorithm, adam, descend
 from triplesumo.algos.noise import ActionNoise
 
 Batch = Mapping[str, np.ndarray | torch.Tensor]
@@ -46,6 +46,17 @@ class OffPolicyAlgorithm(Algorithm):
 
     target_pairs: tuple[tuple[str, str], ...] = ()
     """``(online, target)`` attribute names that :meth:`soft_update_targets` averages."""
+    optimizers: tuple[str, ...] = ("actor_optimizer", "critic_optimizer")
+    critics: list[Critic]
+    """Q_1 (, Q_2): the online critics, all regressed onto the same target."""
+    critic_targets: list[Critic]
+    """Q'_1 (, Q'_2): their target copies."""
+
+    def build_optimizers(self) -> None:
+        """Adam for the actor, and one Adam over all critics (with the critics' weight decay)."""
+        critic_params = [p for critic in self.critics for p in critic.parameters()]
+        self.actor_optimizer = adam(self.actor.parameters(), self.config.actor_lr)
+        self.critic_optimizer = adam(critic_params, self.config.critic_lr, self.config.weight_decay)
 
     # ------------------------------------------------------------------------- batches
 
@@ -104,9 +115,7 @@ class OffPolicyAlgorithm(Algorithm):
         qs = [critic(b["obs"], b["act"]) for critic in critics]
         losses = [F.mse_loss(q, y) for q in qs]
         loss = sum(losses[1:], losses[0])
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
+        descend(optimizer, loss)
         return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
 
     def soft_update_targets(self) -> None:

@@ -39,7 +39,7 @@ import torch
 import torch.nn.functional as F
 
 from triplesumo.agents.networks import GaussianActor, ValueFunction, gaussian_entropy, gaussian_log_prob
-from triplesumo.algos.base import Algorithm, adam
+from triplesumo.algos.base import Algorithm, adam, descend
 from triplesumo.algos.config import at_least, flag, fraction, hidden_sizes, learning_rate, non_negative, real, require
 
 
@@ -132,12 +132,8 @@ def clipped_surrogate(log_ratio: torch.Tensor, advantages: torch.Tensor, clip: f
 class PPO(Algorithm):
     """PPO learner for one agent: Gaussian policy, value function, rollout and update.
 
-    Args:
-        obs_dim: Size of the agent's (flat) observation.
-        act_dim: Size of its normalized action (in [-1, 1]).
-        config: Hyper-parameters.
-        seed: Seeds the networks and the learner's torch generator (minibatch shuffling).
-        device: Torch device of all networks.
+    Built as every learner is (``PPO(obs_dim, act_dim, config, seed)``); the seed also seeds
+    the learner's torch generator, which shuffles the minibatches.
     """
 
     config: PPOConfig
@@ -299,11 +295,7 @@ class PPO(Algorithm):
         value_loss = 0.5 * value_loss.mean()
         entropy = gaussian_entropy(log_std).mean()
         loss = policy_loss - c.ent_coef * entropy + c.vf_coef * value_loss
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_([p for g in self.optimizer.param_groups for p in g["params"]],
-                                       c.max_grad_norm)
-        self.optimizer.step()
+        descend(self.optimizer, loss, c.max_grad_norm)
         with torch.no_grad():
             approx_kl = ((log_ratio.exp() - 1.0) - log_ratio).mean()  # k3 estimator (CleanRL)
             clip_fraction = ((log_ratio.exp() - 1.0).abs() > c.clip_coef).float().mean()

@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from triplesumo.agents.networks import Critic, GaussianActor
-from triplesumo.algos.base import adam, frozen
+from triplesumo.algos.base import adam, descend, frozen
 from triplesumo.algos.config import OffPolicyConfig, flag, learning_rate, real, require
 from triplesumo.algos.noise import ActionNoise
 from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
@@ -81,14 +81,9 @@ class Temperature(nn.Module):
 
 
 class SAC(OffPolicyAlgorithm):
-    """SAC learner for one agent (same API as the other off-policy learners).
+    """SAC learner for one agent, built as every learner is (``SAC(obs_dim, act_dim, config, seed)``).
 
-    Args:
-        obs_dim: Size of the agent's (flat) observation.
-        act_dim: Size of its normalized action (in [-1, 1]).
-        config: Hyper-parameters.
-        seed: Seeds the networks and the learner's torch generator (its update sampling).
-        device: Torch device of all networks.
+    The seed also seeds the learner's torch generator, which draws the update's samples.
     """
 
     config: SACConfig
@@ -97,29 +92,24 @@ class SAC(OffPolicyAlgorithm):
     target_pairs = (("critic", "critic_target"), ("critic2", "critic2_target"))
     uses_generator = True
 
-    def __init__(self, obs_dim: int, act_dim: int, config: SACConfig, seed: int,
-                 device: str | torch.device = "cpu") -> None:
-        super().__init__(obs_dim, act_dim, config, seed, device)
-        self.target_entropy = (float(-act_dim) if config.target_entropy is None
-                               else float(config.target_entropy))
-        """H̄: the entropy the temperature steers the policy towards."""
-
     def build(self) -> None:
+        """Squashed Gaussian actor, twin critics with targets (no target actor), temperature."""
         hidden = self.config.hidden
         self.actor = GaussianActor(self.obs_dim, self.act_dim, hidden, state_dependent_std=True)
         self.critic = Critic(self.obs_dim, self.act_dim, hidden)
         self.critic2 = Critic(self.obs_dim, self.act_dim, hidden)
         self.critic_target = self.target_copy(self.critic)
         self.critic2_target = self.target_copy(self.critic2)
-        self.critics: list[Critic] = [self.critic, self.critic2]
-        self.critic_targets: list[Critic] = [self.critic_target, self.critic2_target]
+        self.critics = [self.critic, self.critic2]
+        self.critic_targets = [self.critic_target, self.critic2_target]
         self.temperature = Temperature(self.config.alpha)
+        self.target_entropy = (float(-self.act_dim) if self.config.target_entropy is None
+                               else float(self.config.target_entropy))
+        """H̄: the entropy the temperature steers the policy towards."""
 
     def build_optimizers(self) -> None:
-        critic_params = [p for critic in self.critics for p in critic.parameters()]
-        self.actor_optimizer = adam(self.actor.parameters(), self.config.actor_lr)
-        self.critic_optimizer = adam(critic_params, self.config.critic_lr, self.config.weight_decay)
-        self.optimizers = ("actor_optimizer", "critic_optimizer")
+        """The actor's and the critics' Adam, and log α's when the temperature is learned."""
+        super().build_optimizers()
         if self.config.learn_alpha:
             self.alpha_optimizer = adam(self.temperature.parameters(), self.config.alpha_lr)
             self.optimizers = (*self.optimizers, "alpha_optimizer")
@@ -151,18 +141,14 @@ class SAC(OffPolicyAlgorithm):
             action, log_prob = self.actor.sample(obs, self.generator)
             alpha = self.temperature().detach()
             loss = (alpha * log_prob - min_q(self.critics, obs, action)).mean()
-            self.actor_optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            self.actor_optimizer.step()
+            descend(self.actor_optimizer, loss)
         log_prob = log_prob.detach()
         return {"actor_loss": loss.item(), "entropy": -log_prob.mean().item()}, log_prob
 
     def update_temperature(self, log_prob: torch.Tensor) -> dict[str, float]:
         """One Adam step on ``-mean log α (log π + H̄)``: α rises while the entropy is below H̄."""
         loss = -(self.temperature.log_alpha * (log_prob + self.target_entropy)).mean()
-        self.alpha_optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        self.alpha_optimizer.step()
+        descend(self.alpha_optimizer, loss)
         return {"alpha_loss": loss.item()}
 
     def train_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:

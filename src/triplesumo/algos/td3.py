@@ -69,10 +69,6 @@ class TD3(DDPG):
                     ("critic2", "critic2_target"))
     uses_generator = True
 
-    def __init__(self, obs_dim: int, act_dim: int, config: TD3Config, seed: int,
-                 device: str | torch.device = "cpu") -> None:
-        super().__init__(obs_dim, act_dim, config, seed, device)
-
     def build(self) -> None:
         """1. Clipped double Q: a second critic Q_2 and its target; the TD target takes the min."""
         super().build()
