@@ -213,10 +213,15 @@ def test_update_losses_finite_and_targets_move() -> None:
     assert not torch.equal(after["actor_target.net.0.weight"], before["actor_target.net.0.weight"])
 
 
-def test_is_update_step_learns_one_step_in_k() -> None:
-    config = DDPGConfig(learn_every=30, learning_starts=60)
-    steps = [n for n in range(1, 301) if config.is_update_step(n)]
+def test_updates_due_learns_one_step_in_k() -> None:
+    agent = DDPG(OBS_DIM, ACT_DIM, DDPGConfig(hidden=(8,), learn_every=30, learning_starts=60), seed=0)
+    steps = [n for n in range(1, 301) if agent.updates_due(n - 1, n, stored=10**6)]
     assert steps == list(range(60, 301, 30))  # not 29 of every 30 (the original code's bug)
+    # Batched collection: n transitions at once cross several strides; G steps per stride.
+    agent4 = DDPG(OBS_DIM, ACT_DIM, DDPGConfig(hidden=(8,), learn_every=2, gradient_steps=3,
+                                               learning_starts=0), seed=0)
+    assert agent4.updates_due(10, 17, stored=64) == 3 * 3  # strides at 12, 14, 16
+    assert agent4.updates_due(10, 17, stored=63) == 0  # replay smaller than a batch
 
 
 # ---------------------------------------------------------------------------- checkpoints

@@ -1,19 +1,28 @@
-"""Actor and critic MLPs for DDPG, and :class:`ActorPolicy`, the numpy-facing policy.
+"""Actor, critic, Gaussian actor and value MLPs, and :class:`ActorPolicy`, the numpy-facing policy.
 
 Architecture follows the paper's original code: two hidden layers (512, 256) with leaky
 ReLU; the actor ends in ``tanh`` so actions are *normalized* to [-1, 1] (the env scales them
 to each agent's control range, read from the MJCF). The last layer of both networks is
 initialised uniformly in ±3e-3, as in DDPG (Lillicrap et al., 2015, §7), so initial actions
 and Q-values are near zero.
+
+:class:`Actor` and :class:`Critic` serve DDPG and TD3; :class:`GaussianActor` (SAC and PPO)
+shares the actor's mean path, so its deterministic policy ``tanh(mean(s))`` exports as a
+plain :class:`Actor` (:meth:`GaussianActor.to_actor`) that every policy-file reader loads;
+:class:`ValueFunction` is PPO's V(s).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
+
+from triplesumo.agents.normalizer import ObsNormalizer
 
 FINAL_INIT = 3e-3
 """Half-width of the uniform initialisation of the last layer (Lillicrap et al., 2015)."""
@@ -114,18 +123,120 @@ class Critic(nn.Module):
         return self.net(torch.cat([obs, action], dim=-1)).squeeze(-1)
 
 
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+"""Bounds of a state-dependent log σ (CleanRL's SAC squashes into them with tanh)."""
+
+
+def tanh_log_det_jacobian(u: torch.Tensor) -> torch.Tensor:
+    """``sum log(1 - tanh(u)²)`` over the last axis, in the stable form ``2(log 2 - u - softplus(-2u))``.
+
+    Subtracted from a Gaussian log-density of ``u`` it gives the log-density of ``tanh(u)``
+    (SAC, Haarnoja et al., 2018, appendix C).
+    """
+    return (2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))).sum(-1)
+
+
+class GaussianActor(Actor):
+    """Diagonal Gaussian policy over a pre-squash action ``u``; the action is ``tanh(u)``.
+
+    An :class:`Actor` (its mean path ``net`` and deterministic :meth:`forward`,
+    ``tanh(mean(s))``) plus a log σ: either a head on the last hidden layer
+    (``state_dependent_std``, SAC's; squashed into [:data:`LOG_STD_MIN`,
+    :data:`LOG_STD_MAX`]) or one learned vector (PPO's, CleanRL's). :meth:`to_actor` drops
+    the log σ, leaving the deterministic policy that policy files hold.
+
+    Args:
+        obs_dim: Size of the (flat) observation.
+        act_dim: Size of the action.
+        hidden: Widths of the hidden layers (leaky ReLU after each).
+        state_dependent_std: log σ from a head on the features (True) or a free parameter.
+        log_std_init: Initial value of the free log σ (state-independent only).
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256),
+                 state_dependent_std: bool = True, log_std_init: float = 0.0) -> None:
+        super().__init__(obs_dim, act_dim, hidden)
+        self.state_dependent_std = state_dependent_std
+        self.log_std_head: nn.Linear | None = None
+        self.log_std: nn.Parameter | None = None
+        if state_dependent_std:
+            self.log_std_head = nn.Linear(self.hidden[-1], act_dim)
+        else:
+            self.log_std = nn.Parameter(torch.full((act_dim,), float(log_std_init)))
+
+    def distribution(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean and log σ of the Gaussian over ``u``, each ``(..., act_dim)``."""
+        features = self.net[:-1](obs)
+        mean = self.net[-1](features)
+        if self.log_std_head is not None:
+            squashed = torch.tanh(self.log_std_head(features))
+            log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (squashed + 1.0)
+        else:
+            assert self.log_std is not None
+            log_std = self.log_std.expand_as(mean)
+        return mean, log_std
+
+    def sample(self, obs: torch.Tensor, generator: torch.Generator | None = None
+               ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Reparameterised ``a = tanh(μ + σ ε)`` and its log-density ``log π(a|s)``, ``(...,)``.
+
+        ``log π(a|s) = log N(u; μ, σ) - Σ log(1 - tanh(u)²)`` (the tanh change of variables).
+        """
+        mean, log_std = self.distribution(obs)
+        eps = torch.randn(mean.shape, generator=generator, device=mean.device, dtype=mean.dtype)
+        u = mean + log_std.exp() * eps
+        return torch.tanh(u), gaussian_log_prob(u, mean, log_std) - tanh_log_det_jacobian(u)
+
+    def to_actor(self) -> Actor:
+        """A detached :class:`Actor` computing :meth:`forward` (for policy files)."""
+        actor = Actor(self.obs_dim, self.act_dim, self.hidden).to(next(self.parameters()).device)
+        actor.net.load_state_dict(self.net.state_dict())
+        return actor
+
+
+def gaussian_log_prob(u: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+    """Log-density of a diagonal Gaussian at ``u``, summed over the last axis."""
+    z = (u - mean) * torch.exp(-log_std)
+    return (-0.5 * z.square() - log_std - 0.5 * math.log(2.0 * math.pi)).sum(-1)
+
+
+def gaussian_entropy(log_std: torch.Tensor) -> torch.Tensor:
+    """Entropy of a diagonal Gaussian, summed over the last axis."""
+    return (log_std + 0.5 * (1.0 + math.log(2.0 * math.pi))).sum(-1)
+
+
+class ValueFunction(nn.Module):
+    """State-value function V(s) (PPO's critic); :meth:`forward` returns shape ``(batch,)``."""
+
+    def __init__(self, obs_dim: int, hidden: tuple[int, ...] = (64, 64)) -> None:
+        super().__init__()
+        hidden = tuple(hidden)
+        _check_sizes(obs_dim, 1, hidden)
+        self.obs_dim = obs_dim
+        self.net = _mlp(obs_dim, hidden, 1)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """Values ``(...,)`` of ``(..., obs_dim)`` observations."""
+        return self.net(obs).squeeze(-1)
+
+
 class ActorPolicy:
     """A trained (or training) actor as a plain numpy callable: ``action = policy(obs)``.
 
     Holds a *reference* to the actor (no copy), so a policy built from a learner's actor
-    follows its training. Runs under ``torch.inference_mode()``.
+    follows its training. Runs under ``torch.inference_mode()``. With an observation
+    normaliser, observations are normalised by it first; the policy never updates it
+    (frozen at evaluation).
 
     Args:
-        actor: The actor network; its device is taken from its parameters.
+        actor: The actor network (an :class:`Actor`, or a :class:`GaussianActor`, acting by
+            its mean); its device is taken from its parameters.
+        obs_norm: Optional running observation normaliser, applied before the actor.
     """
 
-    def __init__(self, actor: Actor) -> None:
+    def __init__(self, actor: Actor, obs_norm: ObsNormalizer | None = None) -> None:
         self.actor = actor
+        self.obs_norm = obs_norm
 
     @property
     def obs_dim(self) -> int:
@@ -146,5 +257,8 @@ class ActorPolicy:
             )
         device = next(self.actor.parameters()).device
         with torch.inference_mode():
-            action = self.actor(torch.as_tensor(obs, device=device))
+            x = torch.as_tensor(obs, device=device)
+            if self.obs_norm is not None:
+                x = self.obs_norm(x)
+            action = self.actor(x)
         return action.cpu().numpy().astype(np.float32, copy=False)

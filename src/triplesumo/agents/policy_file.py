@@ -1,6 +1,8 @@
 """Policy files: an actor's weights as safetensors beside a JSON manifest.
 
-``NAME.safetensors`` holds the actor's tensors (keys ``actor.*``); ``NAME.json`` says
+``NAME.safetensors`` holds the actor's tensors (keys ``actor.*``) and, for a learner that
+normalises its observations, the frozen normaliser (keys ``obs_norm.*``, manifest entry
+``"obs_norm": true``); ``NAME.json`` says
 what they are: agent, observation mode and size, action size, hidden sizes, env and
 mujoco versions, and how they were made (command, seed, epochs, evaluation). Loading
 never unpickles anything.
@@ -19,6 +21,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
 from triplesumo.agents.networks import Actor, ActorPolicy
+from triplesumo.agents.normalizer import ObsNormalizer
 
 FORMAT = "triplesumo-policy/1"
 REQUIRED = ("format", "agent", "obs_mode", "obs_dim", "act_dim", "hidden")
@@ -83,17 +86,21 @@ def load_json(path: Path) -> dict[str, Any]:
     return data
 
 
-def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any]) -> tuple[Path, Path]:
-    """Write ``stem.safetensors`` and ``stem.json``; returns both paths."""
+def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any],
+                obs_norm: ObsNormalizer | None = None) -> tuple[Path, Path]:
+    """Write ``stem.safetensors`` and ``stem.json`` (with the normaliser, if any); returns both paths."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     full = {"format": FORMAT, "obs_dim": actor.obs_dim, "act_dim": actor.act_dim,
-            "hidden": list(actor.hidden), **manifest}
+            "hidden": list(actor.hidden), **manifest, "obs_norm": obs_norm is not None}
     missing = [k for k in REQUIRED if k not in full]
     if missing:
         raise ValueError(f"policy manifest lacks {missing}")
     weights, meta = stem.with_suffix(".safetensors"), stem.with_suffix(".json")
-    atomic_save_tensors({f"actor.{k}": v for k, v in actor.state_dict().items()}, weights)
+    tensors = {f"actor.{k}": v for k, v in actor.state_dict().items()}
+    if obs_norm is not None:
+        tensors |= {f"obs_norm.{k}": v for k, v in obs_norm.state_dict().items()}
+    atomic_save_tensors(tensors, weights)
     atomic_write_bytes(meta, (json.dumps(full, indent=2, sort_keys=True) + "\n").encode())
     return weights, meta
 
@@ -125,5 +132,15 @@ def load_policy(stem: Path, expect_obs_mode: str | None = None,
     if actor.obs_dim != int(manifest["obs_dim"]) or actor.act_dim != int(manifest["act_dim"]):
         raise PolicyFileError(f"{weights_path}: weights are {actor.obs_dim}->{actor.act_dim}, "
                               f"manifest says {manifest['obs_dim']}->{manifest['act_dim']}")
+    obs_norm = None
+    if manifest.get("obs_norm", False):
+        try:
+            obs_norm = ObsNormalizer.from_state_dict(tensors, prefix="obs_norm.")
+        except (KeyError, ValueError, RuntimeError) as exc:
+            raise PolicyFileError(f"{weights_path}: manifest says obs_norm, the weights lack it: {exc}") from exc
+        if obs_norm.obs_dim != actor.obs_dim:
+            raise PolicyFileError(f"{weights_path}: normaliser is for {obs_norm.obs_dim} values, "
+                                  f"the actor takes {actor.obs_dim}")
+        obs_norm.eval()
     actor.eval()
-    return ActorPolicy(actor), manifest
+    return ActorPolicy(actor, obs_norm), manifest

@@ -189,6 +189,7 @@ class Trainer:
         cfg, n = self.cfg, self.cfg.n_envs
         t0 = time.perf_counter()
         obs = self._stacked_obs(self.L)
+        self.agent.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
         probe = self.batch.matches[0]
         actions = np.zeros((n, probe.n_agents, probe.action_width))
         if self.env_steps < cfg.ddpg.learning_starts:
@@ -204,9 +205,7 @@ class Trainer:
         # torch's kernels). Overlapped or not, the result is bit for bit the same.
         before = self.env_steps
         after = before + n
-        due = 0
-        if after >= cfg.ddpg.learning_starts and len(self.replay) >= cfg.ddpg.batch_size:
-            due = (after // cfg.ddpg.learn_every - before // cfg.ddpg.learn_every) * cfg.ddpg.gradient_steps
+        due = self.agent.updates_due(before, after, len(self.replay))
         learner = _Learner(self, due)
         if due and cfg.overlap_learning:
             learner.start()
@@ -333,7 +332,7 @@ class Trainer:
         }
         folder = checkpoint.save(self.run_dir, self.epochs_done, tensors, state, arrays,
                                  self.replay.state_dict() if self.cfg.save_replay else None)
-        save_policy(self.run_dir / "policy", self.agent.actor, self.manifest())
+        save_policy(self.run_dir / "policy", self.agent.actor, self.manifest(), obs_norm=self.agent.obs_norm)
         return folder
 
     def _restore(self) -> None:

@@ -51,7 +51,8 @@ def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = No
     if evaluation is not None:
         manifest["evaluation"] = evaluation
     save_policy(zoo_dir / name, policy.actor, {k: v for k, v in manifest.items()
-                                                      if k not in ("format", "obs_dim", "act_dim", "hidden")})
+                                               if k not in ("format", "obs_dim", "act_dim", "hidden", "obs_norm")},
+                obs_norm=policy.obs_norm)
     return zoo_dir / f"{name}.json"
 
 

@@ -1,0 +1,146 @@
+"""The off-policy core that DDPG, TD3 and SAC share (as SB3's ``OffPolicyAlgorithm``).
+
+It owns what the three have in common and nothing else:
+
+- **batches**: replay samples as float32 tensors on the device, observations normalised with
+  the current running statistics (the replay stores raw observations, as SB3 does);
+- **update scheduling**: :meth:`OffPolicyAlgorithm.updates_due`;
+- **critic regression**: :meth:`OffPolicyAlgorithm.regress_critics`, one Adam step of
+  ``Σ_i mean (Q_i(s, a) - y)²`` onto a target ``y`` that each algorithm states;
+- **target networks**: :meth:`OffPolicyAlgorithm.soft_update_targets`, θ' <- τθ + (1-τ)θ'
+  for every pair in ``target_pairs``;
+- **exploration** by a deterministic actor plus the caller's noise process
+  (:meth:`OffPolicyAlgorithm.explore`; SAC samples its own policy instead);
+- and, from :class:`~triplesumo.algos.base.Algorithm`, seeded networks, checkpoints,
+  finite checks and policy export.
+
+Each algorithm states what differs in :meth:`OffPolicyAlgorithm.train_step`: its TD target,
+its actor loss and when the targets move.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from triplesumo.agents.networks import Critic
+from triplesumo.algos.base import Algorithm, adam, descend
+from triplesumo.algos.noise import ActionNoise
+
+Batch = Mapping[str, np.ndarray | torch.Tensor]
+"""A replay sample: ``obs``, ``act``, ``rew``, ``next_obs``, ``done`` (see ``ReplayBuffer.sample``)."""
+
+
+def min_q(critics: Sequence[Critic], obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
+    """``min_i Q_i(s, a)`` over the critics (clipped double Q); one critic gives its own Q."""
+    return functools.reduce(torch.minimum, (critic(obs, action) for critic in critics))
+
+
+class OffPolicyAlgorithm(Algorithm):
+    """Base of DDPG, TD3 and SAC; subclasses build networks and state :meth:`train_step`."""
+
+    target_pairs: tuple[tuple[str, str], ...] = ()
+    """``(online, target)`` attribute names that :meth:`soft_update_targets` averages."""
+    optimizers: tuple[str, ...] = ("actor_optimizer", "critic_optimizer")
+    critics: list[Critic]
+    """Q_1 (, Q_2): the online critics, all regressed onto the same target."""
+    critic_targets: list[Critic]
+    """Q'_1 (, Q'_2): their target copies."""
+
+    def build_optimizers(self) -> None:
+        """Adam for the actor, and one Adam over all critics (with the critics' weight decay)."""
+        critic_params = [p for critic in self.critics for p in critic.parameters()]
+        self.actor_optimizer = adam(self.actor.parameters(), self.config.actor_lr)
+        self.critic_optimizer = adam(critic_params, self.config.critic_lr, self.config.weight_decay)
+
+    # ------------------------------------------------------------------------- batches
+
+    def batch(self, batch: Batch) -> dict[str, torch.Tensor]:
+        """Batch as float32 tensors on the device; ``rew`` and ``done`` flattened to ``(B,)``;
+        ``obs`` and ``next_obs`` normalised (when the learner normalises observations).
+
+        Already-prepared batches (as returned here) pass through unchanged.
+        """
+        if isinstance(batch, _PreparedBatch):
+            return batch
+        out = _PreparedBatch()
+        for key in ("obs", "act", "rew", "next_obs", "done"):
+            if key not in batch:
+                raise KeyError(f"batch is missing {key!r}")
+            out[key] = self.tensor(batch[key])
+        n = out["obs"].shape[0]
+        for key in ("rew", "done"):
+            out[key] = out[key].reshape(-1)
+            if out[key].shape != (n,):
+                raise ValueError(f"batch[{key!r}] must have {n} entries, got {out[key].shape}")
+        for key in ("obs", "next_obs"):
+            out[key] = self.normalize(out[key])
+        return out
+
+    # ------------------------------------------------------------------------ learning
+
+    def update(self, batch: Batch) -> dict[str, float]:
+        """One gradient update on a replay sample; returns its finite-checked scalar stats.
+
+        Raises:
+            DivergedError: A loss or statistic is not finite (names the update index).
+        """
+        return self.finish_update(self.train_step(self.batch(batch)))
+
+    def train_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
+        """The algorithm's update on a prepared batch (``self.num_updates`` is its index)."""
+        raise NotImplementedError
+
+    def updates_due(self, before: int, after: int, stored: int) -> int:
+        """Gradient updates due when the collected transitions go from ``before`` to ``after``.
+
+        ``G = gradient_steps`` for every multiple of ``K = learn_every`` crossed, once
+        ``after >= learning_starts`` and the replay holds ``stored >= batch_size``
+        transitions (1 step in K, not the paper's original code's K-1 in K).
+        """
+        c = self.config
+        if after < c.learning_starts or stored < c.batch_size:
+            return 0
+        return int((after // c.learn_every - before // c.learn_every) * c.gradient_steps)
+
+    def regress_critics(self, critics: Sequence[Critic], optimizer: torch.optim.Optimizer,
+                        b: Mapping[str, torch.Tensor], y: torch.Tensor) -> dict[str, float]:
+        """One Adam step on ``Σ_i mean (Q_i(s, a) - y)²``; returns ``critic_loss`` and ``q_mean``
+        (mean Q_1(s, a)), both before the step."""
+        qs = [critic(b["obs"], b["act"]) for critic in critics]
+        losses = [F.mse_loss(q, y) for q in qs]
+        loss = sum(losses[1:], losses[0])
+        descend(optimizer, loss)
+        return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
+
+    def soft_update_targets(self) -> None:
+        """Polyak-average every target toward its online net: θ' <- τθ + (1 - τ)θ'."""
+        tau = self.config.tau
+        with torch.no_grad():
+            for online_name, target_name in self.target_pairs:
+                online: nn.Module = getattr(self, online_name)
+                target: nn.Module = getattr(self, target_name)
+                for p, p_targ in zip(online.parameters(), target.parameters(), strict=True):
+                    p_targ.lerp_(p, tau)
+
+    # ------------------------------------------------------------------------- acting
+
+    def explore(self, obs: np.ndarray, rng: np.random.Generator,
+                noise: ActionNoise | None = None) -> np.ndarray:
+        """Training action: ``clip(μ(s) + noise, -1, 1)`` (no noise: the deterministic action)."""
+        action = self.act(obs)
+        if noise is None:
+            return action
+        return np.clip(action + noise.sample(rng), -1.0, 1.0)
+
+
+class _PreparedBatch(dict[str, torch.Tensor]):
+    """A batch already converted and normalised by :meth:`OffPolicyAlgorithm.batch`."""
+
+    prepared = True
+

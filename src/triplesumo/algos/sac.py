@@ -1,0 +1,183 @@
+"""Soft Actor-Critic (Haarnoja et al., 2018, with the learned temperature of the 2018 v2 paper).
+
+On the off-policy core (replay, twin critics with targets, soft updates, schedule), SAC
+states its own three pieces::
+
+    target       y   = r + γ (1 - done) · (min_i Q'_i(s', a') - α log π(a'|s')),  a' ~ π(·|s')
+    actor        L_π = mean (α log π(a|s) - min_i Q_i(s, a)),  a = tanh(μ + σ ε) (reparameterised)
+    temperature  L_α = -mean log α · (log π(a|s) + H̄),   H̄ = -act_dim by default
+
+The policy is a squashed Gaussian (:class:`~triplesumo.agents.networks.GaussianActor`,
+state-dependent log σ), with the tanh change of variables in ``log π``. There is no target
+actor. The temperature falls when the policy's entropy is above the target and rises when it
+is below. Exploration samples the policy (no noise process); the deterministic policy (and
+the exported one) is ``tanh(μ(s))``. Defaults are CleanRL's ``sac_continuous_action.py``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+from triplesumo.agents.networks import Critic, GaussianActor
+from triplesumo.algos.base import adam, descend, frozen
+from triplesumo.algos.config import OffPolicyConfig, flag, learning_rate, real, require
+from triplesumo.algos.noise import ActionNoise
+from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
+
+
+@dataclass(frozen=True)
+class SACConfig(OffPolicyConfig):
+    """SAC hyper-parameters; defaults from Haarnoja et al. (2018) and CleanRL's SAC."""
+
+    actor_lr: float = 3e-4
+    """Adam learning rate of the actor, in (0, 1] (CleanRL: 3e-4)."""
+    critic_lr: float = 1e-3
+    """Adam learning rate of both critics, in (0, 1] (CleanRL: 1e-3)."""
+    tau: float = 0.005
+    """Soft target update factor τ of the critics, in (0, 1] (SAC paper: 0.005)."""
+    batch_size: int = 256
+    """Transitions per gradient step (SAC paper: 256)."""
+    hidden: tuple[int, ...] = (256, 256)
+    """Hidden layer widths of actor and critics (SAC paper: 256, 256)."""
+    learn_every: int = 1
+    """Update stride K: one update per collected transition (SAC paper)."""
+    learning_starts: int = 5000
+    """Transitions of random warm-up collected before the first update (CleanRL: 5e3)."""
+    normalize_obs: bool = True
+    """Normalise observations by their running mean and variance."""
+    alpha: float = 0.2
+    """Temperature α: its initial value when learned, else fixed (CleanRL: 0.2); > 0."""
+    learn_alpha: bool = True
+    """Learn α towards the target entropy (SAC v2's automatic temperature)."""
+    alpha_lr: float = 1e-3
+    """Adam learning rate of log α, in (0, 1] (CleanRL uses the critic's, 1e-3)."""
+    target_entropy: float | None = None
+    """Target entropy H̄ of the learned temperature; None means -act_dim (SAC v2)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require(self, "alpha", real(self, "alpha") > 0, "must be > 0")
+        flag(self, "learn_alpha")
+        learning_rate(self, "alpha_lr")
+        if self.target_entropy is not None:
+            real(self, "target_entropy")
+
+
+class Temperature(nn.Module):
+    """The entropy temperature α, learned as ``log α`` (so α stays positive)."""
+
+    def __init__(self, alpha: float) -> None:
+        super().__init__()
+        self.log_alpha = nn.Parameter(torch.tensor(math.log(alpha)))
+
+    def forward(self) -> torch.Tensor:
+        """α = exp(log α)."""
+        return self.log_alpha.exp()
+
+
+class SAC(OffPolicyAlgorithm):
+    """SAC learner for one agent, built as every learner is (``SAC(obs_dim, act_dim, config, seed)``).
+
+    The seed also seeds the learner's torch generator, which draws the update's samples.
+    """
+
+    config: SACConfig
+    actor: GaussianActor
+    modules = ("actor", "critic", "critic2", "critic_target", "critic2_target", "temperature")
+    target_pairs = (("critic", "critic_target"), ("critic2", "critic2_target"))
+    uses_generator = True
+
+    def build(self) -> None:
+        """Squashed Gaussian actor, twin critics with targets (no target actor), temperature."""
+        hidden = self.config.hidden
+        self.actor = GaussianActor(self.obs_dim, self.act_dim, hidden, state_dependent_std=True)
+        self.critic = Critic(self.obs_dim, self.act_dim, hidden)
+        self.critic2 = Critic(self.obs_dim, self.act_dim, hidden)
+        self.critic_target = self.target_copy(self.critic)
+        self.critic2_target = self.target_copy(self.critic2)
+        self.critics = [self.critic, self.critic2]
+        self.critic_targets = [self.critic_target, self.critic2_target]
+        self.temperature = Temperature(self.config.alpha)
+        self.target_entropy = (float(-self.act_dim) if self.config.target_entropy is None
+                               else float(self.config.target_entropy))
+        """H̄: the entropy the temperature steers the policy towards."""
+
+    def build_optimizers(self) -> None:
+        """The actor's and the critics' Adam, and log α's when the temperature is learned."""
+        super().build_optimizers()
+        if self.config.learn_alpha:
+            self.alpha_optimizer = adam(self.temperature.parameters(), self.config.alpha_lr)
+            self.optimizers = (*self.optimizers, "alpha_optimizer")
+
+    @property
+    def alpha(self) -> float:
+        """The current temperature α."""
+        return float(self.temperature().item())
+
+    # ------------------------------------------------------------------------ learning
+
+    def td_target(self, batch: Batch) -> torch.Tensor:
+        """``y = r + γ (1 - done) (min_i Q'_i(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')``, ``(B,)``."""
+        b = self.batch(batch)
+        with torch.no_grad():
+            next_action, next_log_prob = self.actor.sample(b["next_obs"], self.generator)
+            next_q = min_q(self.critic_targets, b["next_obs"], next_action)  # TARGET critics
+            soft_value = next_q - self.temperature() * next_log_prob
+            return b["rew"] + self.config.gamma * (1.0 - b["done"]) * soft_value
+
+    def update_actor(self, batch: Batch) -> tuple[dict[str, float], torch.Tensor]:
+        """One Adam step on ``mean (α log π(a|s) - min_i Q_i(s, a))`` (critics and α held fixed).
+
+        Returns ``actor_loss`` and ``entropy`` (mean ``-log π``) before the step, and the
+        batch's ``log π(a|s)`` (detached) for the temperature step.
+        """
+        obs = self.batch(batch)["obs"]
+        with frozen(*self.critics):
+            action, log_prob = self.actor.sample(obs, self.generator)
+            alpha = self.temperature().detach()
+            loss = (alpha * log_prob - min_q(self.critics, obs, action)).mean()
+            descend(self.actor_optimizer, loss)
+        log_prob = log_prob.detach()
+        return {"actor_loss": loss.item(), "entropy": -log_prob.mean().item()}, log_prob
+
+    def update_temperature(self, log_prob: torch.Tensor) -> dict[str, float]:
+        """One Adam step on ``-mean log α (log π + H̄)``: α rises while the entropy is below H̄."""
+        loss = -(self.temperature.log_alpha * (log_prob + self.target_entropy)).mean()
+        descend(self.alpha_optimizer, loss)
+        return {"alpha_loss": loss.item()}
+
+    def train_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
+        """Critic step, actor step, temperature step (if learned), soft update of the critics.
+
+        Returns ``critic_loss``, ``q_mean``, ``actor_loss``, ``entropy``, ``alpha`` (after
+        the step) and, when α is learned, ``alpha_loss``.
+        """
+        stats = self.regress_critics(self.critics, self.critic_optimizer, b, self.td_target(b))
+        actor_stats, log_prob = self.update_actor(b)
+        stats |= actor_stats
+        if self.config.learn_alpha:
+            stats |= self.update_temperature(log_prob)
+        self.soft_update_targets()
+        return stats | {"alpha": self.alpha}
+
+    # ------------------------------------------------------------------------- acting
+
+    def explore(self, obs: np.ndarray, rng: np.random.Generator,
+                noise: ActionNoise | None = None) -> np.ndarray:
+        """Training action sampled from the policy, ``tanh(μ(s) + σ(s) ε)``, ε from ``rng``.
+
+        SAC explores by its own stochasticity: passing a noise process is an error.
+        """
+        if noise is not None:
+            raise ValueError("SAC explores by sampling its policy; do not pass an action noise")
+        obs = np.asarray(obs, dtype=np.float32)
+        with torch.inference_mode():
+            mean, log_std = self.actor.distribution(self.normalize(self.tensor(obs)))
+            eps = self.tensor(rng.standard_normal(mean.shape))
+            action = torch.tanh(mean + log_std.exp() * eps)
+        return action.cpu().numpy().astype(np.float32, copy=False)
