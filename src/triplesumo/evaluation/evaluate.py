@@ -39,11 +39,11 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, make_policy, policies_from_pairs, policy_fingerprint
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import ACTION_SIZE
-from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
+from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.rewards import TERMS
-from triplesumo.train.logger import COLUMNS
+from triplesumo.train.logger import COLUMNS, repair_metrics_csv
 
 
 @dataclass(frozen=True)
@@ -262,39 +262,16 @@ def finished_rows(path: Path, epochs: int) -> int:
     """How many test epochs ``path`` (a candidate's ``metrics.csv``) holds, in order from epoch 1.
 
     A run killed while writing leaves a partial last line, and the file is cut back to
-    its last complete, valid row (rewritten atomically). ``ValueError`` if the file is
-    not a metrics CSV or holds more than ``epochs`` epochs.
+    its last complete, valid row by :func:`~triplesumo.train.logger.repair_metrics_csv`
+    (the routine training's resume uses; rewritten atomically). ``ValueError`` if the
+    file is not a metrics CSV, has an invalid row before its last, or holds more than
+    ``epochs`` epochs.
     """
-    if not path.exists():
-        return 0
-    lines = path.read_text(encoding="utf-8").split("\n")
-    complete = lines[:-1]  # a file ending in a newline leaves "" last; anything else is cut off
-    rows = list(csv.reader(complete))
-    if not rows or tuple(rows[0]) != COLUMNS:
-        raise ValueError(f"{path}: not a metrics CSV of an evaluation (expected the header {list(COLUMNS)})")
-    good = 0
-    for row in rows[1:]:
-        if not _valid_row(row, good + 1):
-            break
-        good += 1
+    good = repair_metrics_csv(path)
     if good > epochs:
         raise ValueError(f"{path} already holds {good} test epochs, more than epochs={epochs}: "
                          "raise epochs, or evaluate into a new out folder")
-    if good + 1 < len(lines):  # drop the partial or invalid tail
-        atomic_write_bytes(path, ("\n".join(complete[:good + 1]) + "\n").encode("utf-8"))
     return good
-
-
-def _valid_row(row: list[str], epoch: int) -> bool:
-    if len(row) != len(COLUMNS):
-        return False
-    values = dict(zip(COLUMNS, row, strict=True))
-    if values["epoch"] != str(epoch) or values["outcome"] not in OUTCOMES:
-        return False
-    try:
-        return all(math.isfinite(float(values[c])) for c in COLUMNS if c not in ("epoch", "outcome"))
-    except ValueError:
-        return False
 
 
 class RowAppender:
