@@ -9,6 +9,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 
 from triplesumo.envs.match import ACTION_SIZE, Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
@@ -108,6 +109,8 @@ class TripleSumoEnv(MatchAccess, gym.Env):
         return self._obs[self._learner_index], infos[self._learner_index]
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        if not self._obs:
+            raise ResetNeeded("TripleSumoEnv.step called before reset(): call env.reset(seed=...) first")
         actions = np.zeros((self.match.n_agents, ACTION_SIZE))
         actions[self._learner_index] = self.match.check_action(self.learner, action)
         for i, name in self._others:

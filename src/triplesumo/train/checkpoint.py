@@ -25,6 +25,7 @@ from __future__ import annotations
 import errno
 import json
 import os
+import re
 import shutil
 import zipfile
 from collections.abc import Iterator, Mapping
@@ -59,7 +60,7 @@ class CheckpointWriteError(OSError):
 
 
 @contextmanager
-def writing(path: Path, last_good: str = "") -> Iterator[None]:
+def writing(path: Path | str, last_good: str = "") -> Iterator[None]:
     """Turn a failed write of ``path`` into a :class:`CheckpointWriteError` naming it and the cause."""
     try:
         yield
@@ -67,8 +68,9 @@ def writing(path: Path, last_good: str = "") -> Iterator[None]:
         raise
     except (OSError, SafetensorError) as exc:
         code = getattr(exc, "errno", None)
-        if code is None and "os error 28" in str(exc):  # safetensors reports io errors as text
-            code = errno.ENOSPC
+        if code is None:  # safetensors reports io errors as text: "IoError(Os { code: 28, ..." or "(os error 28)"
+            found = re.search(r"code: (\d+)|os error (\d+)", str(exc))
+            code = int(found.group(1) or found.group(2)) if found else None
         cause = os.strerror(code) if code else str(exc)
         detail = "" if code is None or cause in str(exc) else f" ({exc})"
         raise CheckpointWriteError(code or errno.EIO, f"cannot write {path}: {cause}{detail}{last_good}") from exc

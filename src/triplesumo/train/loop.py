@@ -446,7 +446,7 @@ class Trainer:
         }
         folder = checkpoint.save(self.run_dir, self.epochs_done, tensors, state, arrays,
                                  self.replay.state_dict() if self.cfg.save_replay else None)
-        with checkpoint.writing(self.run_dir / "policy.safetensors",
+        with checkpoint.writing(f"{self.run_dir / 'policy'}.safetensors/.json",
                                 f"; the last good checkpoint {folder} is intact"):
             save_policy(self.run_dir / "policy", self.agent.actor, self.manifest())
         return folder
