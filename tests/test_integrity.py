@@ -140,6 +140,17 @@ def test_start_over_moves_the_old_run_aside(killed_copy: Path, reference: Path) 
     assert killed_copy.with_name("ref.old-2").is_dir() and snapshot(aside) == before
 
 
+def test_evaluate_into_an_evaluation_folder_refuses_without_resume(tmp_path: Path) -> None:
+    cfg = evaluate_module.EvaluateConfig(policy="passive", policies=("ant=zero", "spider=random"), baselines=(),
+                                         epochs=2, n_envs=2, steps_per_epoch=5, out=str(tmp_path), progress=False)
+    evaluate_module.evaluate(cfg)
+    before = snapshot(tmp_path)
+    with pytest.raises(FileExistsError, match=r"already holds an evaluation.*--resume"):
+        evaluate_module.evaluate(cfg)
+    assert snapshot(tmp_path) == before
+    evaluate_module.evaluate(dataclasses.replace(cfg, resume=True, epochs=3))  # extending it is fine
+
+
 # ------------------------------------------------ 2. a kill inside the metrics rewrite
 
 

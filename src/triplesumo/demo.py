@@ -23,7 +23,7 @@ from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summ
 from triplesumo.evaluation.play import PlayConfig, run_play
 from triplesumo.evaluation.video import check_writable
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.loop import train
+from triplesumo.train.loop import holds_run, train
 
 
 @dataclass(frozen=True)
@@ -68,6 +68,9 @@ class DemoConfig:
 
 def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     out = check_writable(Path(cfg.out))
+    if holds_run(out / "bug") or (out / "evaluation").exists():
+        raise FileExistsError(f"{out} already holds an earlier demo's results; nothing was changed: choose another "
+                              "--out (or delete that folder)")
     print(f"[1/3] training Bug with DDPG (paper preset) in the shipped ongoing match -> {out / 'bug'}")
     train_cfg = TrainConfig(name="bug", out=str(out), epochs=cfg.train_epochs, max_minutes=cfg.max_minutes,
                             steps_per_epoch=cfg.steps_per_epoch,

@@ -227,6 +227,12 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
                 for label, spec in candidates.items()}  # every file checked before any epoch is played
     record = _record(cfg, candidates)
     kept: dict[str, Any] = {}
+    if not cfg.resume:
+        held = [p for p in (out / RECORD_FILE, *(out / label / "metrics.csv" for label in candidates)) if p.exists()]
+        if held:
+            names = ", ".join(str(p.relative_to(out)) for p in held)
+            raise FileExistsError(f"{out} already holds an evaluation ({names}); "
+                                  "nothing was changed: add --resume to continue or extend it, or choose another --out")
     if cfg.resume:
         kept = _previous_candidates(out / RECORD_FILE, record)
         record["candidates"] = {**kept, **record["candidates"]}
