@@ -288,7 +288,7 @@ def test_diverging_learner_stops_naming_learner_update_and_checkpoint(tmp_path: 
         trainer.run()
     message = str(caught.value)
     good = tmp_path / "run" / "checkpoints" / f"epoch-{E:06d}"
-    assert re.search(rf"learner 'bug' diverged at update \d+ .*last good checkpoint is {re.escape(str(good))}",
+    assert re.search(rf"learner 'bug' diverged at update \d+ .*last good checkpoint {re.escape(str(good))} ",
                      message), message
     assert "NaN or inf" not in message  # not blamed on the env
     checkpoint.load(good, need_replay=True)  # intact
@@ -385,11 +385,24 @@ def _policy_fails(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(policy_file, "atomic_write_bytes", writer)
 
 
+def _metrics_append_fails(monkeypatch: pytest.MonkeyPatch) -> None:
+    real = logger_module.MetricsLog.epoch
+
+    def epoch(self: Any, row: dict[str, Any], mwr: float) -> None:
+        if row["epoch"] == E + 1:
+            with checkpoint.writing(self.path):
+                self._fh.write(f"{E + 1},lo")  # the row is torn where the disk ran out
+                raise _no_space(self.path)
+        real(self, row, mwr)
+    monkeypatch.setattr(logger_module.MetricsLog, "epoch", epoch)
+
+
 FAULTS: dict[str, tuple[Callable[[pytest.MonkeyPatch], None], str, str, int]] = {
     "weights-disk-full": (_weights_fail, f"epoch-{2 * E:06d}.tmp/weights.safetensors", "No space left on device", E),
     "replay-disk-full": (_replay_fails, f"epoch-{2 * E:06d}.tmp/replay.npz", "No space left on device", E),
     "latest-read-only": (_latest_json_fails, "checkpoints/latest.json", "Read-only file system", E),
     "policy-no-permission": (_policy_fails, "policy.safetensors/.json", "Permission denied", 2 * E),
+    "metrics-disk-full": (_metrics_append_fails, "metrics.csv", "No space left on device", E),
 }
 
 

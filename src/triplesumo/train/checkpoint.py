@@ -58,6 +58,9 @@ class CheckpointError(PolicyFileError):
 class CheckpointWriteError(OSError):
     """Writing a run file failed (disk full, read-only, no permission); names the file and cause."""
 
+    def __str__(self) -> str:
+        return str(self.strerror)
+
 
 @contextmanager
 def writing(path: Path | str, last_good: str = "") -> Iterator[None]:

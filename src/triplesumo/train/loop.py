@@ -366,17 +366,21 @@ class Trainer:
             return 0.0
         return float(moving_winning_rate(np.array(self.lwr[-self.cfg.window:]), self.cfg.window)[-1])
 
-    def diverged(self, what: str) -> DivergenceError:
-        """The error that stops a diverging learner: names it, its update count and the last good checkpoint."""
+    def last_good(self) -> str:
+        """Where the run can go on from: its latest checkpoint, in words."""
         try:
             folder = checkpoint.latest(self.run_dir)
-            good = (f"the last good checkpoint is {folder} (epoch {checkpoint.recorded_epoch(folder)}); "
-                    f"`triplesumo train --resume {self.run_dir}` continues from it")
         except checkpoint.CheckpointError:
-            good = "no checkpoint was saved before it (no good one exists)"
+            return "no checkpoint was saved before it (no good one exists)"
+        return (f"the last good checkpoint {folder} is intact; "
+                f"`triplesumo train --resume {self.run_dir}` continues from it")
+
+    def diverged(self, what: str) -> DivergenceError:
+        """The error that stops a diverging learner: names it, its update count and the last good checkpoint."""
         return DivergenceError(f"learner {self.cfg.learner!r} diverged at update {self.agent.num_updates} "
-                               f"(epoch {self.epochs_done}, env step {self.env_steps}): {what}. Stopped; {good}. "
-                               "Lower the learning rates (--ddpg.actor-lr, --ddpg.critic-lr) or the reward scale")
+                               f"(epoch {self.epochs_done}, env step {self.env_steps}): {what}. Stopped; "
+                               f"{self.last_good()}. Lower the learning rates (--ddpg.actor-lr, --ddpg.critic-lr) "
+                               "or the reward scale")
 
     def run(self) -> TrainResult:
         cfg = self.cfg
@@ -402,6 +406,10 @@ class Trainer:
                     self.save()
                 if timed_out and finished:
                     break
+        except checkpoint.CheckpointWriteError as exc:
+            if "last good checkpoint" in str(exc) or "no earlier checkpoint" in str(exc):
+                raise
+            raise checkpoint.CheckpointWriteError(exc.errno, f"{exc.strerror}; {self.last_good()}") from exc
         finally:
             if bar is not None:
                 bar.close()
