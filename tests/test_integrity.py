@@ -151,6 +151,20 @@ def test_evaluate_into_an_evaluation_folder_refuses_without_resume(tmp_path: Pat
     evaluate_module.evaluate(dataclasses.replace(cfg, resume=True, epochs=3))  # extending it is fine
 
 
+def test_cli_start_over_and_its_misuse(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["train", "--out", str(tmp_path), "--name", "c", "--epochs", "1", "--steps-per-epoch", "5", "--n-envs", "1",
+            "--policies", "spider=random", "ant=zero", "--ddpg.hidden", "8", "--ddpg.buffer-size", "100",
+            "--no-progress", "--no-tensorboard"]
+    assert main(argv) == 0
+    first = snapshot(tmp_path / "c")
+    assert main(argv) == 2 and "--start-over" in capsys.readouterr().err
+    assert main([*argv, "--start-over"]) == 0
+    assert snapshot(tmp_path / "c.old-1") == first and (tmp_path / "c" / "metrics.csv").is_file()
+    assert main(["train", "--resume", str(tmp_path / "c"), "--start-over"]) == 2
+    assert main([*argv[:-2], "--from", "epoch-000001"]) == 2
+    assert "--from needs --resume" in capsys.readouterr().err
+
+
 # ------------------------------------------------ 2. a kill inside the metrics rewrite
 
 
