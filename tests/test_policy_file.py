@@ -96,12 +96,33 @@ def _not_an_actor(stem: Path) -> None:
     save_file({"critic.net.0.weight": torch.zeros(3, 3)}, str(stem.with_suffix(".safetensors")))
 
 
+def _flip_data_byte(stem: Path) -> None:
+    """Flip one byte in the tensor data (past the safetensors header): still a valid file."""
+    path = stem.with_suffix(".safetensors")
+    data = bytearray(path.read_bytes())
+    data[-5] ^= 0x40
+    path.write_bytes(bytes(data))
+
+
+def _unchecked(*damages: Callable[[Path], None]) -> Callable[[Path], None]:
+    """A file written before the sha256 was recorded: damage it, and take the checksum away."""
+    def damage(stem: Path) -> None:
+        _edit_manifest(sha256=None)(stem)
+        for d in damages:
+            d(stem)
+    return damage
+
+
 BROKEN = {
     "missing-json": (lambda s: s.with_suffix(".json").unlink(), ".json", {}, "file not found"),
     "missing-safetensors": (lambda s: s.with_suffix(".safetensors").unlink(), ".safetensors", {}, "file not found"),
-    "truncated-safetensors": (_truncate, ".safetensors", {}, "truncated or corrupt"),
+    "truncated-safetensors": (_truncate, ".safetensors", {}, "sha256 differs"),
     "garbage-safetensors": (lambda s: s.with_suffix(".safetensors").write_bytes(b"\xff" * 64), ".safetensors", {},
-                            "truncated or corrupt"),
+                            "sha256 differs"),
+    "flipped-data-byte": (_flip_data_byte, ".safetensors", {}, "sha256 differs"),
+    "truncated-unchecked": (_unchecked(_truncate), ".safetensors", {}, "truncated or corrupt"),
+    "garbage-unchecked": (_unchecked(lambda s: s.with_suffix(".safetensors").write_bytes(b"\xff" * 64)),
+                          ".safetensors", {}, "truncated or corrupt"),
     "corrupt-json": (lambda s: s.with_suffix(".json").write_text('{"agent": "bug",'), ".json", {}, "corrupt JSON"),
     "json-not-an-object": (lambda s: s.with_suffix(".json").write_text("[1, 2]"), ".json", {},
                            "expected a JSON object"),
@@ -111,7 +132,7 @@ BROKEN = {
     "obs-dim-mismatch": (lambda s: None, ".json", {"expect_obs_dim": OBS_DIM + 1}, f"expects {OBS_DIM} observation"),
     "manifest-disagrees-with-weights": (_edit_manifest(obs_dim=OBS_DIM + 1), ".safetensors", {},
                                         f"weights are {OBS_DIM}->8, manifest says {OBS_DIM + 1}->8"),
-    "weights-not-an-actor": (_not_an_actor, ".safetensors", {}, "not an actor"),
+    "weights-not-an-actor": (_unchecked(_not_an_actor), ".safetensors", {}, "not an actor"),
 }
 
 

@@ -23,7 +23,7 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
-from triplesumo.agents.policy_file import PolicyFileError, load_policy
+from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.cli import main
 from triplesumo.rules.rewards import DENSE_TERMS
@@ -283,17 +283,21 @@ CORRUPTIONS = {
     "garbage-latest-json": (lambda run: (run / "checkpoints" / "latest.json").write_text("epoch-000004"),
                             lambda run: run / "checkpoints" / "latest.json", "corrupt JSON"),
     "truncated-weights": (lambda run: _truncate(_latest_file(run, "weights.safetensors")),
-                          lambda run: _latest_file(run, "weights.safetensors"), "truncated or corrupt"),
+                          lambda run: _latest_file(run, "weights.safetensors"), "sha256 differs"),
     "garbage-state-json": (lambda run: _latest_file(run, "state.json").write_bytes(b"{\x00not json"),
-                           lambda run: _latest_file(run, "state.json"), "corrupt JSON"),
+                           lambda run: _latest_file(run, "state.json"), "sha256 differs"),
     "wrong-format-state-json": (lambda run: _latest_file(run, "state.json").write_text('{"format": "x"}'),
-                                lambda run: _latest_file(run, "state.json"), "format 'x'"),
+                                lambda run: _latest_file(run, "state.json"), "sha256 differs"),
     "truncated-arrays": (lambda run: _truncate(_latest_file(run, "arrays.npz")),
-                         lambda run: _latest_file(run, "arrays.npz"), "corrupt or truncated npz"),
+                         lambda run: _latest_file(run, "arrays.npz"), "sha256 differs"),
     "truncated-replay": (lambda run: _truncate(_latest_file(run, "replay.npz")),
-                         lambda run: _latest_file(run, "replay.npz"), "corrupt or truncated npz"),
+                         lambda run: _latest_file(run, "replay.npz"), "sha256 differs"),
     "missing-replay": (lambda run: _latest_file(run, "replay.npz").unlink(),
                        lambda run: _latest_file(run, "replay.npz"), "file not found"),
+    "missing-manifest": (lambda run: _latest_file(run, "manifest.json").unlink(),
+                         lambda run: _latest_file(run, "manifest.json"), "file not found"),
+    "garbage-manifest": (lambda run: _latest_file(run, "manifest.json").write_text("{"),
+                         lambda run: _latest_file(run, "manifest.json"), "corrupt JSON"),
 }
 
 
@@ -317,11 +321,25 @@ def test_missing_run_folder_names_config_json(tmp_path: Path) -> None:
         train(TrainConfig(), resume_dir=tmp_path / "nope")
 
 
+def _reseal(folder: Path) -> None:
+    """Record the sha256 of a checkpoint's edited files in its manifest (as a well-formed but wrong file)."""
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["sha256"] = {name: file_sha256(folder / name) for name in manifest["sha256"]}
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+
+
 def _drop_state_key(run: Path) -> None:
     path = _latest_file(run, "state.json")
     state = json.loads(path.read_text())
     del state["config"]
     path.write_text(json.dumps(state))
+    _reseal(path.parent)
+
+
+def _wrong_format(run: Path) -> None:
+    path = _latest_file(run, "state.json")
+    path.write_text('{"format": "x"}')
+    _reseal(path.parent)
 
 
 def _drop_array(run: Path) -> None:
@@ -330,14 +348,17 @@ def _drop_array(run: Path) -> None:
         arrays = {k: data[k] for k in data.files if k != "lwr"}
     with path.open("wb") as fh:
         np.savez(fh, **arrays)
+    _reseal(path.parent)
 
 
-@pytest.mark.parametrize(("damage", "name"), [(_drop_state_key, "state.json"), (_drop_array, "arrays.npz")],
-                         ids=["state-json-lacks-config", "arrays-npz-lacks-lwr"])
-def test_checkpoint_lacking_a_key_names_the_file(run_copy: Path, damage: Any, name: str) -> None:
+@pytest.mark.parametrize(("damage", "name", "reason"), [
+    (_drop_state_key, "state.json", "missing entries"), (_drop_array, "arrays.npz", "missing arrays"),
+    (_wrong_format, "state.json", "format 'x'")], ids=["state-json-lacks-config", "arrays-npz-lacks-lwr", "format"])
+def test_checkpoint_lacking_a_key_names_the_file(run_copy: Path, damage: Any, name: str, reason: str) -> None:
+    """Files whose checksums fit their manifest, but which are still wrong, are named too."""
     path = _latest_file(run_copy, name)
     damage(run_copy)
-    with pytest.raises(PolicyFileError, match=re.escape(str(path))):
+    with pytest.raises(PolicyFileError, match=f"{re.escape(str(path))}.*{reason}"):
         train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": 99})
 
 

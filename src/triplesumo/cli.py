@@ -27,6 +27,13 @@ def _parser() -> argparse.ArgumentParser:
                        help="continue the killed or finished run in RUN_DIR (its saved config; "
                             "--epochs and --max-minutes may be raised; --no-save-replay resumes from a checkpoint "
                             "whose replay buffer was not kept, with an empty buffer: not bit-exact)")
+    train.add_argument("--from", dest="from_checkpoint", metavar="epoch-N", default=None,
+                       help="with --resume: continue from this checkpoint of the run instead of the latest (e.g. "
+                            "when the latest is damaged: the error names the newest intact one); later epochs are "
+                            "trained again")
+    train.add_argument("--start-over", action="store_true",
+                       help="train afresh although OUT/NAME already holds a run: that run is first moved aside to "
+                            "OUT/NAME.old-K (without this, training refuses such a folder and changes nothing)")
     _dcargs.add_arguments(train, TrainConfig)
     from triplesumo.evaluation.evaluate import EvaluateConfig
 
@@ -83,16 +90,22 @@ def main(argv: list[str] | None = None) -> int:
 
             if args.resume:
                 allowed = ("epochs", "max_minutes", "progress", "save_replay")
-                given = {k for k in vars(args) if k not in ("command", "resume")}
+                if args.start_over:
+                    raise ValueError("--start-over starts a new run; it cannot be given with --resume")
+                given = {k for k in vars(args) if k not in ("command", "resume", "from_checkpoint", "start_over")}
                 if given - set(allowed):
                     extra = given - set(allowed)
                     flags = ", ".join(sorted("--" + k.replace("__", ".").replace("_", "-") for k in extra))
                     raise ValueError(f"with --resume the run's saved config is used; only --epochs, --max-minutes, "
                                      f"--progress and --no-save-replay may be given, not {flags}")
                 overrides = {k: v for k, v in vars(args).items() if k in allowed}
-                result = train(TrainConfig(), resume_dir=args.resume, overrides=overrides)
+                result = train(TrainConfig(), resume_dir=args.resume, overrides=overrides,
+                               from_checkpoint=args.from_checkpoint)
             else:
-                result = train(_dcargs.build(TrainConfig, args))
+                if args.from_checkpoint:
+                    raise ValueError("--from needs --resume RUN_DIR (it names a checkpoint of that run)")
+                cfg = _dcargs.build(TrainConfig, args)
+                result = train(cfg, start_over=args.start_over)
             print(f"trained {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates "
                   f"in {result.seconds:.0f} s; MWR {result.mwr:+.3f}")
             print(f"run folder: {result.run_dir} (metrics.csv, plots/, checkpoints/, policy.json)")
@@ -162,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.train import main as bench_train
 
                 bench_train(args.rest)
-    except (ValueError, FileNotFoundError, PermissionError, OSError) as exc:
+    except (ValueError, FileNotFoundError, PermissionError, OSError, FloatingPointError) as exc:
         print(f"triplesumo {args.command}: error: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -28,7 +28,7 @@ from triplesumo.evaluation.play import PlayConfig, run_play
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.scenarios import get_scenario
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.loop import train
+from triplesumo.train.loop import holds_run, train
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,9 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     if cfg.scenario != "paper":
         return _run_scenario_demo(cfg)
     out = check_writable(Path(cfg.out))
+    if holds_run(out / "bug") or (out / "evaluation").exists():
+        raise FileExistsError(f"{out} already holds an earlier demo's results; nothing was changed: choose another "
+                              "--out (or delete that folder)")
     print(f"[1/3] training Bug with DDPG (paper preset) in the shipped ongoing match -> {out / 'bug'}")
     train_cfg = TrainConfig(name="bug", out=str(out), epochs=cfg.train_epochs, max_minutes=cfg.max_minutes,
                             steps_per_epoch=cfg.steps_per_epoch,
@@ -126,7 +129,7 @@ def _run_scenario_demo(cfg: DemoConfig) -> dict[str, Path]:
           f"{result.seconds:.0f} s; training MWR {result.mwr:+.3f}")
     policy = str(result.run_dir / "policy")
     print(f"[2/3] evaluating this {learner}, passive and random {learner} ({cfg.eval_epochs} test epochs each)")
-    eval_cfg = EvaluateConfig(policy=policy, learner=learner, policies=("*=random",), scenario=cfg.scenario,
+    eval_cfg = EvaluateConfig(policy=(policy,), learner=learner, policies=("*=random",), scenario=cfg.scenario,
                               epochs=cfg.eval_epochs, out=str(out / "evaluation"),
                               steps_per_epoch=cfg.steps_per_epoch, n_envs=cfg.n_envs, progress=cfg.progress)
     print(format_summary(evaluate(eval_cfg)))

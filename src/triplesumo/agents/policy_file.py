@@ -4,12 +4,14 @@
 normalises its observations, the frozen normaliser (keys ``obs_norm.*``, manifest entry
 ``"obs_norm": true``); ``NAME.json`` says
 what they are: agent, observation mode and size, action size, hidden sizes, env and
-mujoco versions, and how they were made (command, seed, epochs, evaluation). Loading
-never unpickles anything.
+mujoco versions, how they were made (command, seed, epochs, evaluation), and the sha256
+of the weights file, checked on load (files written before it was recorded load
+unchecked). Loading never unpickles anything.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -61,6 +63,15 @@ def atomic_save_tensors(tensors: dict[str, torch.Tensor], path: Path, metadata: 
         raise
 
 
+def file_sha256(path: Path) -> str:
+    """The sha256 of a file's bytes (hex), read in chunks."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        while chunk := fh.read(1 << 20):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
 def load_tensors(path: Path) -> dict[str, torch.Tensor]:
     """Load a safetensors file, or :class:`PolicyFileError` naming the file and the reason."""
     path = Path(path)
@@ -101,6 +112,7 @@ def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any],
     if obs_norm is not None:
         tensors |= {f"obs_norm.{k}": v for k, v in obs_norm.state_dict().items()}
     atomic_save_tensors(tensors, weights)
+    full["sha256"] = file_sha256(weights)
     atomic_write_bytes(meta, (json.dumps(full, indent=2, sort_keys=True) + "\n").encode())
     return weights, meta
 
@@ -124,6 +136,9 @@ def load_policy(stem: Path, expect_obs_mode: str | None = None,
     if expect_obs_dim is not None and int(manifest["obs_dim"]) != expect_obs_dim:
         raise PolicyFileError(f"{meta_path}: policy expects {manifest['obs_dim']} observation values, "
                               f"the match gives {expect_obs_dim}")
+    if "sha256" in manifest and weights_path.is_file() and file_sha256(weights_path) != manifest["sha256"]:
+        raise PolicyFileError(f"{weights_path}: sha256 differs from the one {meta_path} records "
+                              "(damaged, or replaced by other weights)")
     tensors = load_tensors(weights_path)
     try:
         actor = Actor.from_state_dict(tensors, prefix="actor.")

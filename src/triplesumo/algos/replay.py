@@ -152,6 +152,11 @@ class ReplayBuffer:
     def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
         """Restore from :meth:`state_dict` (e.g. an ``np.load`` of a saved ``.npz``).
 
+        Only the filled part is written, one array at a time, so a resumed run needs no more
+        memory than the run it resumes (``state`` may read its arrays lazily, e.g. an open
+        ``np.load`` of an ``.npz``). If an array has the wrong shape the buffer keeps its
+        size and position but the arrays before it are already overwritten.
+
         Raises:
             KeyError: A key is missing.
             ValueError: Capacity, sizes or array shapes do not match this buffer.
@@ -168,15 +173,14 @@ class ReplayBuffer:
             raise ValueError(f"size must be in [0, {capacity}], got {size}")
         if not 0 <= pos < capacity or (size < capacity and pos != size):
             raise ValueError(f"pos {pos} is inconsistent with size {size} and capacity {capacity}")
-        loaded = {}
-        for name, row_shape in self._row_shapes().items():
+        for name, row_shape in self._row_shapes().items():  # one array at a time: never two copies at once
             arr = np.asarray(state[name])
             if arr.shape != (size, *row_shape):
                 raise ValueError(f"{name} must have shape {(size, *row_shape)}, got {arr.shape}")
-            loaded[name] = arr
-        for name, arr in loaded.items():
             target = getattr(self, name)
             target[:size] = arr
-            target[size:] = 0.0
+            del arr
+            if self._size > size:  # zero what an earlier fill left beyond the restored part (untouched
+                target[size:self._size] = 0.0  # pages are still the allocation's zeros: never touch them)
         self._pos = pos
         self._size = size

@@ -174,9 +174,13 @@ class Match:
 
     def check_action(self, agent: str, action: Any) -> np.ndarray:
         """One agent's action as a float64 copy, or ``ValueError`` naming the agent."""
+        if getattr(action, "requires_grad", False):  # a torch tensor still in an autograd graph
+            raise ValueError(f"action of {agent!r} is a tensor that requires grad: pass action.detach()")
+        if np.iscomplexobj(action) or getattr(action, "is_complex", lambda: False)():
+            raise ValueError(f"action of {agent!r} must be real numbers, got complex values")
         try:
             arr = np.array(action, dtype=np.float64, copy=True)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, RuntimeError) as exc:
             raise ValueError(f"action of {agent!r} must be an array of numbers: {exc}") from None
         size = self.action_sizes[self.agents.index(agent)]
         if arr.shape != (size,):

@@ -8,6 +8,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 
 from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
@@ -114,6 +115,8 @@ class TripleSumoEnv(MatchAccess, gym.Env):
         return self._obs[self._learner_index], infos[self._learner_index]
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        if not self._obs:
+            raise ResetNeeded("TripleSumoEnv.step called before reset(): call env.reset(seed=...) first")
         sizes = self.match.action_sizes
         actions = np.zeros((self.match.n_agents, self.match.action_width))
         actions[self._learner_index, :sizes[self._learner_index]] = self.match.check_action(self.learner, action)

@@ -37,12 +37,12 @@ from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, expand_pairs, make_policy, policies_from_pairs, policy_fingerprint
 from triplesumo.envs.match import Match
-from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
+from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config
-from triplesumo.train.logger import COLUMNS
+from triplesumo.train.logger import COLUMNS, repair_metrics_csv
 
 
 @dataclass(frozen=True)
@@ -198,6 +198,12 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
     record = _record(cfg, candidates)
     kept: dict[str, Any] = {}
+    if not cfg.resume:
+        held = [p for p in (out / RECORD_FILE, *(out / label / "metrics.csv" for label in candidates)) if p.exists()]
+        if held:
+            names = ", ".join(str(p.relative_to(out)) for p in held)
+            raise FileExistsError(f"{out} already holds an evaluation ({names}); "
+                                  "nothing was changed: add --resume to continue or extend it, or choose another --out")
     if cfg.resume:
         kept = _previous_candidates(out / RECORD_FILE, record)
         record["candidates"] = {**kept, **record["candidates"]}
@@ -300,39 +306,27 @@ def finished_rows(path: Path, epochs: int, columns: tuple[str, ...] = COLUMNS,
     """How many rows (numbered 1, 2, ...) ``path`` holds, in order from row 1.
 
     A run killed while writing leaves a partial last line, and the file is cut back to
-    its last complete, valid row (rewritten atomically). ``ValueError`` if the file does
-    not have the header ``columns`` or holds more than ``epochs`` rows. By default the
-    file is a candidate's metrics CSV; other row-appended tables pass their ``columns``
-    and ``valid_row(values, number)``; ``what`` names the table, its rows and the limit in errors.
+    its last complete, valid row by :func:`~triplesumo.train.logger.repair_metrics_csv`
+    (the one routine training's resume uses too; rewritten atomically). ``ValueError`` if
+    the file does not have the header ``columns``, has an invalid row before its last, or
+    holds more than ``epochs`` rows. By default the file is a candidate's metrics CSV; other
+    row-appended tables pass their ``columns`` and ``valid_row(values, number)``; ``what``
+    names the table, its rows and the limit in errors.
     """
-    if not path.exists():
-        return 0
-    valid_row = valid_row or _valid_row
-    lines = path.read_text(encoding="utf-8").split("\n")
-    complete = lines[:-1]  # a file ending in a newline leaves "" last; anything else is cut off
-    rows = list(csv.reader(complete))
-    if not rows or tuple(rows[0]) != columns:
-        raise ValueError(f"{path}: not a {what[0]} (expected the header {list(columns)})")
-    good = 0
-    for row in rows[1:]:
-        if len(row) != len(columns) or not valid_row(dict(zip(columns, row, strict=True)), good + 1):
-            break
-        good += 1
+    problem = None
+    if valid_row is not None:
+        check = valid_row
+
+        def problem(row: list[str], number: int) -> str | None:
+            if len(row) != len(columns):
+                return f"{len(row)} fields, expected {len(columns)}"
+            return None if check(dict(zip(columns, row, strict=True)), number) else f"not row {number}"
+
+    good = repair_metrics_csv(path, columns=columns, row_problem=problem, what=what[0])
     if good > epochs:
         raise ValueError(f"{path} already holds {good} {what[1]}, more than {what[2]}={epochs}: "
                          f"raise {what[2]}, or write into a new out folder")
-    if good + 1 < len(lines):  # drop the partial or invalid tail
-        atomic_write_bytes(path, ("\n".join(complete[:good + 1]) + "\n").encode("utf-8"))
     return good
-
-
-def _valid_row(values: dict[str, str], epoch: int) -> bool:
-    if values["epoch"] != str(epoch) or values["outcome"] not in OUTCOMES:
-        return False
-    try:
-        return all(math.isfinite(float(values[c])) for c in COLUMNS if c not in ("epoch", "outcome"))
-    except ValueError:
-        return False
 
 
 class RowAppender:

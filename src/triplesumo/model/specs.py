@@ -101,8 +101,8 @@ class PhysicsConfig:
             raise ValueError(
                 f"PhysicsConfig.integrator must be one of {INTEGRATORS}, got {self.integrator!r}"
             )
-        if self.frame_skip < 1:
-            raise ValueError(f"PhysicsConfig.frame_skip must be >= 1, got {self.frame_skip}")
+        if not isinstance(self.frame_skip, int) or isinstance(self.frame_skip, bool) or self.frame_skip < 1:
+            raise ValueError(f"PhysicsConfig.frame_skip must be an int >= 1, got {self.frame_skip!r}")
         if not re.fullmatch(r"\d+[KMG]?", self.memory):
             raise ValueError(f"PhysicsConfig.memory must look like '16M', got {self.memory!r}")
         if not (0.0 <= self.start_radius < 2.0):

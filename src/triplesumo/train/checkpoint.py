@@ -1,45 +1,82 @@
-"""Checkpoints of a training run: safetensors + JSON + npz, written atomically.
+"""Checkpoints of a training run: safetensors + JSON + npz, written atomically, checksummed.
 
 Layout, inside ``RUN/checkpoints/``::
 
     epoch-000200/weights.safetensors   networks, target networks, Adam state tensors
-    epoch-000200/state.json            config, counters, RNG states, manifest
+    epoch-000200/state.json            config, counters, RNG states, policy manifest
     epoch-000200/arrays.npz            noise state, in-flight matches (physics state etc.)
     epoch-000200/replay.npz            replay buffer (optional)
-    latest.json                        {"dir": "epoch-000200"}
+    epoch-000200/manifest.json         the recorded epoch and the sha256 of every file above
+    latest.json                        {"dir": "epoch-000200", "epoch": 200}
 
 A checkpoint folder is written under a temporary name, fsynced, renamed, and only then
 is ``latest.json`` replaced (``os.replace``): a kill at any moment leaves the previous
-checkpoint intact and pointed to. Nothing is ever unpickled (``np.load`` with
-``allow_pickle=False``, safetensors for tensors).
+checkpoint intact and pointed to. Loading checks every file against its sha256 in
+``manifest.json`` and names the file that fails; :func:`newest_intact` finds the newest
+checkpoint that passes, for ``--resume RUN --from epoch-N``. Old checkpoints are pruned
+by their recorded epoch, never by name. A failed write (disk full, read-only, no
+permission) is a :class:`CheckpointWriteError` naming the file and the cause; the
+half-written folder is removed and the previous checkpoint stays intact and pointed to.
+Nothing is ever unpickled (``np.load`` with ``allow_pickle=False``, safetensors for tensors).
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
+import re
 import shutil
 import zipfile
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
+from safetensors import SafetensorError
 
 from triplesumo.agents.policy_file import (
     PolicyFileError,
     atomic_save_tensors,
     atomic_write_bytes,
+    file_sha256,
     load_json,
     load_tensors,
 )
 
 CHECKPOINT_FORMAT = "triplesumo-checkpoint/1"
 KEEP = 2
+MANIFEST = "manifest.json"
 
 
 class CheckpointError(PolicyFileError):
     """A checkpoint is missing, truncated, corrupt or incompatible (the message names the file)."""
+
+
+class CheckpointWriteError(OSError):
+    """Writing a run file failed (disk full, read-only, no permission); names the file and cause."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+@contextmanager
+def writing(path: Path | str, last_good: str = "") -> Iterator[None]:
+    """Turn a failed write of ``path`` into a :class:`CheckpointWriteError` naming it and the cause."""
+    try:
+        yield
+    except CheckpointWriteError:
+        raise
+    except (OSError, SafetensorError) as exc:
+        code = getattr(exc, "errno", None)
+        if code is None:  # safetensors reports io errors as text: "IoError(Os { code: 28, ..." or "(os error 28)"
+            found = re.search(r"code: (\d+)|os error (\d+)", str(exc))
+            code = int(found.group(1) or found.group(2)) if found else None
+        cause = os.strerror(code) if code else str(exc)
+        detail = "" if code is None or cause in str(exc) else f" ({exc})"
+        raise CheckpointWriteError(code or errno.EIO, f"cannot write {path}: {cause}{detail}{last_good}") from exc
 
 
 def _fsync_dir(path: Path) -> None:
@@ -58,30 +95,85 @@ def _save_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
         os.fsync(fh.fileno())
 
 
+def recorded_epoch(folder: Path) -> int | None:
+    """The epoch a checkpoint folder records (its manifest), or None if it records none readably."""
+    try:
+        epoch = load_json(Path(folder) / MANIFEST).get("epoch")
+    except PolicyFileError:
+        return None
+    return epoch if isinstance(epoch, int) and not isinstance(epoch, bool) else None
+
+
+def checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
+    """The checkpoint folders of ``run_dir`` that record their epoch, oldest first (by epoch)."""
+    root = Path(run_dir) / "checkpoints"
+    found = [(recorded_epoch(f), f) for f in root.glob("epoch-*") if f.is_dir()] if root.is_dir() else []
+    return sorted((e, f) for e, f in found if e is not None)
+
+
 def save(run_dir: Path, epoch: int, tensors: dict[str, torch.Tensor], state: dict[str, Any],
          arrays: dict[str, np.ndarray], replay: dict[str, np.ndarray] | None) -> Path:
-    """Write checkpoint ``epoch`` and point ``latest.json`` at it; returns its folder."""
+    """Write checkpoint ``epoch`` and point ``latest.json`` at it; returns its folder.
+
+    Raises :class:`CheckpointWriteError` (naming the file and the cause, and the checkpoint
+    that is still the latest) when a write fails; the partial folder is removed.
+    """
     root = Path(run_dir) / "checkpoints"
-    root.mkdir(parents=True, exist_ok=True)
     name = f"epoch-{epoch:06d}"
     tmp = root / f".{name}.tmp"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    atomic_save_tensors(tensors, tmp / "weights.safetensors")
-    atomic_write_bytes(tmp / "state.json", (json.dumps({"format": CHECKPOINT_FORMAT, **state}) + "\n").encode())
-    _save_npz(tmp / "arrays.npz", arrays)
-    if replay is not None:
-        _save_npz(tmp / "replay.npz", replay)
-    _fsync_dir(tmp)
-    final = root / name
-    if final.exists():
-        shutil.rmtree(final)
-    os.replace(tmp, final)
-    _fsync_dir(root)
-    atomic_write_bytes(root / "latest.json", (json.dumps({"dir": name}) + "\n").encode())
-    for old in sorted(root.glob("epoch-*"))[:-KEEP]:
-        shutil.rmtree(old, ignore_errors=True)
+    try:
+        previous = f"; the last good checkpoint {latest(run_dir)} is intact"
+    except CheckpointError:
+        previous = "; no earlier checkpoint exists"
+    files: dict[str, Path] = {}
+    try:
+        with writing(root, previous):
+            root.mkdir(parents=True, exist_ok=True)
+            shutil.rmtree(tmp, ignore_errors=True)
+            tmp.mkdir()
+        for file, write in (
+            ("weights.safetensors", lambda p: atomic_save_tensors(tensors, p)),
+            ("state.json", lambda p: atomic_write_bytes(p, _json_bytes({"format": CHECKPOINT_FORMAT, **state}))),
+            ("arrays.npz", lambda p: _save_npz(p, arrays)),
+            *([("replay.npz", lambda p: _save_npz(p, replay))] if replay is not None else []),
+        ):
+            with writing(tmp / file, previous):
+                write(tmp / file)
+            files[file] = tmp / file
+        manifest = {"format": CHECKPOINT_FORMAT, "epoch": epoch,
+                    "sha256": {file: file_sha256(path) for file, path in files.items()}}
+        with writing(tmp / MANIFEST, previous):
+            atomic_write_bytes(tmp / MANIFEST, _json_bytes(manifest))
+            _fsync_dir(tmp)
+        final = root / name
+        with writing(final, previous):
+            if final.exists():
+                shutil.rmtree(final)
+            os.replace(tmp, final)
+            _fsync_dir(root)
+        with writing(root / "latest.json", previous):
+            atomic_write_bytes(root / "latest.json", _json_bytes({"dir": name, "epoch": epoch}))
+    except CheckpointWriteError:
+        shutil.rmtree(tmp, ignore_errors=True)  # give the space back; the previous checkpoint stands
+        raise
+    prune(run_dir, epoch)
     return final
+
+
+def prune(run_dir: Path, current: int) -> None:
+    """Keep checkpoint ``current`` and the KEEP - 1 newest before it, by recorded epoch.
+
+    Folders recording a later epoch belong to a history abandoned by ``--resume --from``
+    and are removed too; folders that record no epoch are left alone.
+    """
+    older = [f for e, f in checkpoints(run_dir) if e < current]
+    newer = [f for e, f in checkpoints(run_dir) if e > current]
+    for old in older[:max(len(older) - (KEEP - 1), 0)] + newer:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _json_bytes(value: dict[str, Any]) -> bytes:
+    return (json.dumps(value) + "\n").encode()
 
 
 def latest(run_dir: Path) -> Path:
@@ -101,6 +193,52 @@ def latest(run_dir: Path) -> Path:
     return folder
 
 
+def find(run_dir: Path, name: str) -> Path:
+    """Checkpoint ``name`` (``epoch-N``, any number of digits) of ``run_dir``, for ``--from``."""
+    prefix, _, number = name.partition("-")
+    if prefix != "epoch" or not number.isdigit():
+        raise CheckpointError(f"--from must name a checkpoint like epoch-000200, got {name!r}")
+    for epoch, folder in checkpoints(run_dir):
+        if epoch == int(number):
+            return folder
+    have = ", ".join(f.name for _, f in checkpoints(run_dir)) or "none"
+    raise CheckpointError(f"{Path(run_dir) / 'checkpoints' / name}: no such checkpoint (the run has: {have})")
+
+
+def verify(folder: Path, need_replay: bool = True) -> None:
+    """Check every file of a checkpoint against the sha256 its manifest records
+    (``replay.npz`` only with ``need_replay``)."""
+    folder = Path(folder)
+    try:
+        manifest = load_json(folder / MANIFEST)
+    except PolicyFileError as exc:
+        raise CheckpointError(str(exc)) from exc
+    sums = manifest.get("sha256")
+    if not isinstance(sums, dict) or not {"weights.safetensors", "state.json", "arrays.npz"} <= set(sums):
+        raise CheckpointError(f"{folder / MANIFEST}: lacks the sha256 of the checkpoint's files")
+    for file, expected in sums.items():
+        if file == "replay.npz" and not need_replay:
+            continue
+        path = folder / str(file)
+        if not path.is_file():
+            raise CheckpointError(f"{path}: file not found")
+        if file_sha256(path) != expected:
+            raise CheckpointError(f"{path}: sha256 differs from {folder / MANIFEST} (damaged or truncated)")
+
+
+def newest_intact(run_dir: Path, below: int | None = None) -> Path | None:
+    """The newest checkpoint of ``run_dir`` (recording an epoch < ``below``) whose files all verify."""
+    for epoch, folder in reversed(checkpoints(run_dir)):
+        if below is not None and epoch >= below:
+            continue
+        try:
+            verify(folder)
+        except CheckpointError:
+            continue
+        return folder
+    return None
+
+
 def _load_npz(path: Path) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise CheckpointError(f"{path}: file not found")
@@ -111,10 +249,41 @@ def _load_npz(path: Path) -> dict[str, np.ndarray]:
         raise CheckpointError(f"{path}: corrupt or truncated npz: {exc}") from exc
 
 
+class LazyNpz(Mapping[str, np.ndarray]):
+    """The members of an npz file, read one at a time (so a large replay buffer is never held twice)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise CheckpointError(f"{self.path}: file not found")
+        try:
+            with np.load(self.path, allow_pickle=False) as data:
+                self.files = list(data.files)
+        except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+            raise CheckpointError(f"{self.path}: corrupt or truncated npz: {exc}") from exc
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.files)
+
+    def __len__(self) -> int:
+        return len(self.files)
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        try:
+            with np.load(self.path, allow_pickle=False) as data:
+                return data[key]
+        except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+            raise CheckpointError(f"{self.path}: corrupt or truncated npz: {exc}") from exc
+
+
 def load(folder: Path, need_replay: bool) -> tuple[dict[str, torch.Tensor], dict[str, Any],
-                                                    dict[str, np.ndarray], dict[str, np.ndarray] | None]:
-    """Read a checkpoint folder: tensors, state, arrays, replay (or None)."""
+                                                    dict[str, np.ndarray], LazyNpz | None]:
+    """Read a checkpoint folder, checked against its manifest: tensors, state, arrays, replay (or None).
+
+    The replay buffer comes as a :class:`LazyNpz` (members read when used).
+    """
     folder = Path(folder)
+    verify(folder, need_replay)
     try:
         state = load_json(folder / "state.json")
         tensors = load_tensors(folder / "weights.safetensors")
@@ -126,5 +295,5 @@ def load(folder: Path, need_replay: bool) -> tuple[dict[str, torch.Tensor], dict
     arrays = _load_npz(folder / "arrays.npz")
     replay = None
     if need_replay:
-        replay = _load_npz(folder / "replay.npz")
+        replay = LazyNpz(folder / "replay.npz")
     return tensors, state, arrays, replay

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 
 from triplesumo.agents.zoo import check_policy_pairs
@@ -73,8 +74,9 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if isinstance(self.policies, list):
             object.__setattr__(self, "policies", tuple(self.policies))
-        if not self.name or "/" in self.name:
-            raise ValueError(f"TrainConfig.name must be a non-empty folder name, got {self.name!r}")
+        if not self.name or self.name in (".", "..") or any(sep in self.name for sep in ("/", "\\", os.sep)):
+            raise ValueError(f"TrainConfig.name must be a plain folder name inside out (no path separator, "
+                             f"not . or ..), got {self.name!r}")
         check_policy_pairs("TrainConfig.policies", self.policies, self.learner)
         for name in ("epochs", "steps_per_epoch", "n_envs", "n_threads", "checkpoint_every", "window",
                      "torch_threads"):

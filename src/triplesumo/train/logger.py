@@ -1,34 +1,132 @@
-"""Per-epoch metrics: a CSV (the source of the plots) and TensorBoard events."""
+"""Per-epoch metrics: a CSV (the source of the plots) and TensorBoard events.
+
+The CSV is only ever appended to, row by row, or rewritten whole through
+:func:`~triplesumo.agents.policy_file.atomic_write_bytes` (temp file, fsync, rename):
+a kill or a full disk at any moment leaves either the old file or the new one.
+:func:`repair_metrics_csv` is the one routine that cuts a CSV back to its finished rows
+(a torn last line of a killed run, rows past a checkpoint); training's resume and
+``evaluate --resume`` both use it.
+"""
 
 from __future__ import annotations
 
 import csv
+import io
+import math
+import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.evaluation.metrics import OUTCOMES
 from triplesumo.rules.rewards import TERMS
+from triplesumo.train.checkpoint import writing
 
 COLUMNS = ("epoch", "outcome", "local_winning_rate", "steps", "total_reward", "dense_reward", "sparse_reward",
            *TERMS, "env_steps", "wall_time")
 """Metrics CSV schema: one row per epoch (match) of the learner."""
 
 
+def _row_problem(row: list[str], epoch: int) -> str | None:
+    """Why ``row`` is not the finished row of ``epoch`` (None if it is)."""
+    if len(row) != len(COLUMNS):
+        return f"{len(row)} fields, expected {len(COLUMNS)}"
+    values = dict(zip(COLUMNS, row, strict=True))
+    if values["epoch"] != str(epoch):
+        return f"epoch {values['epoch']!r}, expected {epoch}"
+    if values["outcome"] not in OUTCOMES:
+        return f"outcome {values['outcome']!r}, expected one of {list(OUTCOMES)}"
+    for c in COLUMNS[2:]:
+        try:
+            if not math.isfinite(float(values[c])):
+                return f"{c} {values[c]!r} is not finite"
+        except ValueError:
+            return f"{c} {values[c]!r} is not a number"
+    return None
+
+
+def repair_metrics_csv(path: Path, keep_through: int | None = None, columns: tuple[str, ...] = COLUMNS,
+                       row_problem: Callable[[list[str], int], str | None] | None = None,
+                       what: str = "metrics CSV") -> int:
+    """Cut the metrics CSV ``path`` back to its finished rows; returns how many it keeps.
+
+    Kept: the complete (newline-terminated) rows for epochs 1, 2, ... in order, up to
+    ``keep_through`` if given. Dropped: a torn last line (a kill while writing it), an
+    invalid last row, and rows after ``keep_through``. The file is rewritten atomically,
+    and only when something is dropped. An invalid row with rows after it is not a torn
+    tail: ``ValueError`` names the file and line instead of dropping finished rows. So is
+    a file that is not a metrics CSV. A missing file holds 0 rows.
+
+    Other row-appended tables (tournament matches, ...) use the same routine with their own
+    ``columns``, ``row_problem(row, number)`` (why a row is not row ``number``, or None) and
+    ``what`` (the table's name in errors).
+    """
+    row_problem = row_problem or _row_problem
+    path = Path(path)
+    if not path.exists():
+        return 0
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not a {what} (byte {exc.start} is not UTF-8 text)") from None
+    lines = text.split("\n")
+    complete = lines[:-1]  # a file ending in a newline leaves "" last; anything else is cut off
+    if not complete or tuple(next(csv.reader(complete[:1]), [])) != columns:
+        raise ValueError(f"{path}: not a {what} (expected the header {list(columns)})")
+    good = 0
+    for number, row in enumerate(csv.reader(complete[1:]), start=2):
+        if keep_through is not None and good >= keep_through:
+            break
+        problem = row_problem(row, good + 1)
+        if problem is not None:
+            if number < len(complete):  # not the last complete line: finished rows follow it
+                which = f"the row of epoch {good + 1}" if columns == COLUMNS else f"row {good + 1}"
+                raise ValueError(f"{path}, line {number}: not {which} ({problem}), and rows "
+                                 f"follow it; fix or delete that line by hand, nothing was changed")
+            break
+        good += 1
+    if good + 1 < len(complete) or lines[-1] != "":
+        with writing(path):
+            atomic_write_bytes(path, ("\n".join(complete[: good + 1]) + "\n").encode("utf-8"))
+    return good
+
+
+def _csv_bytes(rows: list[dict[str, Any]] | None = None) -> bytes:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows or [])
+    return buf.getvalue().encode("utf-8")
+
+
 class MetricsLog:
-    """Appends epoch rows to ``metrics.csv`` and mirrors them to TensorBoard."""
+    """Appends epoch rows to ``metrics.csv`` and mirrors them to TensorBoard.
+
+    ``resume_epoch`` None starts a new CSV; otherwise the CSV is cut back to the rows of
+    epochs 1..``resume_epoch`` (:func:`repair_metrics_csv`), which must all be there.
+    """
 
     def __init__(self, run_dir: Path, resume_epoch: int | None, tensorboard: bool) -> None:
         self.path = Path(run_dir) / "metrics.csv"
-        if resume_epoch is not None and self.path.exists():
-            # Drop rows written after the checkpoint we resume from (a killed run goes on).
-            with self.path.open(newline="") as fh:
-                rows = [r for r in csv.DictReader(fh) if int(r["epoch"]) <= resume_epoch]
-            self._write_header()
-            with self.path.open("a", newline="") as fh:
-                csv.DictWriter(fh, COLUMNS).writerows(rows)
+        if resume_epoch is None:
+            with writing(self.path):
+                atomic_write_bytes(self.path, _csv_bytes())
         else:
-            self._write_header()
-        self._fh = self.path.open("a", newline="", buffering=1)  # line-buffered: rows show up as epochs end
-        self._csv = csv.DictWriter(self._fh, COLUMNS)
+            if resume_epoch > 0 and not self.path.exists():
+                raise ValueError(f"{self.path}: file not found, but the checkpoint resumed from is at epoch "
+                                 f"{resume_epoch}: its rows would be lost")
+            if not self.path.exists():
+                with writing(self.path):
+                    atomic_write_bytes(self.path, _csv_bytes())
+            kept = repair_metrics_csv(self.path, keep_through=resume_epoch)
+            if kept < resume_epoch:
+                raise ValueError(f"{self.path}: holds the rows of epochs 1..{kept}, but the checkpoint resumed from "
+                                 f"is at epoch {resume_epoch}: rows {kept + 1}..{resume_epoch} are missing")
+        with writing(self.path):
+            self._fh = self.path.open("a", newline="", buffering=1)  # line-buffered: rows show up as epochs end
+        self._csv = csv.DictWriter(self._fh, COLUMNS, lineterminator="\n")
         self._tb: Any = None
         if tensorboard:
             from torch.utils.tensorboard import SummaryWriter
@@ -36,12 +134,9 @@ class MetricsLog:
             purge = None if resume_epoch is None else resume_epoch + 1
             self._tb = SummaryWriter(str(Path(run_dir) / "tensorboard"), purge_step=purge)
 
-    def _write_header(self) -> None:
-        with self.path.open("w", newline="") as fh:
-            csv.DictWriter(fh, COLUMNS).writeheader()
-
     def epoch(self, row: dict[str, Any], mwr: float) -> None:
-        self._csv.writerow(row)
+        with writing(self.path):
+            self._csv.writerow(row)
         if self._tb is not None:
             e = row["epoch"]
             self._tb.add_scalar("charts/mwr", mwr, e)
@@ -56,7 +151,10 @@ class MetricsLog:
                 self._tb.add_scalar(f"losses/{key}", value, step)
 
     def flush(self) -> None:
-        self._fh.flush()
+        """Flush and fsync the CSV (before a checkpoint: no checkpoint counts rows the disk lacks)."""
+        with writing(self.path):
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
         if self._tb is not None:
             self._tb.flush()
 

@@ -5,15 +5,24 @@ noise, the others follow their fixed policies), store the learner's transitions,
 every ``learn_every`` collected transitions do ``gradient_steps`` DDPG updates. Each
 finished match is one *epoch*: its outcome, steps and rewards become a row of the
 metrics CSV; the match is reset with fresh seeded noise.
+
+Nothing is lost: a folder that already holds a run is never trained into again without
+``resume`` (continue it) or ``start_over`` (move it aside first); the memory the replay
+buffer needs is checked before anything is made; a learner whose losses, parameters or
+actions stop being finite stops the run with a :class:`DivergenceError` naming the
+learner, the update and the last good checkpoint.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import os
 import shlex
 import threading
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,12 +33,14 @@ import torch
 
 from triplesumo import ENV_VERSION, __version__
 from triplesumo.agents.builtin import act_batch
-from triplesumo.agents.policy_file import save_policy
+from triplesumo.agents.policy_file import atomic_write_bytes, load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
+from triplesumo.algos.base import DivergedError
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.algos.noise import make_noise
-from triplesumo.algos.replay import ReplayBuffer
+from triplesumo.algos.replay import FIELDS, ReplayBuffer
 from triplesumo.envs.batch import MatchBatch
+from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.rules.config import RewardConfig
 from triplesumo.rules.rewards import TERMS
@@ -53,16 +64,45 @@ class TrainResult:
     """Seconds spent in physics+rules (``env``), acting (``act``) and learning (``learn``)."""
 
 
+RUN_FILES = ("config.json", "metrics.csv", "checkpoints", "policy.json", "policy.safetensors")
+"""What makes a folder hold a run: training never writes into such a folder afresh."""
+
+
+class RunExistsError(FileExistsError):
+    """The run folder already holds a run (the message offers ``--resume`` and ``--start-over``)."""
+
+
+class DivergenceError(FloatingPointError):
+    """The learner's losses, parameters or actions are no longer finite (names learner, update, checkpoint)."""
+
+
 def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
-def config_from_json(data: dict[str, Any]) -> TrainConfig:
-    data = dict(data)
-    data["reward"] = RewardConfig(**data["reward"])
-    data["ddpg"] = DDPGConfig(**data["ddpg"])
+def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]:
+    if not isinstance(data, dict):
+        raise ValueError(f"{source}: {where or 'the file'} must be a JSON object, got {type(data).__name__}")
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown, missing = sorted(set(data) - names), sorted(names - set(data))
+    if unknown or missing:
+        problems = [f"unknown key(s) {[where + k for k in unknown]}"] if unknown else []
+        problems += [f"missing key(s) {[where + k for k in missing]}"] if missing else []
+        raise ValueError(f"{source}: {' and '.join(problems)} (a {cls.__name__} has {sorted(names)})")
+    return dict(data)
+
+
+def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
+    """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
+    missing key (a config written by another version, or edited by hand)."""
+    data = _check_keys(data, TrainConfig, "", source)
+    data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
+    data["ddpg"] = DDPGConfig(**_check_keys(data["ddpg"], DDPGConfig, "ddpg.", source))
     data["policies"] = tuple(data["policies"])
-    return TrainConfig(**data)
+    try:
+        return TrainConfig(**data)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: {exc}") from exc
 
 
 def command_for(cfg: TrainConfig) -> str:
@@ -70,6 +110,60 @@ def command_for(cfg: TrainConfig) -> str:
     from triplesumo import _dcargs
 
     return " ".join(shlex.quote(a) for a in ["triplesumo", "train", *_dcargs.to_argv(cfg)])
+
+
+def holds_run(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds (part of) a training run."""
+    return any((Path(run_dir) / name).exists() for name in RUN_FILES)
+
+
+def refuse_existing_run(run_dir: Path, start_over: bool) -> Path | None:
+    """Refuse to train afresh into a folder holding a run; with ``start_over`` move it aside.
+
+    Returns where the old run went (``RUN.old-K``, the first free K), or None.
+    """
+    run_dir = Path(run_dir)
+    if not holds_run(run_dir):
+        return None
+    if not start_over:
+        raise RunExistsError(
+            f"run folder {run_dir} already holds a run ({', '.join(n for n in RUN_FILES if (run_dir / n).exists())}); "
+            f"nothing was changed. Continue it with `triplesumo train --resume {run_dir}` (add --epochs N for more), "
+            f"or start over with the same command plus --start-over (the old run is moved to {run_dir}.old-K), "
+            "or choose another --name")
+    k = 1
+    while (aside := run_dir.with_name(f"{run_dir.name}.old-{k}")).exists():
+        k += 1
+    with checkpoint.writing(aside):
+        os.replace(run_dir, aside)
+    print(f"start over: the earlier run in {run_dir} was moved to {aside}")
+    return aside
+
+
+def replay_bytes(capacity: int, obs_dim: int, act_dim: int) -> int:
+    """Bytes a full replay buffer of ``capacity`` transitions takes (float32 arrays)."""
+    return capacity * (2 * obs_dim + act_dim + 2) * 4
+
+
+def machine_memory() -> int:
+    """Physical memory plus swap of this machine, in bytes (0 if unknown)."""
+    try:
+        info = dict(line.split(":", 1) for line in Path("/proc/meminfo").read_text().splitlines() if ":" in line)
+        return sum(int(info[k].split()[0]) * 1024 for k in ("MemTotal", "SwapTotal") if k in info)
+    except (OSError, ValueError):
+        try:
+            return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        except (ValueError, OSError, AttributeError):
+            return 0
+
+
+def check_replay_memory(cfg: TrainConfig, obs_dim: int, act_dim: int) -> None:
+    """``ValueError`` naming ``TrainConfig.ddpg.buffer_size`` if a full buffer cannot fit this machine."""
+    need, have = replay_bytes(cfg.ddpg.buffer_size, obs_dim, act_dim), machine_memory()
+    if have and need > have:
+        raise ValueError(f"TrainConfig.ddpg.buffer_size={cfg.ddpg.buffer_size} needs {need / 2**30:.1f} GiB for a "
+                         f"full replay buffer ({obs_dim}-value observations), more than this machine's "
+                         f"{have / 2**30:.1f} GiB of memory and swap; nothing was made")
 
 
 def prepare_run_dir(run_dir: Path) -> Path:
@@ -100,10 +194,21 @@ class _Learner(threading.Thread):
 
     def run(self) -> None:
         t, cfg = time.perf_counter(), self.trainer.cfg
+        trainer = self.trainer
         try:
             for _ in range(self.due):
-                batch = self.trainer.replay.sample(cfg.ddpg.batch_size, self.trainer.sample_rng)
-                self.trainer.last_losses = self.trainer.agent.update(batch)
+                batch = trainer.replay.sample(cfg.ddpg.batch_size, trainer.sample_rng)
+                try:
+                    trainer.last_losses = losses = trainer.agent.update(batch)
+                except DivergedError as exc:  # the learner's own finite check of its update stats
+                    raise trainer.diverged(f"its losses are not finite ({exc})") from None
+                bad = {k: v for k, v in losses.items() if not math.isfinite(v)}
+                if bad:
+                    raise trainer.diverged(f"its losses are not finite: {bad}")
+            if self.due:
+                bad_params = [name for name, p in trainer.parameters if not bool(torch.isfinite(p).all())]
+                if bad_params:
+                    raise trainer.diverged(f"its parameters are not finite: {bad_params[:4]}")
         except BaseException as exc:  # re-raised in the collecting thread by finish()
             self.error = exc
         self.seconds = time.perf_counter() - t
@@ -119,7 +224,7 @@ class Trainer:
     """Trains ``cfg.learner`` with DDPG; :meth:`run` until ``cfg.epochs`` or ``max_minutes``."""
 
     def __init__(self, cfg: TrainConfig, run_dir: Path | None = None, resume: bool = False,
-                 command: str | None = None) -> None:
+                 command: str | None = None, start_over: bool = False, from_checkpoint: str | None = None) -> None:
         self.cfg = cfg
         self.match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
                                          reward=cfg.reward)
@@ -131,7 +236,13 @@ class Trainer:
         unknown = [p.split("=")[0] for p in pairs if p.split("=")[0] not in agent_names]
         if unknown:
             raise ValueError(f"TrainConfig.policies names unknown agents {unknown}; agents are {agent_names}")
-        self.run_dir = prepare_run_dir(Path(run_dir) if run_dir else Path(cfg.out) / cfg.name)
+        run_dir = Path(run_dir) if run_dir else Path(cfg.out) / cfg.name
+        if not resume:
+            refuse_existing_run(run_dir, start_over)
+        sizing = Match(self.match_cfg)
+        check_replay_memory(cfg, sizing.observer.sizes[cfg.learner],
+                            sizing.action_sizes[sizing.agents.index(cfg.learner)])
+        self.run_dir = prepare_run_dir(run_dir)
         self.command = command or command_for(cfg)
         torch.set_num_threads(cfg.torch_threads)
         self.batch = MatchBatch(self.match_cfg, cfg.n_envs, cfg.n_threads)
@@ -147,6 +258,9 @@ class Trainer:
         self.obs_dim = probe.observer.sizes[cfg.learner]
         self.act_dim = probe.action_sizes[self.L]
         self.agent = DDPG(self.obs_dim, self.act_dim, cfg.ddpg, seed=cfg.seed)
+        self.parameters = [(f"{owner}.{name}", p) for owner, module in vars(self.agent).items()
+                           if isinstance(module, torch.nn.Module) for name, p in module.named_parameters()]
+        """Every parameter of the learner's networks, checked to be finite after its updates."""
         self.replay = ReplayBuffer(cfg.ddpg.buffer_size, self.obs_dim, self.act_dim)
         self.noise = make_noise(cfg.ddpg.noise, (cfg.n_envs, self.act_dim), cfg.ddpg.noise_sigma,
                                 cfg.ddpg.noise_theta)
@@ -165,11 +279,13 @@ class Trainer:
         thread: overlaps "env" when overlap_learning is on) and waiting for learning."""
         self.last_losses: dict[str, float] = {}
         if resume:
-            self._restore()
+            self._restore(from_checkpoint)
         else:
             for k in range(cfg.n_envs):
                 self.obs.append(self.batch.reset_one(k, seed=self._episode_seed())[0])
-            (self.run_dir / "config.json").write_text(json.dumps(config_to_json(cfg), indent=2) + "\n")
+            with checkpoint.writing(self.run_dir / "config.json"):
+                atomic_write_bytes(self.run_dir / "config.json",
+                                   (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
         self.log = MetricsLog(self.run_dir, self.epochs_done if resume else None, cfg.tensorboard)
 
     # ------------------------------------------------------------------ helpers
@@ -195,7 +311,10 @@ class Trainer:
         if self.env_steps < cfg.ddpg.learning_starts:
             learner_act = self.rng.uniform(-1.0, 1.0, (n, self.act_dim))  # warm-up: the learner only
         else:
-            learner_act = np.clip(self.agent.act(obs) + self.noise.sample(self.rng), -1.0, 1.0)
+            raw = self.agent.act(obs)
+            if not np.isfinite(raw).all():
+                raise self.diverged("its actions are not finite")
+            learner_act = np.clip(raw + self.noise.sample(self.rng), -1.0, 1.0)
         actions[:, self.L, :self.act_dim] = learner_act
         for i, policy in self.others:
             actions[:, i, :probe.action_sizes[i]] = act_batch(policy, self._stacked_obs(i))
@@ -264,6 +383,22 @@ class Trainer:
             return 0.0
         return float(moving_winning_rate(np.array(self.lwr[-self.cfg.window:]), self.cfg.window)[-1])
 
+    def last_good(self) -> str:
+        """Where the run can go on from: its latest checkpoint, in words."""
+        try:
+            folder = checkpoint.latest(self.run_dir)
+        except checkpoint.CheckpointError:
+            return "no checkpoint was saved before it (no good one exists)"
+        return (f"the last good checkpoint {folder} is intact; "
+                f"`triplesumo train --resume {self.run_dir}` continues from it")
+
+    def diverged(self, what: str) -> DivergenceError:
+        """The error that stops a diverging learner: names it, its update count and the last good checkpoint."""
+        return DivergenceError(f"learner {self.cfg.learner!r} diverged at update {self.agent.num_updates} "
+                               f"(epoch {self.epochs_done}, env step {self.env_steps}): {what}. Stopped; "
+                               f"{self.last_good()}. Lower the learning rates (--ddpg.actor-lr, --ddpg.critic-lr) "
+                               "or the reward scale")
+
     def run(self) -> TrainResult:
         cfg = self.cfg
         start = time.perf_counter()
@@ -288,6 +423,10 @@ class Trainer:
                     self.save()
                 if timed_out and finished:
                     break
+        except checkpoint.CheckpointWriteError as exc:
+            if "last good checkpoint" in str(exc) or "no earlier checkpoint" in str(exc):
+                raise
+            raise checkpoint.CheckpointWriteError(exc.errno, f"{exc.strerror}; {self.last_good()}") from exc
         finally:
             if bar is not None:
                 bar.close()
@@ -332,40 +471,60 @@ class Trainer:
         }
         folder = checkpoint.save(self.run_dir, self.epochs_done, tensors, state, arrays,
                                  self.replay.state_dict() if self.cfg.save_replay else None)
-        save_policy(self.run_dir / "policy", self.agent.actor, self.manifest(), obs_norm=self.agent.obs_norm)
+        with checkpoint.writing(f"{self.run_dir / 'policy'}.safetensors/.json",
+                                f"; the last good checkpoint {folder} is intact"):
+            save_policy(self.run_dir / "policy", self.agent.actor, self.manifest(), obs_norm=self.agent.obs_norm)
         return folder
 
-    def _restore(self) -> None:
-        folder = checkpoint.latest(self.run_dir)
-        tensors, state, arrays, replay = checkpoint.load(folder, need_replay=self.cfg.save_replay)
+    def _restore(self, from_checkpoint: str | None) -> None:
+        if from_checkpoint is not None:
+            folder = checkpoint.find(self.run_dir, from_checkpoint)
+            loaded = checkpoint.load(folder, need_replay=self.cfg.save_replay)
+        else:
+            try:
+                folder = checkpoint.latest(self.run_dir)
+                loaded = checkpoint.load(folder, need_replay=self.cfg.save_replay)
+            except checkpoint.CheckpointError as exc:
+                intact = checkpoint.newest_intact(self.run_dir)
+                if intact is None:
+                    raise
+                raise checkpoint.CheckpointError(
+                    f"{exc} -- the latest checkpoint is damaged or missing; the newest intact one is {intact.name} "
+                    f"(epoch {checkpoint.recorded_epoch(intact)}): `triplesumo train --resume {self.run_dir} "
+                    f"--from {intact.name}` continues from it (later epochs are trained again)") from exc
+        tensors, state, arrays, replay = loaded
         need_state = ("config", "optimizer", "rng", "sample_rng", "matches", "epochs_done", "env_steps", "acc")
         missing = [k for k in need_state if k not in state]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'state.json'}: missing entries {missing}")
+        try:
+            saved = config_from_json(state["config"], f"{folder / 'state.json'} (its config)")
+        except ValueError as exc:
+            raise checkpoint.CheckpointError(str(exc)) from exc
+        for name in ("learner", "obs_mode", "n_envs", "steps_per_epoch", "policies", "reward", "ddpg", "seed"):
+            # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
+            if getattr(saved, name) != getattr(self.cfg, name):
+                raise checkpoint.CheckpointError(
+                    f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
+                    f"{getattr(saved, name)!r}, this run has {getattr(self.cfg, name)!r} (from config.json)")
         need_arrays = ["lwr"] + [f"match{k}.{part}" for k in range(self.cfg.n_envs)
                                  for part in ("physics", "last_obs", "warnings", "obs")]
         missing = [k for k in need_arrays if k not in arrays]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'arrays.npz'}: missing arrays {missing[:5]}")
+        if replay is not None and (absent := [k for k in (*FIELDS, "pos", "size", "capacity") if k not in replay]):
+            raise checkpoint.CheckpointError(f"{folder / 'replay.npz'}: missing arrays {absent}")
         try:
             self._restore_from(folder, tensors, state, arrays, replay)
         except (KeyError, IndexError, TypeError, ValueError, RuntimeError) as exc:
             if isinstance(exc, checkpoint.CheckpointError):
                 raise
             raise checkpoint.CheckpointError(
-                f"{folder} (state.json / arrays.npz / weights.safetensors): missing or malformed entry: "
-                f"{exc!r}") from exc
+                f"{folder} (state.json / arrays.npz / replay.npz / weights.safetensors): missing or malformed "
+                f"entry: {exc!r}") from exc
 
     def _restore_from(self, folder: Path, tensors: dict[str, torch.Tensor], state: dict[str, Any],
-                      arrays: dict[str, np.ndarray], replay: dict[str, np.ndarray] | None) -> None:
-        saved = config_from_json(state["config"])
-        for name in ("learner", "obs_mode", "n_envs", "steps_per_epoch", "policies", "reward", "ddpg", "seed",
-                     "scenario"):
-            # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
-            if getattr(saved, name) != getattr(self.cfg, name):
-                raise checkpoint.CheckpointError(
-                    f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
-                    f"{getattr(saved, name)!r}, this run has {getattr(self.cfg, name)!r}")
+                      arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> None:
         self.agent.load_state_dict({k: v for k, v in tensors.items() if not k.startswith("optim.")})
         self.agent.load_optimizer_state({k[6:]: v for k, v in tensors.items() if k.startswith("optim.")},
                                         state["optimizer"])
@@ -398,15 +557,22 @@ class Trainer:
                      title=f"{self.cfg.learner} training ({self.run_dir.name})", label=self.cfg.learner.capitalize())
 
 
-def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str, Any] | None = None) -> TrainResult:
-    """Start a run, or resume the one in ``resume_dir`` (with e.g. more epochs)."""
+def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str, Any] | None = None,
+          start_over: bool = False, from_checkpoint: str | None = None) -> TrainResult:
+    """Start a run, or resume the one in ``resume_dir`` (with e.g. more epochs).
+
+    A new run refuses a folder that already holds a run (:class:`RunExistsError`) unless
+    ``start_over``, which moves that run aside to ``RUN.old-K`` first. ``from_checkpoint``
+    (``epoch-N``) resumes from an older checkpoint than the latest, e.g. when the latest is
+    damaged; the epochs after it are trained again.
+    """
     if resume_dir is not None:
         resume_dir = Path(resume_dir)
-        from triplesumo.agents.policy_file import load_json
-
-        saved = config_from_json(load_json(resume_dir / "config.json"))
+        saved = config_from_json(load_json(resume_dir / "config.json"), str(resume_dir / "config.json"))
         cfg = dataclasses.replace(saved, **(overrides or {}))
-        trainer = Trainer(cfg, run_dir=resume_dir, resume=True)
+        trainer = Trainer(cfg, run_dir=resume_dir, resume=True, from_checkpoint=from_checkpoint)
     else:
-        trainer = Trainer(cfg)
+        if from_checkpoint is not None:
+            raise ValueError("--from needs --resume RUN_DIR (it names a checkpoint of that run)")
+        trainer = Trainer(cfg, start_over=start_over)
     return trainer.run()
