@@ -60,6 +60,8 @@ class Match:
         self.np_random = np.random.default_rng()
         self.steps = 0
         self.over = True
+        self.physics_error: str | None = None
+        """What MuJoCo reported when a physics error truncated the current match, else ``None``."""
         self._last_obs: list[np.ndarray] = []
 
     # ------------------------------------------------------------------ reset
@@ -75,9 +77,15 @@ class Match:
         self.sim.reset(qpos, qvel)
         self.steps = 0
         self.over = False
+        self.physics_error = None
         self._last_obs = self.observer.build()
-        infos = [{"step": 0, "outcome": None} for _ in self.agents]
-        return self._last_obs, infos
+        return self._last_obs, self._quiet_infos()
+
+    def _quiet_infos(self) -> list[dict[str, Any]]:
+        """Infos with every term zero and no outcome: those of reset (and of a physics error)."""
+        info: dict[str, Any] = dict.fromkeys(rules_rewards.REPORTED, 0.0)
+        info.update(outcome=rules_outcome.PLAYING, out_of_ring=False, step=self.steps)
+        return [dict(info) for _ in self.agents]
 
     def start_state(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """Start pose (``model.qpos0``) with the configured noise drawn from ``rng``."""
@@ -176,20 +184,19 @@ class Match:
         results = rules_outcome.judge(out, self._team_of, self._n_teams)
         timed_out = results is None and self.steps >= self.config.max_steps
         rows = self.reward_rule.rows(pos, vel, results, timed_out)
+        codes = rules_outcome.OUTCOME_CODES
         if results is not None:
-            outcomes = [results[t] for t in self._team_of]
-            exited = [a for a, is_out in zip(self.agents, out, strict=True) if is_out]
+            outcomes = [codes[results[t]] for t in self._team_of]
         else:
-            outcomes = [rules_outcome.DRAW if timed_out else None] * self.n_agents
-            exited = []
+            outcomes = [rules_outcome.DRAW_CODE if timed_out else rules_outcome.PLAYING] * self.n_agents
         keys, step = rules_rewards.REPORTED, self.steps
         infos = []
         rewards = []
-        for row, result in zip(rows, outcomes, strict=True):
+        for row, result, is_out in zip(rows, outcomes, out, strict=True):
             rewards.append(row[-2] + row[-1])  # dense + sparse: the terms summed in TERMS order
             info: dict[str, Any] = dict(zip(keys, row, strict=True))
             info["outcome"] = result
-            info["out_of_ring"] = exited
+            info["out_of_ring"] = is_out
             info["step"] = step
             infos.append(info)
         self.over = results is not None or timed_out
@@ -202,12 +209,10 @@ class Match:
         self.over = True
         if self.config.on_physics_error == "raise":
             raise PhysicsError(message)
-        infos = []
-        for _ in self.agents:
-            info: dict[str, Any] = {name: 0.0 for name in rules_rewards.TERMS}
-            info.update(dense_reward=0.0, sparse_reward=0.0, outcome="error", out_of_ring=[],
-                        step=self.steps, physics_error=message)
-            infos.append(info)
+        self.physics_error = message
+        infos = self._quiet_infos()
+        for info in infos:
+            info["outcome"] = rules_outcome.ERROR_CODE
         # The last trustworthy observation: never the NaN or auto-reset state.
         return StepResult(self._last_obs, np.zeros(self.n_agents), False, True, infos)
 

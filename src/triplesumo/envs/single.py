@@ -42,7 +42,8 @@ class TripleSumoEnv(MatchAccess, gym.Env):
 
     ## Episode End
     As the match: termination on a ring exit, truncation at the step limit (draw) or on a
-    physics error. ``info["outcome"]`` is the learner's side's result.
+    physics error. ``info["outcome"]`` is the learner's side's result as an int code
+    (``triplesumo.rules.outcome.OUTCOME_CODES``: 0 playing, 1 win, 2 loss, 3 draw, 4 error).
 
     ## Arguments
     ``learner`` (``"bug"``), ``policies`` (``{agent: callable}`` for the others; an agent

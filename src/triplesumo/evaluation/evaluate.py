@@ -42,6 +42,7 @@ from triplesumo.envs.match import ACTION_SIZE
 from triplesumo.evaluation.metrics import OUTCOMES, local_winning_rate, summarize
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.config import OBS_MODES, MatchConfig
+from triplesumo.rules.outcome import outcome_name
 from triplesumo.rules.rewards import TERMS
 from triplesumo.train.logger import COLUMNS
 
@@ -170,10 +171,11 @@ def play_test_epochs(
                         e = slot_epoch[k]
                         if e >= 0:
                             a = acc[k]
+                            outcome = outcome_name(info["outcome"])
                             rows[e] = {
                                 "epoch": e + 1,
-                                "outcome": info["outcome"],
-                                "local_winning_rate": float(local_winning_rate([info["outcome"]])[0]),
+                                "outcome": outcome,
+                                "local_winning_rate": float(local_winning_rate([outcome])[0]),
                                 "steps": info["step"],
                                 "total_reward": a["dense_reward"] + a["sparse_reward"],
                                 **a,

@@ -11,6 +11,7 @@ import numpy as np
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.video import check_writable, write_mp4
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.outcome import outcome_name
 from triplesumo.sim.render import FrameRenderer
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -76,7 +77,8 @@ def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | 
             renderer.close()
     n_frames = write_mp4(frames, Path(video), fps=round(1.0 / match.sim.dt)) if video is not None else 0
     return MatchRecord(
-        outcomes={a: result.infos[i]["outcome"] for i, a in enumerate(match.agents)},
-        steps=match.steps, returns=returns, out_of_ring=list(result.infos[0]["out_of_ring"]),
+        outcomes={a: outcome_name(result.infos[i]["outcome"]) for i, a in enumerate(match.agents)},
+        steps=match.steps, returns=returns,
+        out_of_ring=[a for i, a in enumerate(match.agents) if result.infos[i]["out_of_ring"]],
         terms=terms, frames=n_frames,
     )
