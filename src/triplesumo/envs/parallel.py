@@ -147,8 +147,9 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
         """The global state (the ``paper`` observation vector)."""
         return self.match.state()
 
-    def render(self) -> np.ndarray | None:
-        return self._view.render()
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """A frame in ``render_mode``; ``mode`` may only repeat it (RLlib passes one)."""
+        return self._view.render(mode)
 
     def close(self) -> None:
         self._view.close()
