@@ -79,9 +79,9 @@ class Match:
         self.over = False
         self.physics_error = None
         self._last_obs = self.observer.build()
-        return self._last_obs, self._quiet_infos()
+        return self._last_obs, self.reset_infos()
 
-    def _quiet_infos(self) -> list[dict[str, Any]]:
+    def reset_infos(self) -> list[dict[str, Any]]:
         """Infos with every term zero and no outcome: those of reset (and of a physics error)."""
         info: dict[str, Any] = dict.fromkeys(rules_rewards.REPORTED, 0.0)
         info.update(outcome=rules_outcome.PLAYING, out_of_ring=False, step=self.steps)
@@ -210,7 +210,7 @@ class Match:
         if self.config.on_physics_error == "raise":
             raise PhysicsError(message)
         self.physics_error = message
-        infos = self._quiet_infos()
+        infos = self.reset_infos()
         for info in infos:
             info["outcome"] = rules_outcome.ERROR_CODE
         # The last trustworthy observation: never the NaN or auto-reset state.
