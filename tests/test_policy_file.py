@@ -14,8 +14,8 @@ from safetensors.torch import save_file
 
 from triplesumo.agents import policy_file
 from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
-from triplesumo.agents.networks import Actor, ActorPolicy
 from triplesumo.agents.frozen import FrozenPolicy
+from triplesumo.agents.networks import Actor, ActorPolicy
 from triplesumo.agents.policy_file import PolicyFileError, load_fixed_policy, load_policy, save_policy
 from triplesumo.agents.zoo import load, make_policy, policies_from_pairs
 

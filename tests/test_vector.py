@@ -57,8 +57,8 @@ def test_autoreset_gives_the_final_observation_and_the_next_match_from_the_slot_
     with triplesumo.vector_env(2, max_steps=3) as env:
         env.reset(seed=11)
         single = Match(config)
-        obs, _ = single.reset(seed=match_seeds(11, 2)[1])
-        for t in range(3):
+        single.reset(seed=match_seeds(11, 2)[1])
+        for _ in range(3):
             out = env.step(np.zeros((2, 3, 8)))
             last = single.step_array(np.zeros((3, 8)))
         assert np.array_equal(out[4]["final_obs"][1], np.stack(last.observations))

@@ -293,7 +293,7 @@ class VectorMatches:
         """Start a match in every slot; see the class docstring for the seeds."""
         if seed is None:
             seeds: Sequence[int | None] = ([None] * self.num_envs if self._seeded else
-                                           match_seeds(int(np.random.SeedSequence().entropy), self.num_envs))
+                                           match_seeds(int(np.random.default_rng().integers(2**63)), self.num_envs))
         elif isinstance(seed, int | np.integer) and not isinstance(seed, bool):
             seeds = match_seeds(int(seed), self.num_envs)
         elif isinstance(seed, Sequence) and len(seed) == self.num_envs:

@@ -122,9 +122,8 @@ class TripleSumoEnv(MatchAccess, gym.Env):
             self.render()
         return self._obs[k], float(result.rewards[k]), result.terminated, result.truncated, result.infos[k]
 
-    def render(self, mode: str | None = None) -> np.ndarray | None:
-        """A frame in ``render_mode``; ``mode`` may only repeat it (RLlib passes one)."""
-        return self._view.render(mode)
+    def render(self) -> np.ndarray | None:
+        return self._view.render()
 
     def close(self) -> None:
         self._view.close()

@@ -119,7 +119,7 @@ def make_vec_env(env_id: str = "TripleSumo-Paper-v0", n_envs: int = 1, seed: int
                  **kwargs: Any) -> TripleSumoVecEnv:
     """``gym.make_vec(env_id, n_envs, **kwargs)`` as an SB3 ``VecEnv`` (``seed`` seeds the first reset)."""
     vector = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **kwargs)
-    env = TripleSumoVecEnv(vector.unwrapped)  # type: ignore[arg-type]
+    env = TripleSumoVecEnv(vector.unwrapped)
     if seed is not None:
         env.seed(seed)
     return env

@@ -19,7 +19,8 @@ import numpy as np
 from triplesumo._gl import ensure_headless_gl
 from triplesumo.model import names
 
-__all__ = ["FrameRenderer", "HumanViewer", "NoDisplayError", "ensure_headless_gl", "no_display_reason", "require_display"]
+__all__ = ["FrameRenderer", "HumanViewer", "NoDisplayError", "ensure_headless_gl", "no_display_reason",
+           "require_display"]
 
 
 class NoDisplayError(RuntimeError):
