@@ -186,8 +186,10 @@ def test_sb3_trains_on_the_batched_path(algo: str) -> None:
                     self.terminal.append(info["terminal_observation"])
             return True
 
+    from stable_baselines3.common.vec_env import VecCheckNan
+
     torch.set_num_threads(1)
-    env = make_vec_env("TripleSumo-Paper-v0", n_envs=4, seed=0, max_steps=25)
+    env = VecCheckNan(make_vec_env("TripleSumo-Paper-v0", n_envs=4, seed=0, max_steps=25), raise_exception=True)
     kwargs = ({"n_steps": 25, "batch_size": 50, "n_epochs": 2} if algo == "PPO" else
               {"learning_starts": 40, "batch_size": 32})
     model = getattr(stable_baselines3, algo)("MlpPolicy", env, seed=0, policy_kwargs={"net_arch": [32, 32]},
