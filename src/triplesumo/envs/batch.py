@@ -327,8 +327,8 @@ class VectorMatches:
                 obs[k] = self.batch.reset_one(k, self._next_seed(k))[0]
         infos = self._infos([r.infos for r in results], [r.infos[0]["step"] for r in results])
         infos["final_obs"], infos["_final_obs"] = final_obs, final
-        per_agent = np.ones((1, a), bool)
-        return obs.copy(), rewards, terminated[:, None] & per_agent, truncated[:, None] & per_agent, infos
+        # All agents of a match end together.
+        return obs.copy(), rewards, np.repeat(terminated[:, None], a, 1), np.repeat(truncated[:, None], a, 1), infos
 
     def _next_seed(self, k: int) -> int | None:
         """Seed of slot ``k``'s next match at an autoreset: ``None`` continues its generator."""
