@@ -103,6 +103,8 @@ def test_bad_arguments_are_named() -> None:
     with pytest.raises(ValueError, match="num_envs must be an integer >= 1"):
         triplesumo.vector_env(0)
     with triplesumo.vector_env(2) as env:
+        with pytest.raises(RuntimeError, match=r"call reset\(\) before step\(\)"):
+            env.step(np.zeros((2, 3, 8)))
         with pytest.raises(ValueError, match="seed must be an int, None or a list of 2 seeds"):
             env.reset(seed=[1, 2, 3])
         env.reset(seed=0)

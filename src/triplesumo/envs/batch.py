@@ -261,7 +261,8 @@ class VectorMatches:
 
     def __init__(self, num_envs: int, config: MatchConfig | None = None, num_threads: int | None = None) -> None:
         if num_threads is None and isinstance(num_envs, int):
-            num_threads = max(1, min(num_envs, len(os.sched_getaffinity(0))))
+            usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+            num_threads = max(1, min(num_envs, usable))
         try:
             self.batch = MatchBatch(config, num_envs, num_threads or 1)
         except ValueError as err:
@@ -309,6 +310,8 @@ class VectorMatches:
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
         """One step of every match with ``(num_envs, n_agents, act_dim)`` actions; autoreset."""
+        if not self._seeded:
+            raise RuntimeError("call reset() before step()")
         results = self.batch.step(actions)
         n, a = self.num_envs, self.n_agents
         obs = self._obs
