@@ -51,6 +51,7 @@ seeds that depend only on ``(seed, k)``.
 from __future__ import annotations
 
 import dataclasses
+import operator
 import os
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -313,21 +314,17 @@ class VectorMatches:
         if not self._seeded:
             raise RuntimeError("call reset() before step()")
         results = self.batch.step(actions)
-        n, a = self.num_envs, self.n_agents
+        a = self.n_agents
         obs = self._obs
-        rewards = np.empty((n, a), np.float32)
-        terminated = np.zeros(n, bool)
-        truncated = np.zeros(n, bool)
-        final = np.zeros(n, bool)
+        obs[:] = [r.observations for r in results]
+        rewards = np.array([r.rewards for r in results], np.float32)
+        terminated = np.array([r.terminated for r in results])
+        truncated = np.array([r.truncated for r in results])
+        final = terminated | truncated
         final_obs = np.zeros_like(obs)
-        for k, res in enumerate(results):
-            obs[k] = res.observations
-            rewards[k] = res.rewards
-            terminated[k], truncated[k] = res.terminated, res.truncated
-            if res.terminated or res.truncated:
-                final[k] = True
-                final_obs[k] = obs[k]
-                obs[k] = self.batch.reset_one(k, self._next_seed(k))[0]
+        for k in np.flatnonzero(final).tolist():
+            final_obs[k] = obs[k]
+            obs[k] = self.batch.reset_one(k, self._next_seed(k))[0]
         infos = self._infos([r.infos for r in results], [r.infos[0]["step"] for r in results])
         infos["final_obs"], infos["_final_obs"] = final_obs, final
         # All agents of a match end together.
@@ -339,7 +336,7 @@ class VectorMatches:
 
     def _infos(self, per_match: list[list[dict[str, Any]]], steps: list[int]) -> dict[str, np.ndarray]:
         n, a = self.num_envs, self.n_agents
-        rows = [[info[key] for key in _ARRAY_INFOS] for infos in per_match for info in infos]
+        rows = [_array_infos(info) for infos in per_match for info in infos]
         table = np.array(rows, np.float64).reshape(n, a, len(_ARRAY_INFOS))
         infos: dict[str, np.ndarray] = {key: table[..., j] for j, key in enumerate(REPORTED)}
         infos["outcome"] = table[..., len(REPORTED)].astype(np.int64)
@@ -359,6 +356,7 @@ class VectorMatches:
 
 
 _ARRAY_INFOS = (*REPORTED, "outcome", "out_of_ring")
+_array_infos = operator.itemgetter(*_ARRAY_INFOS)
 
 
 def vector_env(num_envs: int, scenario: str = "paper", backend: str = "cpu", device: str | None = None,
