@@ -10,6 +10,7 @@ import pytest
 from triplesumo.envs.batch import MatchBatch, match_seeds
 from triplesumo.envs.match import Match
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.sim.physics import PhysicsError
 
 N_MATCHES, N_STEPS = 3, 50
@@ -90,7 +91,7 @@ def test_a_finished_match_is_reported_over_until_reset(
         batch.reload(1)
         results = batch.step(np.zeros((N_MATCHES, 3, 8)))
         assert results[1].terminated and not results[1].truncated
-        assert [info["outcome"] for info in results[1].infos] == ["win", "win", "loss"]
+        assert [info["outcome"] for info in results[1].infos] == [OUTCOME_CODES[o] for o in ("win", "win", "loss")]
         assert not results[0].terminated and not results[2].terminated
         assert batch.over.tolist() == [False, True, False]
         with pytest.raises(RuntimeError, match=r"matches \[1\] are over"):
@@ -128,10 +129,11 @@ def test_physics_blow_up_in_one_match_truncates_only_that_match(backend: str, n_
         batch.matches[0].data.qvel[:] = 1e12  # MuJoCo's bad-qvel warning and auto-reset
         batch.reload(0)
         results = batch.step(np.zeros((N_MATCHES, 3, 8)))
-    assert results[0].truncated and results[0].infos[0]["outcome"] == "error"
-    assert "bad_qvel" in results[0].infos[0]["physics_error"]
+    assert results[0].truncated and results[0].infos[0]["outcome"] == OUTCOME_CODES["error"]
+    assert "bad_qvel" in (batch.matches[0].physics_error or "")
     assert all(np.isfinite(o).all() for o in results[0].observations)
-    assert [r.infos[0]["outcome"] for r in results[1:]] == [None, None]
+    assert [r.infos[0]["outcome"] for r in results[1:]] == [0, 0]
+    assert [m.physics_error for m in batch.matches[1:]] == [None, None]
 
 
 def test_physics_error_raise_mode_finishes_every_match_then_names_the_match() -> None:

@@ -14,19 +14,29 @@ SINGLE = ("raw_physics", "parallel_env", "match_core")
 BATCHES = ("batch_threads_1t", "batch_mujoco_1t", "batch_mujoco_2t", "batch_threads_2t")
 
 
+def _vector_rows(result: dict) -> tuple[str, str]:
+    threads = result["setup"]["n_threads"]
+    return f"raw_batch_{threads}t", f"vector_env_{threads}t"
+
+
 def _check(result: dict) -> None:
     assert set(result) == {"setup", "rates", "rounds", "episodes", "ratios", "target"}
-    assert set(result["rates"]) == set(SINGLE + BATCHES)
+    raw_batch, vector = _vector_rows(result)
+    batches = tuple(b for b in BATCHES if int(b[-2]) <= result["setup"]["n_threads"])
+    assert set(result["rates"]) == set(SINGLE + batches + (raw_batch, vector))
     for name, rate in result["rates"].items():
         assert math.isfinite(rate) and rate > 0, name
         assert len(result["rounds"][name]) == result["setup"]["rounds"]
     rates, ratios = result["rates"], result["ratios"]
     assert ratios["parallel_env_vs_raw"] == pytest.approx(rates["parallel_env"] / rates["raw_physics"], rel=1e-12)
     assert ratios["match_core_vs_raw"] == pytest.approx(rates["match_core"] / rates["raw_physics"], rel=1e-12)
-    for name in BATCHES:
+    assert ratios[f"{vector}_vs_raw_batch"] == pytest.approx(rates[vector] / rates[raw_batch], rel=1e-12)
+    for name in batches:
         assert ratios[f"{name}_vs_one_match"] == pytest.approx(rates[name] / rates["match_core"], rel=1e-12)
         assert ratios[f"{name}_vs_sequential"] == pytest.approx(rates[name] / rates["batch_threads_1t"], rel=1e-12)
-    assert result["target"] == {"parallel_env_vs_raw": 0.85, "met": ratios["parallel_env_vs_raw"] >= 0.85}
+    assert result["target"] == {"parallel_env_vs_raw": 0.85, "met": ratios["parallel_env_vs_raw"] >= 0.85,
+                                "vector_env_vs_raw_batch": 0.9,
+                                "vector_env_met": ratios[f"{vector}_vs_raw_batch"] >= 0.9}
     setup = result["setup"]
     assert setup["integrator"] == "RK4" and setup["cpu_count"] >= 1
     assert {"python", "mujoco", "numpy"} <= set(setup["versions"])
@@ -40,10 +50,13 @@ def test_run_env_benchmark_returns_consistent_rates_and_ratios() -> None:
 
 def test_single_match_variants_replay_the_same_episodes() -> None:
     """Raw physics restarts where the env's episodes end: the same trajectories, so the same count."""
-    result = run_env_benchmark(steps=260, n_matches=2, n_threads=1, rounds=1)
+    result = run_env_benchmark(steps=400, n_matches=2, n_threads=1, rounds=1)
     counts = {result["episodes"][name] for name in SINGLE}
     assert len(counts) == 1, result["episodes"]
     assert counts.pop() >= 1, "no episode ended: lengthen the run so the check means something"
+    # and raw mujoco.batch physics restarts where vector_env's matches end
+    raw_batch, vector = _vector_rows(result)
+    assert result["episodes"][raw_batch] == result["episodes"][vector] >= 1, result["episodes"]
 
 
 def test_main_quick_writes_json_with_the_documented_keys(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -52,6 +65,7 @@ def test_main_quick_writes_json_with_the_documented_keys(tmp_path: Path, capsys:
     _check(json.loads(path.read_text()))
     printed = capsys.readouterr().out
     assert "raw physics" in printed and "PettingZoo parallel_env" in printed and "MatchBatch" in printed
+    assert "triplesumo.vector_env" in printed and "raw mujoco.batch physics" in printed
 
 
 def test_obs_mode_reaches_the_envs_and_the_setup() -> None:

@@ -21,7 +21,7 @@ from gymnasium.utils.env_checker import check_env
 import triplesumo  # noqa: F401  (registers the Gymnasium ids)
 import triplesumo.agents.zoo
 from conftest import TinyZoo
-from triplesumo.agents.policy_file import load_json, load_policy, save_policy
+from triplesumo.agents.policy_file import load_fixed_policy, load_json, load_policy, save_policy
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.cli import main
 from triplesumo.evaluation.video import count_frames
@@ -118,7 +118,7 @@ def test_zoo_publish_records_the_evaluation_and_keeps_the_provenance(
         assert manifest[key] == made[key], key
     assert triplesumo.agents.zoo.available() == ["x"]
     published, _ = triplesumo.agents.zoo.load("x")
-    original, _ = load_policy(run_policy)
+    original, _ = load_fixed_policy(run_policy)  # zoo.load's loader: the same weights act alike
     obs = np.random.default_rng(0).normal(size=(3, made["obs_dim"])).astype(np.float32)
     np.testing.assert_array_equal(published(obs), original(obs))
 

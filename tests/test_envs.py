@@ -14,6 +14,7 @@ import triplesumo
 from triplesumo import MatchConfig, ResetNoise, TripleSumoEnv, parallel_env
 from triplesumo.envs.match import Match
 from triplesumo.model import PhysicsConfig
+from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.sim import PhysicsError
 
 AGENTS = ["ant", "bug", "spider"]
@@ -202,8 +203,8 @@ def test_ring_exit_terminates_every_agent() -> None:
     _, rewards, term, trunc, infos = env.step(zero_actions())
     assert term == {a: True for a in AGENTS}
     assert trunc == {a: False for a in AGENTS}
-    assert infos["bug"]["outcome"] == "win"
-    assert infos["spider"]["outcome"] == "loss"
+    assert infos["bug"]["outcome"] == OUTCOME_CODES["win"]
+    assert infos["spider"]["outcome"] == OUTCOME_CODES["loss"]
     assert env.agents == []
 
 
@@ -432,8 +433,9 @@ def test_physics_blow_up_truncates_with_physics_error(inject: str) -> None:
     assert term == {a: False for a in AGENTS}
     assert env.agents == []
     for a in AGENTS:
-        assert "bad_" in infos[a]["physics_error"]
-        assert infos[a]["outcome"] == "error"
+        assert infos[a]["outcome"] == OUTCOME_CODES["error"]
+    assert "bad_" in (match.physics_error or "")
+    for a in AGENTS:
         assert np.isfinite(obs[a]).all()
         np.testing.assert_array_equal(obs[a], before[a])  # the last trustworthy observation
         assert rewards[a] == 0.0
@@ -441,7 +443,7 @@ def test_physics_blow_up_truncates_with_physics_error(inject: str) -> None:
     env.reset(seed=0)
     _, _, term, trunc, infos = env.step(zero_actions())
     assert not any(trunc.values())
-    assert "physics_error" not in infos["ant"]
+    assert match.physics_error is None and infos["ant"]["outcome"] == 0
 
 
 def test_physics_blow_up_raises_when_asked() -> None:
@@ -458,8 +460,8 @@ def test_physics_blow_up_in_gymnasium_view_truncates() -> None:
     env.unwrapped.data.qvel[:] = 1e12
     obs, reward, terminated, truncated, info = env.step(np.zeros(8, dtype=np.float32))
     assert truncated and not terminated
-    assert info["outcome"] == "error"
-    assert "physics_error" in info
+    assert info["outcome"] == OUTCOME_CODES["error"]
+    assert "bad_qvel" in (env.unwrapped.match.physics_error or "")
     assert np.isfinite(obs).all()
 
 
@@ -478,7 +480,7 @@ def test_contact_memory_overflow_truncates(place) -> None:
         place(match, agent, x=0.05 * k, y=0.05 * k, z=0.6)
     result = match.step_array(np.zeros((3, 8)))
     assert result.truncated and not result.terminated
-    assert "contact_full" in result.infos[0]["physics_error"]
+    assert "contact_full" in (match.physics_error or "")
     assert all(np.isfinite(o).all() for o in result.observations)
 
 
@@ -491,7 +493,7 @@ def test_arena_stack_overflow_is_a_physics_error() -> None:
         if result.truncated:
             break
     assert result is not None and result.truncated
-    assert "arena_overflow" in result.infos[0]["physics_error"]
+    assert "arena_overflow" in (match.physics_error or "")
 
 
 def test_registered_ids() -> None:

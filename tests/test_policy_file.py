@@ -14,8 +14,9 @@ from safetensors.torch import save_file
 
 from triplesumo.agents import policy_file
 from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
+from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.networks import Actor, ActorPolicy
-from triplesumo.agents.policy_file import PolicyFileError, load_policy, save_policy
+from triplesumo.agents.policy_file import PolicyFileError, load_fixed_policy, load_policy, save_policy
 from triplesumo.agents.zoo import load, make_policy, policies_from_pairs
 
 OBS_DIM = 12
@@ -136,13 +137,32 @@ BROKEN = {
 }
 
 
+@pytest.mark.parametrize("loader", [load_policy, load_fixed_policy])
 @pytest.mark.parametrize("case", list(BROKEN))
-def test_broken_policy_file_error_names_the_file(stem: Path, case: str) -> None:
+def test_broken_policy_file_error_names_the_file(stem: Path, case: str, loader: Callable[..., object]) -> None:
     damage, suffix, expect, reason = BROKEN[case]
     damage(stem)
     pattern = f"{re.escape(str(stem.with_suffix(suffix)))}.*{re.escape(reason)}"
     with pytest.raises(PolicyFileError, match=pattern):
-        load_policy(stem, **expect)
+        loader(stem, **expect)
+
+
+def test_fixed_policy_acts_as_the_torch_actor_and_alike_alone_or_batched(stem: Path, actor: Actor) -> None:
+    fixed, manifest = load_fixed_policy(stem, expect_obs_mode="paper")
+    assert isinstance(fixed, FrozenPolicy) and (fixed.obs_dim, fixed.act_dim) == (OBS_DIM, 8)
+    obs = observations(64) * 50.0  # large inputs: tanh saturates for some rows, not all
+    batched = fixed(obs)
+    assert batched.dtype == np.float32 and batched.shape == (64, 8)
+    np.testing.assert_allclose(batched, ActorPolicy(actor)(obs), atol=1e-5)
+    assert np.array_equal(np.stack([fixed(o) for o in obs]), batched)  # no dependence on the batch
+    assert np.array_equal(fixed(obs[:5]), batched[:5])
+    with pytest.raises(ValueError, match=rf"obs must have shape \({OBS_DIM},\)"):
+        fixed(np.zeros(OBS_DIM + 1))
+
+
+def test_zoo_load_gives_the_fork_safe_policy_and_make_policy_the_torch_actor() -> None:
+    assert isinstance(load("spider")[0], FrozenPolicy)
+    assert isinstance(make_policy("zoo:spider"), ActorPolicy)
 
 
 # --------------------------------------------------------------------------- zoo

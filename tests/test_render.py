@@ -60,3 +60,29 @@ def test_render_without_mode_returns_none() -> None:
     env.reset(seed=0)
     with pytest.warns(UserWarning):
         assert env.render() is None
+
+
+@pytest.mark.parametrize("make", [lambda: parallel_env(render_mode="human"),
+                                  lambda: TripleSumoEnv(render_mode="human")])
+def test_human_mode_without_a_display_is_a_python_error_saying_what_to_do(
+        make, monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
+    from triplesumo.sim.render import NoDisplayError
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    with pytest.raises(NoDisplayError, match=r"needs a window.*render_mode='rgb_array'"):
+        make()
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
+def test_render_takes_the_mode_rllib_passes() -> None:
+    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+
+    env = ParallelPettingZooEnv(parallel_env(render_mode="rgb_array", width=64, height=48))
+    env.reset(seed=0)
+    assert env.render().shape == (48, 64, 3)  # RLlib passes its render_mode (None): the env's own mode
+    inner = env.par_env
+    assert inner.render("rgb_array").shape == (48, 64, 3)
+    with pytest.raises(ValueError, match="render mode is fixed"):
+        inner.render("human")

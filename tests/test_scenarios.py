@@ -14,7 +14,10 @@ from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.registration import ENV_IDS
 from triplesumo.rules import TERMS
 from triplesumo.rules.config import ResetNoise
-from triplesumo.rules.outcome import DRAW, LOSS, WIN, place_value
+from triplesumo.rules.outcome import DRAW_CODE as DRAW
+from triplesumo.rules.outcome import LOSS_CODE as LOSS
+from triplesumo.rules.outcome import WIN_CODE as WIN
+from triplesumo.rules.outcome import place_value
 from triplesumo.rules.scenarios import SCENARIOS, get_scenario
 
 ALL = triplesumo.scenarios()

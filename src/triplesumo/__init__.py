@@ -26,6 +26,8 @@ _LAZY = {
     "TripleSumoEnv": "triplesumo.envs.single",
     "TripleSumoParallelEnv": "triplesumo.envs.parallel",
     "parallel_env": "triplesumo.envs.parallel",
+    "vector_env": "triplesumo.envs.batch",
+    "VectorMatches": "triplesumo.envs.batch",
     "MatchConfig": "triplesumo.rules.config",
     "ResetNoise": "triplesumo.rules.config",
     "RewardConfig": "triplesumo.rules.config",

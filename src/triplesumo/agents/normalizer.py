@@ -19,9 +19,11 @@ import numpy as np
 import torch
 from torch import nn
 
-EPS = 1e-8
+from triplesumo.agents.frozen import NORM_CLIP, NORM_EPS
+
+EPS = NORM_EPS
 """Added to the variance before the square root (as SB3's ``VecNormalize``)."""
-CLIP = 10.0
+CLIP = NORM_CLIP
 """Normalised observations are clipped to ``[-CLIP, CLIP]`` (SB3's and CleanRL's default)."""
 
 

@@ -20,8 +20,10 @@ from typing import Any
 
 import torch
 from safetensors import SafetensorError
+from safetensors.numpy import load_file as load_numpy
 from safetensors.torch import load_file, save_file
 
+from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.networks import Actor, ActorPolicy
 from triplesumo.agents.normalizer import ObsNormalizer
 
@@ -117,9 +119,9 @@ def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any],
     return weights, meta
 
 
-def load_policy(stem: Path, expect_obs_mode: str | None = None,
-                expect_obs_dim: int | None = None) -> tuple[ActorPolicy, dict[str, Any]]:
-    """Load a policy file pair; checks the manifest against the weights and expectations."""
+def _read_manifest(stem: Path, expect_obs_mode: str | None,
+                   expect_obs_dim: int | None) -> tuple[dict[str, Any], Path]:
+    """The checked manifest of a policy file pair and the path of its weights."""
     stem = Path(stem)
     if stem.suffix in (".json", ".safetensors"):
         stem = stem.with_suffix("")
@@ -139,14 +141,27 @@ def load_policy(stem: Path, expect_obs_mode: str | None = None,
     if "sha256" in manifest and weights_path.is_file() and file_sha256(weights_path) != manifest["sha256"]:
         raise PolicyFileError(f"{weights_path}: sha256 differs from the one {meta_path} records "
                               "(damaged, or replaced by other weights)")
+    return manifest, weights_path
+
+
+def _check_sizes(weights_path: Path, manifest: dict[str, Any], obs_dim: int, act_dim: int) -> None:
+    if obs_dim != int(manifest["obs_dim"]) or act_dim != int(manifest["act_dim"]):
+        raise PolicyFileError(f"{weights_path}: weights are {obs_dim}->{act_dim}, "
+                              f"manifest says {manifest['obs_dim']}->{manifest['act_dim']}")
+
+
+def load_policy(stem: Path, expect_obs_mode: str | None = None,
+                expect_obs_dim: int | None = None) -> tuple[ActorPolicy, dict[str, Any]]:
+    """Load a policy file pair as a torch actor (to train on, or to publish); checks the
+    manifest against the weights and expectations. To drive an agent, prefer
+    :func:`load_fixed_policy`."""
+    manifest, weights_path = _read_manifest(stem, expect_obs_mode, expect_obs_dim)
     tensors = load_tensors(weights_path)
     try:
         actor = Actor.from_state_dict(tensors, prefix="actor.")
     except (KeyError, ValueError, RuntimeError) as exc:
         raise PolicyFileError(f"{weights_path}: not an actor: {exc}") from exc
-    if actor.obs_dim != int(manifest["obs_dim"]) or actor.act_dim != int(manifest["act_dim"]):
-        raise PolicyFileError(f"{weights_path}: weights are {actor.obs_dim}->{actor.act_dim}, "
-                              f"manifest says {manifest['obs_dim']}->{manifest['act_dim']}")
+    _check_sizes(weights_path, manifest, actor.obs_dim, actor.act_dim)
     obs_norm = None
     if manifest.get("obs_norm", False):
         try:
@@ -159,3 +174,25 @@ def load_policy(stem: Path, expect_obs_mode: str | None = None,
         obs_norm.eval()
     actor.eval()
     return ActorPolicy(actor, obs_norm), manifest
+
+
+def load_fixed_policy(stem: Path, expect_obs_mode: str | None = None,
+                      expect_obs_dim: int | None = None) -> tuple[FrozenPolicy, dict[str, Any]]:
+    """Load a policy file pair as a :class:`FrozenPolicy` (numpy, no torch: fork-safe and
+    cheap), the way fixed opponents and the zoo are played; same checks as :func:`load_policy`
+    (the frozen observation normaliser included)."""
+    manifest, weights_path = _read_manifest(stem, expect_obs_mode, expect_obs_dim)
+    if not weights_path.is_file():
+        raise PolicyFileError(f"{weights_path}: file not found")
+    try:
+        tensors = load_numpy(str(weights_path))
+    except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
+        raise PolicyFileError(f"{weights_path}: not a readable safetensors file (truncated or corrupt?): "
+                              f"{exc}") from exc
+    try:
+        policy = FrozenPolicy.from_tensors(tensors, prefix="actor.",
+                                           obs_norm_prefix="obs_norm." if manifest.get("obs_norm", False) else None)
+    except (KeyError, ValueError) as exc:
+        raise PolicyFileError(f"{weights_path}: not an actor (or its normaliser is missing): {exc}") from exc
+    _check_sizes(weights_path, manifest, policy.obs_dim, policy.act_dim)
+    return policy, manifest

@@ -19,6 +19,15 @@ Variants, each on its own compiled model of the same :class:`MatchConfig`:
     every finished match; about ``steps`` env steps in total. ``batch_threads_1t`` is
     those matches stepped one after another (``Match.step_array``'s work), the baseline
     of ``..._vs_sequential``; ``..._vs_one_match`` compares with ``match_core``.
+``raw_batch_<n>t``
+    Raw ``mujoco.batch`` physics of ``n_matches`` matches on ``n`` threads: controls
+    written, ``step(nstep=frame_skip)``, a match restarted (its state row loaded) where
+    its episode ends (ring-exit test on the torso qpos, step limit); nothing else.
+``vector_env_<n>t``
+    The public batched API, ``triplesumo.vector_env(n_matches, num_threads=n)``: arrays
+    of actions in; observations, rewards, flags, info arrays and autoreset out. Target:
+    ``vector_env_<n>t_vs_raw_batch`` >= 0.9 (issue 10: the batched path costs no more
+    Python per match than the single one).
 
 ``--scenario NAME`` measures a named game (``triplesumo.scenarios()``; default ``paper``).
 Under ``elimination`` rules ``raw_physics`` still restarts on the first ring exit (it is the
@@ -45,7 +54,7 @@ import mujoco
 import numpy as np
 
 from triplesumo.benchmarks import report
-from triplesumo.envs.batch import BACKENDS, MatchBatch
+from triplesumo.envs.batch import BACKENDS, MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.model.specs import PhysicsConfig
@@ -55,6 +64,8 @@ from triplesumo.rules.scenarios import scenario_config
 
 TARGET_ENV_VS_RAW = 0.85
 """Issue 2: the PettingZoo view must run at >= 0.85 x the raw physics rate (RK4)."""
+TARGET_VECTOR_VS_RAW_BATCH = 0.9
+"""Issue 10: ``vector_env`` must run at >= 0.9 x raw ``mujoco.batch`` physics of the same matches."""
 
 LABELS = {
     "raw_physics": "raw physics (mj_step)",
@@ -91,6 +102,8 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
     for backend, threads in _batch_variants(n_threads):
         batch = MatchBatch(config, n_matches, threads, backend=backend)
         variants[f"batch_{backend}_{threads}t"] = _Batch(batch, per_match, seed)
+    variants[f"raw_batch_{n_threads}t"] = _RawBatch(config, n_matches, n_threads, per_match, seed)
+    variants[f"vector_env_{n_threads}t"] = _VectorEnv(VectorMatches(n_matches, config, n_threads), per_match, seed)
     load = os.getloadavg()
     per_round: dict[str, list[float]] = {name: [] for name in variants}
     try:
@@ -105,6 +118,8 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
         "parallel_env_vs_raw": rates["parallel_env"] / rates["raw_physics"],
         "match_core_vs_raw": rates["match_core"] / rates["raw_physics"],
     }
+    vector_vs_raw = rates[f"vector_env_{n_threads}t"] / rates[f"raw_batch_{n_threads}t"]
+    ratios[f"vector_env_{n_threads}t_vs_raw_batch"] = vector_vs_raw
     for name in variants:
         if name.startswith("batch_"):
             ratios[f"{name}_vs_one_match"] = rates[name] / rates["match_core"]
@@ -124,7 +139,9 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
         "episodes": {name: v.episodes for name, v in variants.items()},
         "ratios": ratios,
         "target": {"parallel_env_vs_raw": TARGET_ENV_VS_RAW,
-                   "met": ratios["parallel_env_vs_raw"] >= TARGET_ENV_VS_RAW},
+                   "met": ratios["parallel_env_vs_raw"] >= TARGET_ENV_VS_RAW,
+                   "vector_env_vs_raw_batch": TARGET_VECTOR_VS_RAW_BATCH,
+                   "vector_env_met": vector_vs_raw >= TARGET_VECTOR_VS_RAW_BATCH},
     }
 
 
@@ -267,6 +284,68 @@ class _Batch(_Variant):
         self.batch.close()
 
 
+class _RawBatch(_Variant):
+    def __init__(self, config: MatchConfig, n_matches: int, n_threads: int, per_match: int, seed: int) -> None:
+        self.matches = [Match(config) for _ in range(n_matches)]  # start states and state rows
+        first = self.matches[0]
+        self.length, self.width, self.seed = per_match, n_matches, seed
+        self.raw = mujoco.batch.Batch(first.model, n_matches, nthread=n_threads, persistent=True)
+        self.ctrl, self.qpos = self.raw.bind("ctrl"), self.raw.bind("qpos")
+        sim = first.sim
+        shape = (per_match, n_matches, first.n_agents, first.action_width)
+        # The actions _Batch and _VectorEnv draw.
+        actions = np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32).astype(np.float64)
+        mid, half_range = (sim.ctrl_high + sim.ctrl_low) / 2.0, (sim.ctrl_high - sim.ctrl_low) / 2.0
+        self.controls = np.zeros((per_match, n_matches, first.model.nu))
+        self.controls[..., sim.actuator_ids.ravel()] = (mid + actions * half_range).reshape(per_match, n_matches, -1)
+
+    def _restart(self, k: int) -> None:
+        match = self.matches[k]
+        match.sim.reset(*match.start_state(self.rngs[k]))
+        self.raw.reset(ids=[k], stage=int(mujoco.mjtStage.mjSTAGE_NONE))
+        mujoco.mj_getState(match.model, match.data, self.raw.state[k], int(mujoco.mjtState.mjSTATE_INTEGRATION))
+        self.lengths[k] = 0
+
+    def start(self) -> None:
+        from triplesumo.envs.batch import match_seeds
+
+        self.rngs = [np.random.default_rng(s) for s in match_seeds(self.seed, self.width)]
+        self.lengths = np.zeros(self.width, np.int64)
+        for k in range(self.width):
+            self._restart(k)
+        self.episodes = 0
+
+    def run(self, t0: int, t1: int) -> None:
+        first = self.matches[0]
+        torso, half, limit = first.sim.torso_qpos, first.half_size, first.config.max_steps
+        for t in range(t0, t1):
+            self.ctrl[:] = self.controls[t]
+            self.raw.step(nstep=first.sim.frame_skip)
+            self.lengths += 1
+            xy = np.abs(self.qpos[:, torso][..., :2])
+            for k in np.flatnonzero((xy > half).any(axis=(1, 2)) | (self.lengths >= limit)):
+                self._restart(int(k))
+                self.episodes += 1
+
+
+class _VectorEnv(_Variant):
+    def __init__(self, env: VectorMatches, per_match: int, seed: int) -> None:
+        self.env, self.length, self.width, self.seed = env, per_match, env.num_envs, seed
+        shape = (per_match, env.num_envs, env.n_agents, env.act_dim)
+        self.actions = np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32)
+
+    def start(self) -> None:
+        self.env.reset(seed=self.seed)
+        self.episodes = 0
+
+    def run(self, t0: int, t1: int) -> None:
+        for t in range(t0, t1):
+            self.episodes += int(self.env.step(self.actions[t])[4]["_final_obs"].sum())
+
+    def close(self) -> None:
+        self.env.close()
+
+
 SEQUENTIAL = "batch_threads_1t"
 """The batch's matches stepped one after another on the calling thread: step_array's work."""
 
@@ -308,13 +387,21 @@ def format_table(result: dict[str, Any]) -> str:
             label = (f"MatchBatch {setup['n_matches']} x {setup['steps_per_match']} steps, "
                      f"{backend}, {threads[:-1]} thread{'s' if threads != '1t' else ''}")
             versus = f"{ratios[f'{name}_vs_one_match']:10.2f} {ratios[f'{name}_vs_sequential']:7.2f}"
+        elif name.startswith(("raw_batch_", "vector_env_")):
+            what = "raw mujoco.batch physics" if name.startswith("raw") else "triplesumo.vector_env"
+            threads = name.rsplit("_", 1)[1][:-1]
+            label = f"{what} {setup['n_matches']} x {setup['steps_per_match']}, {threads} thr"
+            versus = " " * 18
         else:
             label, versus = f"{LABELS[name]}, {setup['steps']} steps", " " * 18
         lines.append(f"{label:46s} {rate:11.0f} {rate / rates['raw_physics']:7.2f} {versus} "
                      f"{result['episodes'][name]:8d}")
     target = result["target"]
+    vector = ratios[f"vector_env_{setup['n_threads']}t_vs_raw_batch"]
     lines += ["", f"target parallel_env >= {target['parallel_env_vs_raw']} x raw physics: "
-              f"{ratios['parallel_env_vs_raw']:.2f} ({'met' if target['met'] else 'NOT met'})"]
+              f"{ratios['parallel_env_vs_raw']:.2f} ({'met' if target['met'] else 'NOT met'})",
+              f"target vector_env >= {target['vector_env_vs_raw_batch']} x raw mujoco.batch physics of the "
+              f"same matches: {vector:.2f} ({'met' if target['vector_env_met'] else 'NOT met'})"]
     return "\n".join(lines)
 
 

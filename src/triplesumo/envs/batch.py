@@ -42,19 +42,29 @@ steps with the rules (``triplesumo bench env``): ``mujoco`` 2 threads about 1.5-
 
 Finished matches are not reset here: after a step in which ``results[k]`` is terminated
 or truncated, call :meth:`reset_one` for ``k`` before the next :meth:`step`.
+
+:class:`VectorMatches` (made by ``triplesumo.vector_env``) is the public face of a
+MatchBatch: arrays ``(num_envs, n_agents, ...)`` in and out, Gymnasium-style autoreset,
+seeds that depend only on ``(seed, k)``.
 """
 
 from __future__ import annotations
 
+import operator
+import os
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import mujoco
 import mujoco.batch
 import numpy as np
+from gymnasium import spaces
 
 from triplesumo.envs.match import Match, StepResult
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.rewards import REPORTED
+from triplesumo.rules.scenarios import scenario_config
 from triplesumo.sim.physics import PhysicsError
 
 BACKENDS = ("mujoco", "threads")
@@ -219,3 +229,164 @@ def _finish(match: Match) -> StepResult | PhysicsError:
         return match.finish_step()
     except PhysicsError as err:
         return err
+
+
+"""Scenarios :func:`vector_env` knows (the games issue adds more)."""
+VECTOR_BACKENDS = ("cpu", "warp")
+
+
+class VectorMatches:
+    """Many matches as arrays: TripleSumo's public batched API on the CPU (:func:`vector_env`).
+
+    It grows :class:`MatchBatch` (``mujoco.batch`` threaded physics, bit for bit the
+    trajectories of single matches) into the batched contract that the ``warp`` backend
+    shares: arrays in, arrays out, autoreset.
+
+    Shapes (``N = num_envs``, ``A = n_agents``): observations ``(N, A, obs_dim)`` float32;
+    actions ``(N, A, act_dim)`` in [-1, 1], scaled to each agent's control range as
+    :class:`Match` does; rewards ``(N, A)`` float32; terminations and truncations
+    ``(N, A)`` bool. ``infos`` is a dict of arrays: every reward term and
+    ``dense_reward``/``sparse_reward`` ``(N, A)`` float64 (the reward is exactly
+    ``dense + sparse`` before its cast to float32), ``outcome`` ``(N, A)`` int64
+    (:data:`triplesumo.rules.outcome.OUTCOME_CODES`: 0 goes on, 1 win, 2 loss, 3 draw,
+    4 physics error), ``out_of_ring`` ``(N, A)`` bool, ``step`` ``(N,)`` int64.
+
+    Autoreset (Gymnasium 1.x ``SAME_STEP``): on a step where match ``k`` ends, ``obs[k]``
+    is already the first observation of its next match; ``infos["final_obs"][k]`` is the
+    last observation of the finished match (rows of unfinished matches are unspecified)
+    and ``infos["_final_obs"]`` ``(N,)`` says which rows hold one. Rewards, flags,
+    outcome, terms and ``step`` returned for that step are the finished match's.
+
+    Seeding: ``reset(seed)`` gives match ``k`` the seed ``match_seeds(seed, N)[k]``
+    (``SeedSequence(seed).spawn``), and each later match of slot ``k`` draws its start
+    from that match's own generator. So match ``k``'s run of matches depends only on
+    ``(seed, k)``: never on ``N`` nor on the thread count. ``reset(seed=[s_0, ...])``
+    seeds each match as ``Match.reset(s_k)`` (``None`` keeps its generator going).
+    """
+
+    def __init__(self, num_envs: int, config: MatchConfig | None = None, num_threads: int | None = None) -> None:
+        if num_threads is None and isinstance(num_envs, int):
+            usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+            num_threads = max(1, min(num_envs, usable))
+        try:
+            self.batch = MatchBatch(config, num_envs, num_threads or 1)
+        except ValueError as err:
+            raise ValueError(str(err).replace("n_matches", "num_envs").replace("n_threads", "num_threads")) from None
+        first = self.batch.matches[0]
+        sizes = sorted({first.observer.sizes[a] for a in first.agents})
+        if len(sizes) != 1:
+            self.batch.close()
+            raise ValueError(f"every agent's observation must have one size to stack them, got {first.observer.sizes}")
+        self.config = first.config
+        self.num_envs = num_envs
+        self.num_threads = self.batch.n_threads
+        self.agents = first.agents
+        self.n_agents = first.n_agents
+        self.obs_dim = sizes[0]
+        self.action_sizes = first.action_sizes
+        """Each agent's own action size (8 ant, 12 bug, 16 spider body), roster order."""
+        self.act_dim = first.action_width
+        """Columns of the action array: the largest action size; an agent with a smaller body
+        ignores the columns past its own size."""
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (self.obs_dim,), np.float32)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (self.act_dim,), np.float32)
+        self._obs = np.zeros((num_envs, self.n_agents, self.obs_dim), np.float32)
+        self._seeded = False
+
+    @property
+    def matches(self) -> list[Match]:
+        """The matches themselves (for rendering, or a scenario test placing an agent:
+        call ``batch.reload(k)`` after editing ``matches[k].data``)."""
+        return self.batch.matches
+
+    def reset(self, seed: int | Sequence[int | None] | None = None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Start a match in every slot; see the class docstring for the seeds."""
+        if seed is None:
+            seeds: Sequence[int | None] = ([None] * self.num_envs if self._seeded else
+                                           match_seeds(int(np.random.default_rng().integers(2**63)), self.num_envs))
+        elif isinstance(seed, int | np.integer) and not isinstance(seed, bool):
+            seeds = match_seeds(int(seed), self.num_envs)
+        elif isinstance(seed, Sequence) and len(seed) == self.num_envs:
+            seeds = list(seed)
+        else:
+            raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+        for k, s in enumerate(seeds):
+            self._obs[k] = self.batch.reset_one(k, s)[0]
+        self._seeded = True
+        infos = self._infos([m.reset_infos() for m in self.batch.matches], [0] * self.num_envs)
+        infos["final_obs"], infos["_final_obs"] = np.zeros_like(self._obs), np.zeros(self.num_envs, bool)
+        return self._obs.copy(), infos
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """One step of every match with ``(num_envs, n_agents, act_dim)`` actions; autoreset."""
+        if not self._seeded:
+            raise RuntimeError("call reset() before step()")
+        results = self.batch.step(actions)
+        a = self.n_agents
+        obs = self._obs
+        obs[:] = [r.observations for r in results]
+        rewards = np.array([r.rewards for r in results], np.float32)
+        terminated = np.array([r.terminated for r in results])
+        truncated = np.array([r.truncated for r in results])
+        final = terminated | truncated
+        final_obs = np.zeros_like(obs)
+        for k in np.flatnonzero(final).tolist():
+            final_obs[k] = obs[k]
+            obs[k] = self.batch.reset_one(k, self._next_seed(k))[0]
+        infos = self._infos([r.infos for r in results], [r.infos[0]["step"] for r in results])
+        infos["final_obs"], infos["_final_obs"] = final_obs, final
+        # All agents of a match end together; under elimination rules an agent also terminates
+        # on the step it is eliminated (and its rows stay in the arrays, flagged by
+        # infos["eliminated"], until its match ends).
+        term = np.repeat(terminated[:, None], a, 1)
+        for k, r in enumerate(results):
+            if r.eliminated is not None:
+                term[k] |= np.asarray(r.eliminated, bool)
+        return obs.copy(), rewards, term, np.repeat(truncated[:, None], a, 1), infos
+
+    def _next_seed(self, k: int) -> int | None:
+        """Seed of slot ``k``'s next match at an autoreset: ``None`` continues its generator."""
+        return None
+
+    def _infos(self, per_match: list[list[dict[str, Any]]], steps: list[int]) -> dict[str, np.ndarray]:
+        n, a = self.num_envs, self.n_agents
+        rows = [_array_infos(info) for infos in per_match for info in infos]
+        table = np.array(rows, np.float64).reshape(n, a, len(_ARRAY_INFOS))
+        infos: dict[str, np.ndarray] = {key: table[..., j] for j, key in enumerate(REPORTED)}
+        infos["outcome"] = table[..., len(REPORTED)].astype(np.int64)
+        infos["out_of_ring"] = table[..., len(REPORTED) + 1].astype(bool)
+        infos["place"] = table[..., len(REPORTED) + 2].astype(np.int64)
+        infos["eliminated"] = table[..., len(REPORTED) + 3].astype(bool)
+        infos["step"] = np.array(steps, np.int64)
+        return infos
+
+    def close(self) -> None:
+        """Free the matches' threads and batch."""
+        self.batch.close()
+
+    def __enter__(self) -> VectorMatches:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+_ARRAY_INFOS = (*REPORTED, "outcome", "out_of_ring", "place", "eliminated")
+_array_infos = operator.itemgetter(*_ARRAY_INFOS)
+
+
+def vector_env(num_envs: int, scenario: str = "paper", backend: str = "cpu", device: str | None = None,
+               num_threads: int | None = None, **config: Any) -> VectorMatches:
+    """``num_envs`` matches stepped together, as arrays (see :class:`VectorMatches`).
+
+    ``config`` are :class:`MatchConfig` fields (``max_steps``, ``obs_mode``, ...).
+    ``backend="cpu"`` steps MuJoCo on ``num_threads`` threads (default: one per usable
+    CPU, at most ``num_envs``) and returns numpy arrays; results do not depend on it.
+    """
+    if backend not in VECTOR_BACKENDS:
+        raise ValueError(f"backend must be one of {VECTOR_BACKENDS}, got {backend!r}")
+    if backend == "warp":
+        raise NotImplementedError("backend='warp' (MuJoCo Warp) is issue 10 section 2; use backend='cpu'")
+    if device not in (None, "cpu"):
+        raise ValueError(f"backend='cpu' runs on the CPU: device must be None or 'cpu', got {device!r}")
+    return VectorMatches(num_envs, scenario_config(scenario, **config), num_threads)

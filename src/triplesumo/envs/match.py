@@ -70,7 +70,7 @@ class Match:
         self.alive = [True] * self.n_agents
         """Who is in play (always everyone under ``first_out`` rules)."""
         self._places = [0] * self.n_agents
-        self._outcomes: list[str | None] = [None] * self.n_agents
+        self._outcomes: list[int] = [rules_outcome.PLAYING] * self.n_agents
         self._evader = self.agents.index(self.config.evader) if self.config.evader is not None else None
         self._timeout_team = self._team_of[self._evader] if self._evader is not None else None
         if self._evader is not None:
@@ -79,6 +79,8 @@ class Match:
         self.np_random = np.random.default_rng()
         self.steps = 0
         self.over = True
+        self.physics_error: str | None = None
+        """What MuJoCo reported when a physics error truncated the current match, else ``None``."""
         self._last_obs: list[np.ndarray] = []
 
     # ------------------------------------------------------------------ reset
@@ -94,12 +96,23 @@ class Match:
         self.sim.reset(qpos, qvel)
         self.steps = 0
         self.over = False
+        self.physics_error = None
         self.alive = [True] * self.n_agents
         self._places = [0] * self.n_agents
-        self._outcomes = [None] * self.n_agents
+        self._outcomes = [rules_outcome.PLAYING] * self.n_agents
         self._last_obs = self._observe()
-        infos = [{"step": 0, "outcome": None, "place": 0, "eliminated": False} for _ in self.agents]
-        return self._last_obs, infos
+        return self._last_obs, self.reset_infos()
+
+    def reset_infos(self) -> list[dict[str, Any]]:
+        """Infos with every term zero and no outcome: those of reset (and of a physics error).
+
+        Every info has the same keys and numeric types at reset and every step: the reward
+        terms, ``outcome`` (an int code, :data:`~triplesumo.rules.outcome.OUTCOME_CODES`),
+        ``out_of_ring`` (this agent left the ring on this step), ``step``, ``place`` (1 = winner,
+        0 until decided) and ``eliminated`` (no longer in play)."""
+        info: dict[str, Any] = dict.fromkeys(rules_rewards.REPORTED, 0.0)
+        info.update(outcome=rules_outcome.PLAYING, out_of_ring=False, step=self.steps, place=0)
+        return [dict(info, eliminated=not playing) for playing in self.alive]
 
     @property
     def agents_in_play(self) -> list[str]:
@@ -244,13 +257,12 @@ class Match:
         results = rules_outcome.judge(out, self._team_of, self._n_teams)
         timed_out = results is None and self.steps >= self.config.max_steps
         rows = self.reward_rule.rows(pos, vel, results, timed_out)
+        codes = rules_outcome.OUTCOME_CODES
         if results is not None:
-            outcomes = [results[t] for t in self._team_of]
-            exited = [a for a, is_out in zip(self.agents, out, strict=True) if is_out]
+            outcomes = [codes[results[t]] for t in self._team_of]
             places = rules_outcome.first_out_places(results, self._team_of)
         else:
-            outcomes = [rules_outcome.DRAW if timed_out else None] * self.n_agents
-            exited = []
+            outcomes = [rules_outcome.DRAW_CODE if timed_out else rules_outcome.PLAYING] * self.n_agents
             places = [1 if timed_out else 0] * self.n_agents
         keys, step = rules_rewards.REPORTED, self.steps
         infos = []
@@ -259,7 +271,7 @@ class Match:
             rewards.append(row[-2] + row[-1])  # dense + sparse: the terms summed in TERMS order
             info: dict[str, Any] = dict(zip(keys, row, strict=True))
             info["outcome"] = result
-            info["out_of_ring"] = exited
+            info["out_of_ring"] = is_out
             info["step"] = step
             info["place"] = place
             info["eliminated"] = is_out
@@ -278,16 +290,18 @@ class Match:
         sparse = [rules_outcome.place_value(reward.win, reward.loss, low, high, n_places) if low else 0.0
                   for low, high in judged.spans]
         rows = self.reward_rule.rows_in_play(pos, vel, before, sparse)
-        exited = [a for a, leaving in zip(self.agents, judged.leaving, strict=True) if leaving]
+        codes = rules_outcome.OUTCOME_CODES
         keys, step = rules_rewards.REPORTED, self.steps
         infos, rewards = [], []
         for i, row in enumerate(rows):
             rewards.append(row[-2] + row[-1])
             info: dict[str, Any] = dict(zip(keys, row, strict=True))
-            info["out_of_ring"] = exited
+            info["out_of_ring"] = judged.leaving[i]
             info["step"] = step
             if before[i]:
-                info["outcome"], info["place"] = judged.outcomes[i], judged.places[i]
+                decided = judged.outcomes[i]
+                info["outcome"] = rules_outcome.PLAYING if decided is None else codes[decided]
+                info["place"] = judged.places[i]
             else:  # decided on an earlier step
                 info["outcome"], info["place"] = self._outcomes[i], self._places[i]
             info["eliminated"] = not judged.alive[i]
@@ -310,12 +324,10 @@ class Match:
         self.over = True
         if self.config.on_physics_error == "raise":
             raise PhysicsError(message)
-        infos = []
-        for playing in self.alive:
-            info: dict[str, Any] = {name: 0.0 for name in rules_rewards.TERMS}
-            info.update(dense_reward=0.0, sparse_reward=0.0, outcome="error", out_of_ring=[],
-                        step=self.steps, place=0, eliminated=not playing, physics_error=message)
-            infos.append(info)
+        self.physics_error = message
+        infos = self.reset_infos()
+        for info in infos:
+            info["outcome"] = rules_outcome.ERROR_CODE
         # The last trustworthy observation: never the NaN or auto-reset state.
         return StepResult(self._last_obs, np.zeros(self.n_agents), False, True, infos)
 
@@ -356,7 +368,8 @@ class Match:
         self.np_random.bit_generator.state = snap["rng"]
         self.alive = [bool(a) for a in snap.get("alive", [True] * self.n_agents)]
         self._places = [int(p) for p in snap.get("places", [0] * self.n_agents)]
-        self._outcomes = list(snap.get("outcomes", [None] * self.n_agents))
+        self._outcomes = [rules_outcome.PLAYING if o is None else int(o)
+                          for o in snap.get("outcomes", [None] * self.n_agents)]
 
     def state(self) -> np.ndarray:
         """Global state: the ``paper`` observation vector (torso states, contact forces, qpos, qvel),

@@ -64,9 +64,11 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
 
     Means are over opponents ``o`` (Spider has two: Ant and Bug). Defaults C1 = C2 = C3 = 5,
     still -4 (the paper's code); see :class:`triplesumo.rules.RewardConfig`. ``info`` also
-    has ``dense_reward``, ``sparse_reward``, ``outcome`` (``None`` while playing, then
-    ``"win"``/``"loss"``/``"draw"``/``"error"`` for the agent's side), ``out_of_ring`` and
-    ``step``.
+    has ``dense_reward``, ``sparse_reward``, ``outcome`` (an int code for the agent's side:
+    0 while playing, 1 win, 2 loss, 3 draw, 4 physics error;
+    ``triplesumo.rules.outcome.OUTCOME_CODES`` / ``outcome_name``), ``out_of_ring`` (bool:
+    is this agent out) and ``step``. Infos have the same keys and numeric types at reset
+    and at every step, so tensor-based clients (TorchRL) can stack them.
 
     ## Starting State
     Agents evenly spaced on a circle of radius 1.4 around the centre (Ant at angle 0, Bug at
@@ -79,8 +81,8 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     step) of any agent leaves the ring (``max(|x|, |y|) > 2``). Spider out: the team wins;
     Ant or Bug out: Spider wins; both sides out in the same step: a draw. Truncation: the
     step limit (default 500) is reached, a draw; or MuJoCo reports a physics warning (bad
-    qacc, full contact or constraint memory, non-finite state): ``outcome == "error"`` and
-    ``info[agent]["physics_error"]`` says what happened (``on_physics_error="raise"``
+    qacc, full contact or constraint memory, non-finite state): outcome code 4 and
+    ``env.unwrapped.match.physics_error`` says what happened (``on_physics_error="raise"``
     raises ``PhysicsError`` instead). All agents end together.
 
     ## Arguments
@@ -171,8 +173,9 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
         ``elimination`` rules)."""
         return self.match.state()
 
-    def render(self) -> np.ndarray | None:
-        return self._view.render()
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """A frame in ``render_mode``; ``mode`` may only repeat it (RLlib passes one)."""
+        return self._view.render(mode)
 
     def close(self) -> None:
         self._view.close()

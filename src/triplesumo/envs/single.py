@@ -43,10 +43,11 @@ class TripleSumoEnv(MatchAccess, gym.Env):
 
     ## Episode End
     As the match: termination on a ring exit, truncation at the step limit (draw) or on a
-    physics error. ``info["outcome"]`` is the learner's side's result. Under ``elimination``
-    rules the episode terminates when the learner is eliminated (with its placement reward)
-    or the match ends; agents eliminated before it stop acting and their policies are no
-    longer asked.
+    physics error. ``info["outcome"]`` is the learner's side's result as an int code
+    (``triplesumo.rules.outcome.OUTCOME_CODES``: 0 playing, 1 win, 2 loss, 3 draw, 4 error).
+    Under ``elimination`` rules the episode terminates when the learner is eliminated (with
+    its placement reward) or the match ends; agents eliminated before it stop acting and
+    their policies are no longer asked.
 
     ## Arguments
     ``scenario`` (``"paper"``; any of ``triplesumo.scenarios()``), ``learner`` (default: the
@@ -134,7 +135,7 @@ class TripleSumoEnv(MatchAccess, gym.Env):
             self.render()
         return self._obs[k], float(result.rewards[k]), terminated, truncated, result.infos[k]
 
-    def render(self) -> np.ndarray | None:
+    def render(self) -> Any:  # an (height, width, 3) uint8 frame, or None (gymnasium's RenderFrame)
         return self._view.render()
 
     def close(self) -> None:

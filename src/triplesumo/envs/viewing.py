@@ -8,7 +8,7 @@ import gymnasium
 import numpy as np
 
 from triplesumo.envs.match import Match
-from triplesumo.sim.render import FrameRenderer, HumanViewer
+from triplesumo.sim.render import FrameRenderer, HumanViewer, require_display
 
 RENDER_MODES = ("human", "rgb_array")
 
@@ -38,11 +38,18 @@ class MatchView:
     def __init__(self, match: Match, render_mode: str | None, width: int, height: int) -> None:
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}")
+        if render_mode == "human":
+            require_display()  # fail here, in Python: GLFW would end the process at the first frame
         self.match, self.render_mode, self.size = match, render_mode, (width, height)
         self._renderer: FrameRenderer | None = None
         self._viewer: HumanViewer | None = None
 
-    def render(self) -> np.ndarray | None:
+    def render(self, mode: str | None = None) -> np.ndarray | None:
+        """A frame in the view's render mode; ``mode`` may repeat it (RLlib's
+        ``ParallelPettingZooEnv.render()`` passes its own, usually ``None``)."""
+        if mode is not None and mode != self.render_mode:
+            raise ValueError(f"render mode is fixed when the env is made (render_mode={self.render_mode!r}); "
+                             f"got render({mode!r})")
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'.")
             return None

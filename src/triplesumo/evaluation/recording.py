@@ -18,6 +18,7 @@ import dataclasses
 import json
 import typing
 import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -140,7 +141,7 @@ class MatchRecorder:
         self._actions.append(np.array(actions, dtype=np.float64))
         self._states.append(get_state(self.match))
 
-    def finish(self, outcomes: dict[str, str | None] | None = None) -> MatchFile:
+    def finish(self, outcomes: Mapping[str, str | None] | None = None) -> MatchFile:
         """The recorded match."""
         width = (self.match.n_agents, self.match.action_width)
         actions = np.stack(self._actions) if self._actions else np.zeros((0, *width))

@@ -15,6 +15,7 @@ from triplesumo.envs.match import Match
 from triplesumo.evaluation.recording import MatchRecorder
 from triplesumo.evaluation.video import check_writable, write_mp4
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.outcome import outcome_name
 from triplesumo.sim.render import FrameRenderer
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -86,13 +87,15 @@ def play_match(policies: Mapping[str, Policy], seed: int, config: MatchConfig | 
     finally:
         if renderer:
             renderer.close()
-    outcomes = {a: result.infos[i]["outcome"] for i, a in enumerate(match.agents)}
+    outcomes = {a: outcome_name(result.infos[i]["outcome"]) for i, a in enumerate(match.agents)}
     if recorder is not None and record is not None:
         recorder.finish(outcomes).save(Path(record))
     n_frames = write_mp4(frames, Path(video), fps=round(1.0 / match.sim.dt)) if video is not None else 0
     return MatchRecord(
         outcomes=outcomes,
-        steps=match.steps, returns=returns, out_of_ring=list(result.infos[0]["out_of_ring"]),
+        steps=match.steps, returns=returns,
+        out_of_ring=[a for i, a in enumerate(match.agents)
+                     if result.infos[i]["out_of_ring"] or result.infos[i]["eliminated"]],
         terms=terms, frames=n_frames, places={a: int(result.infos[i]["place"]) for i, a in enumerate(match.agents)},
     )
 
@@ -185,7 +188,8 @@ def play_matches(
     def finish_record(k: int, res: Any) -> None:
         recorder = recorders[k]
         if recorder is not None and record_dir is not None:
-            outcomes = {a: info["outcome"] for a, info in zip(batch.matches[k].agents, res.infos, strict=True)}
+            agents = batch.matches[k].agents
+            outcomes = {a: outcome_name(info["outcome"]) for a, info in zip(agents, res.infos, strict=True)}
             recorder.finish(outcomes).save(record_dir / f"epoch_{slot_match[k] + 1:05d}.npz")
             recorders[k] = None
 
@@ -218,7 +222,7 @@ def play_matches(
                         finish_record(k, res)
                         i = slot_match[k]
                         if i >= 0:
-                            results[i] = SeatedResult(i, [info["outcome"] for info in res.infos],
+                            results[i] = SeatedResult(i, [outcome_name(info["outcome"]) for info in res.infos],
                                                       int(res.infos[0]["step"]), acc[k])
                             if bar is not None:
                                 bar.update(1)

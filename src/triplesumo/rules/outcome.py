@@ -26,6 +26,11 @@ rewards. At the step limit the surviving teams share places ``1 .. s`` (a draw),
 one of them is the evader's: then it wins (place 1) and the other survivors share
 ``2 .. s``. Place ``p`` of ``n`` teams is worth ``win + (loss - win) * (p - 1) / (n - 1)``
 (:func:`place_value`).
+
+Infos report an agent's outcome as an int code (:data:`OUTCOME_CODES`), the same type at
+reset and every step so that tensor-based clients (TorchRL) can stack it;
+:data:`OUTCOME_NAMES` turns a code back into its name where a string is the point
+(metrics CSVs, printed results).
 """
 
 from __future__ import annotations
@@ -34,6 +39,22 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 WIN, LOSS, DRAW = "win", "loss", "draw"
+ERROR = "error"
+"""A physics error truncated the match (see ``MatchConfig.on_physics_error``)."""
+
+OUTCOME_CODES: dict[str, int] = {"playing": 0, WIN: 1, LOSS: 2, DRAW: 3, ERROR: 4}
+"""Int code of each outcome in infos: 0 while the match goes on, 1 win, 2 loss, 3 draw,
+4 physics error."""
+PLAYING, WIN_CODE, LOSS_CODE, DRAW_CODE, ERROR_CODE = OUTCOME_CODES.values()
+OUTCOME_NAMES: tuple[str, ...] = tuple(OUTCOME_CODES)
+"""``OUTCOME_NAMES[code]`` is the outcome's name (``"playing"`` for 0)."""
+
+
+def outcome_name(code: int) -> str:
+    """The name of an outcome code (``"win"``, ...); ``ValueError`` for an unknown code."""
+    if not 0 <= int(code) < len(OUTCOME_NAMES):
+        raise ValueError(f"unknown outcome code {code!r}; codes are {OUTCOME_CODES}")
+    return OUTCOME_NAMES[int(code)]
 
 
 def agents_out(torso_xy: Sequence[Sequence[float]], half_size: float) -> list[bool]:

@@ -9,6 +9,8 @@ display exists. Never fork a process after a renderer exists (the child hangs): 
 
 from __future__ import annotations
 
+import os
+import sys
 from typing import Any
 
 import mujoco
@@ -17,7 +19,36 @@ import numpy as np
 from triplesumo._gl import ensure_headless_gl
 from triplesumo.model import names
 
-__all__ = ["FrameRenderer", "HumanViewer", "ensure_headless_gl"]
+__all__ = ["FrameRenderer", "HumanViewer", "NoDisplayError", "ensure_headless_gl", "no_display_reason",
+           "require_display"]
+
+
+class NoDisplayError(RuntimeError):
+    """``render_mode="human"`` asked for where no window can open."""
+
+
+def no_display_reason() -> str | None:
+    """Why an interactive window cannot open here, or ``None`` if it may.
+
+    Without this check GLFW fails inside ``mujoco.viewer`` at the first frame: it ends the
+    process (no Python exception) and leaves ``MUJOCO_LOG.TXT`` in the working folder.
+    """
+    gl = os.environ.get("MUJOCO_GL", "")
+    if gl in ("egl", "osmesa"):
+        return f"MUJOCO_GL={gl} selects offscreen rendering, which has no windows"
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        return "no display (neither DISPLAY nor WAYLAND_DISPLAY is set)"
+    return None
+
+
+def require_display() -> None:
+    """:class:`NoDisplayError` saying what to do instead when no window can open here."""
+    reason = no_display_reason()
+    if reason is not None:
+        raise NoDisplayError(
+            f"render_mode='human' needs a window, but {reason}. Use render_mode='rgb_array' and "
+            "save the frames (e.g. gymnasium.wrappers.RecordVideo, or `triplesumo play --video "
+            "match.mp4`), or run where a display exists (set DISPLAY, unset MUJOCO_GL).")
 
 
 class FrameRenderer:
@@ -47,6 +78,7 @@ class HumanViewer:
     """An interactive window (``mujoco.viewer.launch_passive``), synced once per env step."""
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        require_display()
         import mujoco.viewer
 
         self._handle: Any = mujoco.viewer.launch_passive(model, data)

@@ -43,6 +43,7 @@ from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.rules.config import RewardConfig
+from triplesumo.rules.outcome import ERROR_CODE, outcome_name
 from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
@@ -342,7 +343,7 @@ class Trainer:
             acc = self.acc[k]
             for key in acc:
                 acc[key] += info[key]
-            if info["outcome"] != "error":  # a physics error's transition is dropped, never learned from
+            if info["outcome"] != ERROR_CODE:  # a physics error's transition is dropped, never learned from
                 keep.append(k)
                 rew.append(res.rewards[self.L])
                 next_obs.append(res.observations[self.L])
@@ -367,11 +368,12 @@ class Trainer:
     def _end_epoch(self, k: int, info: dict[str, Any]) -> None:
         self.epochs_done += 1
         acc = self.acc[k]
-        lwr = float(local_winning_rate([info["outcome"]])[0])
+        outcome = outcome_name(info["outcome"])
+        lwr = float(local_winning_rate([outcome])[0])
         self.lwr.append(lwr)
         self.finished_epoch_steps.append(int(info["step"]))
         total = acc["dense_reward"] + acc["sparse_reward"]
-        row = {"epoch": self.epochs_done, "outcome": info["outcome"], "local_winning_rate": lwr,
+        row = {"epoch": self.epochs_done, "outcome": outcome, "local_winning_rate": lwr,
                "steps": info["step"], "total_reward": total, **acc, "env_steps": self.env_steps,
                "wall_time": round(time.time(), 3)}
         self.log.epoch(row, self.mwr())

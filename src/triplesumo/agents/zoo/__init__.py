@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.builtin import ACTION_SIZE, BUILTIN
-from triplesumo.agents.policy_file import load_policy, save_policy
+from triplesumo.agents.policy_file import load_fixed_policy, load_policy, save_policy
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
 
@@ -27,10 +27,11 @@ def available() -> list[str]:
 
 
 def load(name: str, expect_obs_mode: str | None = None) -> tuple[Any, dict[str, Any]]:
-    """Load a shipped policy and its manifest by name (``"ant"``, ``"spider"``, ``"bug"``)."""
+    """Load a shipped policy (a numpy :class:`~triplesumo.agents.frozen.FrozenPolicy`: fork-safe)
+    and its manifest by name (``"ant"``, ``"spider"``, ``"bug"``)."""
     if name not in available():
         raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
-    return load_policy(ZOO_DIR / name, expect_obs_mode=expect_obs_mode)
+    return load_fixed_policy(ZOO_DIR / name, expect_obs_mode=expect_obs_mode)
 
 
 def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = None,
@@ -63,11 +64,15 @@ def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None 
     ``action_size`` sizes a built-in policy's actions (the agent's motors); trained
     policies have theirs in their file. ``expect_obs_dim`` (the match's observation size for
     the agent) makes a policy file that expects another size fail here, with both sizes named.
+    Trained policies come as torch actors (:func:`load_policy`), whose float32 results
+    the recorded trainings and evaluations replay bit for bit; :func:`load` gives the
+    numpy one that the Gymnasium ids use (fork-safe, differs by float rounding, ~1e-5).
     """
     if spec in BUILTIN:
         cls = BUILTIN[spec]
         return cls(seed, action_size=action_size) if spec == "random" else cls(action_size=action_size)
     if spec.startswith("zoo:"):
+        # The torch actor: recorded trainings and evaluations replay its float32 arithmetic exactly.
         if spec[4:] not in available():
             raise FileNotFoundError(f"no policy {spec[4:]!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
         return load_policy(ZOO_DIR / spec[4:], expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]

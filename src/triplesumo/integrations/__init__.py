@@ -1,0 +1,1 @@
+"""Adapters to outside libraries (optional imports): ``sb3`` (Stable-Baselines3)."""
