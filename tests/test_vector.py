@@ -98,7 +98,7 @@ def test_bad_arguments_are_named() -> None:
         triplesumo.vector_env(2, backend="tpu")
     with pytest.raises(ValueError, match="device must be None or 'cpu'"):
         triplesumo.vector_env(2, device="cuda")
-    with pytest.raises(ValueError, match=r"unknown MatchConfig field\(s\) \['max_step'\]"):
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['max_step'\]"):
         triplesumo.vector_env(2, max_step=3)
     with pytest.raises(ValueError, match="num_envs must be an integer >= 1"):
         triplesumo.vector_env(0)
