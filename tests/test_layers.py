@@ -1,6 +1,6 @@
 """Data flows one way: a module imports only what stands to its left (STYLE.md).
 
-    model -> sim -> rules -> envs -> agents / algos -> evaluation / train / benchmarks -> cli
+    model -> sim -> rules -> envs -> agents / algos -> evaluation / train / benchmarks / integrations -> cli
 
 Checked on the source with ``ast`` (imports inside functions count too), plus the
 third-party imports each layer must not make (torch below agents, gymnasium and
@@ -18,7 +18,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "triplesumo"
 
 LEVEL = {
     "_gl": 0, "model": 0, "sim": 1, "rules": 2, "envs": 3, "registration": 3,
-    "agents": 4, "algos": 4, "evaluation": 5, "train": 5, "benchmarks": 5,
+    "agents": 4, "algos": 4, "evaluation": 5, "train": 5, "benchmarks": 5, "integrations": 5,
     "zoo": 6, "demo": 6, "cli": 7, "_dcargs": 7,
 }
 FORBIDDEN_THIRD_PARTY = {

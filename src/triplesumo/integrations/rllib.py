@@ -37,7 +37,6 @@ from typing import Any
 import numpy as np
 
 try:
-    import torch
     from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
     from ray.rllib.callbacks.callbacks import RLlibCallback
     from ray.rllib.core.columns import Columns
@@ -45,12 +44,15 @@ try:
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
     from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
     from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+    from ray.rllib.policy.policy import PolicySpec
     from ray.tune.registry import get_trainable_cls, register_env
 except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
     raise ImportError(
         "triplesumo.integrations.rllib needs Ray RLlib, which is not installed: "
         'pip install "triplesumo[ray]"'
     ) from exc
+
+import torch
 
 from triplesumo import ENV_VERSION
 from triplesumo.agents.builtin import act_batch
@@ -141,13 +143,14 @@ class FrozenPolicyModule(TorchRLModule):
     """
 
     def setup(self) -> None:
-        cfg = dict(self.model_config or {})
+        cfg: dict[str, Any] = dict(self.model_config or {})  # type: ignore[arg-type]
         if "policy" not in cfg:
             raise ValueError("FrozenPolicyModule: model_config needs 'policy' (e.g. 'zoo:ant', 'zero')")
         self.policy = make_policy(str(cfg["policy"]), seed=int(cfg.get("seed", 0)),
                                   expect_obs_mode=cfg.get("obs_mode"))
         expected = getattr(self.policy, "obs_dim", None)
-        size = int(np.prod(self.observation_space.shape)) if self.observation_space is not None else None
+        shape = getattr(self.observation_space, "shape", None)
+        size = int(np.prod(shape)) if shape is not None else None
         if expected is not None and size is not None and expected != size:
             raise ValueError(f"FrozenPolicyModule: policy {cfg['policy']!r} expects {expected} observation "
                              f"values, the module's observation space has {size}")
@@ -282,7 +285,10 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
         algo_cls.get_default_config()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
         .environment(env=env_name, env_config={"match_config": match_config})
-        .multi_agent(policies=set(module_ids), policy_mapping_fn=_PolicyMapping(modules),
+        # Spaces given per module: RLlib's inference of them from a sampled env is unreliable.
+        .multi_agent(policies={m: PolicySpec(observation_space=spaces[m][0], action_space=spaces[m][1])
+                               for m in module_ids},
+                     policy_mapping_fn=_PolicyMapping(modules),
                      policies_to_train=train)
         .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs=specs))
         .callbacks(OutcomeCallback)
