@@ -54,7 +54,9 @@ def _changed(before: dict[str, torch.Tensor], after: dict[str, torch.Tensor]) ->
 
 
 @pytest.mark.usefixtures("local_ray")
-def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any) -> None:
+def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any, tmp_path: Any) -> None:
+    from ray.rllib.algorithms.algorithm import Algorithm
+
     config = _tiny(rllib.make_config("paper", policies_to_train=["bug"], frozen=ZOO_FROZEN, max_steps=100))
     algo = config.build_algo()
     try:
@@ -67,8 +69,16 @@ def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any) -> None
         sent = algo.learner_group.get_state(components="learner/rl_module/bug", inference_only=True)
         sent = sent["learner"]["rl_module"]["bug"]
         acting = algo.get_module("bug").state_dict()
+        algo.save_to_path(str(tmp_path / "ckpt"))
     finally:
         algo.stop()
+    restored = Algorithm.from_checkpoint(str(tmp_path / "ckpt"))
+    try:
+        again = _weights(restored)
+    finally:
+        restored.stop()
+    for module in after:
+        assert not _changed(after[module], again[module]), f"{module} differs after restoring the checkpoint"
 
     assert _changed(before["bug"], after["bug"]), "PPO did not update Bug"
     for agent in ("ant", "spider"):
@@ -95,7 +105,7 @@ def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any) -> None
 
 @pytest.mark.usefixtures("local_ray")
 def test_self_play_team_module_against_spider_module_both_learn(rllib: Any) -> None:
-    config = _tiny(rllib.make_config("paper", share="team", max_steps=60))
+    config = _tiny(rllib.make_config("paper", share="team", max_steps=60)).training(train_batch_size_per_learner=128)
     assert set(config.policies_to_train) == {"team", "spider"}
     algo = config.build_algo()
     try:
@@ -155,6 +165,10 @@ def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
         steps, over = steps + 1, truncs["__all__"] or terms["__all__"]
     assert steps == 7 and truncs["__all__"] and {i["outcome"] for i in infos.values()} == {"draw"}
     env.close()
+    by_class = rllib.TripleSumoMultiAgentEnv({"scenario": "paper", "obs_mode": "egocentric"})
+    assert by_class.observation_space["spider"].shape == (79,)
+    with pytest.raises(ValueError, match="not both"):
+        rllib.TripleSumoMultiAgentEnv({"match_config": rllib.scenario_config(), "max_steps": 5})
 
 
 @pytest.mark.parametrize(("kwargs", "message"), [

@@ -4,10 +4,11 @@ Works on RLlib's current API stack (RLModules, Learners, EnvRunners; Ray 2.54 to
 Needs the ``ray`` extra: ``pip install "triplesumo[ray]"``; ``import triplesumo`` never
 imports Ray.
 
-- :func:`register_envs` registers every scenario as an RLlib multi-agent env
-  (``"triplesumo_paper_v0"``, ...; the PettingZoo env wrapped in RLlib's
-  ``ParallelPettingZooEnv``); ``env_config`` holds :class:`~triplesumo.rules.MatchConfig`
-  field overrides, or a whole config under ``"match_config"``.
+- :class:`TripleSumoMultiAgentEnv` is one match as an RLlib multi-agent env (the PettingZoo
+  env in RLlib's ``ParallelPettingZooEnv``), built from an ``env_config`` holding
+  :class:`~triplesumo.rules.MatchConfig` field overrides or a whole config under
+  ``"match_config"``; :func:`register_envs` registers every scenario by name
+  (``"triplesumo_paper_v0"``, ...).
 - :func:`make_config` returns an ``AlgorithmConfig`` (PPO by default) with one RLModule per
   agent (module ids = agent names) or per team (``share="team"``: module ids = team labels),
   the policy-mapping function, ``policies_to_train``, the project's observation and action
@@ -61,8 +62,9 @@ from triplesumo.agents.zoo import make_policy
 from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.rules.config import MatchConfig
 
-__all__ = ["OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback", "env_id",
-           "make_config", "make_env", "module_of_agent", "register_envs", "scenario_config"]
+__all__ = ["OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback",
+           "TripleSumoMultiAgentEnv", "env_id", "make_config", "make_env", "match_config_from", "module_of_agent",
+           "register_envs", "scenario_config"]
 
 SCENARIOS = ("paper",)
 """Named scenarios; each is registered as ``triplesumo_{name}_v0`` by :func:`register_envs`."""
@@ -96,33 +98,56 @@ def env_id(scenario: str) -> str:
     return f"triplesumo_{scenario}_{ENV_VERSION}"
 
 
-def make_env(env_config: Mapping[str, Any] | None = None, scenario: str = "paper") -> ParallelPettingZooEnv:
-    """An RLlib ``MultiAgentEnv`` of one match.
+def match_config_from(env_config: Mapping[str, Any] | None = None, scenario: str = "paper") -> MatchConfig:
+    """The match an ``env_config`` asks for.
 
-    ``env_config`` is either ``{"match_config": MatchConfig}`` (as :func:`make_config` sets it)
-    or :class:`MatchConfig` field overrides of the ``scenario`` (``{"max_steps": 200}``).
+    ``env_config`` is either ``{"match_config": MatchConfig}`` (as :func:`make_config` sets
+    it) or an optional ``"scenario"`` name (default ``scenario``) plus :class:`MatchConfig`
+    field overrides (``{"max_steps": 200}``).
     """
     cfg = dict(env_config or {})
     match_config = cfg.pop("match_config", None)
-    if match_config is not None:
-        if cfg:
-            raise ValueError(f"env_config: give either 'match_config' or field overrides, not both ({sorted(cfg)})")
-        if not isinstance(match_config, MatchConfig):
-            raise ValueError(f"env_config['match_config'] must be a MatchConfig, got {type(match_config).__name__}")
-    else:
-        match_config = scenario_config(scenario, **cfg)
-    return ParallelPettingZooEnv(TripleSumoParallelEnv(match_config))
+    if match_config is None:
+        return scenario_config(cfg.pop("scenario", scenario), **cfg)
+    if cfg:
+        raise ValueError(f"env_config: give either 'match_config' or scenario and field overrides, "
+                         f"not both ({sorted(cfg)})")
+    if not isinstance(match_config, MatchConfig):
+        raise ValueError(f"env_config['match_config'] must be a MatchConfig, got {type(match_config).__name__}")
+    return match_config
+
+
+class TripleSumoMultiAgentEnv(ParallelPettingZooEnv):
+    """One TripleSumo match as an RLlib ``MultiAgentEnv``: RLlib's ``ParallelPettingZooEnv``
+    around :class:`~triplesumo.envs.parallel.TripleSumoParallelEnv`.
+
+    Built from an ``env_config`` (see :func:`match_config_from`), so RLlib can make it in
+    any process from the class alone (remote env runners, restored checkpoints) without
+    a registry entry.
+    """
+
+    def __init__(self, env_config: Mapping[str, Any] | None = None) -> None:
+        super().__init__(TripleSumoParallelEnv(match_config_from(env_config)))
+
+
+def make_env(env_config: Mapping[str, Any] | None = None, scenario: str = "paper") -> TripleSumoMultiAgentEnv:
+    """An RLlib multi-agent env of one match of ``scenario`` (see :func:`match_config_from`)."""
+    return TripleSumoMultiAgentEnv({"match_config": match_config_from(env_config, scenario)})
 
 
 def _creator(scenario: str) -> Any:
-    def create(env_config: Mapping[str, Any]) -> ParallelPettingZooEnv:
+    def create(env_config: Mapping[str, Any]) -> TripleSumoMultiAgentEnv:
         return make_env(env_config, scenario=scenario)
 
     return create
 
 
 def register_envs() -> list[str]:
-    """Register every scenario with RLlib (Tune's env registry); returns the env names."""
+    """Register every scenario by name with RLlib (Tune's env registry); returns the names.
+
+    For hand-written configs (``PPOConfig().environment("triplesumo_paper_v0")``);
+    :func:`make_config` passes the env class itself, which needs no registry.
+    """
     ids = []
     for scenario in SCENARIOS:
         register_env(env_id(scenario), _creator(scenario))
@@ -275,16 +300,14 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
         else:
             specs[module] = RLModuleSpec(observation_space=obs_space, action_space=act_space)
 
-    register_envs()
     try:
         algo_cls = get_trainable_cls(algo)
     except Exception as exc:  # Tune raises its own error types for unknown names
         raise ValueError(f"algo: unknown RLlib algorithm {algo!r} ({exc})") from exc
-    env_name = env_id(scenario) if isinstance(scenario, str) else env_id("paper")
     config: AlgorithmConfig = (
         algo_cls.get_default_config()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
-        .environment(env=env_name, env_config={"match_config": match_config})
+        .environment(env=TripleSumoMultiAgentEnv, env_config={"match_config": match_config})
         # Spaces given per module: RLlib's inference of them from a sampled env is unreliable.
         .multi_agent(policies={m: PolicySpec(observation_space=spaces[m][0], action_space=spaces[m][1])
                                for m in module_ids},
