@@ -157,12 +157,13 @@ def register_envs() -> list[str]:
 
 # ----------------------------------------------------------------------------- modules
 class FrozenPolicyModule(TorchRLModule):
-    """A project policy as an RLlib module that acts deterministically and never learns.
+    """A project policy as an RLlib module that never learns and never explores.
 
     ``model_config``: ``policy`` is a policy spec of :func:`triplesumo.zoo.make_policy`
     (``"zoo:ant"``, a policy-file path, ``"zero"``/``"passive"``, ``"random"``); ``obs_mode``
     (optional) is checked against the policy file's; ``seed`` seeds ``"random"``. A trained
-    actor is held as the ``actor`` sub-network (its weights are the module's state); its
+    actor acts deterministically (the same action in exploration and inference) and is held
+    as the ``actor`` sub-network (its weights are the module's state); the module's
     output is the action itself (``Columns.ACTIONS``), so RLlib samples nothing. Keep the
     module out of ``policies_to_train``: its training forward pass raises.
     """
