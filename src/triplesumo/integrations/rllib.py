@@ -309,7 +309,8 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
         algo_cls.get_default_config()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
         .environment(env=TripleSumoMultiAgentEnv, env_config={"match_config": match_config})
-        # Spaces given per module: RLlib's inference of them from a sampled env is unreliable.
+        # Spaces given per module: RLlib's own inference from an env failed intermittently
+        # ("observation_space not provided in PolicySpec") for per-team modules.
         .multi_agent(policies={m: PolicySpec(observation_space=spaces[m][0], action_space=spaces[m][1])
                                for m in module_ids},
                      policy_mapping_fn=_PolicyMapping(modules),
