@@ -195,7 +195,8 @@ def test_core_never_imports_ray_and_a_missing_ray_names_the_extra() -> None:
             "assert not [m for m in sys.modules if m == 'ray' or m.startswith('ray.')], 'ray imported'")
     subprocess.run([sys.executable, "-c", core], check=True)
     blocked = ("import sys; sys.modules['ray'] = None\n"
-               "try:\n    import triplesumo.integrations.rllib\n"
-               "except ImportError as e:\n    print(e)\n")
+               "for name in ('rllib', 'ray_tasks'):\n"
+               "    try:\n        __import__('triplesumo.integrations.' + name)\n"
+               "    except ImportError as e:\n        print(e)\n")
     out = subprocess.run([sys.executable, "-c", blocked], check=True, capture_output=True, text=True).stdout
-    assert 'pip install "triplesumo[ray]"' in out
+    assert out.count('pip install "triplesumo[ray]"') == 2, out
