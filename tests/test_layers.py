@@ -1,6 +1,6 @@
 """Data flows one way: a module imports only what stands to its left (STYLE.md).
 
-    model -> sim -> rules -> envs -> agents / algos -> evaluation / train / benchmarks -> cli
+    model -> sim -> rules -> envs -> agents / algos -> evaluation / train / benchmarks / integrations -> cli
 
 Checked on the source with ``ast`` (imports inside functions count too), plus the
 third-party imports each layer must not make (torch below agents, gymnasium and

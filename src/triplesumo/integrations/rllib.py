@@ -1,0 +1,324 @@
+"""RLlib on TripleSumo: multi-agent envs, frozen-policy modules and ``AlgorithmConfig`` factories.
+
+Works on RLlib's current API stack (RLModules, Learners, EnvRunners; Ray 2.54 to 2.x).
+Needs the ``ray`` extra: ``pip install "triplesumo[ray]"``; ``import triplesumo`` never
+imports Ray.
+
+- :class:`TripleSumoMultiAgentEnv` is one match as an RLlib multi-agent env (the PettingZoo
+  env in RLlib's ``ParallelPettingZooEnv``), built from an ``env_config`` holding
+  :class:`~triplesumo.rules.MatchConfig` field overrides or a whole config under
+  ``"match_config"``; :func:`register_envs` registers every scenario by name
+  (``"triplesumo_paper_v0"``, ...).
+- :func:`make_config` returns an ``AlgorithmConfig`` (PPO by default) with one RLModule per
+  agent (module ids = agent names) or per team (``share="team"``: module ids = team labels),
+  the policy-mapping function, ``policies_to_train``, the project's observation and action
+  spaces, and :class:`OutcomeCallback` so that results carry win/loss/draw rates.
+- :class:`FrozenPolicyModule` plays any project policy (``"zoo:ant"``, a policy file,
+  ``"zero"``, ``"random"``) as a deterministic RLlib module that never learns.
+
+Example (the paper's setup: Bug learns, the zoo's Ant and Spider are frozen)::
+
+    import ray
+    from triplesumo.integrations.rllib import make_config
+
+    ray.init()
+    config = make_config("paper", policies_to_train=["bug"],
+                         frozen={"ant": "zoo:ant", "spider": "zoo:spider"})
+    algo = config.build_algo()
+    result = algo.train()
+    result["env_runners"]["outcomes"]["bug"]["win"]   # Bug's win rate over recent episodes
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Collection, Mapping
+from typing import Any
+
+import numpy as np
+
+try:
+    from ray.rllib.algorithms.algorithm_config import AlgorithmConfig
+    from ray.rllib.callbacks.callbacks import RLlibCallback
+    from ray.rllib.core.columns import Columns
+    from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+    from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
+    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+    from ray.rllib.policy.policy import PolicySpec
+    from ray.tune.registry import get_trainable_cls, register_env
+except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
+    raise ImportError(
+        "triplesumo.integrations.rllib needs Ray RLlib, which is not installed: "
+        'pip install "triplesumo[ray]"'
+    ) from exc
+
+import torch
+
+from triplesumo import ENV_VERSION
+from triplesumo.agents.builtin import act_batch
+from triplesumo.agents.networks import ActorPolicy
+from triplesumo.agents.zoo import make_policy
+from triplesumo.envs.parallel import TripleSumoParallelEnv
+from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.outcome import PLAYING, outcome_name
+from triplesumo.rules.scenarios import scenario_config as named_scenario_config
+from triplesumo.rules.scenarios import scenarios
+
+__all__ = ["OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback",
+           "TripleSumoMultiAgentEnv", "env_id", "make_config", "make_env", "match_config_from", "module_of_agent",
+           "register_envs", "scenario_config"]
+
+SCENARIOS: tuple[str, ...] = scenarios()
+"""Named scenarios (``triplesumo.scenarios()``); each is registered as ``triplesumo_{name}_v0`` by
+:func:`register_envs`."""
+SHARE_MODES = (None, "team")
+"""``share`` values of :func:`make_config`: one module per agent, or one per team."""
+OUTCOMES = ("win", "loss", "draw", "error")
+"""Outcomes of a match from an agent's side (``info[agent]["outcome"]`` on the last step)."""
+
+
+# ----------------------------------------------------------------------------- envs
+def scenario_config(scenario: str | MatchConfig = "paper", **overrides: Any) -> MatchConfig:
+    """The :class:`MatchConfig` of a named scenario (or a given config) with field overrides."""
+    if isinstance(scenario, MatchConfig):
+        known = {f.name for f in dataclasses.fields(MatchConfig)}
+        unknown = sorted(set(overrides) - known)
+        if unknown:
+            raise ValueError(f"unknown MatchConfig field(s) {unknown}; known: {sorted(known)}")
+        return dataclasses.replace(scenario, **overrides)
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario: unknown scenario {scenario!r}; known: {list(SCENARIOS)} "
+                         "(or pass a MatchConfig)")
+    return named_scenario_config(scenario, **overrides)
+
+
+def env_id(scenario: str) -> str:
+    """RLlib env name of a scenario, e.g. ``"triplesumo_paper_v0"``."""
+    if scenario not in SCENARIOS:
+        raise ValueError(f"scenario: unknown scenario {scenario!r}; known: {list(SCENARIOS)}")
+    return f"triplesumo_{scenario}_{ENV_VERSION}"
+
+
+def match_config_from(env_config: Mapping[str, Any] | None = None, scenario: str = "paper") -> MatchConfig:
+    """The match an ``env_config`` asks for.
+
+    ``env_config`` is either ``{"match_config": MatchConfig}`` (as :func:`make_config` sets
+    it) or an optional ``"scenario"`` name (default ``scenario``) plus :class:`MatchConfig`
+    field overrides (``{"max_steps": 200}``).
+    """
+    cfg = dict(env_config or {})
+    match_config = cfg.pop("match_config", None)
+    if match_config is None:
+        return scenario_config(cfg.pop("scenario", scenario), **cfg)
+    if cfg:
+        raise ValueError(f"env_config: give either 'match_config' or scenario and field overrides, "
+                         f"not both ({sorted(cfg)})")
+    if not isinstance(match_config, MatchConfig):
+        raise ValueError(f"env_config['match_config'] must be a MatchConfig, got {type(match_config).__name__}")
+    return match_config
+
+
+class TripleSumoMultiAgentEnv(ParallelPettingZooEnv):
+    """One TripleSumo match as an RLlib ``MultiAgentEnv``: RLlib's ``ParallelPettingZooEnv``
+    around :class:`~triplesumo.envs.parallel.TripleSumoParallelEnv`.
+
+    Built from an ``env_config`` (see :func:`match_config_from`), so RLlib can make it in
+    any process from the class alone (remote env runners, restored checkpoints) without
+    a registry entry.
+    """
+
+    def __init__(self, env_config: Mapping[str, Any] | None = None) -> None:
+        super().__init__(TripleSumoParallelEnv(match_config_from(env_config)))
+
+
+def make_env(env_config: Mapping[str, Any] | None = None, scenario: str = "paper") -> TripleSumoMultiAgentEnv:
+    """An RLlib multi-agent env of one match of ``scenario`` (see :func:`match_config_from`)."""
+    return TripleSumoMultiAgentEnv({"match_config": match_config_from(env_config, scenario)})
+
+
+def _creator(scenario: str) -> Any:
+    def create(env_config: Mapping[str, Any]) -> TripleSumoMultiAgentEnv:
+        return make_env(env_config, scenario=scenario)
+
+    return create
+
+
+def register_envs() -> list[str]:
+    """Register every scenario by name with RLlib (Tune's env registry); returns the names.
+
+    For hand-written configs (``PPOConfig().environment("triplesumo_paper_v0")``);
+    :func:`make_config` passes the env class itself, which needs no registry.
+    """
+    ids = []
+    for scenario in SCENARIOS:
+        register_env(env_id(scenario), _creator(scenario))
+        ids.append(env_id(scenario))
+    return ids
+
+
+# ----------------------------------------------------------------------------- modules
+class FrozenPolicyModule(TorchRLModule):
+    """A project policy as an RLlib module that never learns and never explores.
+
+    ``model_config``: ``policy`` is a policy spec of :func:`triplesumo.zoo.make_policy`
+    (``"zoo:ant"``, a policy-file path, ``"zero"``/``"passive"``, ``"random"``); ``obs_mode``
+    (optional) is checked against the policy file's; ``seed`` seeds ``"random"``. A trained
+    actor acts deterministically (the same action in exploration and inference) and is held
+    as the ``actor`` sub-network (its weights are the module's state); the module's
+    output is the action itself (``Columns.ACTIONS``), so RLlib samples nothing. Keep the
+    module out of ``policies_to_train``: its training forward pass raises.
+    """
+
+    def setup(self) -> None:
+        cfg: dict[str, Any] = dict(self.model_config or {})  # type: ignore[arg-type]
+        if "policy" not in cfg:
+            raise ValueError("FrozenPolicyModule: model_config needs 'policy' (e.g. 'zoo:ant', 'zero')")
+        self.policy = make_policy(str(cfg["policy"]), seed=int(cfg.get("seed", 0)),
+                                  expect_obs_mode=cfg.get("obs_mode"))
+        expected = getattr(self.policy, "obs_dim", None)
+        shape = getattr(self.observation_space, "shape", None)
+        size = int(np.prod(shape)) if shape is not None else None
+        if expected is not None and size is not None and expected != size:
+            raise ValueError(f"FrozenPolicyModule: policy {cfg['policy']!r} expects {expected} observation "
+                             f"values, the module's observation space has {size}")
+        if isinstance(self.policy, ActorPolicy):
+            self.actor = self.policy.actor
+            self.actor.requires_grad_(False)
+
+    def _forward(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        obs = batch[Columns.OBS]
+        obs_np = obs.detach().cpu().numpy() if isinstance(obs, torch.Tensor) else np.asarray(obs)
+        actions = act_batch(self.policy, obs_np.astype(np.float32, copy=False))
+        return {Columns.ACTIONS: torch.as_tensor(actions, dtype=torch.float32)}
+
+    def _forward_train(self, batch: dict[str, Any], **kwargs: Any) -> dict[str, Any]:
+        raise NotImplementedError("FrozenPolicyModule never learns: leave it out of policies_to_train")
+
+
+# ----------------------------------------------------------------------------- metrics
+class OutcomeCallback(RLlibCallback):
+    """Logs each agent's match outcome at episode end.
+
+    Results get ``result["env_runners"]["outcomes"][agent][o]`` for ``o`` in
+    :data:`OUTCOMES`: the fraction of recent episodes (window 100) that ended so for that
+    agent's side, read from ``info[agent]["outcome"]`` on the last step.
+    """
+
+    window = 100
+
+    def on_episode_end(self, *, episode: Any, metrics_logger: Any = None, **kwargs: Any) -> None:
+        if metrics_logger is None:
+            return
+        last = episode.get_infos(-1)
+        for agent, info in last.items():
+            code = info.get("outcome") if isinstance(info, Mapping) else None
+            if code is None or int(code) == PLAYING:  # the episode was cut (not ended by the game)
+                continue
+            outcome = outcome_name(int(code))
+            for kind in OUTCOMES:
+                metrics_logger.log_value(("outcomes", agent, kind), float(outcome == kind),
+                                         reduce="mean", window=self.window)
+
+
+# ----------------------------------------------------------------------------- config
+def module_of_agent(config: MatchConfig, share: str | None = None) -> dict[str, str]:
+    """Module id of every agent: its name, or with ``share="team"`` its team label."""
+    if share not in SHARE_MODES:
+        raise ValueError(f"share must be one of {list(SHARE_MODES)}, got {share!r}")
+    return {a.name: (a.team if share == "team" else a.name) for a in config.agents}
+
+
+class _PolicyMapping:
+    """``policy_mapping_fn``: agent id -> module id (a picklable lookup)."""
+
+    def __init__(self, modules: Mapping[str, str]) -> None:
+        self.modules = dict(modules)
+
+    def __call__(self, agent_id: str, episode: Any = None, **kwargs: Any) -> str:
+        return self.modules[agent_id]
+
+
+def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collection[str] | None = None,
+                algo: str = "PPO", share: str | None = None, frozen: Mapping[str, str] | None = None,
+                **overrides: Any) -> AlgorithmConfig:
+    """An RLlib ``AlgorithmConfig`` for a TripleSumo match, on the new API stack.
+
+    Args:
+        scenario: A name of :data:`SCENARIOS` or a :class:`MatchConfig`.
+        policies_to_train: Module ids that learn; default: every module not in ``frozen``.
+        algo: An RLlib algorithm name (``"PPO"``, ``"APPO"``, ...).
+        share: ``None``: one module per agent (ids = agent names); ``"team"``: one per team
+            (ids = team labels, e.g. ``"team"`` for Ant and Bug, ``"spider"``).
+        frozen: Module id -> policy spec (``"zoo:ant"``, a policy-file path, ``"zero"``,
+            ``"random"``) played by a :class:`FrozenPolicyModule`. Modules that are neither
+            frozen nor trained are RLlib's default modules left as initialised.
+        **overrides: :class:`MatchConfig` fields (``max_steps=200``, ``obs_mode=...``).
+
+    The rest (batch sizes, learning rate, env runners, seeds) is set on the returned config
+    the RLlib way: ``make_config(...).training(lr=1e-4).env_runners(num_env_runners=2)``.
+    """
+    match_config = scenario_config(scenario, **overrides)
+    modules = module_of_agent(match_config, share)
+    module_ids = list(dict.fromkeys(modules.values()))
+    frozen = dict(frozen or {})
+    unknown = sorted(set(frozen) - set(module_ids))
+    if unknown:
+        raise ValueError(f"frozen: unknown module id(s) {unknown}; module ids are {module_ids}")
+    if policies_to_train is None:
+        train = [m for m in module_ids if m not in frozen]
+    else:
+        if isinstance(policies_to_train, str):
+            raise ValueError(f"policies_to_train must be a collection of module ids, got the string "
+                             f"{policies_to_train!r} (use [{policies_to_train!r}])")
+        train = list(policies_to_train)
+        unknown = sorted(set(train) - set(module_ids))
+        if unknown:
+            raise ValueError(f"policies_to_train: unknown module id(s) {unknown}; module ids are {module_ids}")
+        both = sorted(set(train) & set(frozen))
+        if both:
+            raise ValueError(f"policies_to_train: module(s) {both} are also frozen")
+    if not train:
+        raise ValueError("policies_to_train: nothing would learn; name at least one module id")
+
+    env = TripleSumoParallelEnv(match_config)
+    try:
+        spaces: dict[str, tuple[Any, Any]] = {}
+        for agent, module in modules.items():
+            pair = (env.observation_space(agent), env.action_space(agent))
+            if module in spaces and spaces[module] != pair:
+                raise ValueError(f"share={share!r}: agents mapped to module {module!r} have different spaces")
+            spaces[module] = pair
+    finally:
+        env.close()
+
+    specs: dict[str, RLModuleSpec] = {}
+    for k, module in enumerate(module_ids):
+        obs_space, act_space = spaces[module]
+        if module in frozen:
+            model_config = {"policy": frozen[module], "obs_mode": match_config.obs_mode, "seed": k}
+            specs[module] = RLModuleSpec(module_class=FrozenPolicyModule, observation_space=obs_space,
+                                         action_space=act_space, model_config=model_config)
+            FrozenPolicyModule(observation_space=obs_space, action_space=act_space,  # fail early on a bad spec
+                               inference_only=True, model_config=model_config)
+        else:
+            specs[module] = RLModuleSpec(observation_space=obs_space, action_space=act_space)
+
+    try:
+        algo_cls = get_trainable_cls(algo)
+    except Exception as exc:  # Tune raises its own error types for unknown names
+        raise ValueError(f"algo: unknown RLlib algorithm {algo!r} ({exc})") from exc
+    config: AlgorithmConfig = (
+        algo_cls.get_default_config()
+        .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
+        .environment(env=TripleSumoMultiAgentEnv, env_config={"match_config": match_config})
+        # Spaces given per module: RLlib's own inference from an env failed intermittently
+        # ("observation_space not provided in PolicySpec") for per-team modules.
+        .multi_agent(policies={m: PolicySpec(observation_space=spaces[m][0], action_space=spaces[m][1])
+                               for m in module_ids},
+                     policy_mapping_fn=_PolicyMapping(modules),
+                     policies_to_train=train)
+        .rl_module(rl_module_spec=MultiRLModuleSpec(rl_module_specs=specs))
+        .callbacks(OutcomeCallback)
+    )
+    return config

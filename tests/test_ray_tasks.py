@@ -1,0 +1,82 @@
+"""Test epochs played as Ray tasks give the rows of a local run for the same seeds."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from triplesumo.agents.zoo import make_policy
+from triplesumo.evaluation.evaluate import play_test_epochs
+from triplesumo.rules.config import MatchConfig
+
+OTHERS = {"ant": "zoo:ant", "spider": "zoo:spider"}
+
+
+@pytest.fixture(scope="module")
+def ray_tasks() -> Iterator[Any]:
+    ray = pytest.importorskip("ray", reason='the "ray" extra is not installed (pip install "triplesumo[ray]")')
+    from triplesumo.integrations import ray_tasks
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        yield ray_tasks
+    finally:
+        ray.shutdown()
+
+
+def test_rows_on_ray_equal_a_local_run(ray_tasks: Any) -> None:
+    cfg = MatchConfig(max_steps=40)
+    local = play_test_epochs(make_policy("random", seed=3), {a: make_policy(s) for a, s in OTHERS.items()},
+                             "bug", 7, 100, cfg, n_envs=4, n_threads=1, first=1)
+    remote = ray_tasks.play_test_epochs_on_ray("random", OTHERS, "bug", 7, 100, cfg, first=1, chunk=2, n_envs=2)
+    assert [r["epoch"] for r in remote] == list(range(2, 8))
+    assert remote == local
+    assert {r["outcome"] for r in remote} <= {"win", "loss", "draw"}
+
+
+def test_bad_arguments_are_named(ray_tasks: Any) -> None:
+    with pytest.raises(ValueError, match="chunk must be an int >= 1"):
+        ray_tasks.play_test_epochs_on_ray("zero", OTHERS, "bug", 4, 0, chunk=0)
+    with pytest.raises(ValueError, match=r"first must be in \[0, epochs=4\)"):
+        ray_tasks.play_test_epochs_on_ray("zero", OTHERS, "bug", 4, 0, first=4)
+
+
+def _chunk_workers() -> list[int]:
+    """Pids of Ray workers now running a chunk (Ray titles them ``ray::_play_chunk``)."""
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(b"ray::_play_chunk"):
+                pids.append(int(proc.name))
+        except OSError:
+            continue
+    return pids
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds Ray's worker processes through /proc")
+def test_a_killed_worker_is_retried_and_its_epochs_replay_exactly(ray_tasks: Any) -> None:
+    cfg = MatchConfig(max_steps=150)
+    result: dict[str, Any] = {}
+    thread = threading.Thread(target=lambda: result.update(rows=ray_tasks.play_test_epochs_on_ray(
+        "random", OTHERS, "bug", 8, 7, cfg, chunk=4, n_envs=2)))
+    thread.start()
+    killed = None
+    deadline = time.monotonic() + 60
+    while killed is None and thread.is_alive() and time.monotonic() < deadline:
+        pids = _chunk_workers()
+        if pids:
+            killed = pids[0]
+            os.kill(killed, signal.SIGKILL)
+        time.sleep(0.05)
+    thread.join(timeout=120)
+    assert killed is not None, "no chunk worker was seen running"
+    local = play_test_epochs(make_policy("random"), {a: make_policy(s) for a, s in OTHERS.items()},
+                             "bug", 8, 7, cfg, n_envs=4, n_threads=1)
+    assert result["rows"] == local
