@@ -17,6 +17,10 @@ from collections.abc import Sequence
 
 WIN, LOSS, DRAW = "win", "loss", "draw"
 
+OUTCOME_CODES: dict[str | None, int] = {None: 0, WIN: 1, LOSS: 2, DRAW: 3, "error": 4}
+"""Integer code of each outcome in batched infos: ``None`` (the match goes on), win, loss, draw,
+and ``"error"`` (physics error, the match truncated)."""
+
 
 def agents_out(torso_xy: Sequence[Sequence[float]], half_size: float) -> list[bool]:
     """Whose centre of mass is outside the ring, per agent; ``torso_xy`` rows start with x, y.
