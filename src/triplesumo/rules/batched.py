@@ -2,7 +2,7 @@
 
 Every function takes arrays shaped ``(num_envs, n_agents, ...)`` and an array namespace
 ``xp`` -- ``numpy`` or ``torch`` (this module never imports torch) -- and uses only what
-both spell alike (``abs``, ``sign``, ``where``, ``maximum``, ``minimum``, ``@``, and the
+both spell alike (``abs``, ``sign``, ``where``, ``maximum`` of two arrays, ``clip``, ``@``, and the
 methods ``sum``, ``any``, ``all``, ``reshape``,
 ``swapaxes``; ``concat`` and ``stack`` with ``axis``). The batched backends (MuJoCo Warp on a GPU)
 call them with ``torch`` on the device; ``tests/test_batched_rules.py`` holds them equal,
@@ -150,7 +150,7 @@ def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRu
 
 # ------------------------------------------------------------- observations
 def clip(values: Any, limit: float, xp: Any) -> Any:
-    return xp.minimum(xp.maximum(values, -limit), limit)
+    return xp.clip(values, -limit, limit)
 
 
 def paper_observation(pos: Any, vel: Any, forces: Any, qpos: Any, qvel: Any, rules: BatchedRules, xp: Any) -> Any:
