@@ -183,3 +183,19 @@ def test_bad_actions_and_devices_are_refused(rollout: dict) -> None:
         make_warp_vector_env(CONFIG, 0, device="cpu")
     with pytest.raises(ValueError, match="not available"):
         WarpMatchBatch(CONFIG, 1, device="cuda:7")
+
+
+def test_egocentric_observations_of_the_starts_and_one_step_match_the_cpu() -> None:
+    cfg = MatchConfig(obs_mode="egocentric")
+    env = WarpMatchBatch(cfg, 2, device=DEVICE)
+    obs, _ = env.reset(5)
+    matches = [Match(cfg) for _ in range(2)]
+    first = np.stack([np.stack(m.reset(seed=s)[0]) for m, s in zip(matches, match_seeds(5, 2), strict=True)])
+    assert tuple(obs.shape) == first.shape == (2, 3, 79)
+    contact = slice(79 - 39, 79)
+    np.testing.assert_allclose(obs.cpu().numpy()[..., :contact.start], first[..., :contact.start], atol=1e-5)
+    np.testing.assert_allclose(obs.cpu().numpy()[..., contact], first[..., contact], rtol=1e-3, atol=1e-3)
+    actions = np.random.default_rng(1).uniform(-1, 1, (2, 3, 8)).astype(np.float32)
+    obs, *_ = env.step(torch.as_tensor(actions, device=env.device))
+    after = np.stack([np.stack(m.step_array(a).observations) for m, a in zip(matches, actions, strict=True)])
+    np.testing.assert_allclose(obs.cpu().numpy()[..., :contact.start], after[..., :contact.start], atol=1e-3)

@@ -215,6 +215,8 @@ class WarpMatchBatch:
     def reset(self, seed: int | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Start every match: match ``k`` from ``match_seeds(seed, num_envs)[k]``'s stream.
 
+        ``infos`` has the keys of :meth:`step`'s (terms zero, outcome 0, no valid final_obs).
+
         ``seed=None`` keeps the streams of the last seeded reset (fresh entropy the first time,
         or the ``seed`` given at construction).
         """
@@ -228,8 +230,10 @@ class WarpMatchBatch:
             self._restart(np.arange(self.num_envs))
             obs = self._observe(self._state())
             self._last_obs = obs
-            infos = {"step": self.steps.clone(),
-                     "outcome": torch.zeros((self.num_envs, self.n_agents), dtype=torch.long, device=self.device)}
+            zeros = torch.zeros((self.num_envs, self.n_agents), device=self.device)
+            infos = {name: zeros.clone() for name in (*TERMS, "dense_reward", "sparse_reward")}
+            infos.update(step=self.steps.clone(), outcome=zeros.long(), final_obs=obs.clone(),
+                         _final_obs=torch.zeros(self.num_envs, dtype=torch.bool, device=self.device))
         return obs, infos
 
     def step(self, actions: Any) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor,
