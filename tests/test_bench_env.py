@@ -79,3 +79,19 @@ def test_obs_mode_reaches_the_envs_and_the_setup() -> None:
 def test_bad_sizes_are_value_errors() -> None:
     with pytest.raises(ValueError, match="steps"):
         run_env_benchmark(steps=0)
+
+
+def test_warp_backend_reports_env_and_raw_rates_per_size(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("mujoco_warp", reason="mujoco-warp is not installed (pip install 'triplesumo[gpu]')")
+    path = tmp_path / "warp.json"
+    assert main(["--backend", "warp", "--device", "cpu", "--quick", "--json", str(path)]) == 0
+    result = json.loads(path.read_text())
+    assert result["setup"]["backend"] == "warp" and result["setup"]["device"] == "cpu"
+    (row,) = result["rows"]
+    assert row["num_envs"] == 2
+    assert row["env_steps_per_s"] > 0 and row["raw_env_steps_per_s"] > 0
+    assert row["env_vs_raw"] == pytest.approx(row["env_steps_per_s"] / row["raw_env_steps_per_s"], rel=1e-12)
+    assert row["raw_physics_steps_per_s"] == pytest.approx(5 * row["raw_env_steps_per_s"], rel=1e-12)
+    assert "raw mujoco_warp" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="num-envs"):
+        main(["--backend", "warp", "--num-envs", "1,x"])

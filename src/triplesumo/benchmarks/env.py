@@ -1,5 +1,8 @@
 """``triplesumo bench env``: env steps per second, measured in one run.
 
+``--backend warp`` measures the MuJoCo Warp backend instead, at 1 to 16,384 matches
+(:mod:`triplesumo.benchmarks.warp_env`); the default ``--backend cpu`` runs the variants below.
+
 Variants, each on its own compiled model of the same :class:`MatchConfig`:
 
 ``raw_physics``
@@ -407,7 +410,8 @@ def format_table(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="triplesumo bench env", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=int, default=3000, help="env steps per variant and round (default: 3000)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="env steps per variant and round (default: 3000; warp: 200 per size)")
     parser.add_argument("--matches", type=int, default=16, help="matches of the MatchBatch variants (default: 16)")
     parser.add_argument("--threads", type=int, default=2, help="threads of the MatchBatch variants (default: 2)")
     parser.add_argument("--rounds", type=int, default=3, help="repetitions; the median is reported (default: 3)")
@@ -418,11 +422,39 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenario", default="paper", help="named game: paper, ffa, pursuit, 2v2 (default: paper)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
+    parser.add_argument("--backend", choices=["cpu", "warp"], default="cpu",
+                        help="cpu: the variants above; warp: MuJoCo Warp env and raw physics (default: cpu)")
+    parser.add_argument("--num-envs", default=None, metavar="N,N,...",
+                        help="warp: comma-separated numbers of matches (default: 1,16,256,1024,4096,16384)")
+    parser.add_argument("--device", default=None, help="warp: cuda, cuda:N or cpu (default: cuda if Warp sees one)")
     args = parser.parse_args(argv)
+    if args.backend == "warp":
+        args.steps = 200 if args.steps is None else args.steps
+        return _main_warp(args)
+    args.steps = 3000 if args.steps is None else args.steps
     if args.quick:
         args.steps, args.matches, args.rounds, args.chunk = 20, 2, 1, 10
     result = run_env_benchmark(steps=args.steps, n_matches=args.matches, n_threads=args.threads,
                                integrator=args.integrator, seed=args.seed, rounds=args.rounds,
                                chunk=args.chunk, obs_mode=args.obs_mode, scenario=args.scenario)
     report(format_table(result), result, args.json)
+    return 0
+
+
+def _main_warp(args: argparse.Namespace) -> int:
+    from triplesumo.benchmarks import warp_env
+
+    try:
+        sizes = tuple(int(x) for x in args.num_envs.split(",")) if args.num_envs else warp_env.DEFAULT_SIZES
+    except ValueError:
+        raise SystemExit(f"--num-envs must be comma-separated integers, got {args.num_envs!r}") from None
+    if not sizes or min(sizes) < 1:
+        raise SystemExit(f"--num-envs must be integers >= 1, got {args.num_envs!r}")
+    steps, rounds, warmup = args.steps, args.rounds, 10
+    if args.quick:
+        sizes, steps, rounds, warmup = (2,), 2, 1, 1
+    result = warp_env.run_warp_benchmark(sizes=sizes, steps=steps, rounds=rounds, device=args.device,
+                                         integrator=args.integrator, obs_mode=args.obs_mode, seed=args.seed,
+                                         warmup=warmup)
+    report(warp_env.format_table(result), result, args.json)
     return 0

@@ -380,13 +380,23 @@ def vector_env(num_envs: int, scenario: str = "paper", backend: str = "cpu", dev
     """``num_envs`` matches stepped together, as arrays (see :class:`VectorMatches`).
 
     ``config`` are :class:`MatchConfig` fields (``max_steps``, ``obs_mode``, ...).
-    ``backend="cpu"`` steps MuJoCo on ``num_threads`` threads (default: one per usable
-    CPU, at most ``num_envs``) and returns numpy arrays; results do not depend on it.
+    ``scenario`` is any of ``triplesumo.scenarios()``. ``backend="cpu"`` steps MuJoCo on
+    ``num_threads`` threads (default: one per usable CPU, at most ``num_envs``) and returns
+    numpy arrays; results do not depend on it. ``backend="warp"`` steps MuJoCo Warp on
+    ``device`` (``"cuda"``, or Warp's ``"cpu"``; default: a GPU when Warp sees one) and returns
+    torch tensors on it (:class:`triplesumo.envs.warp.WarpMatchBatch`: the same contract,
+    first-out rules with one body kind; the ``gpu`` extra).
     """
     if backend not in VECTOR_BACKENDS:
         raise ValueError(f"backend must be one of {VECTOR_BACKENDS}, got {backend!r}")
     if backend == "warp":
-        raise NotImplementedError("backend='warp' (MuJoCo Warp) is issue 10 section 2; use backend='cpu'")
+        try:
+            from triplesumo.envs.warp import make_warp_vector_env
+        except ImportError as exc:
+            raise ImportError(f"backend='warp' needs MuJoCo Warp: pip install \"triplesumo[gpu]\" ({exc})") from None
+        if num_threads is not None:
+            raise ValueError("num_threads is for backend='cpu' (MuJoCo threads); backend='warp' runs on device")
+        return make_warp_vector_env(scenario_config(scenario, **config), num_envs, device)  # type: ignore[return-value]
     if device not in (None, "cpu"):
         raise ValueError(f"backend='cpu' runs on the CPU: device must be None or 'cpu', got {device!r}")
     return VectorMatches(num_envs, scenario_config(scenario, **config), num_threads)

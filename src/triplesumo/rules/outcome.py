@@ -57,6 +57,7 @@ def outcome_name(code: int) -> str:
     return OUTCOME_NAMES[int(code)]
 
 
+
 def agents_out(torso_xy: Sequence[Sequence[float]], half_size: float) -> list[bool]:
     """Whose centre of mass is outside the ring, per agent; ``torso_xy`` rows start with x, y.
 
