@@ -28,7 +28,7 @@ from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.learners import OffPolicyLearner, PPOLearner
 from triplesumo.train.logger import COLUMNS, LEARNING_COLUMNS
-from triplesumo.train.loop import Trainer, TrainResult, train
+from triplesumo.train.loop import DivergenceError, Trainer, TrainResult, train
 
 E = 2
 SAC = SACConfig(hidden=(16, 16), buffer_size=2000, learning_starts=40, batch_size=16, learn_every=2)
@@ -213,6 +213,15 @@ def test_a_learner_out_of_an_elimination_match_stops_collecting_until_the_match_
     for agent in ("ant", "bug"):
         (row,) = rows(trainer.run_dir / f"metrics-{agent}.csv")
         assert row["outcome"] in ("loss", "win", "draw") and int(row["steps"]) <= 3
+
+
+def test_a_diverging_learner_among_several_is_named(tmp_path: Path) -> None:
+    trainer = Trainer(tiny(tmp_path, "nan", epochs=8, **PAIR))
+    ant = trainer.learners[0]
+    for group in ant.algo.critic_optimizer.param_groups:  # type: ignore[attr-defined]
+        group["lr"] = 1e30
+    with pytest.raises(DivergenceError, match=r"learner 'ant' diverged at update \d+ .*sac\): .*--sac.actor-lr"):
+        trainer.run()
 
 
 # ------------------------------------------------------------------- bad input

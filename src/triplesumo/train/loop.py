@@ -421,7 +421,7 @@ class Trainer:
             for key in acc:
                 acc[key] += info[key]
             if res.eliminated is not None and res.eliminated[i]:
-                self.final[agent][k] = {"outcome": info["outcome"], "step": int(info["step"])}
+                self.final[agent][k] = {"outcome": outcome_name(info), "step": int(info["step"])}
                 out_now.append(agent)
         over = res.terminated or res.truncated
         if not over and any(self.final[a][k] is None for a in self.agents):
@@ -430,7 +430,7 @@ class Trainer:
         self.epochs_done += 1
         for agent in self.agents:
             i = self.batch.matches[k].agents.index(agent)
-            last = self.final[agent][k] or {"outcome": res.infos[i]["outcome"], "step": int(res.infos[i]["step"])}
+            last = self.final[agent][k] or {"outcome": outcome_name(res.infos[i]), "step": int(res.infos[i]["step"])}
             self._agent_row(agent, k, last)
             self.final[agent][k] = None
         self.finished_epoch_steps.append(max(int(info["step"]) for info in res.infos))
@@ -656,7 +656,8 @@ def is_error(info: Mapping[str, Any]) -> bool:
 
 
 def outcome_name(info: Mapping[str, Any]) -> str:
-    """The outcome of an info as a name (win, loss, draw, error; "" while the match goes on)."""
+    """The outcome of an info as a name (win, loss, draw, error; "" while the match goes on):
+    the one place the trainer reads ``info["outcome"]`` (should it become a numeric code)."""
     outcome = info["outcome"]
     return "" if outcome is None else str(outcome)
 
