@@ -512,3 +512,39 @@ def test_an_error_in_the_update_thread_reaches_the_caller(tmp_path: Path, monkey
     monkeypatch.setattr(DDPG, "update", broken)
     with pytest.raises(RuntimeError, match="update failed on purpose"):
         train(tiny(tmp_path, "broken", overlap_learning=True))
+
+
+def _as_one_learner_layout(run: Path) -> None:
+    """Rewrite a run's latest checkpoint, config and CSVs as the one-DDPG-learner trainer wrote them."""
+    folder = checkpoint.latest(run)
+    state = json.loads((folder / "state.json").read_text())
+    learner = state.pop("learners")["bug"]
+    state.pop("final")
+    state |= {"optimizer": learner["optimizer"], "sample_rng": learner["sample_rng"], "acc": state["acc"]["bug"]}
+    (folder / "state.json").write_text(json.dumps(state))
+    tensors = {k.removeprefix("bug."): v for k, v in load_file(str(folder / "weights.safetensors")).items()}
+    from safetensors.torch import save_file
+
+    save_file(tensors, str(folder / "weights.safetensors"))
+    for name, rename in (("arrays.npz", lambda k: {"lwr.bug": "lwr"}.get(k, k.removeprefix("bug."))),
+                         ("replay.npz", lambda k: k.removeprefix("bug."))):
+        with np.load(folder / name) as data:
+            arrays = {rename(k): data[k] for k in data.files if k != "bug.active"}
+        with (folder / name).open("wb") as fh:
+            np.savez(fh, **arrays)
+    _reseal(folder)
+    config = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({k: v for k, v in config.items()
+                                                 if k not in ("learn", "share", "td3", "sac", "ppo")}))
+    (run / "learning.csv").unlink()
+
+
+def test_a_run_of_the_one_learner_trainer_resumes_exactly(uninterrupted: Trained, tmp_path: Path) -> None:
+    """Runs checkpointed before several learners existed (long runs resumed across sessions)."""
+    killed = train(tiny(tmp_path, name="old", epochs=E)).run_dir
+    _as_one_learner_layout(killed)
+    train(TrainConfig(), resume_dir=killed, overrides={"epochs": 2 * E})
+    assert_same_run(uninterrupted.run, killed)
+    rows = list(csv.reader((killed / "learning.csv").open()))
+    assert all(cell == "" for row in rows[1:E + 1] for cell in row[1:])  # the epochs before: empty learning rows
+    assert int(rows[-1][1]) == uninterrupted.result.updates

@@ -96,7 +96,8 @@ def repair_metrics_csv(path: Path, keep_through: int | None = None, columns: tup
 LEARNING_COLUMNS = ("epoch", "updates", "actor_loss", "critic_loss", "q_mean", "entropy", "alpha", "alpha_loss",
                     "approx_kl", "clip_fraction")
 """Learning CSV schema: one row per epoch of a learner, its update count and the means of the
-stats its algorithm reported over the updates since the previous row (empty: none reported)."""
+stats its algorithm reported over the updates since the previous row (empty: none reported;
+rows of a run resumed from before this file existed are all empty)."""
 
 
 def _learning_row_problem(row: list[str], epoch: int) -> str | None:
@@ -105,7 +106,7 @@ def _learning_row_problem(row: list[str], epoch: int) -> str | None:
         return f"{len(row)} fields, expected {len(LEARNING_COLUMNS)}"
     if row[0] != str(epoch):
         return f"epoch {row[0]!r}, expected {epoch}"
-    if not row[1].isdigit():
+    if row[1] and not row[1].isdigit():
         return f"updates {row[1]!r} is not a count"
     for name, value in zip(LEARNING_COLUMNS[2:], row[2:], strict=True):
         try:
@@ -120,13 +121,17 @@ class _Table:
     """One row-appended CSV of a run, cut back to the resumed epoch on resume."""
 
     def __init__(self, path: Path, columns: tuple[str, ...], row_problem: Callable[[list[str], int], str | None],
-                 resume_epoch: int | None, what: str) -> None:
+                 resume_epoch: int | None, what: str, backfill: bool = False) -> None:
         self.path, self.columns = path, columns
         header = _csv_bytes(columns)
         if resume_epoch is None:
             with writing(path):
                 atomic_write_bytes(path, header)
         else:
+            if backfill and not path.exists():  # a run from before this table: its epochs get empty rows
+                blank = "".join(f"{e}{',' * (len(columns) - 1)}\n" for e in range(1, resume_epoch + 1))
+                with writing(path):
+                    atomic_write_bytes(path, header + blank.encode())
             if resume_epoch > 0 and not path.exists():
                 raise ValueError(f"{path}: file not found, but the checkpoint resumed from is at epoch "
                                  f"{resume_epoch}: its rows would be lost")
@@ -185,7 +190,8 @@ class MetricsLog:
         self.metrics = {a: _Table(Path(run_dir) / run_file("metrics", a, self.several, ".csv"), COLUMNS,
                                   _row_problem, resume_epoch, "metrics CSV") for a in agents}
         self.learning = {n: _Table(Path(run_dir) / run_file("learning", n, self.several, ".csv"), LEARNING_COLUMNS,
-                                   _learning_row_problem, resume_epoch, "learning CSV") for n in learners}
+                                   _learning_row_problem, resume_epoch, "learning CSV", backfill=True)
+                         for n in learners}
         self.path = self.metrics[agents[0]].path
         self._tb: Any = None
         if tensorboard:

@@ -41,6 +41,7 @@ from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.algos.base import DivergedError
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
+from triplesumo.algos.replay import FIELDS
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.envs.batch import MatchBatch
@@ -111,6 +112,9 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
+    if isinstance(data, dict) and "ddpg" in data and "learn" not in data:  # written before several learners
+        data = {**data, **{k: v for k, v in config_to_json(TrainConfig()).items()
+                           if k in ("learn", "share", "td3", "sac", "ppo")}}
     data = _check_keys(data, TrainConfig, "", source)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
     for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
@@ -370,7 +374,6 @@ class Trainer:
             if self._match_step(k, res):
                 finished += 1
         t3 = time.perf_counter()
-        learned = 0.0
         for learner in self.learners:
             if isinstance(learner, PPOLearner):
                 try:
@@ -591,6 +594,8 @@ class Trainer:
                     f"(epoch {checkpoint.recorded_epoch(intact)}): `triplesumo train --resume {self.run_dir} "
                     f"--from {intact.name}` continues from it (later epochs are trained again)") from exc
         tensors, state, arrays, replay = loaded
+        if "learners" not in state and "optimizer" in state:
+            tensors, state, arrays, replay = self._one_learner_checkpoint(tensors, state, arrays, replay)
         need_state = ("config", "learners", "rng", "matches", "epochs_done", "env_steps", "acc", "final")
         missing = [k for k in need_state if k not in state]
         if missing:
@@ -619,6 +624,20 @@ class Trainer:
             where = "replay.npz" if replay is not None and "replay arrays" in str(exc) else (
                 "state.json / arrays.npz / replay.npz / weights.safetensors")
             raise checkpoint.CheckpointError(f"{folder} ({where}): missing or malformed entry: {exc!r}") from exc
+
+    def _one_learner_checkpoint(self, tensors: dict[str, torch.Tensor], state: dict[str, Any],
+                                arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> tuple[
+            dict[str, torch.Tensor], dict[str, Any], dict[str, np.ndarray], Mapping[str, np.ndarray] | None]:
+        """A checkpoint of the one-DDPG-learner trainer (before several learners) in today's layout."""
+        name = self.learners[0].name
+        upgraded = {**state, "acc": {name: state["acc"]}, "final": {name: [None] * self.cfg.n_envs},
+                    "learners": {name: {"optimizer": state["optimizer"], "sample_rng": state["sample_rng"],
+                                        "collected": state["env_steps"], "stats": [{}, {}]}}}
+        moved = {f"{name}.{k}" if k.startswith("noise.") else k: v for k, v in arrays.items() if k != "lwr"}
+        moved |= {f"lwr.{name}": arrays["lwr"], f"{name}.active": np.ones(self.cfg.n_envs, dtype=bool)}
+        if replay is not None:
+            replay = {f"{name}.{k}": replay[k] for k in (*FIELDS, "pos", "size", "capacity") if k in replay}
+        return {f"{name}.{k}": v for k, v in tensors.items()}, upgraded, moved, replay
 
     def _restore_from(self, tensors: dict[str, torch.Tensor], state: dict[str, Any],
                       arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> None:
