@@ -25,7 +25,7 @@ import os
 import shlex
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,7 +41,6 @@ from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.algos.base import DivergedError
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
-from triplesumo.algos.replay import FIELDS
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.envs.batch import MatchBatch
@@ -593,7 +592,8 @@ class Trainer:
                     f"{exc} -- the latest checkpoint is damaged or missing; the newest intact one is {intact.name} "
                     f"(epoch {checkpoint.recorded_epoch(intact)}): `triplesumo train --resume {self.run_dir} "
                     f"--from {intact.name}` continues from it (later epochs are trained again)") from exc
-        tensors, state, arrays, replay = loaded
+        tensors, state, arrays, lazy_replay = loaded
+        replay: Mapping[str, np.ndarray] | None = lazy_replay
         if "learners" not in state and "optimizer" in state:
             tensors, state, arrays, replay = self._one_learner_checkpoint(tensors, state, arrays, replay)
         need_state = ("config", "learners", "rng", "matches", "epochs_done", "env_steps", "acc", "final")
@@ -636,7 +636,7 @@ class Trainer:
         moved = {f"{name}.{k}" if k.startswith("noise.") else k: v for k, v in arrays.items() if k != "lwr"}
         moved |= {f"lwr.{name}": arrays["lwr"], f"{name}.active": np.ones(self.cfg.n_envs, dtype=bool)}
         if replay is not None:
-            replay = {f"{name}.{k}": replay[k] for k in (*FIELDS, "pos", "size", "capacity") if k in replay}
+            replay = _Prefixed(replay, f"{name}.")
         return {f"{name}.{k}": v for k, v in tensors.items()}, upgraded, moved, replay
 
     def _restore_from(self, tensors: dict[str, torch.Tensor], state: dict[str, Any],
@@ -667,6 +667,24 @@ class Trainer:
     def finish_outputs(self) -> None:
         """Plots from the metrics CSVs (skipped for an agent without a finished epoch)."""
         plot_metrics(self.run_dir, self.cfg.window)
+
+
+class _Prefixed(Mapping[str, np.ndarray]):
+    """``mapping`` with every key prefixed (members still read lazily, one at a time)."""
+
+    def __init__(self, mapping: Mapping[str, np.ndarray], prefix: str) -> None:
+        self.mapping, self.prefix = mapping, prefix
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        if not key.startswith(self.prefix):
+            raise KeyError(key)
+        return self.mapping[key.removeprefix(self.prefix)]
+
+    def __iter__(self) -> Iterator[str]:
+        return (self.prefix + k for k in self.mapping)
+
+    def __len__(self) -> int:
+        return len(self.mapping)
 
 
 def is_error(info: Mapping[str, Any]) -> bool:
