@@ -239,6 +239,12 @@ def test_bad_learn_input_names_the_field(tmp_path: Path, fields: dict[str, Any],
         tiny(tmp_path, "bad", **fields)
 
 
+def test_default_policies_leave_out_the_learning_agents() -> None:
+    assert TrainConfig(learn=("ant=sac", "bug=sac")).policies == ("spider=zoo:spider",)
+    assert TrainConfig(learn=("spider=ppo",)).policies == ("ant=zoo:ant",)
+    assert TrainConfig().policies == ("ant=zoo:ant", "spider=zoo:spider")
+
+
 @pytest.mark.parametrize(("fields", "named"), [
     ({"learn": ("ant=sac", "dragon=ppo")}, r"TrainConfig.learn names unknown agents \['dragon'\]"),
     ({"learn": ("ant=sac", "bug=td3"), "share": "team"}, r"team .* different algorithms \(ant=sac, bug=td3\)"),

@@ -17,6 +17,8 @@ from triplesumo.rules.scenarios import scenarios
 ALGOS = ("ddpg", "td3", "sac", "ppo")
 """Algorithms a learner can use (``--learn AGENT=ALGO``); each has its config field."""
 SHARE_MODES = ("none", "team")
+DEFAULT_POLICIES = ("ant=zoo:ant", "spider=zoo:spider")
+"""The other agents of the paper's third stage: the ongoing match of the trained Ant and Spider."""
 
 
 @dataclass(frozen=True)
@@ -42,9 +44,9 @@ class TrainConfig:
     share: str = "none"
     """none: one network per learning agent; team: one shared network (and replay or rollout)
     per team, fed by all its learning agents (they must use the same algorithm)."""
-    policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider")
+    policies: tuple[str, ...] = DEFAULT_POLICIES
     """AGENT=POLICY for the other agents (zero, passive, random, zoo:NAME or a policy file);
-    agents not named are passive."""
+    agents not named are passive. Left at its default, the pairs of agents that learn are dropped."""
     epochs: int = 20_000
     """Epochs (matches) to train; one epoch = one match of at most steps_per_epoch steps. Matches
     run n_envs at a time, so those ending on the same final step can add up to n_envs - 1 more."""
@@ -108,6 +110,9 @@ class TrainConfig:
         if len(set(agents)) < len(agents):
             twice = sorted({a for a in agents if agents.count(a) > 1})
             raise ValueError(f"TrainConfig.learn names an agent twice: {twice}")
+        if self.learn and self.policies == DEFAULT_POLICIES:
+            learning = set(self.learners())
+            object.__setattr__(self, "policies", tuple(p for p in self.policies if p.split("=")[0] not in learning))
         if self.share not in SHARE_MODES:
             raise ValueError(f"TrainConfig.share must be one of {SHARE_MODES}, got {self.share!r}")
         for agent in self.learners():
