@@ -49,7 +49,7 @@ def test_quick_prints_the_table_with_all_three_variants(quick: tuple) -> None:
     assert rc == 0
     for name, label in LABELS.items():
         line = next(line for line in printed.splitlines() if line.startswith(label))
-        assert float(line.split()[-2]) == pytest.approx(result["rates"][name], abs=0.5)
+        assert float(line.split()[-3]) == pytest.approx(result["rates"][name], abs=0.5)
     assert "SB3: measured" in printed
     assert "train / env alone:" in printed and "train / SB3 DDPG:" in printed
     assert printed.rstrip().endswith(f"wrote {path}")
@@ -73,6 +73,23 @@ def test_quick_json_rates_ratios_split_and_projection_follow_from_each_other(qui
     setup = result["setup"]
     assert (setup["steps"], setup["n_envs"], setup["learning_starts"]) == (QUICK_STEPS, QUICK_ENVS, QUICK_WARM_UP)
     assert setup["sb3"] == "measured"
+
+
+ALGO_ROWS = ("train_td3", "train_sac", "train_ppo", "train_3_learners", "sb3_td3", "sb3_sac", "sb3_ppo")
+
+
+def test_quick_measures_each_algorithm_three_learners_and_sb3s_same_algorithm(quick: tuple) -> None:
+    _, printed, result, _ = quick
+    rates, updates, ratios = result["rates"], result["updates_per_s"], result["ratios"]
+    assert set(ALGO_ROWS) <= set(rates) and set(rates) == set(updates)
+    assert all(math.isfinite(u) and u >= 0 for u in updates.values())
+    assert updates["train_paper"] > 0 and updates["sb3_ppo"] > 0  # (quick runs are too short for the rest)
+    for algo in ("td3", "sac", "ppo"):
+        assert ratios[f"{algo}_vs_sb3"] == pytest.approx(rates[f"train_{algo}"] / rates[f"sb3_{algo}"])
+        assert f"train {algo.upper()} / SB3 {algo.upper()}:" in printed
+    assert result["setup"]["algo_schedule"]["three_learners"] == ["ant=sac", "bug=td3", "spider=ppo"]
+    line = next(line for line in printed.splitlines() if line.startswith("training 3 learners"))
+    assert float(line.split()[-1]) == pytest.approx(updates["train_3_learners"], abs=0.05)
 
 
 def test_quick_never_reports_an_epoch_longer_than_any_match_has_run(quick: tuple) -> None:

@@ -296,7 +296,7 @@ def test_from_names_a_missing_checkpoint(reference: Path, tmp_path: Path) -> Non
 def test_diverging_learner_stops_naming_learner_update_and_checkpoint(tmp_path: Path, optimizer: str) -> None:
     # Learning starts after the first checkpoint; then a learning rate no config would accept.
     trainer = Trainer(tiny(tmp_path, epochs=20, ddpg=dataclasses.replace(TINY_DDPG, learning_starts=64)))
-    for group in getattr(trainer.agent, optimizer).param_groups:
+    for group in getattr(trainer.learners[0].algo, optimizer).param_groups:
         group["lr"] = 1e30
     with pytest.raises(DivergenceError) as caught:
         trainer.run()
@@ -402,12 +402,12 @@ def _policy_fails(monkeypatch: pytest.MonkeyPatch) -> None:
 def _metrics_append_fails(monkeypatch: pytest.MonkeyPatch) -> None:
     real = logger_module.MetricsLog.epoch
 
-    def epoch(self: Any, row: dict[str, Any], mwr: float) -> None:
+    def epoch(self: Any, agent: str, row: dict[str, Any], mwr: float) -> None:
         if row["epoch"] == E + 1:
             with checkpoint.writing(self.path):
-                self._fh.write(f"{E + 1},lo")  # the row is torn where the disk ran out
+                self.metrics[agent]._fh.write(f"{E + 1},lo")  # the row is torn where the disk ran out
                 raise _no_space(self.path)
-        real(self, row, mwr)
+        real(self, agent, row, mwr)
     monkeypatch.setattr(logger_module.MetricsLog, "epoch", epoch)
 
 

@@ -64,8 +64,9 @@ def test_trainer_ends_the_learners_epoch_when_it_is_eliminated(tmp_path: Path) -
     trainer.collect_step()
     assert trainer.epochs_done == 1
     assert match.steps == 0 and all(match.alive)  # reset for the next epoch
-    assert len(trainer.replay) == 2
-    assert trainer.replay.done[:2].tolist() == [1.0, 0.0]  # the eliminated learner's transition is terminal
+    replay = trainer.learners[0].replay  # type: ignore[attr-defined]
+    assert len(replay) == 2
+    assert replay.done[:2].tolist() == [1.0, 0.0]  # the eliminated learner's transition is terminal
     assert json.loads((tmp_path / "ffa" / "config.json").read_text())["scenario"] == "ffa"
 
 

@@ -24,7 +24,7 @@ import torch
 from safetensors.torch import load_file
 
 from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy
-from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.cli import main
 from triplesumo.rules.rewards import DENSE_TERMS
 from triplesumo.train import checkpoint
@@ -104,7 +104,7 @@ def uninterrupted(tmp_path_factory: pytest.TempPathFactory) -> Trained:
     """2E epochs straight through, checkpoint every E, TensorBoard on."""
     cfg = tiny(tmp_path_factory.mktemp("runs"), name="A", tensorboard=True)
     trainer = Trainer(cfg)
-    initial = trainer.agent.state_dict()
+    initial = trainer.learners[0].algo.state_dict()
     result = trainer.run()
     return Trained(cfg, trainer, result, initial)
 
@@ -121,26 +121,28 @@ def run_copy(uninterrupted: Trained, tmp_path: Path) -> Path:
 def test_tiny_run_learns_finite_losses(uninterrupted: Trained) -> None:
     trainer, result, ddpg = uninterrupted.trainer, uninterrupted.result, uninterrupted.cfg.ddpg
     assert result.epochs == trainer.epochs_done >= uninterrupted.cfg.epochs
-    assert set(trainer.last_losses) == {"critic_loss", "actor_loss", "q_mean"}
-    assert all(math.isfinite(v) for v in trainer.last_losses.values()), trainer.last_losses
+    bug = trainer.learners[0]
+    assert set(bug.last_stats) == {"critic_loss", "actor_loss", "q_mean"}
+    assert all(math.isfinite(v) for v in bug.last_stats.values()), bug.last_stats
     # One gradient step per learn_every transitions from learning_starts on (n_envs divides both).
     expected_updates = (result.env_steps - ddpg.learning_starts) // ddpg.learn_every + 1
-    assert result.updates == trainer.agent.num_updates == expected_updates
+    assert result.updates == bug.algo.num_updates == expected_updates
 
 
 def test_tiny_run_fills_replay_with_every_learner_transition(uninterrupted: Trained) -> None:
     trainer, result = uninterrupted.trainer, uninterrupted.result
+    replay = trainer.learners[0].replay  # type: ignore[attr-defined]
     assert result.env_steps == trainer.env_steps > 0
     _, rows = read_rows(uninterrupted.run)
     errors = sum(r["outcome"] == "error" for r in rows)  # a physics error's transition is dropped
-    assert 0 < len(trainer.replay) == result.env_steps - errors <= result.env_steps
-    batch = trainer.replay.sample(len(trainer.replay), np.random.default_rng(0))
+    assert 0 < len(replay) == result.env_steps - errors <= result.env_steps
+    batch = replay.sample(len(replay), np.random.default_rng(0))
     assert all(np.isfinite(v).all() for v in batch.values())
     assert np.abs(batch["act"]).max() <= 1.0
 
 
 def test_tiny_run_moves_online_and_target_networks(uninterrupted: Trained) -> None:
-    initial, now = uninterrupted.initial, uninterrupted.trainer.agent.state_dict()
+    initial, now = uninterrupted.initial, uninterrupted.trainer.learners[0].algo.state_dict()
     for net in ("actor", "critic"):
         keys = [k for k in initial if k.startswith(f"{net}.")]
         assert keys
@@ -187,16 +189,16 @@ def test_tiny_run_writes_plots_config_and_tensorboard(uninterrupted: Trained) ->
 
 
 def test_tiny_run_policy_file_acts_deterministically(uninterrupted: Trained) -> None:
-    trainer = uninterrupted.trainer
+    bug = uninterrupted.trainer.learners[0]
     policy, manifest = load_policy(uninterrupted.run / "policy", expect_obs_mode="paper",
-                                   expect_obs_dim=trainer.obs_dim)
-    assert manifest["agent"] == "bug" and manifest["obs_mode"] == "paper"
+                                   expect_obs_dim=bug.obs_dim)
+    assert manifest["agent"] == "bug" and manifest["obs_mode"] == "paper" and manifest["algo"] == "ddpg"
     assert manifest["epochs"] == uninterrupted.result.epochs and manifest["hidden"] == [16, 16]
-    obs = np.random.default_rng(1).normal(size=(3, trainer.obs_dim)).astype(np.float32)
+    obs = np.random.default_rng(1).normal(size=(3, bug.obs_dim)).astype(np.float32)
     first = policy(obs)
     assert first.shape == (3, 8) and np.abs(first).max() <= 1.0
     assert np.array_equal(first, policy(obs))
-    assert np.array_equal(first, trainer.agent.act(obs))  # the final actor was saved
+    assert np.array_equal(first, bug.algo.act(obs))  # the final actor was saved
     assert policy(obs[0]).shape == (8,)
 
 
@@ -345,7 +347,7 @@ def _wrong_format(run: Path) -> None:
 def _drop_array(run: Path) -> None:
     path = _latest_file(run, "arrays.npz")
     with np.load(path) as data:
-        arrays = {k: data[k] for k in data.files if k != "lwr"}
+        arrays = {k: data[k] for k in data.files if k != "lwr.bug"}
     with path.open("wb") as fh:
         np.savez(fh, **arrays)
     _reseal(path.parent)
@@ -507,6 +509,42 @@ def test_an_error_in_the_update_thread_reaches_the_caller(tmp_path: Path, monkey
     def broken(self: Any, batch: Any) -> dict[str, float]:
         raise RuntimeError("update failed on purpose")
 
-    monkeypatch.setattr(train_loop.DDPG, "update", broken)
+    monkeypatch.setattr(DDPG, "update", broken)
     with pytest.raises(RuntimeError, match="update failed on purpose"):
         train(tiny(tmp_path, "broken", overlap_learning=True))
+
+
+def _as_one_learner_layout(run: Path) -> None:
+    """Rewrite a run's latest checkpoint, config and CSVs as the one-DDPG-learner trainer wrote them."""
+    folder = checkpoint.latest(run)
+    state = json.loads((folder / "state.json").read_text())
+    learner = state.pop("learners")["bug"]
+    state.pop("final")
+    state |= {"optimizer": learner["optimizer"], "sample_rng": learner["sample_rng"], "acc": state["acc"]["bug"]}
+    (folder / "state.json").write_text(json.dumps(state))
+    tensors = {k.removeprefix("bug."): v for k, v in load_file(str(folder / "weights.safetensors")).items()}
+    from safetensors.torch import save_file
+
+    save_file(tensors, str(folder / "weights.safetensors"))
+    for name, rename in (("arrays.npz", lambda k: {"lwr.bug": "lwr"}.get(k, k.removeprefix("bug."))),
+                         ("replay.npz", lambda k: k.removeprefix("bug."))):
+        with np.load(folder / name) as data:
+            arrays = {rename(k): data[k] for k in data.files if k != "bug.active"}
+        with (folder / name).open("wb") as fh:
+            np.savez(fh, **arrays)
+    _reseal(folder)
+    config = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({k: v for k, v in config.items()
+                                                 if k not in ("learn", "share", "td3", "sac", "ppo")}))
+    (run / "learning.csv").unlink()
+
+
+def test_a_run_of_the_one_learner_trainer_resumes_exactly(uninterrupted: Trained, tmp_path: Path) -> None:
+    """Runs checkpointed before several learners existed (long runs resumed across sessions)."""
+    killed = train(tiny(tmp_path, name="old", epochs=E)).run_dir
+    _as_one_learner_layout(killed)
+    train(TrainConfig(), resume_dir=killed, overrides={"epochs": 2 * E})
+    assert_same_run(uninterrupted.run, killed)
+    rows = list(csv.reader((killed / "learning.csv").open()))
+    assert all(cell == "" for row in rows[1:E + 1] for cell in row[1:])  # the epochs before: empty learning rows
+    assert int(rows[-1][1]) == uninterrupted.result.updates

@@ -22,7 +22,8 @@ def _parser() -> argparse.ArgumentParser:
     _dcargs.add_arguments(play, PlayConfig)
     from triplesumo.train.config import TrainConfig
 
-    train = sub.add_parser("train", help="train one agent with DDPG (the others follow given policies)")
+    train = sub.add_parser("train", help="train learning agents (DDPG, TD3, SAC or PPO; the others follow given "
+                                              "policies)")
     train.add_argument("--resume", metavar="RUN_DIR", default=None,
                        help="continue the killed or finished run in RUN_DIR (its saved config; "
                             "--epochs and --max-minutes may be raised; --no-save-replay resumes from a checkpoint "
@@ -52,7 +53,7 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("folders", nargs="+", help="evaluation folders (each holds per_seed.csv)")
     _dcargs.add_arguments(compare, CompareConfig, skip=("folders",))
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
-    plot.add_argument("run_dir", help="run folder (holds metrics.csv)")
+    plot.add_argument("run_dir", help="run folder (holds metrics.csv, or metrics-<agent>.csv per learning agent)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
     zoo = sub.add_parser("zoo", help="list the shipped policies, or publish a trained one into the zoo")
     zoo.add_argument("action", choices=["list", "publish"])
@@ -108,7 +109,9 @@ def main(argv: list[str] | None = None) -> int:
                 result = train(cfg, start_over=args.start_over)
             print(f"trained {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates "
                   f"in {result.seconds:.0f} s; MWR {result.mwr:+.3f}")
-            print(f"run folder: {result.run_dir} (metrics.csv, plots/, checkpoints/, policy.json)")
+            if len(result.mwrs) > 1:
+                print("MWR " + ", ".join(f"{a} {m:+.3f}" for a, m in result.mwrs.items()))
+            print(f"run folder: {result.run_dir} (metrics*.csv, learning*.csv, plots/, checkpoints/, policy*.json)")
         elif args.command == "evaluate":
             from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 
@@ -131,19 +134,9 @@ def main(argv: list[str] | None = None) -> int:
             print(format_compare(compare(ccfg)))
             print(f"tables: {ccfg.out}/compare.csv, improvement.csv, compare.json; plot: {ccfg.out}/compare.png")
         elif args.command == "plot":
-            from pathlib import Path
+            from triplesumo.train.loop import plot_metrics
 
-            from triplesumo.evaluation.plots import plot_run, read_metrics_csv
-
-            run_dir = Path(args.run_dir)
-            learner = "bug"
-            if (run_dir / "config.json").exists():
-                from triplesumo.agents.policy_file import load_json
-
-                learner = str(load_json(run_dir / "config.json").get("learner", learner))
-            paths = plot_run(read_metrics_csv(run_dir / "metrics.csv"), run_dir / "plots", window=args.window,
-                             title=f"{learner} training ({run_dir.name})", label=learner.capitalize())
-            print("\n".join(str(p) for p in paths))
+            print("\n".join(str(p) for p in plot_metrics(args.run_dir, args.window)))
         elif args.command == "zoo":
             import json
             from pathlib import Path

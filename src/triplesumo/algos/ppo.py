@@ -141,7 +141,7 @@ class PPO(Algorithm):
     modules = ("actor", "critic")
     optimizers = ("optimizer",)
     uses_generator = True
-    _ROLLOUT = ("obs", "u", "log_prob", "value", "reward", "terminated", "truncated", "bootstrap")
+    _ROLLOUT = ("obs", "u", "log_prob", "value", "reward", "terminated", "truncated", "bootstrap", "valid")
 
     def __init__(self, obs_dim: int, act_dim: int, config: PPOConfig, seed: int,
                  device: str | torch.device = "cpu") -> None:
@@ -185,9 +185,14 @@ class PPO(Algorithm):
         return torch.tanh(u).cpu().numpy().astype(np.float32, copy=False)
 
     def record(self, reward: np.ndarray, terminated: np.ndarray, truncated: np.ndarray,
-               final_obs: np.ndarray | None = None) -> None:
+               final_obs: np.ndarray | None = None, valid: np.ndarray | None = None) -> None:
         """Store the step just taken: ``(N,)`` rewards and end flags, and for truncated
-        matches their real final observations (rows of ``final_obs``, raw) to bootstrap from."""
+        matches their real final observations (rows of ``final_obs``, raw) to bootstrap from.
+
+        ``valid`` (``(N,)``, default all) marks the rows that are real steps: a row of an agent
+        already out of its match (elimination rules) or of a physics error is kept in the
+        rollout's shape but left out of the loss; record it as terminated (no bootstrap, no
+        advantage carried across)."""
         if self._pending is None:
             raise RuntimeError("record() needs a preceding explore()")
         if self.rollout_full:
@@ -196,6 +201,8 @@ class PPO(Algorithm):
         n = step["obs"].shape[0]
         step["reward"], step["terminated"], step["truncated"] = (
             self.tensor(np.asarray(x, dtype=np.float32).reshape(n)) for x in (reward, terminated, truncated))
+        step["valid"] = torch.ones(n, device=self.device) if valid is None else self.tensor(
+            np.asarray(valid, dtype=np.float32).reshape(n))
         step["bootstrap"] = torch.zeros(n, device=self.device)
         if bool(step["truncated"].any()):
             if final_obs is None:
@@ -263,6 +270,9 @@ class PPO(Algorithm):
         adv, returns = self.advantages(next_obs)
         flat = {k: v.flatten(0, 1) for k, v in self.rollout.items()} | {
             "advantage": adv.flatten(), "return": returns.flatten()}
+        valid = flat.pop("valid") > 0
+        if not bool(valid.all()):
+            flat = {k: v[valid] for k, v in flat.items()}
         size = flat["value"].shape[0]
         minibatch = max(size // c.n_minibatches, 1)
         totals: dict[str, float] = {}
@@ -273,7 +283,7 @@ class PPO(Algorithm):
                 stats = self.minibatch_step({k: v[order[start:start + minibatch]] for k, v in flat.items()})
                 totals = {k: totals.get(k, 0.0) + v for k, v in stats.items()}
                 count += 1
-            if c.target_kl is not None and stats["approx_kl"] > c.target_kl:
+            if c.target_kl is not None and count and stats["approx_kl"] > c.target_kl:
                 break
         self.rollout, self.step = {}, 0
         return self.finish_update({k: v / count for k, v in totals.items()})

@@ -21,6 +21,19 @@ other agents following ``policies``):
     after its warm-up. Target: ``train_paper`` >= 1.6 x ``sb3_ddpg``. Skipped when SB3
     is not installed.
 
+``train_td3``, ``train_sac``, ``train_ppo``
+    The trainer with Bug learning by TD3, SAC or PPO at their default networks and batch
+    sizes, on one shared *algorithm schedule*: one gradient step per ``n_envs`` collected
+    transitions for the off-policy ones (``learn_every = n_envs``), and for PPO rollouts of
+    2,048 transitions (``n_steps = 2048 / n_envs``), 10 epochs of 32 minibatches.
+``train_3_learners``
+    Ant (SAC), Bug (TD3) and Spider (PPO) learning at once on that schedule.
+``sb3_td3``, ``sb3_sac``, ``sb3_ppo``
+    Stable-Baselines3's same algorithm on one Gymnasium env, same networks, batch and
+    schedule (``train_freq = n_envs`` steps; PPO ``n_steps = 2048``, batch 64, 10 epochs).
+    The algorithm rows run ``algo_steps`` env steps per round; ``updates/s`` counts
+    gradient steps (PPO: minibatch steps).
+
 Warm-ups (``learning_starts`` transitions) run before timing. The variants take turns
 in chunks of about ``chunk`` env steps for ``rounds`` rounds; a rate is the median over
 rounds. The time split comes from the trainer's own timers: collecting (physics and
@@ -43,6 +56,9 @@ import numpy as np
 import torch
 
 from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.ppo import PPOConfig
+from triplesumo.algos.sac import SACConfig
+from triplesumo.algos.td3 import TD3Config
 from triplesumo.benchmarks import report
 from triplesumo.benchmarks.env import _versions
 from triplesumo.train.config import TrainConfig
@@ -53,10 +69,22 @@ TARGET_VS_SB3 = 1.6
 PAPER_EPOCHS = 20_000
 
 
+PPO_ROLLOUT = 2048
+"""Transitions per PPO rollout on the algorithm schedule (SB3's n_steps with one env)."""
+
+
 class _TrainerVariant:
     def __init__(self, cfg: TrainConfig, run_dir: Path, warm_up_steps: int) -> None:
         self.trainer = Trainer(cfg, run_dir=run_dir)
         self.warm_up_steps = warm_up_steps
+
+    def gradient_steps(self) -> int:
+        """Gradient steps so far, PPO's minibatch steps included."""
+        total = 0
+        for learner in self.trainer.learners:
+            c = learner.config
+            total += learner.algo.num_updates * (c.n_epochs * c.n_minibatches if learner.spec.algo == "ppo" else 1)
+        return total
 
     def warm_up(self) -> None:
         while self.trainer.env_steps < self.warm_up_steps:
@@ -70,38 +98,74 @@ class _TrainerVariant:
 
 
 class _SB3Variant:
-    def __init__(self, policies: tuple[str, ...], seed: int, learning_starts: int) -> None:
-        from stable_baselines3 import DDPG as SB3DDPG
-        from stable_baselines3.common.noise import OrnsteinUhlenbeckActionNoise
+    def __init__(self, algo: str, policies: tuple[str, ...], seed: int, learning_starts: int,
+                 learn_every: int = 30) -> None:
+        import stable_baselines3 as sb3
+        from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
 
         from triplesumo.agents.zoo import policies_from_pairs
         from triplesumo.envs.single import TripleSumoEnv
 
         env = TripleSumoEnv(learner="bug", policies=policies_from_pairs(policies, seed, "paper"))
-        paper = DDPGConfig()
-        noise = OrnsteinUhlenbeckActionNoise(np.zeros(8), paper.noise_sigma * np.ones(8), theta=paper.noise_theta)
-        self.model = SB3DDPG(
-            "MlpPolicy", env, learning_rate=paper.critic_lr, buffer_size=paper.buffer_size,
-            learning_starts=learning_starts, batch_size=paper.batch_size, tau=paper.tau, gamma=paper.gamma,
-            train_freq=(paper.learn_every, "step"), gradient_steps=paper.gradient_steps, action_noise=noise,
-            policy_kwargs={"net_arch": list(paper.hidden), "activation_fn": torch.nn.LeakyReLU},
-            seed=seed, device="cpu", verbose=0,
-        )
+        common: dict[str, Any] = {"seed": seed, "device": "cpu", "verbose": 0}
+        act = torch.nn.LeakyReLU
+        self.algo = algo
+        if algo == "ppo":
+            c = PPOConfig()
+            self.model: Any = sb3.PPO(
+                "MlpPolicy", env, learning_rate=c.lr, n_steps=PPO_ROLLOUT, batch_size=PPO_ROLLOUT // c.n_minibatches,
+                n_epochs=c.n_epochs, gamma=c.gamma, gae_lambda=c.gae_lambda, clip_range=c.clip_coef,
+                ent_coef=c.ent_coef, vf_coef=c.vf_coef, max_grad_norm=c.max_grad_norm,
+                policy_kwargs={"net_arch": {"pi": list(c.hidden), "vf": list(c.hidden)}, "activation_fn": act},
+                **common)
+            self.learning_starts = 0
+            return
+        if algo == "ddpg":
+            paper = DDPGConfig()
+            noise = OrnsteinUhlenbeckActionNoise(np.zeros(8), paper.noise_sigma * np.ones(8), theta=paper.noise_theta)
+            self.model = sb3.DDPG(
+                "MlpPolicy", env, learning_rate=paper.critic_lr, buffer_size=paper.buffer_size,
+                learning_starts=learning_starts, batch_size=paper.batch_size, tau=paper.tau, gamma=paper.gamma,
+                train_freq=(paper.learn_every, "step"), gradient_steps=paper.gradient_steps, action_noise=noise,
+                policy_kwargs={"net_arch": list(paper.hidden), "activation_fn": act}, **common)
+        elif algo == "td3":
+            t = TD3Config()
+            self.model = sb3.TD3(
+                "MlpPolicy", env, learning_rate=t.actor_lr, buffer_size=t.buffer_size, learning_starts=learning_starts,
+                batch_size=t.batch_size, tau=t.tau, gamma=t.gamma, train_freq=(learn_every, "step"),
+                gradient_steps=1, action_noise=NormalActionNoise(np.zeros(8), t.noise_sigma * np.ones(8)),
+                policy_delay=t.policy_delay, target_policy_noise=t.policy_noise, target_noise_clip=t.noise_clip,
+                policy_kwargs={"net_arch": list(t.hidden), "activation_fn": act}, **common)
+        else:
+            c2 = SACConfig()
+            self.model = sb3.SAC(
+                "MlpPolicy", env, learning_rate=c2.actor_lr, buffer_size=c2.buffer_size,
+                learning_starts=learning_starts, batch_size=c2.batch_size, tau=c2.tau, gamma=c2.gamma,
+                train_freq=(learn_every, "step"), gradient_steps=1, ent_coef=f"auto_{c2.alpha}",
+                policy_kwargs={"net_arch": list(c2.hidden), "activation_fn": act}, **common)
         self.learning_starts = learning_starts
 
+    def gradient_steps(self) -> int:
+        n = int(self.model._n_updates)
+        return n * (PPO_ROLLOUT // self.model.batch_size) if self.algo == "ppo" else n
+
     def warm_up(self) -> None:
-        self.model.learn(total_timesteps=self.learning_starts, reset_num_timesteps=False)
+        if self.learning_starts:
+            self.model.learn(total_timesteps=self.learning_starts, reset_num_timesteps=False)
 
     def run(self, steps: int) -> tuple[int, float]:
-        t0 = time.perf_counter()
+        t0, before = time.perf_counter(), self.model.num_timesteps
         self.model.learn(total_timesteps=steps, reset_num_timesteps=False)
-        return steps, time.perf_counter() - t0
+        return self.model.num_timesteps - before, time.perf_counter() - t0
 
 
 def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1, rounds: int = 3,
                         chunk: int = 2000, policies: tuple[str, ...] = ("ant=random", "spider=random"),
-                        seed: int = 0, learning_starts: int = 1000, sb3: bool = True) -> dict[str, Any]:
-    """Measure env-only, paper-preset training and (optionally) SB3 DDPG; returns a JSON-able dict."""
+                        seed: int = 0, learning_starts: int = 1000, sb3: bool = True,
+                        algo_steps: int | None = 2048) -> dict[str, Any]:
+    """Measure env-only, paper-preset training and (optionally) SB3 DDPG, then (unless
+    ``algo_steps`` is None) TD3, SAC, PPO and three learners at once against SB3's same
+    algorithms; returns a JSON-able dict."""
     torch.set_num_threads(1)
     base = TrainConfig(name="bench", policies=policies, n_envs=n_envs, n_threads=n_threads, seed=seed,
                        progress=False, tensorboard=False, save_replay=False, epochs=10**9)
@@ -123,31 +187,52 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     sb3_status = "measured"
     if sb3:
         try:
-            variants["sb3_ddpg"] = _SB3Variant(policies, seed, learning_starts)
+            variants["sb3_ddpg"] = _SB3Variant("ddpg", policies, seed, learning_starts)
             budget["sb3_ddpg"] = steps
         except ImportError:
             sb3_status = "stable-baselines3 not installed"
     else:
         sb3_status = "skipped"
+    if algo_steps is not None:
+        algo_base = {**base.__dict__, "td3": TD3Config(learn_every=n_envs, learning_starts=learning_starts),
+                     "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts),
+                     "ppo": PPOConfig(n_steps=max(PPO_ROLLOUT // n_envs, 1))}
+        for algo in ("td3", "sac", "ppo"):
+            variants[f"train_{algo}"] = _TrainerVariant(TrainConfig(**{**algo_base, "learn": (f"bug={algo}",)}),
+                                                        root / algo, 0 if algo == "ppo" else learning_starts)
+            budget[f"train_{algo}"] = algo_steps
+        others = tuple(p for p in policies if p.split("=")[0] not in ("ant", "bug", "spider"))
+        variants["train_3_learners"] = _TrainerVariant(
+            TrainConfig(**{**algo_base, "learn": ("ant=sac", "bug=td3", "spider=ppo"), "policies": others}),
+            root / "three", learning_starts)
+        budget["train_3_learners"] = algo_steps
+        if sb3 and sb3_status == "measured":
+            for algo in ("td3", "sac", "ppo"):
+                variants[f"sb3_{algo}"] = _SB3Variant(algo, policies, seed, learning_starts, learn_every=n_envs)
+                budget[f"sb3_{algo}"] = algo_steps
     for v in variants.values():
         v.warm_up()
     trainer = variants["train_paper"].trainer
     timers0 = dict(trainer.timers)
     epochs0 = trainer.epochs_done
     per_round: dict[str, list[float]] = {name: [] for name in variants}
+    update_rounds: dict[str, list[float]] = {name: [] for name in variants}
     load_before = os.getloadavg()
     for _ in range(rounds):
         done = dict.fromkeys(variants, 0)
         spent = dict.fromkeys(variants, 0.0)
+        grads = {name: v.gradient_steps() for name, v in variants.items()}
         while any(done[name] < budget[name] for name in variants):
             for name, variant in variants.items():
                 if done[name] < budget[name]:
                     n, seconds = variant.run(min(chunk, budget[name] - done[name]))
                     done[name] += n
                     spent[name] += seconds
-        for name in variants:
+        for name, variant in variants.items():
             per_round[name].append(done[name] / spent[name])
+            update_rounds[name].append((variant.gradient_steps() - grads[name]) / spent[name])
     rates = {name: float(np.median(r)) for name, r in per_round.items()}
+    update_rates = {name: float(np.median(r)) for name, r in update_rounds.items()}
     spent = {k: trainer.timers[k] - timers0[k] for k in timers0}
     wall = spent["env"] + spent["act"] + spent["wait"]
     epochs = trainer.epochs_done - epochs0
@@ -156,13 +241,25 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     ratios = {"train_vs_env": rates["train_paper"] / rates["env_only"]}
     if "sb3_ddpg" in rates:
         ratios["train_vs_sb3"] = rates["train_paper"] / rates["sb3_ddpg"]
+    for algo in ("td3", "sac", "ppo"):
+        if f"sb3_{algo}" in rates:
+            ratios[f"{algo}_vs_sb3"] = rates[f"train_{algo}"] / rates[f"sb3_{algo}"]
+        if f"train_{algo}" in rates:
+            ratios[f"{algo}_vs_env"] = rates[f"train_{algo}"] / rates["env_only"]
+    if "train_3_learners" in rates:
+        ratios["3_learners_vs_env"] = rates["train_3_learners"] / rates["env_only"]
     result = {
         "setup": {"steps": steps, "rounds": rounds, "chunk": chunk, "n_envs": n_envs, "n_threads": n_threads,
                   "policies": list(policies), "seed": seed, "learning_starts": learning_starts,
                   "paper_schedule": {"learn_every": 30, "gradient_steps": 1, "batch_size": 64, "hidden": [512, 256]},
                   "cpu_count": os.cpu_count(), "usable_cpus": len(os.sched_getaffinity(0)),
-                  "load_average_before": list(load_before), "versions": _versions(), "sb3": sb3_status},
+                  "load_average_before": list(load_before), "versions": _versions(), "sb3": sb3_status,
+                  "algo_steps": algo_steps,
+                  "algo_schedule": {"offpolicy_learn_every": n_envs, "gradient_steps": 1,
+                                    "ppo_rollout": PPO_ROLLOUT, "ppo_epochs": 10, "ppo_minibatches": 32,
+                                    "three_learners": ["ant=sac", "bug=td3", "spider=ppo"]}},
         "rates": rates,
+        "updates_per_s": update_rates,
         "ratios": ratios,
         "time_split": {"env": spent["env"] / wall, "act": spent["act"] / wall,
                        "wait_for_learning": spent["wait"] / wall},
@@ -195,13 +292,20 @@ def format_table(result: dict[str, Any]) -> str:
         f"paper preset: hidden 512/256, batch 64, 1 gradient step per 30 transitions; "
         f"torch 1 thread; SB3: {s['sb3']}",
         "",
-        f"{'variant':34s} {'env steps/s':>11s} {'vs env only':>11s}",
+        f"{'variant':38s} {'env steps/s':>11s} {'vs env only':>11s} {'updates/s':>9s}",
     ]
     labels = {"env_only": "env alone (collection, no learning)", "train_paper": "training, paper preset",
               "sb3_ddpg": "Stable-Baselines3 DDPG, same schedule",
-              "train_every_step": "training, 1 update per step"}
+              "train_every_step": "training, 1 update per step",
+              "train_td3": "training TD3, algorithm schedule", "train_sac": "training SAC, algorithm schedule",
+              "train_ppo": "training PPO, algorithm schedule",
+              "train_3_learners": "training 3 learners (SAC, TD3, PPO)",
+              "sb3_td3": "Stable-Baselines3 TD3, same schedule", "sb3_sac": "Stable-Baselines3 SAC, same schedule",
+              "sb3_ppo": "Stable-Baselines3 PPO, same schedule"}
+    updates = result.get("updates_per_s", {})
     for name, rate in rates.items():
-        lines.append(f"{labels[name]:34s} {rate:11.0f} {rate / rates['env_only']:11.2f}")
+        lines.append(f"{labels[name]:38s} {rate:11.0f} {rate / rates['env_only']:11.2f} "
+                     f"{updates.get(name, float('nan')):9.1f}")
     split = result["time_split"]
     lines += ["", "time split of training (wall): " + ", ".join(f"{k} {100 * v:.0f}%" for k, v in split.items())
               + f"; the update thread was busy {100 * result['learning_busy']:.0f}% of it (overlapping env)",
@@ -210,6 +314,10 @@ def format_table(result: dict[str, Any]) -> str:
     if "train_vs_sb3" in ratios:
         lines.append(f"train / SB3 DDPG: {ratios['train_vs_sb3']:.2f} (target >= {TARGET_VS_SB3}: "
                      f"{'met' if ratios['train_vs_sb3'] >= TARGET_VS_SB3 else 'NOT met'})")
+    for algo in ("td3", "sac", "ppo"):
+        if f"{algo}_vs_sb3" in ratios:
+            lines.append(f"train {algo.upper()} / SB3 {algo.upper()}: {ratios[f'{algo}_vs_sb3']:.2f} "
+                         f"(target >= 2: {'met' if ratios[f'{algo}_vs_sb3'] >= 2 else 'NOT met'})")
     p = result["projected_hours_20000_epochs"]
     if p["at_measured_epoch_length"] is not None:
         lines.append(f"projected wall time of 20,000 epochs at the measured {result['mean_epoch_steps']:.0f} "
@@ -230,6 +338,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--policies", nargs="*", default=["ant=random", "spider=random"],
                         help="AGENT=POLICY of the other agents (default: ant=random spider=random)")
     parser.add_argument("--no-sb3", action="store_true", help="skip the Stable-Baselines3 comparison")
+    parser.add_argument("--algo-steps", type=int, default=2048,
+                        help="env steps per round of the TD3/SAC/PPO/3-learner rows and their SB3 rows (default: 2048)")
+    parser.add_argument("--no-algos", action="store_true", help="skip the TD3, SAC, PPO and 3-learner rows")
     parser.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
@@ -237,8 +348,10 @@ def main(argv: list[str] | None = None) -> int:
     learning_starts = 1000
     if args.quick:
         args.steps, args.envs, args.rounds, args.chunk, learning_starts = 64, 2, 1, 32, 32
+        args.algo_steps = 64
     result = run_train_benchmark(steps=args.steps, n_envs=args.envs, n_threads=args.threads, rounds=args.rounds,
                                  chunk=args.chunk, policies=tuple(args.policies), seed=args.seed,
-                                 learning_starts=learning_starts, sb3=not args.no_sb3)
+                                 learning_starts=learning_starts, sb3=not args.no_sb3,
+                                 algo_steps=None if args.no_algos else args.algo_steps)
     report(format_table(result), result, args.json)
     return 0

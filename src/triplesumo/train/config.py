@@ -8,17 +8,28 @@ from dataclasses import dataclass, field
 
 from triplesumo.agents.zoo import check_policy_pairs
 from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.ppo import PPOConfig
+from triplesumo.algos.sac import SACConfig
+from triplesumo.algos.td3 import TD3Config
 from triplesumo.rules.config import OBS_MODES, RewardConfig
 from triplesumo.rules.scenarios import scenarios
+
+ALGOS = ("ddpg", "td3", "sac", "ppo")
+"""Algorithms a learner can use (``--learn AGENT=ALGO``); each has its config field."""
+SHARE_MODES = ("none", "team")
+DEFAULT_POLICIES = ("ant=zoo:ant", "spider=zoo:spider")
+"""The other agents of the paper's third stage: the ongoing match of the trained Ant and Spider."""
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """One DDPG learner trained in a match whose other agents follow given policies.
+    """Learners trained in a match whose other agents follow given policies.
 
-    The paper's stages are runs of this with different arguments: Ant first (learner ant,
-    Spider random, Bug passive), then Spider against the trained Ant, then Bug in the
-    ongoing match of the trained Ant and Spider.
+    By default one DDPG learner (``learner``); ``learn`` names several, each with its
+    algorithm (``ant=sac bug=td3``), and ``share="team"`` gives the learning agents of a team
+    one shared network. The paper's stages are runs of the one-learner case with different
+    arguments: Ant first (learner ant, Spider random, Bug passive), then Spider against the
+    trained Ant, then Bug in the ongoing match of the trained Ant and Spider.
     """
 
     name: str = "bug"
@@ -26,10 +37,16 @@ class TrainConfig:
     out: str = "runs"
     """Folder that holds run folders."""
     learner: str = "bug"
-    """The agent trained with DDPG."""
-    policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider")
+    """The agent trained with DDPG when learn is empty (the paper's one-learner case)."""
+    learn: tuple[str, ...] = ()
+    """AGENT=ALGO for every learning agent (algo: ddpg, td3, sac or ppo), e.g. ant=sac bug=sac;
+    empty: learner=ddpg. Given, it replaces learner."""
+    share: str = "none"
+    """none: one network per learning agent; team: one shared network (and replay or rollout)
+    per team, fed by all its learning agents (they must use the same algorithm)."""
+    policies: tuple[str, ...] = DEFAULT_POLICIES
     """AGENT=POLICY for the other agents (zero, passive, random, zoo:NAME or a policy file);
-    agents not named are passive."""
+    agents not named are passive. Left at its default, the pairs of agents that learn are dropped."""
     epochs: int = 20_000
     """Epochs (matches) to train; one epoch = one match of at most steps_per_epoch steps. Matches
     run n_envs at a time, so those ending on the same final step can add up to n_envs - 1 more."""
@@ -51,14 +68,21 @@ class TrainConfig:
     """The hybrid reward's weights (C1, C2, C3, still punishment, win/loss/draw)."""
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     """DDPG hyper-parameters (paper Table 2)."""
+    td3: TD3Config = field(default_factory=TD3Config)
+    """TD3 hyper-parameters (learners with algo td3)."""
+    sac: SACConfig = field(default_factory=SACConfig)
+    """SAC hyper-parameters (learners with algo sac)."""
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    """PPO hyper-parameters (learners with algo ppo); a rollout is ppo.n_steps x n_envs steps."""
     checkpoint_every: int = 200
     """Save a checkpoint every this many epochs (and at the end)."""
     save_replay: bool = True
-    """Save the replay buffer in checkpoints, for an exact resume (large for long runs)."""
+    """Save the replay buffers in checkpoints, for an exact resume (large for long runs)."""
     window: int = 200
     """λ of the MWR and the rolling curves (paper: 200)."""
     overlap_learning: bool = True
-    """Run the DDPG updates due at a step while MuJoCo steps the matches (same results)."""
+    """Run the off-policy updates due at a step in a thread while MuJoCo steps the matches
+    (same results)."""
     torch_threads: int = 1
     """torch.set_num_threads on CPU (two threads collapse when the other core is busy)."""
     progress: bool = True
@@ -72,12 +96,27 @@ class TrainConfig:
     for every other agent. Under elimination rules the learner's epoch ends when it is out."""
 
     def __post_init__(self) -> None:
-        if isinstance(self.policies, list):
-            object.__setattr__(self, "policies", tuple(self.policies))
+        for name in ("policies", "learn"):
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
         if not self.name or self.name in (".", "..") or any(sep in self.name for sep in ("/", "\\", os.sep)):
             raise ValueError(f"TrainConfig.name must be a plain folder name inside out (no path separator, "
                              f"not . or ..), got {self.name!r}")
-        check_policy_pairs("TrainConfig.policies", self.policies, self.learner)
+        for pair in self.learn:
+            agent, _, algo = pair.partition("=")
+            if not agent or "=" in algo or algo not in ALGOS:
+                raise ValueError(f"TrainConfig.learn: expected AGENT=ALGO with ALGO one of {ALGOS}, got {pair!r}")
+        agents = [p.split("=")[0] for p in self.learn]
+        if len(set(agents)) < len(agents):
+            twice = sorted({a for a in agents if agents.count(a) > 1})
+            raise ValueError(f"TrainConfig.learn names an agent twice: {twice}")
+        if self.learn and self.policies == DEFAULT_POLICIES:
+            learning = set(self.learners())
+            object.__setattr__(self, "policies", tuple(p for p in self.policies if p.split("=")[0] not in learning))
+        if self.share not in SHARE_MODES:
+            raise ValueError(f"TrainConfig.share must be one of {SHARE_MODES}, got {self.share!r}")
+        for agent in self.learners():
+            check_policy_pairs("TrainConfig.policies", self.policies, agent)
         for name in ("epochs", "steps_per_epoch", "n_envs", "n_threads", "checkpoint_every", "window",
                      "torch_threads"):
             value = getattr(self, name)
@@ -89,3 +128,9 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.max_minutes must be >= 0, got {self.max_minutes!r}")
         if self.scenario not in scenarios():
             raise ValueError(f"TrainConfig.scenario must be one of {scenarios()}, got {self.scenario!r}")
+
+    def learners(self) -> dict[str, str]:
+        """Learning agent -> algorithm, in the order given (``{learner: "ddpg"}`` when learn is empty)."""
+        if not self.learn:
+            return {self.learner: "ddpg"}
+        return {pair.split("=")[0]: pair.split("=")[1] for pair in self.learn}

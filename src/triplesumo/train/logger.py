@@ -1,4 +1,4 @@
-"""Per-epoch metrics: a CSV (the source of the plots) and TensorBoard events.
+"""Per-epoch metrics and learning stats: CSVs (the source of the plots) and TensorBoard events.
 
 The CSV is only ever appended to, row by row, or rewritten whole through
 :func:`~triplesumo.agents.policy_file.atomic_write_bytes` (temp file, fsync, rename):
@@ -93,40 +93,106 @@ def repair_metrics_csv(path: Path, keep_through: int | None = None, columns: tup
     return good
 
 
-def _csv_bytes(rows: list[dict[str, Any]] | None = None) -> bytes:
+LEARNING_COLUMNS = ("epoch", "updates", "actor_loss", "critic_loss", "q_mean", "entropy", "alpha", "alpha_loss",
+                    "approx_kl", "clip_fraction")
+"""Learning CSV schema: one row per epoch of a learner, its update count and the means of the
+stats its algorithm reported over the updates since the previous row (empty: none reported;
+rows of a run resumed from before this file existed are all empty)."""
+
+
+def _learning_row_problem(row: list[str], epoch: int) -> str | None:
+    """Why ``row`` is not the finished learning row of ``epoch`` (None if it is)."""
+    if len(row) != len(LEARNING_COLUMNS):
+        return f"{len(row)} fields, expected {len(LEARNING_COLUMNS)}"
+    if row[0] != str(epoch):
+        return f"epoch {row[0]!r}, expected {epoch}"
+    if row[1] and not row[1].isdigit():
+        return f"updates {row[1]!r} is not a count"
+    for name, value in zip(LEARNING_COLUMNS[2:], row[2:], strict=True):
+        try:
+            if value and not math.isfinite(float(value)):
+                return f"{name} {value!r} is not finite"
+        except ValueError:
+            return f"{name} {value!r} is not a number"
+    return None
+
+
+class _Table:
+    """One row-appended CSV of a run, cut back to the resumed epoch on resume."""
+
+    def __init__(self, path: Path, columns: tuple[str, ...], row_problem: Callable[[list[str], int], str | None],
+                 resume_epoch: int | None, what: str, backfill: bool = False) -> None:
+        self.path, self.columns = path, columns
+        header = _csv_bytes(columns)
+        if resume_epoch is None:
+            with writing(path):
+                atomic_write_bytes(path, header)
+        else:
+            if backfill and not path.exists():  # a run from before this table: its epochs get empty rows
+                blank = "".join(f"{e}{',' * (len(columns) - 1)}\n" for e in range(1, resume_epoch + 1))
+                with writing(path):
+                    atomic_write_bytes(path, header + blank.encode())
+            if resume_epoch > 0 and not path.exists():
+                raise ValueError(f"{path}: file not found, but the checkpoint resumed from is at epoch "
+                                 f"{resume_epoch}: its rows would be lost")
+            if not path.exists():
+                with writing(path):
+                    atomic_write_bytes(path, header)
+            kept = repair_metrics_csv(path, resume_epoch, columns, row_problem, what)
+            if kept < resume_epoch:
+                raise ValueError(f"{path}: holds the rows of epochs 1..{kept}, but the checkpoint resumed from "
+                                 f"is at epoch {resume_epoch}: rows {kept + 1}..{resume_epoch} are missing")
+        with writing(path):
+            self._fh = path.open("a", newline="", buffering=1)  # line-buffered: rows show up as epochs end
+        self._csv = csv.DictWriter(self._fh, columns, lineterminator="\n")
+
+    def write(self, row: dict[str, Any]) -> None:
+        with writing(self.path):
+            self._csv.writerow(row)
+
+    def flush(self) -> None:
+        with writing(self.path):
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+def _csv_bytes(columns: tuple[str, ...] = COLUMNS) -> bytes:
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows or [])
+    csv.writer(buf, lineterminator="\n").writerow(columns)
     return buf.getvalue().encode("utf-8")
 
 
-class MetricsLog:
-    """Appends epoch rows to ``metrics.csv`` and mirrors them to TensorBoard.
+def run_file(stem: str, name: str, several: bool, suffix: str = "") -> str:
+    """A run folder's file for agent or learner ``name``: ``metrics.csv`` when the run has one
+    learning agent, ``metrics-<name>.csv`` when it has several (``stem`` "metrics", ``suffix`` ".csv")."""
+    return f"{stem}-{name}{suffix}" if several else f"{stem}{suffix}"
 
-    ``resume_epoch`` None starts a new CSV; otherwise the CSV is cut back to the rows of
-    epochs 1..``resume_epoch`` (:func:`repair_metrics_csv`), which must all be there.
+
+class MetricsLog:
+    """Per-epoch rows of every learning agent and every learner, mirrored to TensorBoard.
+
+    Writes ``metrics.csv`` (the agent's matches: outcome, rewards, the source of the plots)
+    and ``learning.csv`` (the learner's update count and mean losses and stats since the
+    previous epoch). With several learning agents or learners every file is named after
+    its agent or learner (``metrics-ant.csv``, ``learning-ant+bug.csv``) and TensorBoard tags
+    are prefixed with the name (``ant/charts/mwr``, ``ant+bug/losses/critic_loss``).
+
+    ``resume_epoch`` None starts new CSVs; otherwise each is cut back to the rows of epochs
+    1..``resume_epoch`` (:func:`repair_metrics_csv`), which must all be there.
     """
 
-    def __init__(self, run_dir: Path, resume_epoch: int | None, tensorboard: bool) -> None:
-        self.path = Path(run_dir) / "metrics.csv"
-        if resume_epoch is None:
-            with writing(self.path):
-                atomic_write_bytes(self.path, _csv_bytes())
-        else:
-            if resume_epoch > 0 and not self.path.exists():
-                raise ValueError(f"{self.path}: file not found, but the checkpoint resumed from is at epoch "
-                                 f"{resume_epoch}: its rows would be lost")
-            if not self.path.exists():
-                with writing(self.path):
-                    atomic_write_bytes(self.path, _csv_bytes())
-            kept = repair_metrics_csv(self.path, keep_through=resume_epoch)
-            if kept < resume_epoch:
-                raise ValueError(f"{self.path}: holds the rows of epochs 1..{kept}, but the checkpoint resumed from "
-                                 f"is at epoch {resume_epoch}: rows {kept + 1}..{resume_epoch} are missing")
-        with writing(self.path):
-            self._fh = self.path.open("a", newline="", buffering=1)  # line-buffered: rows show up as epochs end
-        self._csv = csv.DictWriter(self._fh, COLUMNS, lineterminator="\n")
+    def __init__(self, run_dir: Path, agents: list[str], learners: list[str], resume_epoch: int | None,
+                 tensorboard: bool) -> None:
+        self.several = len(agents) > 1 or len(learners) > 1 or agents != learners
+        self.metrics = {a: _Table(Path(run_dir) / run_file("metrics", a, self.several, ".csv"), COLUMNS,
+                                  _row_problem, resume_epoch, "metrics CSV") for a in agents}
+        self.learning = {n: _Table(Path(run_dir) / run_file("learning", n, self.several, ".csv"), LEARNING_COLUMNS,
+                                   _learning_row_problem, resume_epoch, "learning CSV", backfill=True)
+                         for n in learners}
+        self.path = self.metrics[agents[0]].path
         self._tb: Any = None
         if tensorboard:
             from torch.utils.tensorboard import SummaryWriter
@@ -134,31 +200,37 @@ class MetricsLog:
             purge = None if resume_epoch is None else resume_epoch + 1
             self._tb = SummaryWriter(str(Path(run_dir) / "tensorboard"), purge_step=purge)
 
-    def epoch(self, row: dict[str, Any], mwr: float) -> None:
-        with writing(self.path):
-            self._csv.writerow(row)
+    def _tag(self, name: str, tag: str) -> str:
+        return f"{name}/{tag}" if self.several else tag
+
+    def epoch(self, agent: str, row: dict[str, Any], mwr: float) -> None:
+        self.metrics[agent].write(row)
         if self._tb is not None:
             e = row["epoch"]
-            self._tb.add_scalar("charts/mwr", mwr, e)
-            self._tb.add_scalar("charts/local_winning_rate", row["local_winning_rate"], e)
-            self._tb.add_scalar("charts/episodic_length", row["steps"], e)
+            self._tb.add_scalar(self._tag(agent, "charts/mwr"), mwr, e)
+            self._tb.add_scalar(self._tag(agent, "charts/local_winning_rate"), row["local_winning_rate"], e)
+            self._tb.add_scalar(self._tag(agent, "charts/episodic_length"), row["steps"], e)
             for key in ("total_reward", "dense_reward", "sparse_reward", *TERMS):
-                self._tb.add_scalar(f"rewards/{key}", row[key], e)
+                self._tb.add_scalar(self._tag(agent, f"rewards/{key}"), row[key], e)
 
-    def losses(self, values: dict[str, float], step: int) -> None:
+    def learned(self, learner: str, epoch: int, updates: int, stats: dict[str, float]) -> None:
+        """The learning row of ``learner`` at ``epoch`` (stats: means since the previous row)."""
+        known = {k: v for k, v in stats.items() if k in LEARNING_COLUMNS}
+        self.learning[learner].write({"epoch": epoch, "updates": updates, **known})
         if self._tb is not None:
-            for key, value in values.items():
-                self._tb.add_scalar(f"losses/{key}", value, step)
+            self._tb.add_scalar(self._tag(learner, "charts/updates"), updates, epoch)
+            for key, value in known.items():
+                self._tb.add_scalar(self._tag(learner, f"losses/{key}"), value, epoch)
 
     def flush(self) -> None:
-        """Flush and fsync the CSV (before a checkpoint: no checkpoint counts rows the disk lacks)."""
-        with writing(self.path):
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
+        """Flush and fsync the CSVs (before a checkpoint: no checkpoint counts rows the disk lacks)."""
+        for table in (*self.metrics.values(), *self.learning.values()):
+            table.flush()
         if self._tb is not None:
             self._tb.flush()
 
     def close(self) -> None:
-        self._fh.close()
+        for table in (*self.metrics.values(), *self.learning.values()):
+            table.close()
         if self._tb is not None:
             self._tb.close()

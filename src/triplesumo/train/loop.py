@@ -1,10 +1,14 @@
-"""The training loop: one DDPG learner in several matches at once, resumable.
+"""The training loop: learners of any algorithm in several matches at once, resumable.
 
-Reads like the paper: collect a step of every match (learner acts with exploration
-noise, the others follow their fixed policies), store the learner's transitions, and
-every ``learn_every`` collected transitions do ``gradient_steps`` DDPG updates. Each
-finished match is one *epoch*: its outcome, steps and rewards become a row of the
-metrics CSV; the match is reset with fresh seeded noise.
+Reads like the paper: collect a step of every match (each learner acts for its agents with
+exploration, the others follow their fixed policies), hand each learner its transitions,
+and let it learn on its schedule: an off-policy learner (DDPG, TD3, SAC) does
+``gradient_steps`` updates every ``learn_every`` collected transitions, in a thread beside
+the physics; PPO updates when its ``(n_steps, rows)`` rollout is full. Each finished match
+is one *epoch*: every learning agent's outcome, steps and rewards become a row of its
+metrics CSV, every learner's update count and mean losses a row of its learning CSV; the
+match is reset with fresh seeded noise. The one-learner case (``--learner bug``, DDPG) is
+the paper's, bit for bit.
 
 Nothing is lost: a folder that already holds a run is never trained into again without
 ``resume`` (continue it) or ``start_over`` (move it aside first); the memory the replay
@@ -17,12 +21,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import shlex
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,19 +39,29 @@ from triplesumo.agents.builtin import act_batch
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.algos.base import DivergedError
-from triplesumo.algos.ddpg import DDPG, DDPGConfig
-from triplesumo.algos.noise import make_noise
-from triplesumo.algos.replay import FIELDS, ReplayBuffer
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.ppo import PPOConfig
+from triplesumo.algos.sac import SACConfig
+from triplesumo.algos.td3 import TD3Config
 from triplesumo.envs.batch import MatchBatch
-from triplesumo.envs.match import Match
+from triplesumo.envs.match import Match, StepResult
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.rules.config import RewardConfig
-from triplesumo.rules.outcome import ERROR_CODE, outcome_name
+from triplesumo.rules.outcome import PLAYING
+from triplesumo.rules.outcome import outcome_name as code_name
 from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.logger import MetricsLog
+from triplesumo.train.learners import (
+    Learner,
+    LearnerSpec,
+    OffPolicyLearner,
+    PPOLearner,
+    learner_specs,
+    make_learner,
+)
+from triplesumo.train.logger import MetricsLog, run_file
 
 
 @dataclass
@@ -60,13 +73,17 @@ class TrainResult:
     env_steps: int
     updates: int
     mwr: float
+    """MWR of the first learning agent."""
     seconds: float
     timers: dict[str, float] = field(default_factory=dict)
     """Seconds spent in physics+rules (``env``), acting (``act``) and learning (``learn``)."""
+    mwrs: dict[str, float] = field(default_factory=dict)
+    """MWR of every learning agent."""
 
 
 RUN_FILES = ("config.json", "metrics.csv", "checkpoints", "policy.json", "policy.safetensors")
-"""What makes a folder hold a run: training never writes into such a folder afresh."""
+"""What makes a folder hold a run: training never writes into such a folder afresh (with
+``metrics-*.csv`` and ``policy-*.json`` of runs with several learners)."""
 
 
 class RunExistsError(FileExistsError):
@@ -74,7 +91,7 @@ class RunExistsError(FileExistsError):
 
 
 class DivergenceError(FloatingPointError):
-    """The learner's losses, parameters or actions are no longer finite (names learner, update, checkpoint)."""
+    """A learner's losses, parameters or actions are no longer finite (names learner, update, checkpoint)."""
 
 
 def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
@@ -96,10 +113,18 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
+    if isinstance(data, dict) and "ddpg" in data and "learn" not in data:  # written before several learners
+        data = {**data, **{k: v for k, v in config_to_json(TrainConfig()).items()
+                           if k in ("learn", "share", "td3", "sac", "ppo")}}
     data = _check_keys(data, TrainConfig, "", source)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
-    data["ddpg"] = DDPGConfig(**_check_keys(data["ddpg"], DDPGConfig, "ddpg.", source))
+    for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
+        try:
+            data[name] = cls(**_check_keys(data[name], cls, f"{name}.", source))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: {exc}") from exc
     data["policies"] = tuple(data["policies"])
+    data["learn"] = tuple(data["learn"])
     try:
         return TrainConfig(**data)
     except (TypeError, ValueError) as exc:
@@ -115,7 +140,9 @@ def command_for(cfg: TrainConfig) -> str:
 
 def holds_run(run_dir: Path) -> bool:
     """Whether ``run_dir`` holds (part of) a training run."""
-    return any((Path(run_dir) / name).exists() for name in RUN_FILES)
+    run_dir = Path(run_dir)
+    return (any((run_dir / name).exists() for name in RUN_FILES)
+            or any(run_dir.glob("metrics-*.csv")) or any(run_dir.glob("policy-*.json")))
 
 
 def refuse_existing_run(run_dir: Path, start_over: bool) -> Path | None:
@@ -158,12 +185,15 @@ def machine_memory() -> int:
             return 0
 
 
-def check_replay_memory(cfg: TrainConfig, obs_dim: int, act_dim: int) -> None:
-    """``ValueError`` naming ``TrainConfig.ddpg.buffer_size`` if a full buffer cannot fit this machine."""
-    need, have = replay_bytes(cfg.ddpg.buffer_size, obs_dim, act_dim), machine_memory()
+def check_replay_memory(cfg: TrainConfig, learners: list[tuple[str, int, int]]) -> None:
+    """``ValueError`` naming ``TrainConfig.<algo>.buffer_size`` if the learners' full replay
+    buffers (``(algo, obs_dim, act_dim)`` each; PPO has none) cannot fit this machine."""
+    sized = [(algo, getattr(cfg, algo).buffer_size, obs, act) for algo, obs, act in learners if algo != "ppo"]
+    need, have = sum(replay_bytes(size, obs, act) for _, size, obs, act in sized), machine_memory()
     if have and need > have:
-        raise ValueError(f"TrainConfig.ddpg.buffer_size={cfg.ddpg.buffer_size} needs {need / 2**30:.1f} GiB for a "
-                         f"full replay buffer ({obs_dim}-value observations), more than this machine's "
+        fields = ", ".join(sorted({f"TrainConfig.{algo}.buffer_size={size}" for algo, size, _, _ in sized}))
+        raise ValueError(f"{fields} needs {need / 2**30:.1f} GiB for {len(sized)} full replay buffer(s) "
+                         f"({sized[0][2]}-value observations), more than this machine's "
                          f"{have / 2**30:.1f} GiB of memory and swap; nothing was made")
 
 
@@ -180,11 +210,12 @@ def prepare_run_dir(run_dir: Path) -> Path:
     return run_dir
 
 
-class _Learner(threading.Thread):
-    """Runs the DDPG updates due at one collection step, in a thread or inline."""
+class _Updates(threading.Thread):
+    """Runs the off-policy updates due at one collection step (every learner's, in turn), in a
+    thread beside the physics or inline."""
 
-    def __init__(self, trainer: Trainer, due: int) -> None:
-        super().__init__(name="ddpg-updates", daemon=True)
+    def __init__(self, trainer: Trainer, due: list[tuple[OffPolicyLearner, int]]) -> None:
+        super().__init__(name="offpolicy-updates", daemon=True)
         self.trainer, self.due, self.seconds = trainer, due, 0.0
         self.error: BaseException | None = None
         self._launched = False
@@ -194,22 +225,13 @@ class _Learner(threading.Thread):
         super().start()
 
     def run(self) -> None:
-        t, cfg = time.perf_counter(), self.trainer.cfg
-        trainer = self.trainer
+        t = time.perf_counter()
         try:
-            for _ in range(self.due):
-                batch = trainer.replay.sample(cfg.ddpg.batch_size, trainer.sample_rng)
+            for learner, due in self.due:
                 try:
-                    trainer.last_losses = losses = trainer.agent.update(batch)
-                except DivergedError as exc:  # the learner's own finite check of its update stats
-                    raise trainer.diverged(f"its losses are not finite ({exc})") from None
-                bad = {k: v for k, v in losses.items() if not math.isfinite(v)}
-                if bad:
-                    raise trainer.diverged(f"its losses are not finite: {bad}")
-            if self.due:
-                bad_params = [name for name, p in trainer.parameters if not bool(torch.isfinite(p).all())]
-                if bad_params:
-                    raise trainer.diverged(f"its parameters are not finite: {bad_params[:4]}")
+                    learner.run_updates(due)
+                except DivergedError as exc:
+                    raise self.trainer.diverged(learner, str(exc)) from None
         except BaseException as exc:  # re-raised in the collecting thread by finish()
             self.error = exc
         self.seconds = time.perf_counter() - t
@@ -222,7 +244,11 @@ class _Learner(threading.Thread):
 
 
 class Trainer:
-    """Trains ``cfg.learner`` with DDPG; :meth:`run` until ``cfg.epochs`` or ``max_minutes``."""
+    """Trains the learners of ``cfg``; :meth:`run` until ``cfg.epochs`` or ``max_minutes``.
+
+    One *epoch* is one match: it ends when the match is over or when every learning agent in
+    it is out (elimination rules); each learning agent then gets one row in its metrics CSV.
+    """
 
     def __init__(self, cfg: TrainConfig, run_dir: Path | None = None, resume: bool = False,
                  command: str | None = None, start_over: bool = False, from_checkpoint: str | None = None) -> None:
@@ -230,25 +256,24 @@ class Trainer:
         self.match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
                                          reward=cfg.reward)
         agent_names = list(self.match_cfg.agent_names)
-        if cfg.learner not in agent_names:
-            raise ValueError(f"TrainConfig.learner must be one of {agent_names} (scenario {cfg.scenario!r}), "
-                             f"got {cfg.learner!r}")
-        pairs = expand_pairs(cfg.policies, [a for a in agent_names if a != cfg.learner])
+        self.specs = learner_specs(cfg, agent_names, {a.name: a.team for a in self.match_cfg.agents})
+        self.agents = [a for spec in self.specs for a in spec.agents]
+        """The learning agents, learner by learner."""
+        pairs = expand_pairs(cfg.policies, [a for a in agent_names if a not in self.agents])
         unknown = [p.split("=")[0] for p in pairs if p.split("=")[0] not in agent_names]
         if unknown:
             raise ValueError(f"TrainConfig.policies names unknown agents {unknown}; agents are {agent_names}")
         run_dir = Path(run_dir) if run_dir else Path(cfg.out) / cfg.name
+        sizing = Match(self.match_cfg)
+        dims = {spec.name: self._dims(sizing, spec) for spec in self.specs}
         if not resume:
             refuse_existing_run(run_dir, start_over)
-        sizing = Match(self.match_cfg)
-        check_replay_memory(cfg, sizing.observer.sizes[cfg.learner],
-                            sizing.action_sizes[sizing.agents.index(cfg.learner)])
+        check_replay_memory(cfg, [(spec.algo, *dims[spec.name]) for spec in self.specs])
         self.run_dir = prepare_run_dir(run_dir)
         self.command = command or command_for(cfg)
         torch.set_num_threads(cfg.torch_threads)
         self.batch = MatchBatch(self.match_cfg, cfg.n_envs, cfg.n_threads)
         probe = self.batch.matches[0]
-        self.L = probe.agents.index(cfg.learner)  # learner and policy agents were checked above
         try:
             self.policies = policies_from_pairs(
                 pairs, cfg.seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
@@ -256,29 +281,24 @@ class Trainer:
         except ValueError as err:
             raise ValueError(f"TrainConfig.policies (scenario {cfg.scenario!r}): {err}") from None
         self.others = [(probe.agents.index(a), p) for a, p in self.policies.items()]
-        self.obs_dim = probe.observer.sizes[cfg.learner]
-        self.act_dim = probe.action_sizes[self.L]
-        self.agent = DDPG(self.obs_dim, self.act_dim, cfg.ddpg, seed=cfg.seed)
-        self.parameters = [(f"{owner}.{name}", p) for owner, module in vars(self.agent).items()
-                           if isinstance(module, torch.nn.Module) for name, p in module.named_parameters()]
-        """Every parameter of the learner's networks, checked to be finite after its updates."""
-        self.replay = ReplayBuffer(cfg.ddpg.buffer_size, self.obs_dim, self.act_dim)
-        self.noise = make_noise(cfg.ddpg.noise, (cfg.n_envs, self.act_dim), cfg.ddpg.noise_sigma,
-                                cfg.ddpg.noise_theta)
+        self.learners = [make_learner(spec, [probe.agents.index(a) for a in spec.agents], position, cfg,
+                                      *dims[spec.name]) for position, spec in enumerate(self.specs)]
         self.rng = np.random.default_rng(cfg.seed)
-        self.sample_rng = np.random.default_rng([cfg.seed, 1])
-        """Replay sampling only (used by the update thread; never shared with collection)."""
+        """Warm-up actions, exploration, and every match's reset seed."""
         self.epochs_done = 0
         self.env_steps = 0
-        self.lwr: list[float] = []
+        self.lwr: dict[str, list[float]] = {a: [] for a in self.agents}
         self.finished_epoch_steps: list[int] = []
         """Length of every epoch finished by this process (not restored on resume)."""
-        self.acc = [self._empty_acc() for _ in range(cfg.n_envs)]
+        self.acc: dict[str, list[dict[str, float]]] = {a: [self._empty_acc() for _ in range(cfg.n_envs)]
+                                                       for a in self.agents}
+        self.final: dict[str, list[dict[str, Any] | None]] = {a: [None] * cfg.n_envs for a in self.agents}
+        """The last info (outcome, step) of a learning agent already out of a match still running."""
         self.obs: list[list[np.ndarray]] = []
         self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0, "wait": 0.0}
-        """Seconds collecting (physics and rules), acting, learning (busy, in the update
-        thread: overlaps "env" when overlap_learning is on) and waiting for learning."""
-        self.last_losses: dict[str, float] = {}
+        """Seconds collecting (physics and rules), acting, learning (off-policy updates run in a
+        thread: they overlap "env" when overlap_learning is on; PPO's run inline) and waiting
+        for learning."""
         if resume:
             self._restore(from_checkpoint)
         else:
@@ -287,9 +307,18 @@ class Trainer:
             with checkpoint.writing(self.run_dir / "config.json"):
                 atomic_write_bytes(self.run_dir / "config.json",
                                    (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
-        self.log = MetricsLog(self.run_dir, self.epochs_done if resume else None, cfg.tensorboard)
+        self.log = MetricsLog(self.run_dir, self.agents, [s.name for s in self.specs],
+                              self.epochs_done if resume else None, cfg.tensorboard)
 
     # ------------------------------------------------------------------ helpers
+    def _dims(self, match: Match, spec: LearnerSpec) -> tuple[int, int]:
+        obs = {match.observer.sizes[a] for a in spec.agents}
+        act = {match.action_sizes[match.agents.index(a)] for a in spec.agents}
+        if len(obs) > 1 or len(act) > 1:
+            raise ValueError(f"TrainConfig.share=team: agents {list(spec.agents)} have different observation "
+                             f"or action sizes ({sorted(obs)}, {sorted(act)}); they cannot share a network")
+        return obs.pop(), act.pop()
+
     def _episode_seed(self) -> int:
         return int(self.rng.integers(2**31 - 1))
 
@@ -297,93 +326,145 @@ class Trainer:
     def _empty_acc() -> dict[str, float]:
         return dict.fromkeys(("dense_reward", "sparse_reward", *TERMS), 0.0)
 
-    def _stacked_obs(self, agent: int) -> np.ndarray:
-        return np.stack([o[agent] for o in self.obs])
+    def _rows(self, learner: Learner) -> np.ndarray:
+        """The learner's observations, ``(n_envs x len(agents), obs_dim)``, match-major."""
+        return np.stack([o[i] for o in self.obs for i in learner.index])
+
+    @property
+    def updates(self) -> int:
+        return sum(learner.algo.num_updates for learner in self.learners)
 
     # -------------------------------------------------------------------- loop
     def collect_step(self) -> int:
         """Step every match once; returns the number of epochs that finished."""
         cfg, n = self.cfg, self.cfg.n_envs
         t0 = time.perf_counter()
-        obs = self._stacked_obs(self.L)
-        self.agent.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
         probe = self.batch.matches[0]
         actions = np.zeros((n, probe.n_agents, probe.action_width))
-        if self.env_steps < cfg.ddpg.learning_starts:
-            learner_act = self.rng.uniform(-1.0, 1.0, (n, self.act_dim))  # warm-up: the learner only
-        else:
-            raw = self.agent.act(obs)
-            if not np.isfinite(raw).all():
-                raise self.diverged("its actions are not finite")
-            learner_act = np.clip(raw + self.noise.sample(self.rng), -1.0, 1.0)
-        actions[:, self.L, :self.act_dim] = learner_act
+        seen, acted = [], []
+        for learner in self.learners:
+            obs = self._rows(learner)
+            try:
+                act = learner.act(obs, self.rng)
+            except DivergedError as exc:
+                raise self.diverged(learner, str(exc)) from None
+            actions[:, learner.index, :learner.act_dim] = act.reshape(n, len(learner.index), learner.act_dim)
+            seen.append(obs)
+            acted.append(act)
         for i, policy in self.others:
-            actions[:, i, :probe.action_sizes[i]] = act_batch(policy, self._stacked_obs(i))
+            actions[:, i, :probe.action_sizes[i]] = act_batch(policy, np.stack([o[i] for o in self.obs]))
         t1 = time.perf_counter()
-        # The DDPG updates due at this step learn from the replay as it was before the step,
-        # so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and in
-        # torch's kernels). Overlapped or not, the result is bit for bit the same.
-        before = self.env_steps
-        after = before + n
-        due = self.agent.updates_due(before, after, len(self.replay))
-        learner = _Learner(self, due)
+        # The off-policy updates due at this step learn from the replay as it was before the
+        # step, so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and
+        # in torch's kernels). Overlapped or not, the result is bit for bit the same.
+        due = [(lr, d) for lr in self.learners if isinstance(lr, OffPolicyLearner) and (d := lr.updates_due())]
+        updates = _Updates(self, due)
         if due and cfg.overlap_learning:
-            learner.start()
+            updates.start()
         elif due:
-            learner.run()
+            updates.run()
         results = self.batch.step(actions)
         t2 = time.perf_counter()
-        learner.finish()
+        updates.finish()
         t_joined = time.perf_counter()
-        keep, rew, next_obs, done = [], [], [], []
+        self.env_steps += n  # counted before epochs end, so their rows include this step
+        for learner, obs, act in zip(self.learners, seen, acted, strict=True):
+            self._store(learner, obs, act, results)
         finished = 0
-        self.env_steps = after  # counted before epochs end, so their rows include this step
         for k, res in enumerate(results):
-            info = res.infos[self.L]
-            acc = self.acc[k]
-            for key in acc:
-                acc[key] += info[key]
-            if info["outcome"] != ERROR_CODE:  # a physics error's transition is dropped, never learned from
-                keep.append(k)
-                rew.append(res.rewards[self.L])
-                next_obs.append(res.observations[self.L])
-                out = res.eliminated is not None and res.eliminated[self.L]  # the learner left the match
-                done.append(1.0 if res.terminated or out else 0.0)  # bootstrap through a draw by time limit
-            if res.terminated or res.truncated or (res.eliminated is not None and res.eliminated[self.L]):
+            if self._match_step(k, res):
                 finished += 1
-                self._end_epoch(k, info)
-                self.obs[k] = self.batch.reset_one(k, seed=self._episode_seed())[0]
-                self.noise.reset(np.arange(n) == k)
-            else:
-                self.obs[k] = res.observations
-        if keep:
-            self.replay.add_batch(obs[keep], learner_act[keep], np.array(rew), np.stack(next_obs), np.array(done))
         t3 = time.perf_counter()
+        for learner in self.learners:
+            if isinstance(learner, PPOLearner):
+                try:
+                    learner.update_if_full(self._rows(learner))
+                except DivergedError as exc:
+                    raise self.diverged(learner, str(exc)) from None
+        learned = time.perf_counter() - t3
         self.timers["act"] += t1 - t0
         self.timers["env"] += (t2 - t1) + (t3 - t_joined)
-        self.timers["learn"] += learner.seconds  # overlapped with "env" when overlap_learning is on
+        self.timers["learn"] += updates.seconds + learned  # the thread's part overlaps "env"
         self.timers["wait"] += t_joined - t2
         return finished
 
-    def _end_epoch(self, k: int, info: dict[str, Any]) -> None:
-        self.epochs_done += 1
-        acc = self.acc[k]
-        outcome = outcome_name(info["outcome"])
-        lwr = float(local_winning_rate([outcome])[0])
-        self.lwr.append(lwr)
-        self.finished_epoch_steps.append(int(info["step"]))
-        total = acc["dense_reward"] + acc["sparse_reward"]
-        row = {"epoch": self.epochs_done, "outcome": outcome, "local_winning_rate": lwr,
-               "steps": info["step"], "total_reward": total, **acc, "env_steps": self.env_steps,
-               "wall_time": round(time.time(), 3)}
-        self.log.epoch(row, self.mwr())
-        self.acc[k] = self._empty_acc()
+    def _store(self, learner: Learner, obs: np.ndarray, act: np.ndarray, results: list[StepResult]) -> None:
+        """Hand the learner its rows' step: rewards, next observations, ends, which rows played."""
+        m, rows = len(learner.index), learner.n_rows
+        reward, terminated, truncated = np.zeros(rows), np.zeros(rows, dtype=bool), np.zeros(rows, dtype=bool)
+        valid = np.ones(rows, dtype=bool)
+        next_obs = list(obs)
+        for k, res in enumerate(results):
+            for j, i in enumerate(learner.index):
+                r = k * m + j
+                if not learner.active[r]:
+                    continue
+                valid[r] = not is_error(res.infos[i])  # a physics error's transition is never learned from
+                reward[r] = res.rewards[i]
+                next_obs[r] = res.observations[i]
+                out = res.eliminated is not None and res.eliminated[i]  # the agent left the match
+                terminated[r] = res.terminated or out
+                truncated[r] = res.truncated and not terminated[r]  # a draw by time limit bootstraps
+        played = learner.active.copy()
+        learner.store(obs, act, reward, np.stack(next_obs), terminated, truncated, valid, played)
+        for k, res in enumerate(results):
+            for j, i in enumerate(learner.index):
+                if res.eliminated is not None and res.eliminated[i]:
+                    learner.active[k * m + j] = False
 
-    def mwr(self) -> float:
-        """MWR over the last λ epochs (mean over what exists for the first λ-1)."""
-        if not self.lwr:
+    def _match_step(self, k: int, res: StepResult) -> bool:
+        """Account match ``k``'s step for every learning agent; end the epoch (rows, reset) when
+        the match is over or all its learning agents are out. Returns whether it ended."""
+        out_now = []
+        for agent in self.agents:
+            if self.final[agent][k] is not None:
+                continue  # out earlier: its epoch waits for the match
+            i = self.batch.matches[k].agents.index(agent)
+            info = res.infos[i]
+            acc = self.acc[agent][k]
+            for key in acc:
+                acc[key] += info[key]
+            if res.eliminated is not None and res.eliminated[i]:
+                self.final[agent][k] = {"outcome": outcome_name(info), "step": int(info["step"])}
+                out_now.append(agent)
+        over = res.terminated or res.truncated
+        if not over and any(self.final[a][k] is None for a in self.agents):
+            self.obs[k] = res.observations
+            return False
+        self.epochs_done += 1
+        for agent in self.agents:
+            i = self.batch.matches[k].agents.index(agent)
+            last = self.final[agent][k] or {"outcome": outcome_name(res.infos[i]), "step": int(res.infos[i]["step"])}
+            self._agent_row(agent, k, last)
+            self.final[agent][k] = None
+        self.finished_epoch_steps.append(max(int(info["step"]) for info in res.infos))
+        for learner in self.learners:
+            self.log.learned(learner.name, self.epochs_done, learner.algo.num_updates, learner.take_stats())
+        self.obs[k] = self.batch.reset_one(k, seed=self._episode_seed())[0]
+        for learner in self.learners:
+            rows = learner.rows_of(k)
+            learner.active[rows] = True
+            learner.reset_rows(rows)
+        return True
+
+    def _agent_row(self, agent: str, k: int, last: dict[str, Any]) -> None:
+        acc = self.acc[agent][k]
+        lwr = float(local_winning_rate([last["outcome"]])[0])
+        self.lwr[agent].append(lwr)
+        total = acc["dense_reward"] + acc["sparse_reward"]
+        row = {"epoch": self.epochs_done, "outcome": last["outcome"], "local_winning_rate": lwr,
+               "steps": last["step"], "total_reward": total, **acc, "env_steps": self.env_steps,
+               "wall_time": round(time.time(), 3)}
+        self.log.epoch(agent, row, self.mwr(agent))
+        self.acc[agent][k] = self._empty_acc()
+
+    def mwr(self, agent: str | None = None) -> float:
+        """MWR of ``agent`` (default: the first learning agent) over the last λ epochs (mean
+        over what exists for the first λ-1)."""
+        lwr = self.lwr[agent or self.agents[0]]
+        if not lwr:
             return 0.0
-        return float(moving_winning_rate(np.array(self.lwr[-self.cfg.window:]), self.cfg.window)[-1])
+        return float(moving_winning_rate(np.array(lwr[-self.cfg.window:]), self.cfg.window)[-1])
 
     def last_good(self) -> str:
         """Where the run can go on from: its latest checkpoint, in words."""
@@ -394,12 +475,13 @@ class Trainer:
         return (f"the last good checkpoint {folder} is intact; "
                 f"`triplesumo train --resume {self.run_dir}` continues from it")
 
-    def diverged(self, what: str) -> DivergenceError:
+    def diverged(self, learner: Learner, what: str) -> DivergenceError:
         """The error that stops a diverging learner: names it, its update count and the last good checkpoint."""
-        return DivergenceError(f"learner {self.cfg.learner!r} diverged at update {self.agent.num_updates} "
-                               f"(epoch {self.epochs_done}, env step {self.env_steps}): {what}. Stopped; "
-                               f"{self.last_good()}. Lower the learning rates (--ddpg.actor-lr, --ddpg.critic-lr) "
-                               "or the reward scale")
+        algo = learner.spec.algo
+        rates = "--ppo.lr" if algo == "ppo" else f"--{algo}.actor-lr, --{algo}.critic-lr"
+        return DivergenceError(f"learner {learner.name!r} diverged at update {learner.algo.num_updates} "
+                               f"(epoch {self.epochs_done}, env step {self.env_steps}, {algo}): {what}. Stopped; "
+                               f"{self.last_good()}. Lower the learning rates ({rates}) or the reward scale")
 
     def run(self) -> TrainResult:
         cfg = self.cfg
@@ -410,7 +492,7 @@ class Trainer:
             from tqdm import tqdm
 
             bar = tqdm(total=cfg.epochs, initial=min(self.epochs_done, cfg.epochs), unit="epoch",
-                       desc=f"train {cfg.learner}", dynamic_ncols=True)
+                       desc=f"train {' '.join(s.name for s in self.specs)}", dynamic_ncols=True)
         try:
             while self.epochs_done < cfg.epochs:
                 before = self.epochs_done
@@ -418,7 +500,8 @@ class Trainer:
                 if finished and bar is not None:
                     bar.update(min(self.epochs_done, cfg.epochs) - min(before, cfg.epochs))
                     rate = (self.env_steps - start_steps) / max(time.perf_counter() - start, 1e-9)
-                    bar.set_postfix(MWR=f"{self.mwr():+.3f}", steps_s=f"{rate:.0f}", refresh=False)
+                    mwrs = {f"MWR {a}" if len(self.agents) > 1 else "MWR": f"{self.mwr(a):+.3f}" for a in self.agents}
+                    bar.set_postfix(mwrs | {"steps_s": f"{rate:.0f}"}, refresh=False)
                 crossed = finished and (self.epochs_done // cfg.checkpoint_every > before // cfg.checkpoint_every)
                 timed_out = cfg.max_minutes > 0 and (time.perf_counter() - start) > cfg.max_minutes * 60
                 if crossed or (timed_out and finished) or self.epochs_done >= cfg.epochs:
@@ -434,58 +517,75 @@ class Trainer:
                 bar.close()
             self.log.close()
         self.finish_outputs()
-        return TrainResult(self.run_dir, self.epochs_done, self.env_steps, self.agent.num_updates, self.mwr(),
-                           time.perf_counter() - start, dict(self.timers))
+        return TrainResult(self.run_dir, self.epochs_done, self.env_steps, self.updates, self.mwr(),
+                           time.perf_counter() - start, dict(self.timers), {a: self.mwr(a) for a in self.agents})
 
     # ---------------------------------------------------------- checkpoints
-    def manifest(self) -> dict[str, Any]:
+    def policy_stem(self, learner: Learner) -> Path:
+        """``RUN/policy`` (one learning agent) or ``RUN/policy-<learner>``."""
+        return self.run_dir / run_file("policy", learner.name, self.log.several)
+
+    def manifest(self, learner: Learner) -> dict[str, Any]:
         probe = self.batch.matches[0]
-        spec = {a.name: a for a in self.match_cfg.agents}[self.cfg.learner]
+        spec = {a.name: a for a in self.match_cfg.agents}[learner.spec.agents[0]]
         return {
-            "agent": self.cfg.learner, "obs_mode": self.cfg.obs_mode,
+            "agent": learner.name, "algo": learner.spec.algo, "plays": list(learner.spec.agents),
+            "learners": {s.name: s.algo for s in self.specs}, "obs_mode": self.cfg.obs_mode,
             "action_scaling": f"normalised [-1, 1] scaled linearly to ctrl [-{spec.ctrl_range}, {spec.ctrl_range}]",
             "ctrl_range": spec.ctrl_range, "env_version": ENV_VERSION, "triplesumo_version": __version__,
             "mujoco_version": mujoco.__version__, "torch_version": torch.__version__,
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
-            "command": self.command, "trained_against": list(self.cfg.policies),
-            "agents": list(probe.agents),
+            "updates": learner.algo.num_updates, "command": self.command, "trained_against": list(self.cfg.policies),
+            "agents": list(probe.agents), "scenario": self.cfg.scenario,
         }
 
     def save(self) -> Path:
         self.log.flush()
-        opt_tensors, opt_meta = self.agent.optimizer_state()
-        tensors = {**self.agent.state_dict(), **{f"optim.{k}": v for k, v in opt_tensors.items()}}
+        tensors: dict[str, torch.Tensor] = {}
+        arrays: dict[str, np.ndarray] = {}
+        replay: dict[str, np.ndarray] = {}
+        for learner in self.learners:
+            tensors |= {f"{learner.name}.{k}": v for k, v in learner.tensors().items()}
+            arrays |= {f"{learner.name}.{k}": v for k, v in learner.arrays().items()}
+            if isinstance(learner, OffPolicyLearner):
+                replay |= {f"{learner.name}.{k}": v for k, v in learner.replay.state_dict().items()}
         snaps = [m.snapshot() for m in self.batch.matches]
-        arrays: dict[str, np.ndarray] = {f"noise.{k}": v for k, v in self.noise.state_dict().items()}
         for k, s in enumerate(snaps):
             arrays[f"match{k}.physics"] = s["physics"]
             arrays[f"match{k}.last_obs"] = s["last_obs"]
             arrays[f"match{k}.warnings"] = s["warnings"]
             arrays[f"match{k}.obs"] = np.stack(self.obs[k])
-        arrays["lwr"] = np.array(self.lwr)
+        for agent, lwr in self.lwr.items():
+            arrays[f"lwr.{agent}"] = np.array(lwr)
         state = {
-            "config": config_to_json(self.cfg), "manifest": self.manifest(), "epochs_done": self.epochs_done,
-            "env_steps": self.env_steps, "optimizer": opt_meta, "rng": self.rng.bit_generator.state,
-            "sample_rng": self.sample_rng.bit_generator.state,
+            "config": config_to_json(self.cfg), "manifests": {lr.name: self.manifest(lr) for lr in self.learners},
+            "epochs_done": self.epochs_done, "env_steps": self.env_steps, "rng": self.rng.bit_generator.state,
+            "learners": {lr.name: lr.state() for lr in self.learners},
             "matches": [{"steps": s["steps"], "over": s["over"], "rng": s["rng"]} for s in snaps],
-            "acc": self.acc, "timers": self.timers,
+            "acc": self.acc, "final": self.final, "timers": self.timers,
             "policy_rngs": {a: p.rng.bit_generator.state for a, p in self.policies.items() if hasattr(p, "rng")},
         }
+        keep_replay = self.cfg.save_replay and bool(replay)
         folder = checkpoint.save(self.run_dir, self.epochs_done, tensors, state, arrays,
-                                 self.replay.state_dict() if self.cfg.save_replay else None)
-        with checkpoint.writing(f"{self.run_dir / 'policy'}.safetensors/.json",
-                                f"; the last good checkpoint {folder} is intact"):
-            save_policy(self.run_dir / "policy", self.agent.actor, self.manifest(), obs_norm=self.agent.obs_norm)
+                                 replay if keep_replay else None)
+        for learner in self.learners:
+            stem = self.policy_stem(learner)
+            with checkpoint.writing(f"{stem}.safetensors/.json", f"; the last good checkpoint {folder} is intact"):
+                save_policy(stem, learner.algo.export_actor(), self.manifest(learner), obs_norm=learner.algo.obs_norm)
         return folder
 
+    def _needs_replay(self) -> bool:
+        return self.cfg.save_replay and any(isinstance(lr, OffPolicyLearner) for lr in self.learners)
+
     def _restore(self, from_checkpoint: str | None) -> None:
+        need_replay = self._needs_replay()
         if from_checkpoint is not None:
             folder = checkpoint.find(self.run_dir, from_checkpoint)
-            loaded = checkpoint.load(folder, need_replay=self.cfg.save_replay)
+            loaded = checkpoint.load(folder, need_replay=need_replay)
         else:
             try:
                 folder = checkpoint.latest(self.run_dir)
-                loaded = checkpoint.load(folder, need_replay=self.cfg.save_replay)
+                loaded = checkpoint.load(folder, need_replay=need_replay)
             except checkpoint.CheckpointError as exc:
                 intact = checkpoint.newest_intact(self.run_dir)
                 if intact is None:
@@ -494,8 +594,11 @@ class Trainer:
                     f"{exc} -- the latest checkpoint is damaged or missing; the newest intact one is {intact.name} "
                     f"(epoch {checkpoint.recorded_epoch(intact)}): `triplesumo train --resume {self.run_dir} "
                     f"--from {intact.name}` continues from it (later epochs are trained again)") from exc
-        tensors, state, arrays, replay = loaded
-        need_state = ("config", "optimizer", "rng", "sample_rng", "matches", "epochs_done", "env_steps", "acc")
+        tensors, state, arrays, lazy_replay = loaded
+        replay: Mapping[str, np.ndarray] | None = lazy_replay
+        if "learners" not in state and "optimizer" in state:
+            tensors, state, arrays, replay = self._one_learner_checkpoint(tensors, state, arrays, replay)
+        need_state = ("config", "learners", "rng", "matches", "epochs_done", "env_steps", "acc", "final")
         missing = [k for k in need_state if k not in state]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'state.json'}: missing entries {missing}")
@@ -503,38 +606,51 @@ class Trainer:
             saved = config_from_json(state["config"], f"{folder / 'state.json'} (its config)")
         except ValueError as exc:
             raise checkpoint.CheckpointError(str(exc)) from exc
-        for name in ("learner", "obs_mode", "n_envs", "steps_per_epoch", "policies", "reward", "ddpg", "seed"):
+        for name in ("learner", "learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
+                     "reward", "ddpg", "td3", "sac", "ppo", "seed"):
             # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
             if getattr(saved, name) != getattr(self.cfg, name):
                 raise checkpoint.CheckpointError(
                     f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
                     f"{getattr(saved, name)!r}, this run has {getattr(self.cfg, name)!r} (from config.json)")
-        need_arrays = ["lwr"] + [f"match{k}.{part}" for k in range(self.cfg.n_envs)
-                                 for part in ("physics", "last_obs", "warnings", "obs")]
+        need_arrays = [f"lwr.{a}" for a in self.agents] + [f"{lr.name}.active" for lr in self.learners] + [
+            f"match{k}.{part}" for k in range(self.cfg.n_envs) for part in ("physics", "last_obs", "warnings", "obs")]
         missing = [k for k in need_arrays if k not in arrays]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'arrays.npz'}: missing arrays {missing[:5]}")
-        if replay is not None and (absent := [k for k in (*FIELDS, "pos", "size", "capacity") if k not in replay]):
-            raise checkpoint.CheckpointError(f"{folder / 'replay.npz'}: missing arrays {absent}")
         try:
-            self._restore_from(folder, tensors, state, arrays, replay)
+            self._restore_from(tensors, state, arrays, replay)
         except (KeyError, IndexError, TypeError, ValueError, RuntimeError) as exc:
             if isinstance(exc, checkpoint.CheckpointError):
                 raise
-            raise checkpoint.CheckpointError(
-                f"{folder} (state.json / arrays.npz / replay.npz / weights.safetensors): missing or malformed "
-                f"entry: {exc!r}") from exc
+            where = "replay.npz" if replay is not None and "replay arrays" in str(exc) else (
+                "state.json / arrays.npz / replay.npz / weights.safetensors")
+            raise checkpoint.CheckpointError(f"{folder} ({where}): missing or malformed entry: {exc!r}") from exc
 
-    def _restore_from(self, folder: Path, tensors: dict[str, torch.Tensor], state: dict[str, Any],
-                      arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> None:
-        self.agent.load_state_dict({k: v for k, v in tensors.items() if not k.startswith("optim.")})
-        self.agent.load_optimizer_state({k[6:]: v for k, v in tensors.items() if k.startswith("optim.")},
-                                        state["optimizer"])
-        self.noise.load_state_dict({k[6:]: v for k, v in arrays.items() if k.startswith("noise.")})
+    def _one_learner_checkpoint(self, tensors: dict[str, torch.Tensor], state: dict[str, Any],
+                                arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> tuple[
+            dict[str, torch.Tensor], dict[str, Any], dict[str, np.ndarray], Mapping[str, np.ndarray] | None]:
+        """A checkpoint of the one-DDPG-learner trainer (before several learners) in today's layout."""
+        name = self.learners[0].name
+        upgraded = {**state, "acc": {name: state["acc"]}, "final": {name: [None] * self.cfg.n_envs},
+                    "learners": {name: {"optimizer": state["optimizer"], "sample_rng": state["sample_rng"],
+                                        "collected": state["env_steps"], "stats": [{}, {}]}}}
+        moved = {f"{name}.{k}" if k.startswith("noise.") else k: v for k, v in arrays.items() if k != "lwr"}
+        moved |= {f"lwr.{name}": arrays["lwr"], f"{name}.active": np.ones(self.cfg.n_envs, dtype=bool)}
         if replay is not None:
-            self.replay.load_state_dict(replay)
+            replay = _Prefixed(replay, f"{name}.")
+        return {f"{name}.{k}": v for k, v in tensors.items()}, upgraded, moved, replay
+
+    def _restore_from(self, tensors: dict[str, torch.Tensor], state: dict[str, Any],
+                      arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> None:
+        for learner in self.learners:
+            prefix = f"{learner.name}."
+            learner.load({k.removeprefix(prefix): v for k, v in tensors.items() if k.startswith(prefix)},
+                         state["learners"][learner.name],
+                         {k.removeprefix(prefix): v for k, v in arrays.items() if k.startswith(prefix)})
+            if replay is not None and isinstance(learner, OffPolicyLearner):
+                learner.load_replay(replay, prefix)
         self.rng.bit_generator.state = state["rng"]
-        self.sample_rng.bit_generator.state = state["sample_rng"]
         for k, match in enumerate(self.batch.matches):
             meta = state["matches"][k]
             match.restore({"physics": arrays[f"match{k}.physics"], "last_obs": arrays[f"match{k}.last_obs"],
@@ -545,18 +661,65 @@ class Trainer:
             self.policies[agent].rng.bit_generator.state = rng_state
         self.epochs_done = int(state["epochs_done"])
         self.env_steps = int(state["env_steps"])
-        self.acc = state["acc"]
-        self.lwr = [float(x) for x in arrays["lwr"]]
+        self.acc = {a: state["acc"][a] for a in self.agents}
+        self.final = {a: state["final"][a] for a in self.agents}
+        self.lwr = {a: [float(x) for x in arrays[f"lwr.{a}"]] for a in self.agents}
         self.timers = {**self.timers, **state.get("timers", {})}
 
     def finish_outputs(self) -> None:
-        """Plots from the metrics CSV (skipped when the run has no finished epoch)."""
-        from triplesumo.evaluation.plots import plot_run, read_metrics_csv
+        """Plots from the metrics CSVs (skipped for an agent without a finished epoch)."""
+        plot_metrics(self.run_dir, self.cfg.window)
 
-        metrics = read_metrics_csv(self.run_dir / "metrics.csv")
+
+class _Prefixed(Mapping[str, np.ndarray]):
+    """``mapping`` with every key prefixed (members still read lazily, one at a time)."""
+
+    def __init__(self, mapping: Mapping[str, np.ndarray], prefix: str) -> None:
+        self.mapping, self.prefix = mapping, prefix
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        if not key.startswith(self.prefix):
+            raise KeyError(key)
+        return self.mapping[key.removeprefix(self.prefix)]
+
+    def __iter__(self) -> Iterator[str]:
+        return (self.prefix + k for k in self.mapping)
+
+    def __len__(self) -> int:
+        return len(self.mapping)
+
+
+def is_error(info: Mapping[str, Any]) -> bool:
+    """Whether a step's info reports a physics error (the one place the trainer reads ``outcome`` codes)."""
+    return outcome_name(info) == "error"
+
+
+def outcome_name(info: Mapping[str, Any]) -> str:
+    """The outcome of an info as a name (win, loss, draw, error; "" while the match goes on):
+    the one place the trainer reads ``info["outcome"]`` (an int code, ``rules.outcome.OUTCOME_CODES``)."""
+    code = int(info["outcome"])
+    return "" if code == PLAYING else code_name(code)
+
+
+def plot_metrics(run_dir: Path, window: int) -> list[Path]:
+    """The paper's figures of every learning agent of a run: ``metrics.csv`` -> ``plots/``,
+    ``metrics-<agent>.csv`` -> ``plots/<agent>/`` (agents without a finished epoch are skipped)."""
+    from triplesumo.evaluation.plots import plot_run, read_metrics_csv
+
+    run_dir = Path(run_dir)
+    learner = "bug"
+    if (run_dir / "config.json").is_file():
+        learner = str(load_json(run_dir / "config.json").get("learner", learner))
+    paths: list[Path] = []
+    files = sorted(run_dir.glob("metrics-*.csv")) or [run_dir / "metrics.csv"]
+    for path in files:
+        agent = path.stem.removeprefix("metrics-") if path.name != "metrics.csv" else learner
+        metrics = read_metrics_csv(path)
         if len(metrics["epoch"]):
-            plot_run(metrics, self.run_dir / "plots", window=self.cfg.window,
-                     title=f"{self.cfg.learner} training ({self.run_dir.name})", label=self.cfg.learner.capitalize())
+            out = run_dir / "plots" if path.name == "metrics.csv" else run_dir / "plots" / agent
+            paths += plot_run(metrics, out, window=window, title=f"{agent} training ({run_dir.name})",
+                              label=agent.capitalize())
+    return paths
 
 
 def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str, Any] | None = None,
