@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from triplesumo.envs.match import Match
 from triplesumo.model import AgentSpec
@@ -97,12 +98,14 @@ def test_observations_equal_the_observation_builder_over_rollouts(obs_mode: str,
         else:
             sim = sims[0]
             g = sim.geom_counts[0]
-            got = B.egocentric_observation(
-                pos, vel, np.stack([s.torso_quaternions() for s in sims]),
-                np.stack([s.torso_angular_velocities() for s in sims]),
-                np.stack([s.data.qpos[np.stack([a.joint_qpos for a in sim.agents])] for s in sims]),
-                np.stack([s.data.qvel[np.stack([a.joint_qvel for a in sim.agents])] for s in sims]),
-                forces.reshape(len(sims), m.n_agents, g, 3), rules, np)
+            args = (pos, vel, np.stack([s.torso_quaternions() for s in sims]),
+                    np.stack([s.torso_angular_velocities() for s in sims]),
+                    np.stack([s.data.qpos[np.stack([a.joint_qpos for a in sim.agents])] for s in sims]),
+                    np.stack([s.data.qvel[np.stack([a.joint_qvel for a in sim.agents])] for s in sims]),
+                    forces.reshape(len(sims), m.n_agents, g, 3))
+            got = B.egocentric_observation(*args, rules, np)
+            on_torch = B.egocentric_observation(*(torch.as_tensor(a) for a in args), rules.to(torch.as_tensor), torch)
+            np.testing.assert_allclose(on_torch.numpy(), got, rtol=1e-12, atol=1e-12)  # one code, two namespaces
         assert got.shape == np.stack(built).shape
         np.testing.assert_allclose(got.astype(np.float32), np.stack(built), rtol=1e-6, atol=1e-5)
     assert clipped > 0  # the clip was exercised

@@ -12,7 +12,7 @@ from triplesumo.envs.match import Match
 from triplesumo.model import PAPER_AGENTS, AgentSpec, PhysicsConfig, build_model, ring_half_size
 from triplesumo.model import names as mjcf_names
 from triplesumo.model.specs import BLUE, GREEN, RED
-from triplesumo.rules.config import MatchConfig, RewardConfig
+from triplesumo.rules.config import MatchConfig, ResetNoise, RewardConfig
 
 
 @pytest.fixture(scope="module")
@@ -174,6 +174,7 @@ def test_pursuit_roster_teams() -> None:
         (lambda: PhysicsConfig(timestep=0.0), "timestep"),
         (lambda: PhysicsConfig(frame_skip=0), "frame_skip"),
         (lambda: PhysicsConfig(memory="lots"), "memory"),
+        (lambda: PhysicsConfig(border_rim=1), "border_rim"),
         (lambda: MatchConfig(obs_mode="pixels"), "obs_mode"),
         (lambda: MatchConfig(max_steps=0), "max_steps"),
         (lambda: MatchConfig(max_steps=2.5), "max_steps"),
@@ -223,3 +224,57 @@ def test_agents_at_rest_never_touch_and_stand_on_the_tatami(make_match, zeros) -
     for i, a in enumerate(match.sim.agents):
         weight = match.model.body_subtreemass[a.torso_body] * gravity
         np.testing.assert_allclose(forces[i * g:(i + 1) * g].sum(axis=0), [0.0, 0.0, weight], atol=1e-3 * weight)
+
+
+# ------------------------------------------------------------------------ the border rim
+def _push_ant_at_the_rim(border_rim: bool) -> tuple[set[str], float]:
+    """Ant, settled at its start, moved 0.3 m toward the right border and pushed at it at 2 m/s
+    for 30 env steps: the names of its geoms that touched a border geom, and the x component of
+    the border's contact forces on them, summed over contacts and steps."""
+    match = Match(MatchConfig(physics=PhysicsConfig(border_rim=border_rim), reset_noise=ResetNoise(0, 0, 0, 0)))
+    match.reset(seed=0)
+    sim, model = match.sim, match.model
+    for _ in range(30):
+        sim.step(np.zeros((3, 8)))
+    ant = sim.agents[0]
+    qpos, qvel = sim.data.qpos.copy(), np.zeros(model.nv)
+    qpos[ant.root_qpos] += 0.3
+    qvel[ant.root_qvel] = 2.0
+    sim.reset(qpos, qvel)
+    rim = {model.geom(n).id for n in mjcf_names.BORDER_GEOMS}
+    own = {int(g) for g in ant.geoms}
+    touched: set[str] = set()
+    push_x, wrench = 0.0, np.zeros(6)
+    for _ in range(30):
+        sim.step(np.zeros((3, 8)))
+        for k, c in enumerate(sim.data.contact[:sim.data.ncon]):
+            pair = {int(c.geom1), int(c.geom2)}
+            if pair & rim and pair & own:
+                touched.add(model.geom((pair & own).pop()).name)
+                mujoco.mj_contactForce(model, sim.data, k, wrench)  # contact frame, acts on geom2
+                on_ant = c.frame.reshape(3, 3).T @ wrench[:3]
+                push_x += float(on_ant[0] if int(c.geom2) in own else -on_ant[0])
+    return touched, push_x
+
+
+def test_border_rim_is_solid_only_when_asked() -> None:
+    """RoboSumo's and the paper's rim: the four cylinders collide with agents (default flags) only
+    with ``border_rim``; the ring's half-size and every other geom stay the same."""
+    plain, solid = build_model(PAPER_AGENTS, PhysicsConfig()), build_model(PAPER_AGENTS, PhysicsConfig(border_rim=True))
+    rim = [plain.geom(n).id for n in mjcf_names.BORDER_GEOMS]
+    assert (plain.geom_contype[rim] == 0).all() and (plain.geom_conaffinity[rim] == 0).all()
+    assert (solid.geom_contype[rim] == 1).all() and (solid.geom_conaffinity[rim] == 1).all()
+    np.testing.assert_array_equal(solid.geom_size[rim], plain.geom_size[rim])
+    np.testing.assert_allclose(solid.geom_size[rim, 0], 0.03)  # a 3 cm ridge on the tatami's top
+    np.testing.assert_allclose(solid.geom_pos[rim, 2], 0.5)
+    others = np.setdiff1d(np.arange(plain.ngeom), rim)
+    np.testing.assert_array_equal(solid.geom_contype[others], plain.geom_contype[others])
+    assert ring_half_size(solid) == ring_half_size(plain) == 2.0
+
+
+def test_a_torso_pushed_against_the_rim_collides_with_it() -> None:
+    touched, push_x = _push_ant_at_the_rim(True)
+    assert "ant/torso_geom" in touched
+    assert push_x < -1.0  # the rim pushes the torso back toward the centre (newton-steps)
+    untouched, none = _push_ant_at_the_rim(False)
+    assert untouched == set() and none == 0.0

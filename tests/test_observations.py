@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -13,20 +14,25 @@ from triplesumo.rules import MatchConfig, ResetNoise
 def reference_egocentric(match: Match) -> list[np.ndarray]:
     """rules/observations.py's ``egocentric`` layout, one agent at a time."""
     sim, obs = match.sim, []
-    forces = np.clip(sim.contact_forces_reference(), -match.config.contact_force_clip, match.config.contact_force_clip)
+    clip = match.config.contact_force_clip
+    forces = sim.contact_forces_reference()
     pos, vel, quat = sim.torso_positions(), sim.torso_velocities(), sim.torso_quaternions()
     g = sim.geom_counts[0]
     for i, a in enumerate(sim.agents):
         w, x, y, z = quat[i]
         yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
         to_heading = np.array([[np.cos(yaw), np.sin(yaw), 0], [-np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        inverse_yaw, orientation = np.zeros(4), np.zeros(4)
+        mujoco.mju_axisAngle2Quat(inverse_yaw, np.array([0.0, 0.0, 1.0]), -yaw)
+        mujoco.mju_mulQuat(orientation, inverse_yaw, quat[i])
+        orientation *= np.sign(orientation[0])
         others = [*match.teams.partners[i], *match.teams.opponents[i]]
-        blocks = [[pos[i, 2]], quat[i], sim.data.qpos[a.joint_qpos], to_heading @ vel[i],
+        blocks = [[pos[i, 2]], orientation, sim.data.qpos[a.joint_qpos], to_heading @ vel[i],
                   sim.torso_angular_velocities()[i], sim.data.qvel[a.joint_qvel],
                   [2.0 - max(abs(pos[i, 0]), abs(pos[i, 1]))]]
         for j in others:
             blocks += [to_heading @ (pos[j] - pos[i]), to_heading @ (vel[j] - vel[i])]
-        blocks.append((forces[i * g:(i + 1) * g] @ to_heading.T).ravel())
+        blocks.append(np.clip(forces[i * g:(i + 1) * g] @ to_heading.T, -clip, clip).ravel())
         obs.append(np.concatenate(blocks))
     return obs
 
@@ -86,3 +92,51 @@ def test_paper_observation_is_the_global_state_for_every_agent_and_not_shared() 
         np.testing.assert_allclose(o, want, rtol=1e-6, atol=1e-6)
     obs[0][:] = 0.0
     assert np.abs(obs[1]).sum() > 0  # each agent gets its own array
+
+
+def _blocks(match: Match, obs: list[np.ndarray]) -> list[dict[str, np.ndarray]]:
+    out = []
+    for agent, o in zip(match.agents, obs, strict=True):
+        sizes = match.observer.structure[agent]
+        offsets = np.cumsum([0, *sizes.values()])
+        out.append({k: o[s:e] for k, s, e in zip(sizes, offsets[:-1], offsets[1:], strict=True)})
+    return out
+
+
+def test_self_orientation_is_the_heading_frame_quaternion() -> None:
+    """An upright agent yawed by 90 degrees reads the identity in its own heading frame (the world
+    quaternion would read cos 45, 0, 0, sin 45); a tilted one reads its tilt only, w >= 0."""
+    match = Match(MatchConfig(obs_mode="egocentric", reset_noise=ResetNoise(0, 0, 0, 0)))
+    match.reset(seed=0)
+    sim = match.sim
+    qpos, qvel = sim.data.qpos.copy(), np.zeros(sim.model.nv)
+    roll = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(roll, np.array([1.0, 0.0, 0.0]), 0.3)
+    yawed, tilted = np.zeros(4), np.zeros(4)
+    mujoco.mju_axisAngle2Quat(yawed, np.array([0.0, 0.0, 1.0]), np.pi / 2)
+    mujoco.mju_mulQuat(tilted, yawed, roll)
+    qpos[sim.quat_qpos[0]] = yawed
+    qpos[sim.quat_qpos[1]] = -tilted  # the same rotation, the other sign
+    sim.reset(qpos, qvel)
+    blocks = _blocks(match, match.observer.build())
+    np.testing.assert_allclose(blocks[0]["self_orientation"], [1.0, 0.0, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(blocks[1]["self_orientation"], roll, atol=1e-6)
+
+
+def test_contact_forces_are_rotated_then_clipped() -> None:
+    """With a small clip most contact forces saturate; no heading-frame component exceeds it (clipping
+    on world axes and rotating after lets components reach sqrt(2) times the clip)."""
+    clip = 2.0
+    match = Match(MatchConfig(obs_mode="egocentric", contact_force_clip=clip))
+    match.reset(seed=3)
+    rng = np.random.default_rng(3)
+    at_clip = 0
+    for _ in range(40):
+        obs = match.step_array(rng.uniform(-1, 1, (match.n_agents, 8))).observations
+        for b in _blocks(match, obs):
+            forces = b["contact_force"]
+            assert np.abs(forces).max() <= clip + 1e-6
+            at_clip += int(np.sum(np.isclose(np.abs(forces), clip)))
+        if match.over:
+            match.reset()
+    assert at_clip > 20

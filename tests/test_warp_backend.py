@@ -221,3 +221,27 @@ def test_public_vector_env_reaches_the_warp_backend_and_refuses_what_it_cannot_p
         triplesumo.vector_env(2, scenario="bodies", backend="warp", device="cpu")
     with pytest.raises(ValueError, match="num_threads is for backend='cpu'"):
         triplesumo.vector_env(2, backend="warp", device="cpu", num_threads=2)
+
+
+def test_the_border_rim_reaches_warp_with_the_compiled_model() -> None:
+    """``PhysicsConfig.border_rim`` lives in the MjModel, which Warp takes as it is: its border
+    geoms collide there too, and the agents' legs that land on the rim at a noise-free start
+    touch it in Warp as on the CPU."""
+    from triplesumo.model import PhysicsConfig, names
+
+    cfg = MatchConfig(physics=PhysicsConfig(border_rim=True), reset_noise=ResetNoise(0, 0, 0, 0))
+    env = WarpMatchBatch(cfg, 1, device=DEVICE)
+    rim = [env.match.model.geom(n).id for n in names.BORDER_GEOMS]
+    assert (env.m.geom_contype.numpy()[rim] == 1).all() and (env.m.geom_conaffinity.numpy()[rim] == 1).all()
+    env.reset(0)
+    match = Match(cfg)
+    match.reset(seed=0)
+    for _ in range(5):
+        env.step(torch.zeros((1, 3, 8), device=env.device))
+        match.step_array(np.zeros((3, 8)))
+    n = int(env.d.nacon.numpy()[0])
+    on_warp = {tuple(sorted(map(int, p))) for p in env.d.contact.geom.numpy()[:n] if set(map(int, p)) & set(rim)}
+    on_cpu = {tuple(sorted((int(c.geom1), int(c.geom2)))) for c in match.data.contact[:match.data.ncon]
+              if {int(c.geom1), int(c.geom2)} & set(rim)}
+    assert len(on_cpu) >= 2
+    assert on_warp == on_cpu

@@ -43,9 +43,10 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     torso positions (9) and velocities (9) of the three agents, the world-frame contact
     force on each of the 39 agent geoms summed over all its contacts (117, clipped to
     +-100 N), all qpos (45) and qvel (42); the same vector for every agent.
-    ``obs_mode="egocentric"`` (n = 79): the agent's own body state, the other agents'
-    torso positions and velocities in its heading frame, its distance to the ring edge and
-    its contact forces. Blocks and sizes: ``env.observation_structure[agent]``; details in
+    ``obs_mode="egocentric"`` (n = 79): the agent's own body state (its orientation in its
+    heading frame), the other agents' torso positions and velocities in its heading frame,
+    its distance to the ring edge and its contact forces (rotated into the heading frame,
+    then clipped to +-100 N). Blocks and sizes: ``env.observation_structure[agent]``; details in
     :mod:`triplesumo.rules.observations`.
 
     ## Rewards
@@ -77,7 +78,7 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     every leg joint, Gaussian 0.1 on every qvel. Zero noise gives an identical start.
 
     ## Episode End
-    Termination: on the step the centre of mass (free-joint position, current after the
+    Termination: on the step the torso centre (free-joint position, current after the
     step) of any agent leaves the ring (``max(|x|, |y|) > 2``). Spider out: the team wins;
     Ant or Bug out: Spider wins; both sides out in the same step: a draw. Truncation: the
     step limit (default 500) is reached, a draw; or MuJoCo reports a physics warning (bad
@@ -101,6 +102,18 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
 
     ## Version History
     - v0: first release.
+    - v0, fidelity fixes (the default ``paper`` observations and physics are unchanged, so the
+      shipped zoo policies play exactly as before; no version bump):
+      ``egocentric`` observations changed: ``self_orientation`` is the torso's quaternion in
+      its heading frame (was the world-frame quaternion, although documented as heading
+      frame), and contact forces are rotated into the heading frame before they are
+      clipped (were clipped on world axes first, so components reached ~141 N).
+      Policies trained on ``egocentric`` observations before this must be retrained.
+      ``PhysicsConfig.border_rim`` added: ``border_rim=True`` is the paper's (and
+      RoboSumo's) ring, whose four border cylinders form a solid 3 cm rim; the default
+      stays ``False`` (visual markers, the ring of every shipped policy and published
+      figure) and flips to ``True`` with the rebuilt zoo (Ant 3,000 and Spider 20,000
+      epochs) and the next env version, v1.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": "triplesumo_v0", "is_parallelizable": True,

@@ -61,6 +61,9 @@ class TripleSumoEnv(MatchAccess, gym.Env):
 
     ## Version History
     - v0: first release.
+    - v0, fidelity fixes: ``egocentric`` observations changed and ``PhysicsConfig.border_rim``
+      added (the paper's solid ring rim, off by default until v1); details in
+      :class:`triplesumo.envs.parallel.TripleSumoParallelEnv`.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20}

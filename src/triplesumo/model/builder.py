@@ -6,6 +6,7 @@ PyMJCF models), then given the agent's colour and control range. Start poses
 (:mod:`triplesumo.model.layout`): agents evenly spaced on a circle of
 ``PhysicsConfig.start_radius``, the first at angle 0, each facing the centre, widened
 and turned only where bodies would touch; the compiled ``qpos0`` is that start pose.
+``PhysicsConfig.border_rim`` turns the border markers into the paper's solid rim.
 """
 
 from __future__ import annotations
@@ -39,6 +40,10 @@ def build_spec(agents: tuple[AgentSpec, ...], physics: PhysicsConfig) -> mujoco.
     spec.option.timestep = physics.timestep
     spec.option.integrator = _INTEGRATOR[physics.integrator]
     spec.memory = _memory_bytes(physics.memory)
+    if physics.border_rim:  # the paper's solid rim: MuJoCo's default flags, as RoboSumo's tatami.xml leaves them
+        for name in names.BORDER_GEOMS:
+            geom = spec.geom(name)
+            geom.contype, geom.conaffinity = 1, 1
     half_size = abs(float(spec.geom(names.RING_MARKER_GEOM).fromto[0]))
     poses = start_layout([a.body for a in agents], physics.start_radius, half_size - START_MARGIN)
     for agent, (x, y, yaw) in zip(agents, poses, strict=True):

@@ -174,12 +174,22 @@ def yaw_of(quat: Any, xp: Any) -> Any:
     return xp.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
+def heading_quaternion(quat: Any, yaw: Any, xp: Any) -> Any:
+    """``(..., 4)`` orientations (w, x, y, z) seen from the heading frame rotated by ``yaw``
+    about z, sign chosen so w >= 0 (:func:`triplesumo.rules.observations.heading_quaternion`)."""
+    c, s = xp.cos(yaw / 2.0), xp.sin(yaw / 2.0)
+    w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
+    q = xp.stack([c * w + s * z, c * x + s * y, c * y - s * x, c * z - s * w], axis=-1)
+    return xp.where(q[..., :1] < 0.0, -q, q)
+
+
 def egocentric_observation(pos: Any, vel: Any, quat: Any, angvel: Any, joint_pos: Any, joint_vel: Any,
                            forces: Any, rules: BatchedRules, xp: Any) -> Any:
     """``(E, n, D)`` ``egocentric`` observation of every agent (:meth:`ObservationBuilder.build`).
 
     ``pos``, ``vel``, ``angvel``: ``(E, n, 3)``; ``quat``: ``(E, n, 4)``; ``joint_pos``,
-    ``joint_vel``: ``(E, n, 8)``; ``forces``: ``(E, n, geoms_per_agent, 3)`` world frame.
+    ``joint_vel``: ``(E, n, 8)``; ``forces``: ``(E, n, geoms_per_agent, 3)`` world frame, rotated
+    into each agent's heading frame and then clipped.
     """
     e, n = pos.shape[0], pos.shape[1]
     yaw = yaw_of(quat, xp)
@@ -193,8 +203,8 @@ def egocentric_observation(pos: Any, vel: Any, quat: Any, angvel: Any, joint_pos
     rel_vel = (vel[:, others] - vel[:, :, None, :]) @ rot_t
     edge = rules.half_size - xp.maximum(xp.abs(pos[..., 0]), xp.abs(pos[..., 1]))
     own_vel = (rot @ vel[..., None])[..., 0]
-    local_forces = clip(forces, rules.force_clip, xp) @ rot_t
-    parts = [pos[..., 2:3], quat, joint_pos, own_vel, angvel, joint_vel, edge[..., None],
+    local_forces = clip(forces @ rot_t, rules.force_clip, xp)  # rotate, then clip
+    parts = [pos[..., 2:3], heading_quaternion(quat, yaw, xp), joint_pos, own_vel, angvel, joint_vel, edge[..., None],
              xp.concat([rel_pos, rel_vel], axis=-1).reshape(e, n, -1),
              local_forces.reshape(e, n, -1)]
     return xp.concat(parts, axis=-1)

@@ -10,15 +10,18 @@
     qvel             (nv)             all generalised velocities
 
 ``egocentric`` -- for agent ``i``, in its heading frame (rotated by minus its yaw about z,
-origin at its torso):
+origin at its torso centre):
 
-    self_height (1), self_orientation (4, quaternion w x y z), self_joint_position (one per
+    self_height (1), self_orientation (4, quaternion w x y z of the torso in the heading
+    frame: its roll and pitch only, w >= 0; an upright torso reads 1 0 0 0 whatever its
+    yaw), self_joint_position (one per
     motor: 8 for an ant, 12 for a bug, 16 for a spider), self_velocity (3),
     self_angular_velocity (3, torso frame), self_joint_velocity (one per motor),
     edge_distance (1, half_size - max(|x|, |y|), negative once out),
     <other>_position (3) and <other>_velocity (3) relative to the agent, for each partner
     then each opponent in roster order,
-    contact_force (3 per own geom: 13, 19 or 25 geoms; heading frame, clipped).
+    contact_force (3 per own geom: 13, 19 or 25 geoms; summed over the geom's contacts,
+    rotated into the heading frame, then clipped to +-contact_force_clip).
 
 ``observation_structure(mode)`` gives the ordered block sizes.
 
@@ -41,6 +44,15 @@ def yaw_of(quat: np.ndarray) -> np.ndarray:
     """Heading angle about z of ``(..., 4)`` quaternions (w, x, y, z)."""
     w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
     return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def heading_quaternion(quat: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """``(..., 4)`` orientations ``quat`` (w, x, y, z, world frame) seen from the heading
+    frame that is rotated by ``yaw`` about z: ``conj(q_yaw) * quat``, sign chosen so w >= 0."""
+    c, s = np.cos(yaw / 2.0), np.sin(yaw / 2.0)
+    w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
+    q = np.stack([c * w + s * z, c * x + s * y, c * y - s * x, c * z - s * w], axis=-1)
+    return np.where(q[..., :1] < 0.0, -q, q)
 
 
 class ObservationBuilder:
@@ -120,9 +132,9 @@ class ObservationBuilder:
             obs = self.global_state()
             return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
         forces = sim.contact_forces()
-        _clip(forces, self.force_clip)
         pos, vel, quat = sim.torso_positions(), sim.torso_velocities(), sim.torso_quaternions()
         yaw = yaw_of(quat)
+        orientation = heading_quaternion(quat, yaw)
         c, s_ = np.cos(yaw), np.sin(yaw)
         n = sim.n_agents
         rot = np.zeros((n, 3, 3))  # world -> heading frame of each agent
@@ -137,17 +149,20 @@ class ObservationBuilder:
         ang_vel = sim.torso_angular_velocities()
         rel = np.concatenate([rel_pos, rel_vel], axis=2).reshape(n, -1)
         if self._uniform:
+            local = forces.reshape(n, -1, 3) @ rot_t  # rotate, then clip: every component within the clip
+            _clip(local, self.force_clip)
             out = np.concatenate([
-                pos[:, 2:3], quat, data.qpos[self._joint_qpos].reshape(n, -1), head_vel, ang_vel,
-                data.qvel[self._joint_qvel].reshape(n, -1), edge[:, None], rel,
-                (forces.reshape(n, -1, 3) @ rot_t).reshape(n, -1),
+                pos[:, 2:3], orientation, data.qpos[self._joint_qpos].reshape(n, -1), head_vel, ang_vel,
+                data.qvel[self._joint_qvel].reshape(n, -1), edge[:, None], rel, local.reshape(n, -1),
             ], axis=1, dtype=np.float32)
             return list(out)
         qpos = np.split(data.qpos[self._joint_qpos], self._joint_split)
         qvel = np.split(data.qvel[self._joint_qvel], self._joint_split)
-        own = np.split(forces, self._geom_split)
-        return [np.concatenate([pos[i, 2:3], quat[i], qpos[i], head_vel[i], ang_vel[i], qvel[i], edge[i:i + 1],
-                                rel[i], (own[i] @ rot_t[i]).ravel()], dtype=np.float32) for i in range(n)]
+        own = [f @ rot_t[i] for i, f in enumerate(np.split(forces, self._geom_split))]
+        for f in own:
+            _clip(f, self.force_clip)
+        return [np.concatenate([pos[i, 2:3], orientation[i], qpos[i], head_vel[i], ang_vel[i], qvel[i],
+                                edge[i:i + 1], rel[i], own[i].ravel()], dtype=np.float32) for i in range(n)]
 
 
 def _clip(values: np.ndarray, limit: float) -> None:

@@ -4,8 +4,10 @@ Two rule sets (``MatchConfig.rules``), written once here over plain sequences.
 
 ``first_out`` (the paper)
 
-An agent is *out* when its centre of mass (the torso free joint's position, current
-after the step) is outside the ring: ``max(|x|, |y|) > half_size``.
+An agent is *out* when its torso centre (the torso free joint's position, current
+after the step) is outside the ring: ``max(|x|, |y|) > half_size``. (The paper says
+"centre of mass"; its code, like this one, tests the torso body's position, not the
+whole body's centre of mass.)
 
 The match ends on the first step in which any agent is out. Then every team with an
 agent out loses and every other team wins. If every team has an agent out in the same
@@ -59,7 +61,7 @@ def outcome_name(code: int) -> str:
 
 
 def agents_out(torso_xy: Sequence[Sequence[float]], half_size: float) -> list[bool]:
-    """Whose centre of mass is outside the ring, per agent; ``torso_xy`` rows start with x, y.
+    """Whose torso centre is outside the ring, per agent; ``torso_xy`` rows start with x, y.
 
     Plain Python on the rows (a list, or an array's ``tolist()``): for a handful of agents
     this is several times faster than numpy's per-call overhead.
@@ -99,7 +101,7 @@ class Elimination:
     """One step judged under ``elimination``, per agent in roster order."""
 
     leaving: list[bool]
-    """Eliminated on this step (it was in play and its centre of mass is out)."""
+    """Eliminated on this step (it was in play and its torso centre is out)."""
     alive: list[bool]
     """Still in play after this step."""
     over: bool

@@ -126,7 +126,7 @@ _PAPER_DOC = """\
 ``ant`` (red, +-0.20) and ``bug`` (blue, +-0.18), one team, against ``spider`` (green, +-0.22).
 
 ## Rules
-``first_out``: the match ends on the first step any agent's centre of mass leaves the ring.
+``first_out``: the match ends on the first step any agent's torso centre leaves the ring.
 
 ## Rewards
 The paper's hybrid reward (velocity terms, still punishment) plus +500 to the winning side,
@@ -143,7 +143,7 @@ _FFA_DOC = """\
 own team, in distinct colours, control range +-0.20.
 
 ## Rules
-``elimination``: an agent whose centre of mass leaves the ring is eliminated: terminated on
+``elimination``: an agent whose torso centre leaves the ring is eliminated: terminated on
 that step, absent from ``env.agents`` afterwards, its body gets zero control. Every other
 agent still in play is an opponent.
 
