@@ -603,14 +603,14 @@ def league_demo(run_dir: Path, epochs: int = 40, seed: int = 0, max_steps: int =
         for epoch in chunk:
             side, other = ("team", "spider") if epoch % 2 == 0 else ("spider", "team")
             plan.append((side, league.sample(other)[0], learner_policies(side, epoch)))
-        lineups = []
-        for k, (side, opponent, mine) in enumerate(plan):
-            seated = league.policies(opponent, seed=seed + chunk[k]) | {
-                r: BUILTIN[s](seed + chunk[k]) if s == "random" else BUILTIN[s]() for r, s in mine.items()}
+        lineups, seeds = [], [seed * 100_003 + epoch for epoch in chunk]
+        for epoch, (_, opponent, mine) in zip(chunk, plan, strict=True):
+            seated = league.policies(opponent, seed=seed + epoch) | {
+                r: BUILTIN[s](seed + epoch) if s == "random" else BUILTIN[s]() for r, s in mine.items()}
             lineups.append([seated[a] for a in order])
-        results = play_matches(lambda i: lineups[i], lambda i: seed * 100_003 + chunk[i], len(chunk), match_cfg,
+        results = play_matches(lineups.__getitem__, seeds.__getitem__, len(chunk), match_cfg,
                                n_envs=min(n_envs, len(chunk)), n_threads=1)
-        for epoch, (side, opponent, mine), res in zip(chunk, plan, results, strict=True):
+        for epoch, (side, opponent, _), res in zip(chunk, plan, results, strict=True):
             team_outcome, spider_outcome = res.outcomes[0], res.outcomes[2]
             if "error" in (team_outcome, spider_outcome):
                 continue
