@@ -240,3 +240,29 @@ def test_scripted_2v1_league_admits_stronger_snapshots_and_moves_ratings(tmp_pat
     assert len(rows) == 1 + 2 * 24
     assert (tmp_path / "plots" / "league.png").stat().st_size > 10_000
     assert as_json(League.load(tmp_path).state_dict()) == as_json(lg.state_dict())
+
+
+def test_zoo_members_are_copied_into_the_run_folder_and_play_as_the_zoo_policy(tmp_path: Path) -> None:
+    from triplesumo.agents.zoo import load as zoo_load
+
+    lg = League(tmp_path, LeagueConfig(zoo=("spider=zoo:spider",)), SIDES)
+    (snap,) = lg.pools["spider"].members
+    assert snap.source == "zoo" and snap.policies == {"spider": "members/spider-0001/spider"}
+    assert (tmp_path / "league" / "members" / "spider-0001" / "spider.safetensors").is_file()
+    assert len(snap.sha256) == 2 and lg.pools["team"].members == []  # the team pool's roles were not named
+    ours, theirs = lg.policies(snap)["spider"], zoo_load("spider")[0]
+    obs = np.linspace(-1.0, 1.0, ours.obs_dim).astype(np.float32)
+    np.testing.assert_array_equal(ours(obs), theirs(obs))
+
+
+def test_league_config_generates_cli_flags_and_back() -> None:
+    import argparse
+
+    from triplesumo import _dcargs
+
+    parser = argparse.ArgumentParser()
+    _dcargs.add_arguments(parser, LeagueConfig)
+    cfg = _dcargs.build(LeagueConfig, parser.parse_args(
+        ["--threshold", "0.7", "--sampling", "uniform", "--zoo", "spider=zoo:spider", "ant=passive"]))
+    assert cfg == LeagueConfig(threshold=0.7, sampling="uniform", zoo=("spider=zoo:spider", "ant=passive"))
+    assert _dcargs.build(LeagueConfig, parser.parse_args(_dcargs.to_argv(cfg))) == cfg
