@@ -152,6 +152,15 @@ def test_ratings_move_with_results_for_teams_and_free_for_all(tmp_path: Path) ->
     ffa.record_match([[me], ["ffa-0003"], ["ffa-0003"]], [2, 1, 3])
     assert ffa.ratings["ffa-0003"].mu > before.mu and ffa.ratings.matches["ffa-0003"] == 1
     assert ffa.pools["ffa"].window[-1] == 0
+    # by seat: a team snapshot drives both its seats and is one player
+    two = league(tmp_path / "seats")
+    two.admit("team", 1, builtin={"ant": "passive", "bug": "passive"})
+    one = league(tmp_path / "teams")
+    one.admit("team", 1, builtin={"ant": "passive", "bug": "passive"})
+    two.record_seat_outcomes(["team-0002", "team-0002", "spider:learner"], ["loss", "loss", "win"])
+    one.record_outcomes([["team-0002"], ["spider:learner"]], ["loss", "win"])
+    assert two.state_dict()["ratings"] == one.state_dict()["ratings"]
+    assert list(two.pools["spider"].window) == [1] and two.pools["team"].members[1].games == 1
     with pytest.raises(KeyError, match="ffa-0099"):
         ffa.record_match([[me], ["ffa-0099"]], [1, 2])
 

@@ -320,19 +320,36 @@ class League:
         if len(rated_teams) >= 2:
             self.ratings.record(rated_teams, rated_places)
         best = min(places)
-        for team, place in zip(teams, places, strict=True):
+        for t, (team, place) in enumerate(zip(teams, places, strict=True)):
             for name in team:
                 if not self._is_learner(name):
                     continue
                 pool = self.pools[name.split(":")[0]]
                 pool.window.append(int(place == best and list(places).count(best) == 1))
-                for other, other_place in zip(teams, places, strict=True):
-                    for opp in other:
+                for u, (other, other_place) in enumerate(zip(teams, places, strict=True)):
+                    for opp in other if u != t else ():  # teammates are not opponents
                         if not self._is_learner(opp):
                             m = self.member(opp)
                             m.games += 1
                             m.wins += int(place < other_place)
                             m.draws += int(place == other_place)
+
+    def record_seats(self, players: Sequence[str], places: Sequence[float]) -> None:
+        """:meth:`record_match` from one player per seat (roster order) and each seat's place: the seats
+        of one player (a snapshot of a team drives all its seats) form one team, placed as its first seat."""
+        if len(players) != len(places):
+            raise ValueError(f"one place per seat, got {len(players)} players and {len(places)} places")
+        first: dict[str, float] = {}
+        for name, place in zip(players, places, strict=True):
+            first.setdefault(name, place)
+        self.record_match([[n] for n in first], list(first.values()))
+
+    def record_seat_outcomes(self, players: Sequence[str], outcomes: Sequence[str]) -> None:
+        """:meth:`record_seats` from each seat's ``win``/``loss``/``draw`` (a :class:`SeatedResult`'s outcomes)."""
+        bad = [o for o in outcomes if o not in PLACE_OF_OUTCOME]
+        if bad:
+            raise ValueError(f"outcomes must be among {sorted(PLACE_OF_OUTCOME)}, got {bad}")
+        self.record_seats(players, [PLACE_OF_OUTCOME[o] for o in outcomes])
 
     def record_outcomes(self, teams: Sequence[Sequence[str]], outcomes: Sequence[str]) -> None:
         """:meth:`record_match` from each team's ``win``/``loss``/``draw``."""
@@ -611,12 +628,11 @@ def league_demo(run_dir: Path, epochs: int = 40, seed: int = 0, max_steps: int =
         results = play_matches(lineups.__getitem__, seeds.__getitem__, len(chunk), match_cfg,
                                n_envs=min(n_envs, len(chunk)), n_threads=1)
         for epoch, (side, opponent, _), res in zip(chunk, plan, results, strict=True):
-            team_outcome, spider_outcome = res.outcomes[0], res.outcomes[2]
-            if "error" in (team_outcome, spider_outcome):
+            if "error" in res.outcomes:
                 continue
-            players = ([League.learner("team")], [opponent.id]) if side == "team" else \
-                ([opponent.id], [League.learner("spider")])
-            league.record_outcomes(players, [team_outcome, spider_outcome])
+            team_player, spider_player = ((League.learner("team"), opponent.id) if side == "team"
+                                          else (opponent.id, League.learner("spider")))
+            league.record_seat_outcomes([team_player, team_player, spider_player], res.outcomes)
             for s in league.pools:
                 if league.admit_due(s, epoch):
                     league.admit(s, epoch, builtin=learner_policies(s, epoch))
