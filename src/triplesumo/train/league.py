@@ -14,7 +14,9 @@ The rules, after AlphaStar's league and RLlib's league example:
 * **Results.** :meth:`League.record_match` takes the players of a match grouped by team
   with their places (1 = first; equal places a draw). Every player is rated with openskill
   (:class:`~triplesumo.evaluation.ratings.RatingTable`, teams of any size, any number of
-  teams); a player seated twice in one match is rated once, at its first seat. Each learner
+  teams); a player seated twice in one match is rated once, at its first seat
+  (:meth:`League.record_seats` takes one player per seat, as
+  :func:`~triplesumo.evaluation.runner.play_matches` reports them). Each learner
   in the match appends 1 (it finished first, alone) or 0 to its side's win-rate window of
   the last :attr:`LeagueConfig.window` matches, and each member it met counts the
   learner's result against it (win: better place, draw: same place, loss: worse).
@@ -41,7 +43,9 @@ Persistence: :meth:`League.save` writes ``RUN/league/pool.json`` atomically: mem
 (with the sha256 of every file), evicted members, ratings, win-rate windows, the RNG
 state. :meth:`League.load` checks every file against its sha256 and restores the league
 exactly (the same next samples, the same ratings); :meth:`League.state_dict` /
-:meth:`League.load_state_dict` give the same state for a checkpoint. :meth:`League.epoch_end`
+:meth:`League.load_state_dict` give the same state for a checkpoint (a trainer resuming from a
+checkpoint restores the league from the state in it, which matches its networks, rather
+than from ``pool.json``, which is the newest). :meth:`League.epoch_end`
 returns the scalars to log and appends them to ``RUN/league/league.csv``, which
 :func:`plot_league` draws.
 """
