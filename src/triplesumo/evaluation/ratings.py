@@ -136,6 +136,27 @@ class RatingTable:
         """Names by decreasing ``mu`` (ties by name)."""
         return sorted(self._ratings, key=lambda n: (-self[n].mu, n))
 
+    def set(self, name: str, rating: Rating, matches: int = 0) -> None:
+        """Give ``name`` the belief ``rating`` (a new player starts from another's, e.g. a snapshot
+        of a learner from the learner's) and a match count."""
+        if not (math.isfinite(rating.mu) and math.isfinite(rating.sigma) and rating.sigma > 0):
+            raise ValueError(f"a rating needs a finite mu and a finite sigma > 0, got {rating}")
+        self._ratings[name] = self.model.rating(mu=rating.mu, sigma=rating.sigma, name=name)
+        self.matches[name] = int(matches)
+
+    def state_dict(self) -> dict[str, Any]:
+        """The table as JSON-able data (model, and per player mu, sigma, matches, in order)."""
+        return {"model": self.model_name,
+                "players": [[n, float(r.mu), float(r.sigma), self.matches[n]] for n, r in self._ratings.items()]}
+
+    @classmethod
+    def from_state_dict(cls, state: dict[str, Any]) -> RatingTable:
+        """The table :meth:`state_dict` described, exactly (floats round-trip through JSON)."""
+        table = cls(str(state["model"]))
+        for name, mu, sigma, matches in state["players"]:
+            table.set(str(name), Rating(float(mu), float(sigma)), int(matches))
+        return table
+
     def win_probability(self, teams: Sequence[Sequence[str]]) -> list[float]:
         """openskill's predicted probability that each team wins a match between them."""
         return [float(p) for p in self.model.predict_win([[self._player(n) for n in team] for team in teams])]

@@ -1,0 +1,646 @@
+"""Self-play leagues: pools of policy snapshots that learners play against, with ratings.
+
+A :class:`League` holds one :class:`OpponentPool` per *side*, a group of seats one
+learner drives (the paper's 2-vs-1: side ``team`` with roles ``ant`` and ``bug``, side
+``spider`` with role ``spider``; free-for-all: one side ``ffa`` with one role whose
+network takes any seat). A pool member, a :class:`Snapshot`, is one player: a policy
+per role (policy file pairs under ``RUN/league/members/ID/ROLE.{json,safetensors}``, or
+a built-in name) with its id, source (``self``: a learner's snapshot; ``zoo``: seeded
+from :attr:`LeagueConfig.zoo`), the epoch it joined and the results of the learner that
+faces it. Learners are players too (``SIDE:learner``).
+
+The rules, after AlphaStar's league and RLlib's league example:
+
+* **Results.** :meth:`League.record_match` takes the players of a match grouped by team
+  with their places (1 = first; equal places a draw). Every player is rated with openskill
+  (:class:`~triplesumo.evaluation.ratings.RatingTable`, teams of any size, any number of
+  teams); a player seated twice in one match is rated once, at its first seat
+  (:meth:`League.record_seats` takes one player per seat, as
+  :func:`~triplesumo.evaluation.runner.play_matches` reports them). Each learner
+  in the match appends 1 (it finished first, alone) or 0 to its side's win-rate window of
+  the last :attr:`LeagueConfig.window` matches, and each member it met counts the
+  learner's result against it (win: better place, draw: same place, loss: worse).
+* **Admission.** At epochs that are multiples of :attr:`LeagueConfig.snapshot_every`, a
+  side whose window is full and whose win rate is strictly greater than
+  :attr:`LeagueConfig.threshold` is due (:meth:`League.admit_due`); :meth:`League.admit`
+  then has the trainer write the learner's policy files, adds the snapshot (rated as the
+  learner is at that moment) and empties the window, so the next snapshot must beat the
+  grown pool.
+* **Sampling.** :meth:`League.sample` draws opponents from a side's pool with the
+  league's ``numpy`` Generator, member ``i`` with probability ``w_i / sum(w)``:
+  ``uniform``: ``w_i = 1``; ``latest``: only the newest member; ``pfsp`` (prioritised
+  fictitious self-play): ``w_i = f(p_i)`` where ``p_i = (wins_i + 1) / (games_i + 2)``
+  is the facing learner's win rate against member ``i`` (Laplace prior: an unmet member
+  counts 0.5), with AlphaStar's weightings ``hard``: ``f(p) = (1 - p) ** exponent``
+  (mostly the opponents it loses to) or ``variance``: ``f(p) = p (1 - p)`` (mostly the
+  even matches).
+* **Size limit.** Past :attr:`LeagueConfig.max_size` members the oldest is evicted
+  (FIFO), except the first member and the best-rated one (highest ``mu``). An evicted
+  member's files stay under ``members/`` (listed as ``evicted``), so any checkpoint
+  that still names it resumes.
+
+Persistence: :meth:`League.save` writes ``RUN/league/pool.json`` atomically: members
+(with the sha256 of every file), evicted members, ratings, win-rate windows, the RNG
+state. :meth:`League.load` checks every file against its sha256 and restores the league
+exactly (the same next samples, the same ratings); :meth:`League.state_dict` /
+:meth:`League.load_state_dict` give the same state for a checkpoint (a trainer resuming from a
+checkpoint restores the league from the state in it, which matches its networks, rather
+than from ``pool.json``, which is the newest). :meth:`League.epoch_end`
+returns the scalars to log and appends them to ``RUN/league/league.csv``, which
+:func:`plot_league` draws.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from triplesumo.agents.builtin import ACTION_SIZE, BUILTIN
+from triplesumo.agents.policy_file import (
+    PolicyFileError,
+    atomic_write_bytes,
+    file_sha256,
+    load_fixed_policy,
+    load_json,
+)
+from triplesumo.agents.zoo import ZOO_DIR, available
+from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Rating, RatingTable
+
+SAMPLING = ("uniform", "latest", "pfsp")
+"""Opponent sampling rules (see the module docstring)."""
+PFSP_WEIGHTINGS = ("hard", "variance")
+"""AlphaStar's PFSP weightings: ``hard`` ``(1 - p) ** exponent``, ``variance`` ``p (1 - p)``."""
+POOL_FORMAT = "triplesumo-league/1"
+POOL_FILE = "pool.json"
+LOG_FILE = "league.csv"
+LOG_COLUMNS = ("epoch", "side", "pool_size", "learner_mu", "learner_sigma", "mean_opponent_mu", "admitted",
+               "members")
+
+
+@dataclass(frozen=True)
+class LeagueConfig:
+    """Self-play: learners play against pools of their own past snapshots and the zoo."""
+
+    threshold: float = 0.55
+    """Admit a learner's snapshot when its win rate over the last ``window`` matches is greater than this."""
+    window: int = 50
+    """Matches in the win-rate window that admission looks at (it must be full)."""
+    sampling: str = "pfsp"
+    """How opponents are drawn from a pool: uniform, latest or pfsp (prioritised fictitious self-play)."""
+    pfsp_weighting: str = "hard"
+    """pfsp weights of a member the learner beats with probability p: hard ((1 - p) ** pfsp_exponent) or
+    variance (p (1 - p))."""
+    pfsp_exponent: float = 2.0
+    """Exponent of the hard pfsp weighting (AlphaStar: 2)."""
+    max_size: int = 20
+    """Most members a pool holds; past it the oldest goes (FIFO), never the first nor the best-rated."""
+    snapshot_every: int = 50
+    """Check the learners for admission every this many epochs."""
+    zoo: tuple[str, ...] = ()
+    """ROLE=POLICY entries seeding each pool with one member (zero, passive, random, zoo:NAME or a policy
+    file); a pool is seeded when every one of its roles is named."""
+    rating_model: str = "PlackettLuce"
+    """openskill model of the ratings: PlackettLuce, BradleyTerryFull, BradleyTerryPart,
+    ThurstoneMostellerFull or ThurstoneMostellerPart."""
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.threshold, int | float) and not isinstance(self.threshold, bool)
+                and 0.0 <= self.threshold < 1.0):
+            raise ValueError(f"LeagueConfig.threshold must be a number in [0, 1), got {self.threshold!r}")
+        for name, minimum in (("window", 1), ("max_size", 3), ("snapshot_every", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
+                raise ValueError(f"LeagueConfig.{name} must be an int >= {minimum}, got {value!r}")
+        if self.sampling not in SAMPLING:
+            raise ValueError(f"LeagueConfig.sampling must be one of {SAMPLING}, got {self.sampling!r}")
+        if self.pfsp_weighting not in PFSP_WEIGHTINGS:
+            raise ValueError(f"LeagueConfig.pfsp_weighting must be one of {PFSP_WEIGHTINGS}, "
+                             f"got {self.pfsp_weighting!r}")
+        if not (isinstance(self.pfsp_exponent, int | float) and math.isfinite(self.pfsp_exponent)
+                and self.pfsp_exponent > 0):
+            raise ValueError(f"LeagueConfig.pfsp_exponent must be a finite number > 0, got {self.pfsp_exponent!r}")
+        if self.rating_model not in MODELS:
+            raise ValueError(f"LeagueConfig.rating_model must be one of {sorted(MODELS)}, "
+                             f"got {self.rating_model!r}")
+        roles: set[str] = set()
+        for entry in self.zoo:
+            role, sep, spec = entry.partition("=")
+            if not sep or not role or not spec:
+                raise ValueError(f"LeagueConfig.zoo: expected ROLE=POLICY, got {entry!r}")
+            if role in roles:
+                raise ValueError(f"LeagueConfig.zoo: role {role!r} named twice")
+            roles.add(role)
+            _check_spec(spec, "LeagueConfig.zoo")
+
+
+def _check_spec(spec: str, where: str) -> None:
+    if spec in BUILTIN:
+        return
+    if spec.startswith("zoo:"):
+        if spec[4:] not in available():
+            raise ValueError(f"{where}: no policy {spec[4:]!r} in the zoo; shipped: {available()}")
+        return
+    stem = Path(spec).with_suffix("") if Path(spec).suffix in (".json", ".safetensors") else Path(spec)
+    if not stem.with_suffix(".json").is_file():
+        raise ValueError(f"{where}: {spec!r} is neither a built-in policy ({sorted(BUILTIN)}), zoo:NAME, "
+                         "nor a policy file")
+
+
+@dataclass
+class Snapshot:
+    """A pool member: one player, a policy per role of its side."""
+
+    id: str
+    """Unique in the league: SIDE-NNNN."""
+    side: str
+    """The side whose seats it takes."""
+    source: str
+    """self (a learner's snapshot) or zoo (seeded from LeagueConfig.zoo)."""
+    epoch: int
+    """Epoch it joined the pool."""
+    policies: dict[str, str]
+    """Role -> a built-in policy name, or the stem of its policy files relative to RUN/league."""
+    sha256: dict[str, str] = field(default_factory=dict)
+    """File (relative to RUN/league) -> sha256 of its bytes."""
+    games: int = 0
+    """Matches the facing learner played against it."""
+    wins: int = 0
+    """...of which the learner finished ahead of it."""
+    draws: int = 0
+    """...of which they finished level."""
+
+    @property
+    def p_win(self) -> float:
+        """The facing learner's win rate against it, with a Laplace prior: ``(wins + 1) / (games + 2)``."""
+        return (self.wins + 1) / (self.games + 2)
+
+
+class OpponentPool:
+    """The snapshots of one side, its learner's win-rate window, and the sampling rule."""
+
+    def __init__(self, side: str, roles: tuple[str, ...], config: LeagueConfig) -> None:
+        self.side, self.roles, self.config = side, roles, config
+        self.members: list[Snapshot] = []
+        self.evicted: list[Snapshot] = []
+        self.window: deque[int] = deque(maxlen=config.window)
+        self.created = 0
+        self.admitted_since_log = 0
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+    @property
+    def win_rate(self) -> float:
+        """The learner's win rate over its window (nan while empty)."""
+        return float(np.mean(self.window)) if self.window else math.nan
+
+    def weights(self) -> np.ndarray:
+        """Each member's probability of being drawn, by :attr:`LeagueConfig.sampling` (module docstring)."""
+        n = len(self.members)
+        if n == 0:
+            raise ValueError(f"pool {self.side!r} is empty: seed it (LeagueConfig.zoo) or admit a snapshot first")
+        if self.config.sampling == "uniform":
+            w = np.ones(n)
+        elif self.config.sampling == "latest":
+            w = np.zeros(n)
+            w[-1] = 1.0
+        else:
+            p = np.array([m.p_win for m in self.members])
+            w = (1.0 - p) ** self.config.pfsp_exponent if self.config.pfsp_weighting == "hard" else p * (1.0 - p)
+        return w / w.sum()
+
+    def new_id(self) -> str:
+        self.created += 1
+        return f"{self.side}-{self.created:04d}"
+
+    def evict(self, ratings: RatingTable) -> list[Snapshot]:
+        """Drop the oldest members past ``max_size``, never the first nor the best-rated (highest mu)."""
+        gone: list[Snapshot] = []
+        while len(self.members) > self.config.max_size:
+            best = max(self.members, key=lambda m: ratings[m.id].mu)  # ties: the earliest
+            keep = {self.members[0].id, best.id}
+            victim = next(m for m in self.members if m.id not in keep)
+            self.members.remove(victim)
+            self.evicted.append(victim)
+            gone.append(victim)
+        return gone
+
+
+class League:
+    """Opponent pools of every side of a run, their ratings and the sampling RNG (module docstring).
+
+    Args:
+        run_dir: The run folder; the league lives in ``run_dir/league``.
+        config: The league's rules.
+        sides: Side name -> its roles (``{"team": ("ant", "bug"), "spider": ("spider",)}``).
+        seed: Seeds the sampling Generator.
+        epoch: The epoch the zoo members join at.
+    """
+
+    def __init__(self, run_dir: Path, config: LeagueConfig, sides: Mapping[str, Sequence[str]],
+                 seed: int = 0, epoch: int = 0) -> None:
+        if not sides:
+            raise ValueError("a league needs at least one side")
+        for side, roles in sides.items():
+            if not side or "-" in side or ":" in side or not roles or len(set(roles)) != len(roles):
+                raise ValueError(f"side {side!r}: a name without '-' or ':' and distinct roles, got {list(roles)}")
+        all_roles = {r for roles in sides.values() for r in roles}
+        unknown = [e for e in config.zoo if e.partition("=")[0] not in all_roles]
+        if unknown:
+            raise ValueError(f"LeagueConfig.zoo names roles no side has: {unknown}; roles are {sorted(all_roles)}")
+        self.root = Path(run_dir) / "league"
+        self.config = config
+        self.pools = {side: OpponentPool(side, tuple(roles), config) for side, roles in sides.items()}
+        self.ratings = RatingTable(config.rating_model, [self.learner(s) for s in sides])
+        self.rng = np.random.default_rng(seed)
+        self.epoch = epoch
+        zoo = dict(e.split("=", 1) for e in config.zoo)
+        for side, pool in self.pools.items():
+            if all(r in zoo for r in pool.roles):
+                self._add(side, "zoo", epoch, lambda stems: _copy_specs(zoo, stems), {r: zoo[r] for r in pool.roles})
+
+    @staticmethod
+    def learner(side: str) -> str:
+        """The rating name of a side's learner."""
+        return f"{side}:learner"
+
+    def member(self, member_id: str) -> Snapshot:
+        """A current or evicted member by id."""
+        for pool in self.pools.values():
+            for m in (*pool.members, *pool.evicted):
+                if m.id == member_id:
+                    return m
+        raise KeyError(f"no league member {member_id!r}")
+
+    # -- sampling ---------------------------------------------------------------------------
+    def sample(self, side: str, k: int = 1) -> list[Snapshot]:
+        """``k`` opponents from ``side``'s pool by the sampling rule; distinct while the pool has ``k``."""
+        pool = self._pool(side)
+        w = pool.weights()
+        picks = self.rng.choice(len(w), size=k, replace=bool(k > np.count_nonzero(w)), p=w)
+        return [pool.members[int(i)] for i in picks]
+
+    def policies(self, member: Snapshot, seed: int | None = None,
+                 action_sizes: Mapping[str, int] | None = None) -> dict[str, Any]:
+        """Role -> a callable policy of ``member`` (files as numpy :class:`FrozenPolicy`)."""
+        out: dict[str, Any] = {}
+        for role, spec in member.policies.items():
+            if spec in BUILTIN:
+                size = (action_sizes or {}).get(role, ACTION_SIZE)
+                out[role] = BUILTIN[spec](seed, action_size=size) if spec == "random" else BUILTIN[spec](size)
+            else:
+                out[role] = load_fixed_policy(self.root / spec)[0]
+        return out
+
+    # -- results ----------------------------------------------------------------------------
+    def record_match(self, teams: Sequence[Sequence[str]], places: Sequence[float]) -> None:
+        """Rate one match and update windows and member results (module docstring).
+
+        ``teams[t]`` are the players (``SIDE:learner`` names and member ids) of the team that
+        finished in place ``places[t]``.
+        """
+        if len(teams) != len(places):
+            raise ValueError(f"one place per team, got {len(teams)} teams and {len(places)} places")
+        seen: set[str] = set()
+        rated_teams, rated_places = [], []
+        for team, place in zip(teams, places, strict=True):
+            for name in team:
+                if not self._is_learner(name):
+                    self.member(name)  # raises for an unknown id
+            kept = [n for n in team if n not in seen]
+            seen.update(kept)
+            if kept:
+                rated_teams.append(kept)
+                rated_places.append(place)
+        if len(rated_teams) >= 2:
+            self.ratings.record(rated_teams, rated_places)
+        best = min(places)
+        for t, (team, place) in enumerate(zip(teams, places, strict=True)):
+            for name in team:
+                if not self._is_learner(name):
+                    continue
+                pool = self.pools[name.split(":")[0]]
+                pool.window.append(int(place == best and list(places).count(best) == 1))
+                for u, (other, other_place) in enumerate(zip(teams, places, strict=True)):
+                    for opp in other if u != t else ():  # teammates are not opponents
+                        if not self._is_learner(opp):
+                            m = self.member(opp)
+                            m.games += 1
+                            m.wins += int(place < other_place)
+                            m.draws += int(place == other_place)
+
+    def record_seats(self, players: Sequence[str], places: Sequence[float]) -> None:
+        """:meth:`record_match` from one player per seat (roster order) and each seat's place: the seats
+        of one player (a snapshot of a team drives all its seats) form one team, placed as its first seat."""
+        if len(players) != len(places):
+            raise ValueError(f"one place per seat, got {len(players)} players and {len(places)} places")
+        first: dict[str, float] = {}
+        for name, place in zip(players, places, strict=True):
+            first.setdefault(name, place)
+        self.record_match([[n] for n in first], list(first.values()))
+
+    def record_seat_outcomes(self, players: Sequence[str], outcomes: Sequence[str]) -> None:
+        """:meth:`record_seats` from each seat's ``win``/``loss``/``draw`` (a :class:`SeatedResult`'s outcomes)."""
+        bad = [o for o in outcomes if o not in PLACE_OF_OUTCOME]
+        if bad:
+            raise ValueError(f"outcomes must be among {sorted(PLACE_OF_OUTCOME)}, got {bad}")
+        self.record_seats(players, [PLACE_OF_OUTCOME[o] for o in outcomes])
+
+    def record_outcomes(self, teams: Sequence[Sequence[str]], outcomes: Sequence[str]) -> None:
+        """:meth:`record_match` from each team's ``win``/``loss``/``draw``."""
+        bad = [o for o in outcomes if o not in PLACE_OF_OUTCOME]
+        if bad:
+            raise ValueError(f"outcomes must be among {sorted(PLACE_OF_OUTCOME)}, got {bad}")
+        self.record_match(teams, [PLACE_OF_OUTCOME[o] for o in outcomes])
+
+    # -- admission --------------------------------------------------------------------------
+    def admit_due(self, side: str, epoch: int) -> bool:
+        """Whether ``side``'s learner joins its pool now: at a multiple of ``snapshot_every``, with a
+        full window whose win rate is greater than ``threshold``."""
+        pool = self._pool(side)
+        return (epoch % self.config.snapshot_every == 0 and len(pool.window) == self.config.window
+                and pool.win_rate > self.config.threshold)
+
+    def admit(self, side: str, epoch: int, write: Callable[[Mapping[str, Path]], None] | None = None,
+              builtin: Mapping[str, str] | None = None) -> Snapshot:
+        """Add the learner of ``side`` as a snapshot: ``write(stems)`` writes one policy file pair per role
+        at ``stems[role]`` (e.g. with :func:`~triplesumo.agents.policy_file.save_policy`), or
+        ``builtin`` names a built-in policy per role. The snapshot starts from the learner's rating;
+        the window empties; past the size limit the oldest member goes. Saves ``pool.json``."""
+        pool = self._pool(side)
+        if (write is None) == (builtin is None):
+            raise ValueError("admit needs exactly one of write (policy files) or builtin (policy names)")
+        if builtin is not None:
+            missing = [r for r in pool.roles if builtin.get(r) not in BUILTIN]
+            if missing:
+                raise ValueError(f"admit: builtin must name a built-in policy ({sorted(BUILTIN)}) for roles {missing}")
+        snap = self._add(side, "self", epoch, write, dict(builtin) if builtin is not None else None)
+        self.ratings.set(snap.id, self.ratings[self.learner(side)])
+        pool.window.clear()
+        pool.evict(self.ratings)
+        self.save()
+        return snap
+
+    def _add(self, side: str, source: str, epoch: int, write: Callable[[Mapping[str, Path]], None] | None,
+             specs: dict[str, str] | None) -> Snapshot:
+        pool = self.pools[side]
+        member_id = pool.new_id()
+        folder = self.root / "members" / member_id
+        files = {r: folder / r for r in pool.roles if specs is None or specs[r] not in BUILTIN}
+        if files:
+            folder.mkdir(parents=True, exist_ok=True)
+            assert write is not None
+            write(files)
+        policies, sums = {}, {}
+        for role in pool.roles:
+            if role not in files:
+                policies[role] = (specs or {})[role]
+                continue
+            policies[role] = files[role].relative_to(self.root).as_posix()
+            for suffix in (".json", ".safetensors"):
+                path = files[role].with_suffix(suffix)
+                if not path.is_file():
+                    raise PolicyFileError(f"{path}: snapshot {member_id} lacks its {role!r} policy file")
+                sums[path.relative_to(self.root).as_posix()] = file_sha256(path)
+        snap = Snapshot(member_id, side, source, epoch, policies, sums)
+        pool.members.append(snap)
+        pool.admitted_since_log += 1
+        if snap.id not in self.ratings:
+            self.ratings.set(snap.id, Rating(self.ratings.model.mu, self.ratings.model.sigma))
+        return snap
+
+    # -- logging ----------------------------------------------------------------------------
+    def epoch_end(self, epoch: int) -> dict[str, float]:
+        """Scalars to log for ``epoch`` (``league/SIDE/...``: pool size, learner mu and sigma, mean
+        opponent mu, snapshots admitted since the last call), also appended to ``league.csv``."""
+        self.epoch = epoch
+        out: dict[str, float] = {}
+        rows = []
+        for side, pool in self.pools.items():
+            me = self.ratings[self.learner(side)]
+            opp = float(np.mean([self.ratings[m.id].mu for m in pool.members])) if pool.members else math.nan
+            values = {"pool_size": float(len(pool)), "learner_mu": me.mu, "learner_sigma": me.sigma,
+                      "mean_opponent_mu": opp, "admitted": float(pool.admitted_since_log)}
+            out |= {f"league/{side}/{k}": v for k, v in values.items()}
+            rows.append([epoch, side, len(pool), repr(me.mu), repr(me.sigma), repr(opp), pool.admitted_since_log,
+                         " ".join(m.id for m in pool.members)])
+            pool.admitted_since_log = 0
+        self.root.mkdir(parents=True, exist_ok=True)
+        log = self.root / LOG_FILE
+        new = not log.exists()
+        with open(log, "a", newline="") as fh:
+            writer = csv.writer(fh)
+            if new:
+                writer.writerow(LOG_COLUMNS)
+            writer.writerows(rows)
+        return out
+
+    # -- persistence ------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        """The whole league as JSON-able data (the member files stay in ``RUN/league``)."""
+        return {
+            "format": POOL_FORMAT,
+            "config": asdict(self.config),
+            "epoch": self.epoch,
+            "sides": {s: list(p.roles) for s, p in self.pools.items()},
+            "pools": {s: {"members": [asdict(m) for m in p.members], "evicted": [asdict(m) for m in p.evicted],
+                          "window": list(p.window), "created": p.created, "admitted_since_log": p.admitted_since_log}
+                      for s, p in self.pools.items()},
+            "ratings": self.ratings.state_dict(),
+            "rng": self.rng.bit_generator.state,
+        }
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`state_dict` exactly, after checking every member file against its sha256."""
+        if state.get("format") != POOL_FORMAT:
+            raise PolicyFileError(f"league state: format {state.get('format')!r}, expected {POOL_FORMAT!r}")
+        if {s: list(r) for s, r in state["sides"].items()} != {s: list(p.roles) for s, p in self.pools.items()}:
+            raise ValueError(f"league state has sides {state['sides']}, this league "
+                             f"{ {s: list(p.roles) for s, p in self.pools.items()} }")
+        pools = {}
+        for side, data in state["pools"].items():
+            pool = OpponentPool(side, self.pools[side].roles, self.config)
+            pool.members = [Snapshot(**m) for m in data["members"]]
+            pool.evicted = [Snapshot(**m) for m in data["evicted"]]
+            pool.window.extend(int(x) for x in data["window"])
+            pool.created, pool.admitted_since_log = int(data["created"]), int(data["admitted_since_log"])
+            for m in (*pool.members, *pool.evicted):
+                for rel, digest in m.sha256.items():
+                    path = self.root / rel
+                    if not path.is_file():
+                        raise PolicyFileError(f"{path}: league member {m.id} lacks this file")
+                    if file_sha256(path) != digest:
+                        raise PolicyFileError(f"{path}: sha256 differs from the league's record (damaged or replaced)")
+            pools[side] = pool
+        self.pools = pools
+        self.ratings = RatingTable.from_state_dict(state["ratings"])
+        self.rng = np.random.default_rng()
+        self.rng.bit_generator.state = state["rng"]
+        self.epoch = int(state["epoch"])
+
+    def save(self) -> Path:
+        """Write ``RUN/league/pool.json`` atomically; returns its path."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        path = self.root / POOL_FILE
+        atomic_write_bytes(path, (json.dumps(self.state_dict(), indent=1) + "\n").encode())
+        return path
+
+    @classmethod
+    def load(cls, run_dir: Path, config: LeagueConfig | None = None) -> League:
+        """The league saved in ``run_dir/league`` (files checked); ``league.csv`` rows past its epoch
+        are cut, so a resumed run logs every epoch once."""
+        root = Path(run_dir) / "league"
+        state = load_json(root / POOL_FILE)
+        if state.get("format") != POOL_FORMAT:
+            raise PolicyFileError(f"{root / POOL_FILE}: format {state.get('format')!r}, expected {POOL_FORMAT!r}")
+        saved: dict[str, Any] = {k: tuple(v) if k == "zoo" else v for k, v in state["config"].items()}
+        cfg = config or LeagueConfig(**saved)
+        league = cls.__new__(cls)
+        league.root, league.config = root, cfg
+        league.pools = {s: OpponentPool(s, tuple(r), cfg) for s, r in state["sides"].items()}
+        league.load_state_dict(state)
+        league.truncate_log(league.epoch)
+        return league
+
+    def truncate_log(self, epoch: int) -> None:
+        """Drop ``league.csv`` rows of epochs after ``epoch`` (written before a resume point)."""
+        log = self.root / LOG_FILE
+        if not log.exists():
+            return
+        lines = log.read_text().splitlines(keepends=True)
+        first = [ln.split(",", 1)[0] for ln in lines]
+        kept = lines[:1] + [ln for ln, e in zip(lines[1:], first[1:], strict=True) if e.isdigit() and int(e) <= epoch]
+        atomic_write_bytes(log, "".join(kept).encode())
+
+    # -- helpers ----------------------------------------------------------------------------
+    def _pool(self, side: str) -> OpponentPool:
+        if side not in self.pools:
+            raise KeyError(f"no side {side!r}; sides are {sorted(self.pools)}")
+        return self.pools[side]
+
+    def _is_learner(self, name: str) -> bool:
+        side, sep, rest = name.partition(":")
+        return bool(sep) and rest == "learner" and side in self.pools
+
+
+def _copy_specs(specs: Mapping[str, str], stems: Mapping[str, Path]) -> None:
+    """Copy the policy files named by ``specs`` (zoo:NAME or a path) to ``stems``."""
+    for role, stem in stems.items():
+        spec = specs[role]
+        src = ZOO_DIR / spec[4:] if spec.startswith("zoo:") else Path(spec)
+        src = src.with_suffix("") if src.suffix in (".json", ".safetensors") else src
+        for suffix in (".json", ".safetensors"):
+            shutil.copyfile(src.with_name(src.name + suffix), stem.with_name(stem.name + suffix))
+
+
+def plot_league(run_dir: Path, path: Path | None = None) -> Path:
+    """Plot ``RUN/league/league.csv``: each learner's rating mu over epochs with its +- 1.96 sigma band
+    (top) and its pool's size and the members it held (bottom). Writes ``RUN/plots/league.png``
+    unless ``path`` is given; returns the path."""
+    from matplotlib.figure import Figure
+
+    log = Path(run_dir) / "league" / LOG_FILE
+    if not log.is_file():
+        raise FileNotFoundError(f"{log}: no league log (a run without --self-play?)")
+    with open(log, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        raise ValueError(f"{log}: no rows yet")
+    fig = Figure(figsize=(7.5, 6.0))
+    ax, bx = fig.subplots(2, 1, sharex=True)
+    for side in dict.fromkeys(r["side"] for r in rows):
+        mine = [r for r in rows if r["side"] == side]
+        epoch = np.array([int(r["epoch"]) for r in mine])
+        mu = np.array([float(r["learner_mu"]) for r in mine])
+        sigma = np.array([float(r["learner_sigma"]) for r in mine])
+        line = ax.plot(epoch, mu, label=f"{side} learner")[0]
+        ax.fill_between(epoch, mu - 1.96 * sigma, mu + 1.96 * sigma, color=line.get_color(), alpha=0.2)
+        opp = np.array([float(r["mean_opponent_mu"]) for r in mine])
+        ax.plot(epoch, opp, linestyle="--", color=line.get_color(), alpha=0.7, label=f"{side} pool mean")
+        ids = sorted({m for r in mine for m in r["members"].split()}, key=lambda m: int(m.rsplit("-", 1)[1]))
+        for m in ids:
+            held = epoch[[m in r["members"].split() for r in mine]]
+            bx.scatter(held, np.full(len(held), f"{m}"), s=6, color=line.get_color())
+    ax.set_ylabel("rating mu (95% band)")
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(alpha=0.3)
+    bx.set_xlabel("epoch")
+    bx.set_ylabel("pool members")
+    bx.tick_params(axis="y", labelsize=7)
+    bx.grid(alpha=0.3)
+    fig.tight_layout()
+    out = Path(path) if path is not None else Path(run_dir) / "plots" / "league.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    fig.clear()
+    return out
+
+
+DEMO_STAGES: dict[str, tuple[str, str]] = {"team": ("random", "passive"), "spider": ("random", "passive")}
+"""The scripted learners of :func:`league_demo`: each side plays the first policy, then the second
+(in the paper's match a passive quadruped out-stays a random one, which walks itself out)."""
+
+
+def league_demo(run_dir: Path, epochs: int = 40, seed: int = 0, max_steps: int = 150,
+                config: LeagueConfig | None = None, n_envs: int = 8) -> League:
+    """A self-play league in the paper's 2-vs-1 without a trainer: scripted learners get stronger.
+
+    Sides ``team`` (Ant and Bug) and ``spider``; each pool is seeded with random players.
+    Epoch ``e`` is one match: the team learner against a Spider drawn from the spider pool on
+    even epochs, the Spider learner against a team drawn from the team pool on odd ones. A
+    learner plays :data:`DEMO_STAGES`' first policy before epoch ``epochs // 4`` and its second
+    after (built-ins: a snapshot is admitted as its built-in names). Matches run through
+    :func:`~triplesumo.evaluation.runner.play_matches`, ``snapshot_every`` at a time, each
+    seeded by its epoch; the league is saved and plotted at the end.
+    """
+    import dataclasses
+
+    from triplesumo.evaluation.runner import play_matches
+    from triplesumo.rules.scenarios import scenario_config
+
+    config = config or LeagueConfig(threshold=0.5, window=10, snapshot_every=10, max_size=4,
+                                    zoo=("ant=random", "bug=random", "spider=random"))
+    league = League(run_dir, config, {"team": ("ant", "bug"), "spider": ("spider",)}, seed=seed)
+    match_cfg = dataclasses.replace(scenario_config("paper"), max_steps=max_steps)
+    order = ("ant", "bug", "spider")
+    block = config.snapshot_every
+
+    def learner_policies(side: str, epoch: int) -> dict[str, str]:
+        spec = DEMO_STAGES[side][0 if epoch < epochs // 4 else 1]
+        return {role: spec for role in league.pools[side].roles}
+
+    for start in range(1, epochs + 1, block):
+        chunk = list(range(start, min(start + block, epochs + 1)))
+        plan: list[tuple[str, Snapshot, dict[str, str]]] = []
+        for epoch in chunk:
+            side, other = ("team", "spider") if epoch % 2 == 0 else ("spider", "team")
+            plan.append((side, league.sample(other)[0], learner_policies(side, epoch)))
+        lineups, seeds = [], [seed * 100_003 + epoch for epoch in chunk]
+        for epoch, (_, opponent, mine) in zip(chunk, plan, strict=True):
+            seated = league.policies(opponent, seed=seed + epoch) | {
+                r: BUILTIN[s](seed + epoch) if s == "random" else BUILTIN[s]() for r, s in mine.items()}
+            lineups.append([seated[a] for a in order])
+        results = play_matches(lineups.__getitem__, seeds.__getitem__, len(chunk), match_cfg,
+                               n_envs=min(n_envs, len(chunk)), n_threads=1)
+        for epoch, (side, opponent, _), res in zip(chunk, plan, results, strict=True):
+            if "error" in res.outcomes:
+                continue
+            team_player, spider_player = ((League.learner("team"), opponent.id) if side == "team"
+                                          else (opponent.id, League.learner("spider")))
+            league.record_seat_outcomes([team_player, team_player, spider_player], res.outcomes)
+            for s in league.pools:
+                if league.admit_due(s, epoch):
+                    league.admit(s, epoch, builtin=learner_policies(s, epoch))
+            league.epoch_end(epoch)
+    league.save()
+    plot_league(run_dir)
+    return league

@@ -1,0 +1,277 @@
+"""Self-play leagues: admission threshold, sampling frequencies, size limit, exact resume, config
+errors, and a tiny scripted 2-vs-1 league played through the match runner."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.stats import chisquare
+
+from triplesumo.agents.frozen import FrozenPolicy
+from triplesumo.agents.networks import Actor
+from triplesumo.agents.policy_file import PolicyFileError, save_policy
+from triplesumo.evaluation.ratings import Rating, RatingTable
+from triplesumo.train.league import League, LeagueConfig, league_demo, plot_league
+
+SIDES = {"team": ("ant", "bug"), "spider": ("spider",)}
+SEEDED = ("ant=random", "bug=random", "spider=random")
+TEAM = League.learner("team")
+
+
+def league(tmp_path: Path, **kw: object) -> League:
+    cfg = LeagueConfig(**{"zoo": SEEDED, "snapshot_every": 1, **kw})  # type: ignore[arg-type]
+    return League(tmp_path, cfg, SIDES, seed=7)
+
+
+def play(lg: League, results: list[str]) -> None:
+    """The team learner's matches against spider-0001, ``win``/``loss``/``draw`` from the team's side."""
+    other = {"win": "loss", "loss": "win", "draw": "draw"}
+    for r in results:
+        lg.record_outcomes([[TEAM], ["spider-0001"]], [r, other[r]])
+
+
+def as_json(state: dict[str, object]) -> object:
+    return json.loads(json.dumps(state))
+
+
+def write_actor(seed: int, obs_dim: int = 5, act_dim: int = 3):  # type: ignore[no-untyped-def]
+    def write(stems: dict[str, Path]) -> None:
+        for k, (role, stem) in enumerate(stems.items()):
+            torch.manual_seed(seed + k)
+            save_policy(stem, Actor(obs_dim, act_dim, (8,)), {"agent": role, "obs_mode": "paper"})
+    return write
+
+
+def test_a_snapshot_is_admitted_exactly_when_the_window_win_rate_passes_the_threshold(tmp_path: Path) -> None:
+    lg = league(tmp_path, threshold=0.6, window=10)
+    play(lg, ["win"] * 9)
+    assert not lg.admit_due("team", 1)  # 9 of 9 but the window is not full
+    lg.pools["team"].window.clear()
+    play(lg, ["loss"] * 4 + ["win"] * 6)
+    assert lg.pools["team"].win_rate == pytest.approx(0.6)
+    assert not lg.admit_due("team", 1)  # 0.6 does not pass 0.6
+    play(lg, ["win"])  # the oldest loss leaves the window: 0.7
+    assert lg.pools["team"].win_rate == pytest.approx(0.7)
+    assert lg.admit_due("team", 1)
+    assert not lg.admit_due("spider", 1)  # the Spider learner has played nothing
+    snap = lg.admit("team", 1, write=write_actor(3))
+    assert snap.id == "team-0002" and snap.source == "self" and snap.epoch == 1
+    assert [m.id for m in lg.pools["team"].members] == ["team-0001", "team-0002"]
+    assert lg.ratings[snap.id] == lg.ratings[TEAM]  # a snapshot starts where its learner stands
+    assert len(lg.pools["team"].window) == 0 and not lg.admit_due("team", 1)
+    # its files are in the run folder, checksummed, and play as the actor that was written
+    assert set(snap.sha256) == {f"members/team-0002/{r}.{s}" for r in ("ant", "bug") for s in ("json", "safetensors")}
+    policies = lg.policies(snap)
+    assert isinstance(policies["ant"], FrozenPolicy)
+    torch.manual_seed(3)
+    actor = Actor(5, 3, (8,))
+    obs = np.linspace(-1, 1, 5).astype(np.float32)
+    np.testing.assert_allclose(policies["ant"](obs), actor(torch.as_tensor(obs)).detach().numpy(), atol=1e-5)
+    assert json.loads((tmp_path / "league" / "pool.json").read_text())["pools"]["team"]["members"][1]["id"] == snap.id
+
+
+def test_admission_is_checked_only_every_snapshot_every_epochs(tmp_path: Path) -> None:
+    lg = league(tmp_path, threshold=0.5, window=4, snapshot_every=5)
+    play(lg, ["win"] * 4)
+    assert [e for e in range(1, 16) if lg.admit_due("team", e)] == [5, 10, 15]
+
+
+@pytest.mark.parametrize(("sampling", "weighting"), [("uniform", "hard"), ("latest", "hard"), ("pfsp", "hard"),
+                                                      ("pfsp", "variance")])
+def test_sampling_frequencies_follow_the_documented_weights(tmp_path: Path, sampling: str, weighting: str) -> None:
+    lg = league(tmp_path, sampling=sampling, pfsp_weighting=weighting, pfsp_exponent=2.0)
+    for k in range(3):
+        lg.admit("spider", k + 1, builtin={"spider": "passive"})
+    # the team learner's record against each Spider: (games, wins)
+    record = [(10, 9), (10, 5), (10, 1), (0, 0)]
+    for m, (games, wins) in zip(lg.pools["spider"].members, record, strict=True):
+        m.games, m.wins = games, wins
+    p = np.array([(w + 1) / (g + 2) for g, w in record])
+    expected = {"uniform": np.full(4, 0.25), "latest": np.array([0.0, 0.0, 0.0, 1.0]),
+                "pfsp": (1 - p) ** 2 if weighting == "hard" else p * (1 - p)}[sampling]
+    expected = expected / expected.sum()
+    np.testing.assert_allclose(lg.pools["spider"].weights(), expected)
+    n = 8000
+    ids = [m.id for m in lg.pools["spider"].members]
+    draws = [ids.index(lg.sample("spider")[0].id) for _ in range(n)]
+    counts = np.bincount(draws, minlength=4)
+    if sampling == "latest":
+        assert counts.tolist() == [0, 0, 0, n]
+        return
+    nonzero = expected > 0
+    assert chisquare(counts[nonzero], n * expected[nonzero]).pvalue > 0.001
+    if sampling == "pfsp" and weighting == "hard":
+        assert counts[2] > counts[1] > counts[0]  # the Spider it loses to most is drawn most
+
+
+def test_sampling_several_seats_draws_distinct_members_while_the_pool_has_enough(tmp_path: Path) -> None:
+    lg = league(tmp_path, sampling="uniform")
+    lg.admit("spider", 1, builtin={"spider": "passive"})
+    for _ in range(50):
+        a, b = lg.sample("spider", 2)
+        assert a.id != b.id
+    assert len(lg.sample("spider", 3)) == 3  # more seats than members: drawn with replacement
+
+
+def test_size_limit_evicts_fifo_but_keeps_the_first_and_the_best_rated(tmp_path: Path) -> None:
+    lg = league(tmp_path, max_size=3)
+    for e in (1, 2):
+        lg.admit("team", e, write=write_actor(e))
+    lg.ratings.set("team-0002", Rating(40.0, 2.0))  # the best-rated member
+    assert [m.id for m in lg.pools["team"].members] == ["team-0001", "team-0002", "team-0003"]
+    lg.admit("team", 3, write=write_actor(3))
+    assert [m.id for m in lg.pools["team"].members] == ["team-0001", "team-0002", "team-0004"]
+    lg.admit("team", 4, write=write_actor(4))
+    assert [m.id for m in lg.pools["team"].members] == ["team-0001", "team-0002", "team-0005"]
+    assert [m.id for m in lg.pools["team"].evicted] == ["team-0003", "team-0004"]
+    assert (tmp_path / "league" / "members" / "team-0003" / "ant.safetensors").is_file()  # kept for old checkpoints
+    lg.ratings.set("team-0005", Rating(50.0, 2.0))  # now team-0005 is best: team-0002 may go
+    lg.admit("team", 5, write=write_actor(5))
+    assert [m.id for m in lg.pools["team"].members] == ["team-0001", "team-0005", "team-0006"]
+
+
+def test_ratings_move_with_results_for_teams_and_free_for_all(tmp_path: Path) -> None:
+    lg = league(tmp_path)
+    play(lg, ["win"] * 20)
+    assert lg.ratings[TEAM].mu > 25.0 > lg.ratings["spider-0001"].mu
+    assert lg.pools["spider"].members[0].games == 20 and lg.pools["spider"].members[0].wins == 20
+    ffa = League(tmp_path / "ffa", LeagueConfig(zoo=("agent=random",), sampling="uniform"), {"ffa": ("agent",)})
+    for e in (1, 2):
+        ffa.admit("ffa", e, builtin={"agent": "passive"})
+    me = League.learner("ffa")
+    for _ in range(10):
+        ffa.record_match([[me], ["ffa-0001"], ["ffa-0002"]], [1, 2, 3])
+    assert ffa.ratings[me].mu > ffa.ratings["ffa-0001"].mu > ffa.ratings["ffa-0002"].mu
+    assert list(ffa.pools["ffa"].window) == [1] * 10
+    # a member in two seats is rated once, at its first seat
+    before = ffa.ratings["ffa-0003"]
+    ffa.record_match([[me], ["ffa-0003"], ["ffa-0003"]], [2, 1, 3])
+    assert ffa.ratings["ffa-0003"].mu > before.mu and ffa.ratings.matches["ffa-0003"] == 1
+    assert ffa.pools["ffa"].window[-1] == 0
+    # by seat: a team snapshot drives both its seats and is one player
+    two = league(tmp_path / "seats")
+    two.admit("team", 1, builtin={"ant": "passive", "bug": "passive"})
+    one = league(tmp_path / "teams")
+    one.admit("team", 1, builtin={"ant": "passive", "bug": "passive"})
+    two.record_seat_outcomes(["team-0002", "team-0002", "spider:learner"], ["loss", "loss", "win"])
+    one.record_outcomes([["team-0002"], ["spider:learner"]], ["loss", "win"])
+    assert two.state_dict()["ratings"] == one.state_dict()["ratings"]
+    assert list(two.pools["spider"].window) == [1] and two.pools["team"].members[1].games == 1
+    with pytest.raises(KeyError, match="ffa-0099"):
+        ffa.record_match([[me], ["ffa-0099"]], [1, 2])
+
+
+def test_resume_restores_the_league_exactly(tmp_path: Path) -> None:
+    lg = league(tmp_path, sampling="pfsp", threshold=0.5, window=4)
+    lg.admit("spider", 0, builtin={"spider": "passive"})
+    for epoch in range(1, 4):
+        play(lg, ["win", "win", "win", "draw"])
+        opponent = lg.sample("spider")[0]
+        lg.record_outcomes([[TEAM], [opponent.id]], ["win", "loss"])
+        if lg.admit_due("team", epoch):
+            lg.admit("team", epoch, write=write_actor(epoch))
+        lg.epoch_end(epoch)
+    assert len(lg.pools["team"].members) > 1  # snapshots with policy files were admitted
+    lg.save()
+    lg.epoch_end(4)  # logged after the save: a resume from it drops this row
+    back = League.load(tmp_path)
+    assert as_json(back.state_dict()) == as_json(lg.state_dict() | {"epoch": 3})
+    assert [back.sample("spider")[0].id for _ in range(40)] == [lg.sample("spider")[0].id for _ in range(40)]
+    for name in lg.ratings.players:
+        assert back.ratings[name] == lg.ratings[name]
+    assert list(back.pools["team"].window) == list(lg.pools["team"].window)
+    epochs = [ln.split(",")[0] for ln in (tmp_path / "league" / "league.csv").read_text().splitlines()[1:]]
+    assert epochs == ["1", "1", "2", "2", "3", "3"]
+    # state_dict / load_state_dict (what a checkpoint holds) give the same league
+    other = League(tmp_path, lg.config, SIDES, seed=123)
+    other.load_state_dict(json.loads(json.dumps(lg.state_dict())))
+    assert [other.sample("spider")[0].id for _ in range(20)] == [lg.sample("spider")[0].id for _ in range(20)]
+    # a damaged member file is named
+    member = next(m for m in lg.pools["team"].members if m.sha256)
+    damaged = tmp_path / "league" / next(iter(member.sha256))
+    damaged.write_bytes(damaged.read_bytes() + b" ")
+    with pytest.raises(PolicyFileError, match=str(damaged.name)):
+        League.load(tmp_path)
+
+
+def test_rating_table_round_trips_exactly() -> None:
+    table = RatingTable("BradleyTerryFull")
+    table.record([["a", "b"], ["c"]], [1, 2])
+    back = RatingTable.from_state_dict(json.loads(json.dumps(table.state_dict())))
+    assert back.players == table.players and back.matches == table.matches
+    assert all(back[n] == table[n] for n in table.players)
+    back.record([["a"], ["c"]], [2, 1])
+    table.record([["a"], ["c"]], [2, 1])
+    assert back["c"] == table["c"]
+
+
+@pytest.mark.parametrize(("kw", "field"), [
+    ({"threshold": 1.0}, "threshold"), ({"threshold": -0.1}, "threshold"), ({"window": 0}, "window"),
+    ({"sampling": "best"}, "sampling"), ({"pfsp_weighting": "easy"}, "pfsp_weighting"),
+    ({"pfsp_exponent": 0.0}, "pfsp_exponent"), ({"max_size": 2}, "max_size"),
+    ({"snapshot_every": 0}, "snapshot_every"), ({"zoo": ("spider",)}, "zoo"),
+    ({"zoo": ("spider=zoo:nobody",)}, "zoo"), ({"zoo": ("spider=random", "spider=passive")}, "zoo"),
+    ({"rating_model": "Glicko"}, "rating_model"),
+])
+def test_bad_config_names_the_field(kw: dict[str, object], field: str) -> None:
+    with pytest.raises(ValueError, match=f"LeagueConfig.{field}"):
+        LeagueConfig(**kw)  # type: ignore[arg-type]
+
+
+def test_bad_league_use_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="roles no side has"):
+        League(tmp_path, LeagueConfig(zoo=("beetle=random",)), SIDES)
+    lg = League(tmp_path, LeagueConfig(), SIDES)
+    with pytest.raises(ValueError, match="pool 'spider' is empty"):
+        lg.sample("spider")
+    with pytest.raises(KeyError, match="no side 'ffa'"):
+        lg.sample("ffa")
+    with pytest.raises(ValueError, match="exactly one of write"):
+        lg.admit("team", 1)
+    with pytest.raises(FileNotFoundError, match="league.csv"):
+        plot_league(tmp_path)
+
+
+def test_scripted_2v1_league_admits_stronger_snapshots_and_moves_ratings(tmp_path: Path) -> None:
+    cfg = LeagueConfig(threshold=0.5, window=6, snapshot_every=6, max_size=4, zoo=SEEDED)
+    lg = league_demo(tmp_path, epochs=24, max_steps=150, config=cfg)
+    for side in ("team", "spider"):
+        admitted = [m for m in lg.pools[side].members if m.source == "self"]
+        assert admitted, f"no {side} snapshot was admitted"
+        assert set(admitted[-1].policies.values()) == {"passive"}  # the stronger, later stage
+        assert lg.ratings[League.learner(side)].mu > lg.ratings[f"{side}-0001"].mu  # beats the seeded random player
+        assert lg.ratings[League.learner(side)].sigma < 25.0 / 3.0
+    rows = (tmp_path / "league" / "league.csv").read_text().splitlines()
+    assert len(rows) == 1 + 2 * 24
+    assert (tmp_path / "plots" / "league.png").stat().st_size > 10_000
+    assert as_json(League.load(tmp_path).state_dict()) == as_json(lg.state_dict())
+
+
+def test_zoo_members_are_copied_into_the_run_folder_and_play_as_the_zoo_policy(tmp_path: Path) -> None:
+    from triplesumo.agents.zoo import load as zoo_load
+
+    lg = League(tmp_path, LeagueConfig(zoo=("spider=zoo:spider",)), SIDES)
+    (snap,) = lg.pools["spider"].members
+    assert snap.source == "zoo" and snap.policies == {"spider": "members/spider-0001/spider"}
+    assert (tmp_path / "league" / "members" / "spider-0001" / "spider.safetensors").is_file()
+    assert len(snap.sha256) == 2 and lg.pools["team"].members == []  # the team pool's roles were not named
+    ours, theirs = lg.policies(snap)["spider"], zoo_load("spider")[0]
+    obs = np.linspace(-1.0, 1.0, ours.obs_dim).astype(np.float32)
+    np.testing.assert_array_equal(ours(obs), theirs(obs))
+
+
+def test_league_config_generates_cli_flags_and_back() -> None:
+    import argparse
+
+    from triplesumo import _dcargs
+
+    parser = argparse.ArgumentParser()
+    _dcargs.add_arguments(parser, LeagueConfig)
+    cfg = _dcargs.build(LeagueConfig, parser.parse_args(
+        ["--threshold", "0.7", "--sampling", "uniform", "--zoo", "spider=zoo:spider", "ant=passive"]))
+    assert cfg == LeagueConfig(threshold=0.7, sampling="uniform", zoo=("spider=zoo:spider", "ant=passive"))
+    assert _dcargs.build(LeagueConfig, parser.parse_args(_dcargs.to_argv(cfg))) == cfg
