@@ -270,3 +270,29 @@ def test_cli_learn_trains_two_learners_and_plots_each(tmp_path: Path, capsys: py
     assert str(tmp_path / "cli" / "plots" / "ant" / "mwr.png") in out and "plots/bug/mwr.png" in out
     assert main(["train", "--out", str(tmp_path), "--name", "bad", "--learn", "ant=dqn", "--no-progress"]) == 2
     assert "TrainConfig.learn" in capsys.readouterr().err
+
+
+def test_a_checkpoint_keeps_who_is_still_in_play(tmp_path: Path) -> None:
+    """Under elimination rules a checkpoint taken mid-match holds who left, their places and
+    outcomes: the resumed match plays on with the same agents, not with the eliminated one back."""
+    cfg = tiny(tmp_path, "ffa", scenario="ffa", learn=("ant=sac", "bug=sac"), policies=("*=random",),
+               steps_per_epoch=50, sac=SACConfig(hidden=(8, 8), buffer_size=200, learning_starts=1000))
+    trainer = Trainer(cfg)
+    match = trainer.batch.matches[0]
+    spider = match.sim.agents[match.agents.index("spider")]
+    match.data.qpos[spider.root_qpos] = 2.6  # the non-learning spider leaves; ant and bug play on
+    mujoco.mj_forward(match.model, match.data)
+    trainer.batch.reload(0)
+    trainer.collect_step()
+    assert match.alive == [True, True, False] and trainer.epochs_done == 0
+    before = match.snapshot()
+    folder = trainer.save()
+    trainer.log.close()
+    resumed = Trainer(TrainConfig(**{**cfg.__dict__}), run_dir=trainer.run_dir, resume=True)
+    again = resumed.batch.matches[0]
+    assert again.alive == [True, True, False]
+    after = again.snapshot()
+    assert (after["places"], after["outcomes"], after["steps"]) == (before["places"], before["outcomes"],
+                                                                   before["steps"])
+    assert folder.exists()
+    resumed.log.close()

@@ -561,7 +561,8 @@ class Trainer:
             "config": config_to_json(self.cfg), "manifests": {lr.name: self.manifest(lr) for lr in self.learners},
             "epochs_done": self.epochs_done, "env_steps": self.env_steps, "rng": self.rng.bit_generator.state,
             "learners": {lr.name: lr.state() for lr in self.learners},
-            "matches": [{"steps": s["steps"], "over": s["over"], "rng": s["rng"]} for s in snaps],
+            "matches": [{key: s[key] for key in ("steps", "over", "rng", "alive", "places", "outcomes")}
+                        for s in snaps],  # who is still in play (elimination rules) resumes too
             "acc": self.acc, "final": self.final, "timers": self.timers,
             "policy_rngs": {a: p.rng.bit_generator.state for a, p in self.policies.items() if hasattr(p, "rng")},
         }
