@@ -193,7 +193,8 @@ def run_trials_on_ray(configs: Sequence[Any], on_done: Callable[[int, dict[str, 
     """Train every :class:`~triplesumo.train.config.TrainConfig` of ``configs`` as a Ray task
     (:func:`~triplesumo.train.sweep.run_trial`); results in ``configs`` order, each handed to
     ``on_done(index, result)`` as it finishes. A task whose worker dies is run again and resumes
-    its run from the last checkpoint."""
+    its run from the last checkpoint; a trial that fails for good gives ``{"trial", "error"}``
+    and the others go on."""
     if not ray.is_initialized():
         raise RuntimeError("call ray.init() (or ray.init(address=...)) before running trials on Ray")
     _check_counts(cpus_per_trial=cpus_per_trial)
@@ -205,7 +206,13 @@ def run_trials_on_ray(configs: Sequence[Any], on_done: Callable[[int, dict[str, 
             ready, _ = ray.wait(list(pending), num_returns=1)
             for ref in ready:
                 k = pending.pop(ref)
-                results[k] = ray.get(ref)
+                try:
+                    results[k] = ray.get(ref)
+                except ray.exceptions.RayError as exc:  # the trial failed (or its retries ran out): the others go on
+                    cause = getattr(exc, "cause", None) or exc
+                    last = str(cause).strip().splitlines()[-1:] or [""]
+                    results[k] = {"trial": getattr(configs[k], "name", str(k)),
+                                  "error": f"{type(cause).__name__}: {last[0]}"}
                 if on_done is not None:
                     on_done(k, results[k])
     finally:
