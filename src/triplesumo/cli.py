@@ -74,8 +74,8 @@ def _parser() -> argparse.ArgumentParser:
                                            "checking it re-simulates bit for bit")
     replay.add_argument("file", help="match file (.npz)")
     _dcargs.add_arguments(replay, ReplayConfig)
-    bench = sub.add_parser("bench", help="benchmarks: 'bench env' or 'bench train' (--help for each)")
-    bench.add_argument("which", choices=["env", "train"])
+    bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train' or 'bench ray' (--help for each)")
+    bench.add_argument("which", choices=["env", "train", "ray"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
     return parser
 
@@ -189,10 +189,14 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.env import main as bench_env
 
                 bench_env(args.rest)
-            else:
+            elif args.which == "train":
                 from triplesumo.benchmarks.train import main as bench_train
 
                 bench_train(args.rest)
+            else:
+                from triplesumo.benchmarks.ray import main as bench_ray
+
+                bench_ray(args.rest)
     except (ValueError, FileNotFoundError, PermissionError, OSError, FloatingPointError) as exc:
         print(f"triplesumo {args.command}: error: {exc}", file=sys.stderr)
         return 2
