@@ -149,3 +149,20 @@ def test_the_command_line_takes_repeated_grids_and_fixed_train_options(capsys: p
     assert (base.epochs, base.ddpg.batch_size, base.out) == (7, 8, TrainConfig().out)
     assert main(["sweep", "--grid", "ddpg.actr_lr=1"]) == 2
     assert "ddpg has no field 'actr_lr'" in capsys.readouterr().err
+
+
+def test_without_ray_sweep_and_ray_options_name_the_extra(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    script = ("import sys; sys.modules['ray'] = None\n"
+              "from triplesumo.cli import main\n"
+              f"codes = [main(['sweep', '--grid', 'seed=0', '--out', {str(tmp_path / 's')!r}]),\n"
+              f"         main(['evaluate', '--ray', '--epochs', '1', '--out', {str(tmp_path / 'e')!r}]),\n"
+              f"         main(['tournament', '--ray', '--out', {str(tmp_path / 't')!r}])]\n"
+              "assert codes == [2, 2, 2], codes\n"
+              "assert not [m for m, v in sys.modules.items() if v is not None and m.split('.')[0] == 'ray']\n")
+    err = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")}).stderr
+    assert err.count('pip install "triplesumo[ray]"') == 3, err
+    assert not (tmp_path / "s").exists()
