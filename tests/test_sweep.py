@@ -166,3 +166,21 @@ def test_without_ray_sweep_and_ray_options_name_the_extra(tmp_path: Path) -> Non
                          env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")}).stderr
     assert err.count('pip install "triplesumo[ray]"') == 3, err
     assert not (tmp_path / "s").exists()
+
+
+def test_bench_ray_reports_rates_per_core_figures_and_a_labelled_projection(ray_session: Any, tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    from triplesumo.benchmarks.ray import main
+
+    assert main(["--epochs", "2", "--steps", "20", "--eval-epochs", "2", "--cores", "64",
+                 "--json", str(tmp_path / "b.json")]) == 0
+    printed = capsys.readouterr().out
+    result = json.loads((tmp_path / "b.json").read_text())
+    v = result["variants"]
+    assert v["sweep_2"]["env_steps"] > v["sweep_1"]["env_steps"] > 0
+    assert v["evaluate_ray"]["env_steps"] == v["evaluate_local"]["env_steps"] > 0
+    for row in v.values():
+        assert row["env_steps_per_s"] == pytest.approx(row["env_steps"] / row["seconds"])
+    assert result["per_core"]["sweep"] == pytest.approx(v["sweep_2"]["env_steps_per_s"] / 2)
+    assert result["projection"]["sweep_env_steps_per_s"] == pytest.approx(64 * result["per_core"]["sweep"])
+    assert "PROJECTION to 64 cores" in printed and "not measured" in printed
