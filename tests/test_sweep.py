@@ -73,23 +73,25 @@ def _rows(path: Path) -> list[dict[str, str]]:
 
 def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_session: Any,
                                                                            tmp_path: Path) -> None:
-    cfg = SweepConfig(grid=("seed=0,1",), out=str(tmp_path / "sweep"), evaluate_epochs=2)
+    cfg = SweepConfig(grid=("seed=0,1", "ddpg.actor_lr=1e-3"), out=str(tmp_path / "sweep"), evaluate_epochs=2)
     summary = run_sweep(cfg, TINY)
     rows = summary["trials"]
-    assert [r["trial"] for r in rows] == ["seed=0", "seed=1"]
+    names = ["seed=0,ddpg.actor_lr=1e-3", "seed=1,ddpg.actor_lr=1e-3"]
+    assert [r["trial"] for r in rows] == names
     for r in rows:
         run = tmp_path / "sweep" / r["trial"]
         metrics = _rows(run / "metrics.csv")
         assert r["epochs"] == len(metrics) >= 4 and r["env_steps"] == int(metrics[-1]["env_steps"])
         assert r["finished"] and r["resumed_from"] == 0 and r["test_mwr"] != ""
-        assert json.loads((run / "config.json").read_text())["seed"] == int(r["trial"][-1])
-    assert _rows(tmp_path / "sweep" / "seed=0" / "metrics.csv") != _rows(tmp_path / "sweep" / "seed=1" / "metrics.csv")
+        saved = json.loads((run / "config.json").read_text())
+        assert (saved["seed"], saved["ddpg"]["actor_lr"]) == (int(r["trial"][5]), 1e-3)
+    assert _rows(tmp_path / "sweep" / names[0] / "metrics.csv") != _rows(tmp_path / "sweep" / names[1] / "metrics.csv")
     group = summary["compare"]["groups"]
-    assert [(g["group"], g["n_seeds"]) for g in group] == [("all/trained", 2)]
+    assert [(g["group"], g["n_seeds"]) for g in group] == [("ddpg.actor_lr=1e-3/trained", 2)]
     assert sorted(group[0]["scores"]) == sorted(r["test_mwr"] for r in rows)
     assert (tmp_path / "sweep" / "compare" / "compare.csv").exists()
     with (tmp_path / "sweep" / "summary.csv").open() as fh:
-        assert [r["trial"] for r in csv.DictReader(fh)] == ["seed=0", "seed=1"]
+        assert [r["trial"] for r in csv.DictReader(fh)] == names
     # Run again: both trials are finished, nothing is trained; other options are refused.
     before = {r["trial"]: (tmp_path / "sweep" / r["trial"] / "metrics.csv").read_bytes() for r in rows}
     again = run_sweep(cfg, TINY)

@@ -273,6 +273,7 @@ def _evaluate(cfg: SweepConfig, out: Path, done: list[Trial]) -> tuple[dict[str,
     for group, members in groups.items():
         first = members[0].config
         folder = out / "evaluation" / _safe(group)
+        folder.mkdir(parents=True, exist_ok=True)  # (a name like ddpg.actor_lr=1e-4 looks like a file to evaluate)
         policies = {str(Path(t.config.out) / t.name / "policy"): t.name for t in members}
         ecfg = EvaluateConfig(learner=first.learner, policy=tuple(policies), policies=first.policies, baselines=(),
                               epochs=cfg.evaluate_epochs, seed=cfg.eval_seed, steps_per_epoch=first.steps_per_epoch,
