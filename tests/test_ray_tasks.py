@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import threading
@@ -48,12 +49,12 @@ def test_bad_arguments_are_named(ray_tasks: Any) -> None:
         ray_tasks.play_test_epochs_on_ray("zero", OTHERS, "bug", 4, 0, first=4)
 
 
-def _chunk_workers() -> list[int]:
-    """Pids of Ray workers now running a chunk (Ray titles them ``ray::_play_chunk``)."""
+def _chunk_workers(task: bytes = b"_play_test_chunk") -> list[int]:
+    """Pids of Ray workers now running ``task`` (Ray titles them ``ray::TASK``)."""
     pids = []
     for proc in Path("/proc").iterdir():
         try:
-            if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(b"ray::_play_chunk"):
+            if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(b"ray::" + task):
                 pids.append(int(proc.name))
         except OSError:
             continue
@@ -80,3 +81,55 @@ def test_a_killed_worker_is_retried_and_its_epochs_replay_exactly(ray_tasks: Any
     local = play_test_epochs(make_policy("random"), {a: make_policy(s) for a, s in OTHERS.items()},
                              "bug", 8, 7, cfg, n_envs=4, n_threads=1)
     assert result["rows"] == local
+
+
+def _csv_rows(path: Path) -> list[bytes]:
+    return path.read_bytes().splitlines()
+
+
+def test_evaluate_on_ray_writes_the_bytes_of_a_local_run_and_resumes(ray_tasks: Any, tmp_path: Path) -> None:
+    from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+
+    base = EvaluateConfig(policy=("random",), epochs=6, steps_per_epoch=40, n_envs=4, n_threads=1, progress=False,
+                          baselines=("passive",), out=str(tmp_path / "local"))
+    local = evaluate(base)
+    on_ray = dataclasses.replace(base, out=str(tmp_path / "ray"), ray=True, ray_chunk=4, epochs=3)
+    evaluate(on_ray)  # a first part, as if killed after 3 epochs, then resumed to 6 on Ray
+    summary = evaluate(dataclasses.replace(on_ray, epochs=6, resume=True))
+    for label in ("trained", "passive"):
+        ray_rows = _csv_rows(tmp_path / "ray" / label / "metrics.csv")
+        assert len(ray_rows) == 7
+        assert ray_rows == _csv_rows(tmp_path / "local" / label / "metrics.csv")
+    assert summary["candidates"] == local["candidates"]
+
+
+def test_tournament_on_ray_writes_the_rows_of_a_local_run_and_resumes(ray_tasks: Any, tmp_path: Path) -> None:
+    from triplesumo.evaluation.tournament import TournamentConfig, run_tournament
+    from triplesumo.model.specs import AgentSpec
+
+    duel = MatchConfig(agents=(AgentSpec("a", "a", 0.2), AgentSpec("b", "b", 0.2)), max_steps=60)
+    base = TournamentConfig(policies=("passive=passive", "random=random"), rounds=3, steps_per_epoch=60,
+                            n_envs=4, n_threads=1, progress=False, out=str(tmp_path / "local"))
+    run_tournament(base, duel)
+    on_ray = dataclasses.replace(base, out=str(tmp_path / "ray"), ray=True, ray_chunk=2, rounds=2)
+    run_tournament(on_ray, duel)
+    run_tournament(dataclasses.replace(on_ray, rounds=3, resume=True), duel)
+    ray_rows = _csv_rows(tmp_path / "ray" / "matches.csv")
+    assert len(ray_rows) == 7  # header + 3 rounds of 2 lineups
+    assert ray_rows == _csv_rows(tmp_path / "local" / "matches.csv")
+    assert (tmp_path / "ray" / "leaderboard.csv").read_bytes() == (tmp_path / "local" / "leaderboard.csv").read_bytes()
+
+
+def test_ray_options_without_ray_name_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.util
+
+    from triplesumo.evaluation.evaluate import EvaluateConfig
+    from triplesumo.evaluation.tournament import TournamentConfig
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "ray" else real(name, *a))
+    for cls in (EvaluateConfig, TournamentConfig):
+        with pytest.raises(ValueError, match=r'ray: Ray is not installed.*pip install "triplesumo\[ray\]"'):
+            cls(ray=True)
+        with pytest.raises(ValueError, match="ray_address needs"):
+            cls(ray_address="auto")

@@ -52,6 +52,15 @@ def _parser() -> argparse.ArgumentParser:
                                              "bootstrap intervals, probability of improvement (rliable)")
     compare.add_argument("folders", nargs="+", help="evaluation folders (each holds per_seed.csv)")
     _dcargs.add_arguments(compare, CompareConfig, skip=("folders",))
+    from triplesumo.train.sweep import SweepConfig
+
+    sweep = sub.add_parser("sweep", help="a grid of train runs (any TrainConfig field: --grid seed=0,1,2 --grid "
+                                         "ddpg.actor_lr=1e-4,1e-3) as Ray tasks, resumable; one summary "
+                                         "(needs the ray extra)")
+    sweep.add_argument("--grid", action="extend", nargs="+", default=argparse.SUPPRESS, metavar="FIELD=V1,V2",
+                       help=_dcargs.field_docs(SweepConfig)["grid"] + " (repeat --grid for more fields)")
+    _dcargs.add_arguments(sweep, SweepConfig, skip=("grid",))
+    _dcargs.add_arguments(sweep, TrainConfig, skip=("out", "name"))
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv, or metrics-<agent>.csv per learning agent)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
@@ -66,8 +75,8 @@ def _parser() -> argparse.ArgumentParser:
                                            "checking it re-simulates bit for bit")
     replay.add_argument("file", help="match file (.npz)")
     _dcargs.add_arguments(replay, ReplayConfig)
-    bench = sub.add_parser("bench", help="benchmarks: 'bench env' or 'bench train' (--help for each)")
-    bench.add_argument("which", choices=["env", "train"])
+    bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train' or 'bench ray' (--help for each)")
+    bench.add_argument("which", choices=["env", "train", "ray"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
     return parser
 
@@ -133,6 +142,15 @@ def main(argv: list[str] | None = None) -> int:
             ccfg = _dcargs.build(CompareConfig, args)
             print(format_compare(compare(ccfg)))
             print(f"tables: {ccfg.out}/compare.csv, improvement.csv, compare.json; plot: {ccfg.out}/compare.png")
+        elif args.command == "sweep":
+            from triplesumo.train.config import TrainConfig
+            from triplesumo.train.sweep import SweepConfig, format_sweep, run_sweep
+
+            scfg = _dcargs.build(SweepConfig, args)
+            base = _dcargs.build(TrainConfig, argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "out"}))
+            print(format_sweep(run_sweep(scfg, base)))
+            print(f"summary: {scfg.out}/summary.csv, summary.json" + (f"; compare: {scfg.out}/compare/"
+                                                                      if scfg.evaluate_epochs else ""))
         elif args.command == "plot":
             from triplesumo.train.loop import plot_metrics
 
@@ -164,10 +182,14 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.env import main as bench_env
 
                 bench_env(args.rest)
-            else:
+            elif args.which == "train":
                 from triplesumo.benchmarks.train import main as bench_train
 
                 bench_train(args.rest)
+            else:
+                from triplesumo.benchmarks.ray import main as bench_ray
+
+                bench_ray(args.rest)
     except (ValueError, FileNotFoundError, PermissionError, OSError, FloatingPointError) as exc:
         print(f"triplesumo {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -27,6 +27,7 @@ import csv
 import json
 import math
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -86,14 +87,22 @@ class EvaluateConfig:
     scenario: str = "paper"
     """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
     for every other agent. Under elimination rules a test epoch ends when the learner is out."""
+    ray: bool = False
+    """Play the test epochs as Ray tasks (chunks of ray_chunk epochs; the same rows as a local run).
+    Needs pip install "triplesumo[ray]"."""
+    ray_address: str = ""
+    """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray."""
+    ray_chunk: int = 50
+    """With ray: test epochs per Ray task."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
             raise ValueError(f"EvaluateConfig.record must be an int >= 0, got {self.record!r}")
-        for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads"):
+        for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads", "ray_chunk"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"EvaluateConfig.{name} must be an int >= 1, got {value!r}")
+        check_ray("EvaluateConfig", self.ray, self.ray_address)
         agents = list(scenario_config(self.scenario).agent_names)  # names the scenario if unknown
         if self.learner not in agents:
             raise ValueError(f"EvaluateConfig.learner must be one of {agents} (scenario {self.scenario!r}), "
@@ -108,6 +117,16 @@ class EvaluateConfig:
             raise ValueError("EvaluateConfig.policy needs at least one policy")
         if self.obs_mode not in OBS_MODES:
             raise ValueError(f"EvaluateConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
+
+
+def check_ray(owner: str, ray: bool, address: str) -> None:
+    """``ValueError`` naming the extra when ``ray`` is asked for but not installed (Ray is not imported)."""
+    import importlib.util
+
+    if address and not ray:
+        raise ValueError(f"{owner}.ray_address needs {owner}.ray (--ray)")
+    if ray and importlib.util.find_spec("ray") is None:
+        raise ValueError(f'{owner}.ray: Ray is not installed; install the extra: pip install "triplesumo[ray]"')
 
 
 def play_test_epochs(
@@ -209,16 +228,34 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         record["candidates"] = {**kept, **record["candidates"]}
     _write_json(out / RECORD_FILE, record)
     summary: dict[str, Any] = {"config": asdict(cfg), "candidates": {}}
+    with ExitStack() as stack:
+        ray_tasks: Any = None
+        if cfg.ray:
+            from triplesumo.integrations import ray_tasks as ray_module  # only here: the core never imports Ray
+
+            ray_tasks = ray_module
+            stack.enter_context(ray_tasks.session(cfg.ray_address))
+        for label, spec in candidates.items():
+            path = out / label / "metrics.csv"
+            done = finished_rows(path, cfg.epochs) if label in kept else 0
+            if done >= cfg.epochs:
+                continue
+            seat_names: dict[str, str] = {**dict(p.split("=", 1) for p in pairs), cfg.learner: spec}
+            with RowAppender(path, fresh=done == 0) as append:
+                if ray_tasks is not None:
+                    ray_tasks.play_test_epochs_on_ray(
+                        spec, {a: s for a, s in seat_names.items() if a != cfg.learner}, cfg.learner, cfg.epochs,
+                        cfg.seed, match_cfg, first=done, chunk=cfg.ray_chunk, n_envs=cfg.n_envs, on_row=append,
+                        record=cfg.record, record_dir=out / label / "matches", policy_names=seat_names,
+                        progress=f"evaluate {cfg.learner}={spec}" if cfg.progress else None)
+                else:
+                    play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg,
+                                     cfg.n_envs, cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress,
+                                     first=done, on_row=append, record=cfg.record,
+                                     record_dir=out / label / "matches", policy_names=seat_names)
     curves = {}
     for label, spec in candidates.items():
         path = out / label / "metrics.csv"
-        done = finished_rows(path, cfg.epochs) if label in kept else 0
-        if done < cfg.epochs:
-            with RowAppender(path, fresh=done == 0) as append:
-                play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.n_envs,
-                                 cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress, first=done,
-                                 on_row=append, record=cfg.record, record_dir=out / label / "matches",
-                                 policy_names={**dict(p.split("=") for p in pairs), cfg.learner: spec})
         metrics = read_metrics_csv(path)
         plot_run(
             metrics, out / label / "plots", window=cfg.window, title=f"test: {cfg.learner}={spec}", label=cfg.learner

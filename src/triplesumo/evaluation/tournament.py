@@ -39,6 +39,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -50,7 +51,7 @@ from triplesumo.agents.policy_file import load_policy
 from triplesumo.agents.zoo import load as zoo_load
 from triplesumo.agents.zoo import make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
-from triplesumo.evaluation.evaluate import RowAppender, finished_rows
+from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
 from triplesumo.evaluation.ratings import MODELS, Elo, RatingTable
 from triplesumo.evaluation.runner import SeatedResult, play_matches
@@ -107,12 +108,20 @@ class TournamentConfig:
     """Show a progress bar."""
     resume: bool = False
     """Continue the tournament in ``out`` (killed, or to more rounds/matches): finished matches are kept."""
+    ray: bool = False
+    """Play the matches as Ray tasks (chunks of ray_chunk matches; the same rows as a local run).
+    Needs pip install "triplesumo[ray]"."""
+    ray_address: str = ""
+    """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray."""
+    ray_chunk: int = 50
+    """With ray: matches per Ray task."""
 
     def __post_init__(self) -> None:
-        for name in ("rounds", "matches", "steps_per_epoch", "n_envs", "n_threads"):
+        for name in ("rounds", "matches", "steps_per_epoch", "n_envs", "n_threads", "ray_chunk"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"TournamentConfig.{name} must be an int >= 1, got {value!r}")
+        check_ray("TournamentConfig", self.ray, self.ray_address)
         if self.scenario not in SCENARIOS:
             raise ValueError(f"TournamentConfig.scenario must be one of {sorted(SCENARIOS)}, got {self.scenario!r}")
         if self.schedule not in SCHEDULES:
@@ -232,6 +241,17 @@ class Tournament:
                 **{f"{a}_outcome": o for a, o in zip(self.agents, result.outcomes, strict=True)},
                 "steps": result.steps}
 
+    def play(self, policies: dict[str, Any], first: int, end: int, n_envs: int, n_threads: int,
+             on_row: Callable[[dict[str, Any]], None] | None = None, progress: str | None = None
+             ) -> list[dict[str, Any]]:
+        """The rows of matches ``first .. end - 1`` (``policies``: entry name -> policy), in match order;
+        ``on_row`` gets each as soon as it and every earlier one have finished."""
+        results = play_matches(lambda m: [policies[n] for n in self.lineup_of(m)], self.seed_of, end, self.match_cfg,
+                               n_envs, n_threads, first=first,
+                               on_result=None if on_row is None else lambda r: on_row(self.row(r)),
+                               progress=progress)
+        return [self.row(r) for r in results]
+
     def valid_row(self, values: dict[str, str], number: int) -> bool:
         m = number - 1
         return (values["match"] == str(number) and values["seed"] == str(self.seed_of(m))
@@ -266,15 +286,30 @@ def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) 
 
     atomic_write_bytes(out / RECORD_FILE, (json.dumps(record, indent=2) + "\n").encode())
     if done < t.n_matches:
+        progress = "tournament" if cfg.progress else None
         with RowAppender(rows_path, fresh=done == 0, columns=t.columns) as append:
-            play_matches(lambda m: [policies[n] for n in t.lineup_of(m)], t.seed_of, t.n_matches, t.match_cfg,
-                         cfg.n_envs, cfg.n_threads, first=done, on_result=lambda r: append(t.row(r)),
-                         progress="tournament" if cfg.progress else None)
+            if cfg.ray:
+                from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
+
+                with ray_tasks.session(cfg.ray_address):
+                    ray_tasks.play_tournament_on_ray(cfg, match_cfg, done, t.n_matches, cfg.ray_chunk, on_row=append,
+                                                     progress=progress)
+            else:
+                t.play(policies, done, t.n_matches, cfg.n_envs, cfg.n_threads, on_row=append, progress=progress)
     rows = read_rows(rows_path)
     results = tabulate(rows, t, cfg)
     results["config"] = asdict(cfg)
     _write_outputs(out, results, cfg)
     return results
+
+
+def play_schedule(cfg: TournamentConfig, match_cfg: MatchConfig | None, first: int, end: int,
+                  n_envs: int | None = None) -> list[dict[str, Any]]:
+    """The ``matches.csv`` rows of matches ``first .. end - 1`` of ``cfg``'s tournament, played here on
+    one MuJoCo thread (a chunk of a tournament played elsewhere, e.g. as a Ray task)."""
+    t = Tournament(cfg, match_cfg)
+    policies = {n: make_policy(s, seed=cfg.seed, expect_obs_mode=t.match_cfg.obs_mode) for n, s in t.entries.items()}
+    return t.play(policies, first, end, min(n_envs or cfg.n_envs, end - first), 1)
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:

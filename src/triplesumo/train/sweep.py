@@ -1,0 +1,326 @@
+"""``triplesumo sweep``: a grid of ``triplesumo train`` runs as Ray tasks, resumable, with one summary.
+
+The grid names any :class:`~triplesumo.train.config.TrainConfig` field by its dotted
+name with its values (``seed=0,1,2``, ``ddpg.actor_lr=1e-4,1e-3``, ``scenario=paper,2v2``);
+every combination is one *trial*: a ``triplesumo train`` run with the sweep's fixed train
+options and the trial's values, in the run folder ``OUT/NAME`` where NAME joins the
+trial's values (``seed=0,ddpg.actor_lr=1e-4``). Values are read with the field's type;
+a tuple field takes its items separated by spaces (``policies=ant=zoo:ant spider=random``).
+
+Trials run as Ray tasks (:func:`triplesumo.integrations.ray_tasks.run_trials_on_ray`),
+not Ray Tune trials: recovery is the project's own. A trial is :func:`run_trial`: it
+resumes its run folder from the last checkpoint when one exists
+(``train(..., resume_dir=...)``), else it starts the run. So a trial whose worker dies is
+run again by Ray and resumes, rows and replay buffer intact; a sweep run again skips
+finished trials and resumes the others. Tune would add a second checkpoint system, an
+experiment state and a per-epoch report hook in the trainer, for nothing a grid needs.
+
+The summary (``summary.csv``, ``summary.json``): per trial its values, epochs, env
+steps, the final training MWR (over the last ``window`` epochs) and whether it was
+resumed. With ``evaluate_epochs`` each *group* (the trials that differ only in ``seed``)
+is evaluated (``triplesumo evaluate`` with one policy per seed, its test epochs as Ray
+tasks, into ``OUT/evaluation/GROUP``), each trial gets its test MWR, and the
+``compare`` table across seeds (IQM with bootstrap intervals, by group) is written to
+``OUT/compare``.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import itertools
+import json
+import math
+import types
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.evaluation.metrics import moving_winning_rate
+from triplesumo.train import checkpoint
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.loop import config_to_json, holds_run, train
+
+RECORD_FILE = "sweep.json"
+SUMMARY_COLUMNS = ("trial", "group", "epochs", "env_steps", "final_mwr", "resumed_from", "seconds", "test_mwr",
+                   "error", "run_dir")
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """A grid of training runs as Ray tasks (the fixed train options come beside it)."""
+
+    grid: tuple[str, ...] = ()
+    """FIELD=V1,V2,...: a TrainConfig field by dotted name (seed, ddpg.actor_lr, scenario, ...) and its
+    values; every combination is one trial. Tuple fields take space-separated items."""
+    out: str = "runs/sweep"
+    """Sweep folder: one run folder per trial, sweep.json, summary.csv/json, evaluation/, compare/."""
+    address: str = ""
+    """Ray cluster to run on (e.g. auto, ray://HOST:10001); empty: start a local Ray on this machine."""
+    num_cpus: int = 0
+    """Local Ray only: CPUs it may use (0: all)."""
+    cpus_per_trial: int = 1
+    """CPUs Ray reserves for each trial (a trial trains on one MuJoCo thread plus its update thread)."""
+    max_retries: int = 3
+    """Times Ray runs a trial again whose worker died (each resumes from the last checkpoint)."""
+    evaluate_epochs: int = 0
+    """Test epochs per trial's policy after training (0: no evaluation and no compare table)."""
+    eval_seed: int = 10_000
+    """Test epoch i resets with eval_seed + i (the same starts for every trial)."""
+
+    def __post_init__(self) -> None:
+        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1), ("max_retries", 0), ("evaluate_epochs", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"SweepConfig.{name} must be an int >= {low}, got {value!r}")
+        if self.address and self.num_cpus:
+            raise ValueError("SweepConfig.num_cpus sizes a local Ray; a cluster (address) has its own CPUs")
+        parse_grid(self.grid)
+
+
+def _field_type(dotted: str) -> Any:
+    """The type of TrainConfig field ``dotted`` (``ddpg.actor_lr``); errors list the fields there."""
+    cls: Any = TrainConfig
+    parts = dotted.split(".")
+    for k, part in enumerate(parts):
+        hints = typing.get_type_hints(cls)
+        if part not in hints:
+            where = ".".join(parts[:k]) or "TrainConfig"
+            raise ValueError(f"--grid {dotted}: {where} has no field {part!r} (its fields: {', '.join(hints)})")
+        cls = hints[part]
+        if k < len(parts) - 1 and not dataclasses.is_dataclass(cls):
+            raise ValueError(f"--grid {dotted}: {'.'.join(parts[:k + 1])} is not a group of fields")
+    if dataclasses.is_dataclass(cls):
+        raise ValueError(f"--grid {dotted}: a group of fields; name one of them ({dotted}.FIELD)")
+    return cls
+
+
+def _convert(tp: Any, text: str, where: str) -> Any:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is tuple:
+        return tuple(_convert(args[0], item, where) for item in text.split())
+    if origin in (typing.Union, types.UnionType):
+        if text.lower() == "none" and type(None) in args:
+            return None
+        return _convert(next(a for a in args if a is not type(None)), text, where)
+    if tp is bool:
+        if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+            raise ValueError(f"--grid {where}: {text!r} is not a bool (true or false)")
+        return text.lower() in ("true", "1", "yes")
+    try:
+        return tp(text)
+    except (TypeError, ValueError):
+        raise ValueError(f"--grid {where}: {text!r} is not a {getattr(tp, '__name__', tp)}") from None
+
+
+def parse_grid(grid: tuple[str, ...]) -> list[tuple[str, list[tuple[str, Any]]]]:
+    """``("seed=0,1", "ddpg.actor_lr=1e-4,1e-3")`` -> ``[("seed", [("0", 0), ("1", 1)]), ...]``:
+    each field with its values as given and as typed."""
+    out: list[tuple[str, list[tuple[str, Any]]]] = []
+    for item in grid:
+        key, sep, values = item.partition("=")
+        if not sep or not key or not values:
+            raise ValueError(f"--grid expects FIELD=V1,V2,..., got {item!r}")
+        if key in ("out", "name"):
+            raise ValueError(f"--grid {key}: the sweep sets it (run folders are OUT/<trial values>)")
+        if key in (k for k, _ in out):
+            raise ValueError(f"--grid {key} given twice")
+        tp = _field_type(key)
+        raws = [v.strip() for v in values.split(",")]
+        if "" in raws or len(set(raws)) < len(raws):
+            raise ValueError(f"--grid {key}: values must be non-empty and different, got {values!r}")
+        out.append((key, [(raw, _convert(tp, raw, f"{key}={raw}")) for raw in raws]))
+    return out
+
+
+def with_field(cfg: Any, dotted: str, value: Any) -> Any:
+    """``cfg`` with field ``dotted`` (``ddpg.actor_lr``) set to ``value`` (nested dataclasses replaced)."""
+    head, _, rest = dotted.partition(".")
+    return dataclasses.replace(cfg, **{head: with_field(getattr(cfg, head), rest, value) if rest else value})
+
+
+def _safe(text: str) -> str:
+    return "".join("-" if c in "/\\" else "+" if c.isspace() else c for c in text)
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One combination of the grid: its run and the group it is compared in."""
+
+    name: str
+    """Run name: the grid values, ``seed=0,ddpg.actor_lr=1e-4`` (``base`` for an empty grid)."""
+    group: str
+    """The non-seed values (``all`` when only seeds vary): the trials compared across seeds."""
+    config: TrainConfig
+
+
+def trials(cfg: SweepConfig, base: TrainConfig) -> list[Trial]:
+    """Every combination of the grid over ``base``, as train configs in ``cfg.out`` (absolute)."""
+    grid = parse_grid(cfg.grid)
+    out = str(Path(cfg.out).resolve())
+    made = []
+    for combo in itertools.product(*(values for _, values in grid)):
+        train_cfg = dataclasses.replace(base, out=out, progress=False)
+        for (key, _), (raw, value) in zip(grid, combo, strict=True):
+            try:
+                train_cfg = with_field(train_cfg, key, value)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"--grid {key}={raw}: {exc}") from None
+        values = [f"{key}={_safe(raw)}" for (key, _), (raw, _) in zip(grid, combo, strict=True)]
+        name = ",".join(values) or "base"
+        group = ",".join(v for v in values if not v.startswith("seed=")) or "all"
+        made.append(Trial(name, group, dataclasses.replace(train_cfg, name=name)))
+    return made
+
+
+def run_trial(cfg: TrainConfig) -> dict[str, Any]:
+    """Train ``cfg``'s run to its epochs: resumed from its last checkpoint when its folder holds one,
+    started (a folder without a checkpoint is moved aside first) otherwise. What a Ray task runs."""
+    run_dir = Path(cfg.out) / cfg.name
+    saved = checkpoint.checkpoints(run_dir)
+    resumed_from = 0
+    if saved and (run_dir / "config.json").exists():
+        resumed_from = saved[-1][0]
+        result = train(cfg, resume_dir=run_dir, overrides={"epochs": cfg.epochs})
+    else:
+        result = train(cfg, start_over=holds_run(run_dir))
+    return {"trial": cfg.name, "run_dir": str(result.run_dir), "resumed_from": resumed_from,
+            "seconds": round(result.seconds, 3), "env_steps_here": result.env_steps}
+
+
+def finished(trial: Trial) -> bool:
+    """Whether the trial's run holds a checkpoint at (or past) its epochs."""
+    saved = checkpoint.checkpoints(Path(trial.config.out) / trial.name)
+    return bool(saved) and saved[-1][0] >= trial.config.epochs
+
+
+def run_facts(run_dir: Path, window: int) -> dict[str, Any]:
+    """Epochs, env steps and the final MWR (last ``window`` epochs) of a run, from its metrics CSV."""
+    with (run_dir / "metrics.csv").open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    lwr = np.array([float(r["local_winning_rate"]) for r in rows])
+    mwr = float(moving_winning_rate(lwr[-window:], window)[-1]) if len(lwr) else 0.0
+    return {"epochs": len(rows), "env_steps": int(rows[-1]["env_steps"]) if rows else 0, "final_mwr": mwr}
+
+
+def _check_record(out: Path, record: dict[str, Any]) -> None:
+    path = out / RECORD_FILE
+    if not path.exists():
+        atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+        return
+    old = json.loads(path.read_text(encoding="utf-8"))
+    for key in ("grid", "base"):
+        if old.get(key) != record[key]:
+            what = "grid" if key == "grid" else "fixed train options"
+            raise ValueError(f"{out} holds a sweep with other {what} ({old.get(key)} then, {record[key]} now): "
+                             "re-running a sweep resumes it and needs the same options; choose another --out")
+
+
+def run_sweep(cfg: SweepConfig, base: TrainConfig | None = None) -> dict[str, Any]:
+    """Run (or resume) the sweep on Ray, evaluate and compare when asked, write the summary; returns it."""
+    import importlib.util
+
+    if importlib.util.find_spec("ray") is None:
+        raise ValueError('triplesumo sweep runs its trials on Ray, which is not installed: '
+                         'pip install "triplesumo[ray]"')
+    from triplesumo.integrations import ray_tasks  # the sweep is Ray's; the core install never imports it
+
+    base = base or TrainConfig()
+    out = Path(cfg.out).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    todo_all = trials(cfg, base)
+    canonical = {k: v for k, v in config_to_json(dataclasses.replace(base, progress=False)).items()
+                 if k not in ("out", "name")}  # what the sweep sets itself
+    _check_record(out, {"grid": list(cfg.grid), "base": canonical})
+    results_path = out / "trials.json"
+    previous = json.loads(results_path.read_text()) if results_path.exists() else {}
+    todo = [t for t in todo_all if not finished(t)]
+    print(f"sweep {out}: {len(todo_all)} trials, {len(todo_all) - len(todo)} finished already, {len(todo)} to train")
+
+    def done(k: int, result: dict[str, Any]) -> None:
+        previous[todo[k].name] = result
+        atomic_write_bytes(results_path, (json.dumps(previous, indent=2) + "\n").encode())
+        state = f"error: {result['error']}" if "error" in result else (
+            f"{result['seconds']:.0f} s" + (f", resumed from epoch {result['resumed_from']}"
+                                            if result["resumed_from"] else ""))
+        print(f"  trial {todo[k].name}: {state}")
+
+    evaluation: dict[str, dict[str, Any]] = {}
+    compare_table = None
+    with ray_tasks.session(cfg.address, cfg.num_cpus or None):
+        ray_tasks.run_trials_on_ray([t.config for t in todo], done, cfg.cpus_per_trial, cfg.max_retries)
+        if cfg.evaluate_epochs:
+            evaluation, compare_table = _evaluate(cfg, out, [t for t in todo_all if finished(t)])
+    summary = _summary(cfg, out, todo_all, previous, evaluation, compare_table)
+    return summary
+
+
+def _evaluate(cfg: SweepConfig, out: Path, done: list[Trial]) -> tuple[dict[str, dict[str, Any]], Any]:
+    """Each group's policies evaluated in one folder (on Ray); the compare table across seeds."""
+    from triplesumo.evaluation.compare import CompareConfig, compare
+    from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+
+    groups: dict[str, list[Trial]] = {}
+    for t in done:
+        groups.setdefault(t.group, []).append(t)
+    test_mwr: dict[str, dict[str, Any]] = {}
+    folders = []
+    for group, members in groups.items():
+        first = members[0].config
+        folder = out / "evaluation" / _safe(group)
+        folder.mkdir(parents=True, exist_ok=True)  # (a name like ddpg.actor_lr=1e-4 looks like a file to evaluate)
+        policies = {str(Path(t.config.out) / t.name / "policy"): t.name for t in members}
+        ecfg = EvaluateConfig(learner=first.learner, policy=tuple(policies), policies=first.policies, baselines=(),
+                              epochs=cfg.evaluate_epochs, seed=cfg.eval_seed, steps_per_epoch=first.steps_per_epoch,
+                              obs_mode=first.obs_mode, scenario=first.scenario, window=first.window,
+                              out=str(folder), n_threads=1, progress=False,
+                              resume=(folder / "evaluation.json").exists(), ray=True,
+                              ray_chunk=max(1, min(50, math.ceil(cfg.evaluate_epochs / 4))))
+        summary = evaluate(ecfg)
+        for c in summary["candidates"].values():
+            test_mwr[policies[c["policy"]]] = {"test_mwr": c["mean_lwr"], "group": group}
+        folders.append(str(folder))
+    table = compare(CompareConfig(folders=tuple(folders), by="folder", out=str(out / "compare"), seed=cfg.eval_seed))
+    return test_mwr, table
+
+
+def _summary(cfg: SweepConfig, out: Path, all_trials: list[Trial], results: dict[str, Any],
+             evaluation: dict[str, dict[str, Any]], table: Any) -> dict[str, Any]:
+    rows = []
+    for t in all_trials:
+        run_dir = Path(t.config.out) / t.name
+        result = results.get(t.name, {})
+        facts = run_facts(run_dir, t.config.window) if (run_dir / "metrics.csv").exists() else {}
+        rows.append({"trial": t.name, "group": t.group, **facts, "resumed_from": result.get("resumed_from", ""),
+                     "seconds": result.get("seconds", ""), "error": result.get("error", ""),
+                     "test_mwr": evaluation.get(t.name, {}).get("test_mwr", ""), "run_dir": str(run_dir),
+                     "finished": finished(t)})
+    summary = {"config": dataclasses.asdict(cfg), "trials": rows, "compare": table}
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, SUMMARY_COLUMNS, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    atomic_write_bytes(out / "summary.csv", buf.getvalue().encode())
+    atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2, default=str) + "\n").encode())
+    return summary
+
+
+def format_sweep(summary: dict[str, Any]) -> str:
+    """The per-trial table printed by ``triplesumo sweep`` (and the compare table when there is one)."""
+    lines = [f"{'trial':40s} {'epochs':>6s} {'env steps':>9s} {'final MWR':>9s} {'test MWR':>8s}  resumed"]
+    for r in summary["trials"]:
+        mwr = "-" if "final_mwr" not in r else f"{r['final_mwr']:+.3f}"
+        test = "-" if r["test_mwr"] in ("", None) else f"{r['test_mwr']:+.3f}"
+        resumed = f"from epoch {r['resumed_from']}" if r["resumed_from"] else ("error" if r["error"] else "-")
+        lines.append(f"{r['trial'][:40]:40s} {r.get('epochs', 0):6d} {r.get('env_steps', 0):9d} {mwr:>9s} "
+                     f"{test:>8s}  {resumed}")
+    if summary["compare"] is not None:
+        from triplesumo.evaluation.compare import format_compare
+
+        lines += ["", format_compare(summary["compare"])]
+    return "\n".join(lines)

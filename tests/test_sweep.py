@@ -1,0 +1,188 @@
+"""``triplesumo sweep``: the grid, trials as Ray tasks on a real local Ray, resume after a killed worker."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.sweep import SweepConfig, parse_grid, run_sweep, trials
+
+TINY = TrainConfig(epochs=4, steps_per_epoch=30, n_envs=2, checkpoint_every=2, tensorboard=False, progress=False,
+                   policies=("ant=zero", "spider=random"),
+                   ddpg=DDPGConfig(hidden=(16, 16), buffer_size=2000, learning_starts=20, batch_size=16, learn_every=4))
+
+
+def test_the_grid_takes_any_field_by_its_dotted_name(tmp_path: Path) -> None:
+    cfg = SweepConfig(grid=("seed=0,1", "ddpg.actor_lr=1e-4,1e-3", "policies=ant=zero spider=random,ant=zoo:ant"),
+                      out=str(tmp_path))
+    made = trials(cfg, TINY)
+    assert len(made) == 8
+    first = made[0]
+    assert first.name == "seed=0,ddpg.actor_lr=1e-4,policies=ant=zero+spider=random"
+    assert first.group == "ddpg.actor_lr=1e-4,policies=ant=zero+spider=random"
+    assert first.config.ddpg.actor_lr == 1e-4 and first.config.seed == 0
+    assert first.config.policies == ("ant=zero", "spider=random")
+    assert made[-1].config.policies == ("ant=zoo:ant",) and made[-1].config.ddpg.hidden == (16, 16)
+    assert first.config.out == str(tmp_path.resolve()) and first.config.epochs == 4
+    assert {t.group for t in made if t.config.ddpg.actor_lr == 1e-3 and len(t.config.policies) == 1} == {
+        "ddpg.actor_lr=1e-3,policies=ant=zoo:ant"}
+    assert [(k, [v for _, v in vs]) for k, vs in parse_grid(("save_replay=true,false",))] == [
+        ("save_replay", [True, False])]
+
+
+@pytest.mark.parametrize(("grid", "message"), [
+    (("sed=0,1",), "TrainConfig has no field 'sed'"),
+    (("ddpg.actor_l=1",), "ddpg has no field 'actor_l'"),
+    (("ddpg=1",), "a group of fields"),
+    (("seed=0,x",), "'x' is not a int"),
+    (("seed=0,0",), "non-empty and different"),
+    (("seed",), "expects FIELD=V1,V2"),
+    (("name=a,b",), "the sweep sets it"),
+    (("scenario=paper,nope",), r"--grid scenario=nope: TrainConfig.scenario must be one of"),
+])
+def test_bad_grids_name_the_field(grid: tuple[str, ...], message: str, tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=message):
+        trials(SweepConfig(grid=grid, out=str(tmp_path)), TINY)
+
+
+@pytest.fixture(scope="module")
+def ray_session() -> Iterator[Any]:
+    ray = pytest.importorskip("ray", reason='the "ray" extra is not installed (pip install "triplesumo[ray]")')
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_session: Any,
+                                                                           tmp_path: Path) -> None:
+    cfg = SweepConfig(grid=("seed=0,1", "ddpg.actor_lr=1e-3"), out=str(tmp_path / "sweep"), evaluate_epochs=2)
+    summary = run_sweep(cfg, TINY)
+    rows = summary["trials"]
+    names = ["seed=0,ddpg.actor_lr=1e-3", "seed=1,ddpg.actor_lr=1e-3"]
+    assert [r["trial"] for r in rows] == names
+    for r in rows:
+        run = tmp_path / "sweep" / r["trial"]
+        metrics = _rows(run / "metrics.csv")
+        assert r["epochs"] == len(metrics) >= 4 and r["env_steps"] == int(metrics[-1]["env_steps"])
+        assert r["finished"] and r["resumed_from"] == 0 and r["test_mwr"] != ""
+        saved = json.loads((run / "config.json").read_text())
+        assert (saved["seed"], saved["ddpg"]["actor_lr"]) == (int(r["trial"][5]), 1e-3)
+    assert _rows(tmp_path / "sweep" / names[0] / "metrics.csv") != _rows(tmp_path / "sweep" / names[1] / "metrics.csv")
+    group = summary["compare"]["groups"]
+    assert [(g["group"], g["n_seeds"]) for g in group] == [("ddpg.actor_lr=1e-3/trained", 2)]
+    assert sorted(group[0]["scores"]) == sorted(r["test_mwr"] for r in rows)
+    assert (tmp_path / "sweep" / "compare" / "compare.csv").exists()
+    with (tmp_path / "sweep" / "summary.csv").open() as fh:
+        assert [r["trial"] for r in csv.DictReader(fh)] == names
+    # Run again: both trials are finished, nothing is trained; other options are refused.
+    before = {r["trial"]: (tmp_path / "sweep" / r["trial"] / "metrics.csv").read_bytes() for r in rows}
+    again = run_sweep(cfg, TINY)
+    assert [r["test_mwr"] for r in again["trials"]] == [r["test_mwr"] for r in rows]
+    assert {t: (tmp_path / "sweep" / t / "metrics.csv").read_bytes() for t in before} == before
+    with pytest.raises(ValueError, match="holds a sweep with other fixed train options"):
+        run_sweep(cfg, TINY.__class__(**{**TINY.__dict__, "steps_per_epoch": 31}))
+
+
+def _trial_workers() -> list[int]:
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(b"ray::_run_trial"):
+                pids.append(int(proc.name))
+        except OSError:
+            continue
+    return pids
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds Ray's worker processes through /proc")
+def test_a_trial_whose_worker_is_killed_resumes_from_its_checkpoint(ray_session: Any, tmp_path: Path) -> None:
+    base = TINY.__class__(**{**TINY.__dict__, "epochs": 40, "steps_per_epoch": 40})
+    cfg = SweepConfig(grid=("seed=3",), out=str(tmp_path / "sweep"))
+    run = tmp_path / "sweep" / "seed=3"
+    result: dict[str, Any] = {}
+    thread = threading.Thread(target=lambda: result.update(summary=run_sweep(cfg, base)))
+    thread.start()
+    killed = None
+    deadline = time.monotonic() + 120
+    while killed is None and thread.is_alive() and time.monotonic() < deadline:
+        if list((run / "checkpoints").glob("epoch-*")) and (pids := _trial_workers()):
+            killed = pids[0]
+            os.kill(killed, signal.SIGKILL)
+        time.sleep(0.05)
+    thread.join(timeout=300)
+    assert killed is not None, "no trial worker was seen running after its first checkpoint"
+    (trial,) = result["summary"]["trials"]
+    assert trial["finished"] and not trial["error"]
+    assert trial["resumed_from"] >= 2  # resumed from a checkpoint, not restarted
+    epochs = [int(r["epoch"]) for r in _rows(run / "metrics.csv")]
+    assert epochs == list(range(1, len(epochs) + 1)) and len(epochs) >= 40
+    assert not list(tmp_path.glob("sweep/seed=3.old-*"))  # nothing was started over
+
+
+def test_the_command_line_takes_repeated_grids_and_fixed_train_options(capsys: pytest.CaptureFixture[str]) -> None:
+    import argparse
+
+    from triplesumo import _dcargs
+    from triplesumo.cli import _parser, main
+
+    args = _parser().parse_args(["sweep", "--grid", "seed=0,1", "--grid", "ddpg.actor_lr=1e-4,1e-3", "scenario=paper",
+                                 "--epochs", "7", "--ddpg.batch-size", "8", "--out", "runs/s", "--address", "auto"])
+    scfg = _dcargs.build(SweepConfig, args)
+    base = _dcargs.build(TrainConfig, argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "out"}))
+    assert scfg.grid == ("seed=0,1", "ddpg.actor_lr=1e-4,1e-3", "scenario=paper") and scfg.address == "auto"
+    assert (base.epochs, base.ddpg.batch_size, base.out) == (7, 8, TrainConfig().out)
+    assert main(["sweep", "--grid", "ddpg.actr_lr=1"]) == 2
+    assert "ddpg has no field 'actr_lr'" in capsys.readouterr().err
+
+
+def test_without_ray_sweep_and_ray_options_name_the_extra(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    script = ("import sys; sys.modules['ray'] = None\n"
+              "from triplesumo.cli import main\n"
+              f"codes = [main(['sweep', '--grid', 'seed=0', '--out', {str(tmp_path / 's')!r}]),\n"
+              f"         main(['evaluate', '--ray', '--epochs', '1', '--out', {str(tmp_path / 'e')!r}]),\n"
+              f"         main(['tournament', '--ray', '--out', {str(tmp_path / 't')!r}])]\n"
+              "assert codes == [2, 2, 2], codes\n"
+              "assert not [m for m, v in sys.modules.items() if v is not None and m.split('.')[0] == 'ray']\n")
+    err = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")}).stderr
+    assert err.count('pip install "triplesumo[ray]"') == 3, err
+    assert not (tmp_path / "s").exists()
+
+
+def test_bench_ray_reports_rates_per_core_figures_and_a_labelled_projection(ray_session: Any, tmp_path: Path,
+                                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    from triplesumo.benchmarks.ray import main
+
+    assert main(["--epochs", "2", "--steps", "20", "--eval-epochs", "2", "--cores", "64",
+                 "--json", str(tmp_path / "b.json")]) == 0
+    printed = capsys.readouterr().out
+    result = json.loads((tmp_path / "b.json").read_text())
+    v = result["variants"]
+    assert v["sweep_2"]["env_steps"] > v["sweep_1"]["env_steps"] > 0
+    assert v["evaluate_ray"]["env_steps"] == v["evaluate_local"]["env_steps"] > 0
+    for row in v.values():
+        assert row["env_steps_per_s"] == pytest.approx(row["env_steps"] / row["seconds"])
+    assert result["per_core"]["sweep"] == pytest.approx(v["sweep_2"]["env_steps_per_s"] / 2)
+    assert result["projection"]["sweep_env_steps_per_s"] == pytest.approx(64 * result["per_core"]["sweep"])
+    assert "PROJECTION to 64 cores" in printed and "not measured" in printed
