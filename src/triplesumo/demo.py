@@ -77,7 +77,7 @@ class DemoConfig:
 def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     if cfg.scenario != "paper":
         return _run_scenario_demo(cfg)
-    out = check_writable(Path(cfg.out))
+    out = check_writable(Path(cfg.out), folder=True)
     if holds_run(out / "bug") or (out / "evaluation").exists():
         raise FileExistsError(f"{out} already holds an earlier demo's results; nothing was changed: choose another "
                               "--out (or delete that folder)")
@@ -116,7 +116,7 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
 def _run_scenario_demo(cfg: DemoConfig) -> dict[str, Path]:
     """The demo in a named game other than the paper's: its learner against random others."""
     learner = get_scenario(cfg.scenario).learner
-    out = check_writable(Path(cfg.out))
+    out = check_writable(Path(cfg.out), folder=True)
     print(f"[1/3] training {learner} with DDPG (paper preset) in scenario {cfg.scenario!r} against random "
           f"others -> {out / learner}")
     train_cfg = TrainConfig(name=learner, out=str(out), learner=learner, policies=("*=random",),

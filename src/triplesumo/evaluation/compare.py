@@ -155,7 +155,7 @@ def compare(cfg: CompareConfig) -> dict[str, Any]:
     and ``compare.png``; returns the table."""
     from triplesumo.evaluation.league_plots import plot_compare
 
-    out = check_writable(Path(cfg.out))
+    out = check_writable(Path(cfg.out), folder=True)
     grouped = read_per_seed(cfg.folders, cfg.by)
     scores = {g: np.array([[float(r["test_mwr"])] for r in rows]) for g, rows in grouped.items()}
     est = interval_estimates(scores, cfg.reps, cfg.confidence, cfg.seed)

@@ -197,7 +197,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     """
     from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
 
-    out = check_writable(Path(cfg.out))
+    out = check_writable(Path(cfg.out), folder=True)
     match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode)
     probe = Match(match_cfg)
     sizes = probe.observer.sizes

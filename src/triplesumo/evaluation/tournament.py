@@ -272,7 +272,7 @@ def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) 
     ``match_cfg`` replaces the scenario's match (a roster of any teams), for tests and
     scenarios not yet named.
     """
-    out = check_writable(Path(cfg.out))
+    out = check_writable(Path(cfg.out), folder=True)
     t = Tournament(cfg, match_cfg)
     policies = {n: make_policy(s, seed=cfg.seed, expect_obs_mode=t.match_cfg.obs_mode) for n, s in t.entries.items()}
     record = json.loads(json.dumps(t.record()))

@@ -11,10 +11,16 @@ import imageio.v2 as imageio
 import numpy as np
 
 
-def check_writable(path: Path) -> Path:
-    """Create ``path``'s folder and fail now, naming it, if it cannot be written."""
+def check_writable(path: Path, folder: bool = False) -> Path:
+    """Create the folder a file ``path`` goes in (or, with ``folder=True``, the folder ``path``
+    itself, whatever its name: ``runs/eval.v2`` is a folder) and fail now, naming it, if it
+    cannot be written."""
     path = Path(path)
-    folder = path.parent if path.suffix else path
+    folder_path = path if folder else path.parent
+    return _check_folder(folder_path, path)
+
+
+def _check_folder(folder: Path, path: Path) -> Path:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
