@@ -174,7 +174,7 @@ def test_bench_ray_reports_rates_per_core_figures_and_a_labelled_projection(ray_
                                                                             capsys: pytest.CaptureFixture[str]) -> None:
     from triplesumo.benchmarks.ray import main
 
-    assert main(["--epochs", "2", "--steps", "20", "--eval-epochs", "2", "--cores", "64",
+    assert main(["--epochs", "2", "--steps", "20", "--eval-epochs", "2", "--cores", "64", "--rllib", "64",
                  "--json", str(tmp_path / "b.json")]) == 0
     printed = capsys.readouterr().out
     result = json.loads((tmp_path / "b.json").read_text())
@@ -186,3 +186,6 @@ def test_bench_ray_reports_rates_per_core_figures_and_a_labelled_projection(ray_
     assert result["per_core"]["sweep"] == pytest.approx(v["sweep_2"]["env_steps_per_s"] / 2)
     assert result["projection"]["sweep_env_steps_per_s"] == pytest.approx(64 * result["per_core"]["sweep"])
     assert "PROJECTION to 64 cores" in printed and "not measured" in printed
+    assert v["rllib_ppo"]["env_steps"] >= 64 and v["trainer_ppo"]["env_steps"] >= 64  # the same budget each
+    assert result["scaling"]["trainer_ppo_vs_rllib_ppo"] == pytest.approx(
+        v["trainer_ppo"]["env_steps_per_s"] / v["rllib_ppo"]["env_steps_per_s"])

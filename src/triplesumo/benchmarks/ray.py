@@ -16,6 +16,14 @@ start is not timed), env steps per second of wall time:
     as Ray tasks of ``eval_epochs / 4`` epochs (``evaluate --ray``). The rows are checked
     equal.
 
+``rllib_ppo`` / ``trainer_ppo`` (with ``--rllib``)
+    Bug learning PPO against the zoo's Ant and Spider for the same budget of ``ppo_steps``
+    env steps on the same schedule: updates on batches of 2,000 transitions (fewer for a tiny
+    budget), 4 minibatches, 10 epochs each. RLlib's PPO (:func:`~triplesumo.integrations.rllib.make_config`,
+    sampling in the driver, its default networks) against ``triplesumo train --learn
+    bug=ppo`` (16 matches x 125 steps per rollout, the project's PPO networks); wall time of
+    sampling and learning together, build and warm-up untimed.
+
 From the measured rates, per-core figures (``sweep_2`` and ``evaluate_ray`` over
 ``num_cpus``) and a **projection** to ``cores`` cores (default 64): the per-core rate
 times the cores. It is arithmetic, not a measurement: it assumes every core runs as fast
@@ -45,8 +53,56 @@ def _trial_steps(run_dir: str) -> int:
     return int(rows[-1]["env_steps"]) if rows else 0
 
 
+def _ppo_batch(budget: int) -> int:
+    """Transitions per PPO update in both rows: 2,000 (a multiple of the 16 matches), fewer for tiny budgets."""
+    return max(16, min(2000, budget) // 16 * 16)
+
+
+def _rllib_ppo(budget: int, seed: int) -> dict[str, Any]:
+    """RLlib PPO on the paper match (Bug learns, zoo Ant and Spider frozen) for ``budget`` env steps."""
+    from triplesumo.integrations.rllib import make_config
+
+    algo = (make_config("paper", policies_to_train=["bug"], frozen=OTHERS)
+            .env_runners(num_env_runners=0)
+            .training(train_batch_size_per_learner=_ppo_batch(budget), minibatch_size=_ppo_batch(budget) // 4,
+                      num_epochs=10)
+            .debugging(seed=seed)
+            .build_algo())
+    try:
+        done, wall = 0, 0.0
+        while done < budget:
+            start = time.perf_counter()
+            result = algo.train()
+            wall += time.perf_counter() - start
+            done = int(result["env_runners"]["num_env_steps_sampled_lifetime"])
+    finally:
+        algo.stop()
+    return {"env_steps": done, "seconds": wall, "env_steps_per_s": done / wall}
+
+
+def _trainer_ppo(budget: int, seed: int, out: str) -> dict[str, Any]:
+    """``triplesumo train --learn bug=ppo`` against the zoo's Ant and Spider for ``budget`` env steps."""
+    from triplesumo.algos.ppo import PPOConfig
+    from triplesumo.train.config import TrainConfig
+    from triplesumo.train.loop import Trainer
+
+    cfg = TrainConfig(name="ppo", out=out, learn=("bug=ppo",), policies=tuple(f"{a}={s}" for a, s in OTHERS.items()),
+                      n_envs=16, seed=seed, progress=False, tensorboard=False, checkpoint_every=10**6,
+                      ppo=PPOConfig(n_steps=_ppo_batch(budget) // 16, n_minibatches=4, n_epochs=10))
+    trainer = Trainer(cfg)
+    try:
+        start = time.perf_counter()
+        while trainer.env_steps < budget:
+            trainer.collect_step()
+        wall = time.perf_counter() - start
+    finally:
+        trainer.log.close()
+        trainer.batch.close()
+    return {"env_steps": trainer.env_steps, "seconds": wall, "env_steps_per_s": trainer.env_steps / wall}
+
+
 def run_ray_benchmark(epochs: int = 24, steps: int = 300, eval_epochs: int = 32, num_cpus: int = 2,
-                      cores: int = 64, seed: int = 0) -> dict[str, Any]:
+                      cores: int = 64, seed: int = 0, ppo_steps: int = 0) -> dict[str, Any]:
     """Measure the variants of the module docstring; returns rates, per-core figures and the projection."""
     import ray
 
@@ -89,6 +145,9 @@ def run_ray_benchmark(epochs: int = 24, steps: int = 300, eval_epochs: int = 32,
         wall_ray = time.perf_counter() - start
         if remote != local:
             raise RuntimeError("evaluate on Ray gave other rows than the local run")
+        if ppo_steps:
+            result["variants"]["rllib_ppo"] = _rllib_ppo(ppo_steps, seed)
+            result["variants"]["trainer_ppo"] = _trainer_ppo(ppo_steps, seed, tmp)
         env_steps = sum(int(r["steps"]) for r in local)
         for name, wall in (("evaluate_local", wall_local), ("evaluate_ray", wall_ray)):
             result["variants"][name] = {"epochs": eval_epochs, "env_steps": env_steps, "seconds": wall,
@@ -97,6 +156,9 @@ def run_ray_benchmark(epochs: int = 24, steps: int = 300, eval_epochs: int = 32,
     result["scaling"] = {"sweep_2_vs_1": v["sweep_2"]["env_steps_per_s"] / v["sweep_1"]["env_steps_per_s"],
                          "evaluate_ray_vs_local": (v["evaluate_ray"]["env_steps_per_s"]
                                                    / v["evaluate_local"]["env_steps_per_s"])}
+    if ppo_steps:
+        result["scaling"]["trainer_ppo_vs_rllib_ppo"] = (v["trainer_ppo"]["env_steps_per_s"]
+                                                         / v["rllib_ppo"]["env_steps_per_s"])
     per_core = {"sweep": v["sweep_2"]["env_steps_per_s"] / num_cpus,
                 "evaluate": v["evaluate_ray"]["env_steps_per_s"] / num_cpus}
     result["per_core"] = per_core
@@ -117,7 +179,9 @@ def format_table(result: dict[str, Any]) -> str:
         lines.append(f"{name:16s} {row['env_steps']:10d} {row['seconds']:8.1f} {row['env_steps_per_s']:12.0f}")
     s, p = result["scaling"], result["projection"]
     lines += ["", f"sweep 2 trials / 1 trial: {s['sweep_2_vs_1']:.2f}x; evaluate --ray / local: "
-                  f"{s['evaluate_ray_vs_local']:.2f}x",
+                  f"{s['evaluate_ray_vs_local']:.2f}x"
+              + (f"; our PPO trainer / RLlib PPO: {s['trainer_ppo_vs_rllib_ppo']:.2f}x"
+                 if "trainer_ppo_vs_rllib_ppo" in s else ""),
               f"per core: sweep {result['per_core']['sweep']:.0f}, evaluate {result['per_core']['evaluate']:.0f} "
               "env steps/s",
               f"PROJECTION to {p['cores']} cores (per-core rate x cores, not measured): sweep "
@@ -133,12 +197,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--num-cpus", type=int, default=2, help="CPUs of the local Ray (default: 2)")
     parser.add_argument("--cores", type=int, default=64, help="cores of the projection (default: 64)")
     parser.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
+    parser.add_argument("--rllib", type=int, default=0, metavar="ENV_STEPS",
+                        help="also RLlib PPO vs our PPO trainer on this many env steps each (0: skip)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
     args = parser.parse_args(argv)
     if args.quick:
         args.epochs, args.steps, args.eval_epochs = 2, 30, 4
-    result = run_ray_benchmark(args.epochs, args.steps, args.eval_epochs, args.num_cpus, args.cores, args.seed)
+    result = run_ray_benchmark(args.epochs, args.steps, args.eval_epochs, args.num_cpus, args.cores, args.seed,
+                               args.rllib)
     report(format_table(result), result, args.json)
     return 0
 
