@@ -91,7 +91,7 @@ def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) 
 
 
 def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
-    cfg = tiny(tmp_path, "pursuit", scenario="pursuit", learn=("evader=sac",), epochs=4,
+    cfg = tiny(tmp_path, "pursuit", scenario="pursuit", learn=("evader=sac",), epochs=4, tensorboard=True,
                policies=("*=random",), league=LeagueConfig(zoo=("pursuer_0=passive", "pursuer_1=random",
                                                                 "pursuer_2=passive")))
     trainer = Trainer(cfg)
@@ -102,6 +102,13 @@ def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
         {"pursuer_0": "passive", "pursuer_1": "random", "pursuer_2": "passive"}]
     assert {tuple(s) for s in trainer.seat_members} == {("pursuers-0001",) * 3 + (None,)}
     assert league.pools["pursuers"].members[0].games == 4
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(trainer.run_dir / "tensorboard"))
+    events.Reload()
+    sizes = [e.value for e in events.Scalars("league/pursuers/pool_size")]
+    assert len(sizes) == trainer.epochs_done and set(sizes) == {1.0}
+    assert len(events.Scalars("league/evader/learner_mu")) == trainer.epochs_done
 
 
 def test_resume_restores_the_league_exactly(tmp_path: Path) -> None:

@@ -10,6 +10,11 @@ metrics CSV, every learner's update count and mean losses a row of its learning 
 match is reset with fresh seeded noise. The one-learner case (``--learner bug``, DDPG) is
 the paper's, bit for bit.
 
+With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents that do not
+learn: at every match start one member of each such side's pool is drawn (in a free-for-all
+one per seat); at every match end its players are rated, due learning sides are admitted
+(their actors written as policy files under ``RUN/league``) and the league's epoch is logged.
+
 Nothing is lost: a folder that already holds a run is never trained into again without
 ``resume`` (continue it) or ``start_over`` (move it aside first); the memory the replay
 buffer needs is checked before anything is made; a learner whose losses, parameters or
