@@ -160,6 +160,12 @@ def test_bad_self_play_configs_name_the_problem(tmp_path: Path, fields: dict[str
         Trainer(tiny(tmp_path, "bad", **({"policies": ("*=random",)} | fields)))
 
 
+def test_league_options_without_self_play_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="TrainConfig.league is set .* add --self-play"):
+        tiny(tmp_path, "off", self_play=False, **SPIDER)
+    assert tiny(tmp_path, "off", self_play=False, league=LeagueConfig(), **SPIDER).self_play is False
+
+
 def test_cli_parses_self_play_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["train", "--self-play", "--league.threshold", "2", "--out", str(tmp_path)]) != 0
     assert "LeagueConfig.threshold" in capsys.readouterr().err

@@ -132,6 +132,8 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
         if not (math.isfinite(self.max_minutes) and self.max_minutes >= 0):
             raise ValueError(f"TrainConfig.max_minutes must be >= 0, got {self.max_minutes!r}")
+        if not self.self_play and self.league != LeagueConfig():
+            raise ValueError("TrainConfig.league is set (--league.*) but self_play is off: add --self-play")
         if self.scenario not in scenarios():
             raise ValueError(f"TrainConfig.scenario must be one of {scenarios()}, got {self.scenario!r}")
 
