@@ -13,6 +13,7 @@ from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.rules.config import OBS_MODES, RewardConfig
 from triplesumo.rules.scenarios import scenarios
+from triplesumo.train.league import LeagueConfig
 
 ALGOS = ("ddpg", "td3", "sac", "ppo")
 """Algorithms a learner can use (``--learn AGENT=ALGO``); each has its config field."""
@@ -94,6 +95,11 @@ class TrainConfig:
     scenario: str = "paper"
     """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
     for every other agent. Under elimination rules the learner's epoch ends when it is out."""
+    self_play: bool = False
+    """Fill the seats of the agents that do not learn from opponent pools (RUN/league) sampled at every
+    match start; the learners' snapshots join their side's pool when they beat it (see league)."""
+    league: LeagueConfig = field(default_factory=LeagueConfig)
+    """The self-play league's rules (used with self_play): admission, sampling, pool size, zoo seeds."""
 
     def __post_init__(self) -> None:
         for name in ("policies", "learn"):
@@ -126,6 +132,8 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
         if not (math.isfinite(self.max_minutes) and self.max_minutes >= 0):
             raise ValueError(f"TrainConfig.max_minutes must be >= 0, got {self.max_minutes!r}")
+        if not self.self_play and self.league != LeagueConfig():
+            raise ValueError("TrainConfig.league is set (--league.*) but self_play is off: add --self-play")
         if self.scenario not in scenarios():
             raise ValueError(f"TrainConfig.scenario must be one of {scenarios()}, got {self.scenario!r}")
 

@@ -222,6 +222,12 @@ class MetricsLog:
             for key, value in known.items():
                 self._tb.add_scalar(self._tag(learner, f"losses/{key}"), value, epoch)
 
+    def scalars(self, values: dict[str, float], epoch: int) -> None:
+        """Other per-epoch scalars (e.g. the league's ``league/SIDE/...``) to TensorBoard."""
+        if self._tb is not None:
+            for tag, value in values.items():
+                self._tb.add_scalar(tag, value, epoch)
+
     def flush(self) -> None:
         """Flush and fsync the CSVs (before a checkpoint: no checkpoint counts rows the disk lacks)."""
         for table in (*self.metrics.values(), *self.learning.values()):

@@ -10,6 +10,11 @@ metrics CSV, every learner's update count and mean losses a row of its learning 
 match is reset with fresh seeded noise. The one-learner case (``--learner bug``, DDPG) is
 the paper's, bit for bit.
 
+With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents that do not
+learn: at every match start one member of each such side's pool is drawn (in a free-for-all
+one per seat); at every match end its players are rated, due learning sides are admitted
+(their actors written as policy files under ``RUN/league``) and the league's epoch is logged.
+
 Nothing is lost: a folder that already holds a run is never trained into again without
 ``resume`` (continue it) or ``start_over`` (move it aside first); the memory the replay
 buffer needs is checked before anything is made; a learner whose losses, parameters or
@@ -20,6 +25,7 @@ learner, the update and the last good checkpoint.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import shlex
@@ -35,8 +41,8 @@ import numpy as np
 import torch
 
 from triplesumo import ENV_VERSION, __version__
-from triplesumo.agents.builtin import act_batch
-from triplesumo.agents.policy_file import atomic_write_bytes, load_json, save_policy
+from triplesumo.agents.builtin import BUILTIN, act_batch
+from triplesumo.agents.policy_file import atomic_write_bytes, load_fixed_policy, load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.algos.base import DivergedError
 from triplesumo.algos.ddpg import DDPGConfig
@@ -53,6 +59,7 @@ from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
+from triplesumo.train.league import League, LeagueConfig, plot_league
 from triplesumo.train.learners import (
     Learner,
     LearnerSpec,
@@ -116,6 +123,8 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
     if isinstance(data, dict) and "ddpg" in data and "learn" not in data:  # written before several learners
         data = {**data, **{k: v for k, v in config_to_json(TrainConfig()).items()
                            if k in ("learn", "share", "td3", "sac", "ppo")}}
+    if isinstance(data, dict) and "self_play" not in data and "league" not in data:  # written before self-play
+        data = {**data, **{k: v for k, v in config_to_json(TrainConfig()).items() if k in ("self_play", "league")}}
     data = _check_keys(data, TrainConfig, "", source)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
     for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
@@ -125,6 +134,11 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
             raise ValueError(f"{source}: {exc}") from exc
     data["policies"] = tuple(data["policies"])
     data["learn"] = tuple(data["learn"])
+    try:
+        league: dict[str, Any] = _check_keys(data["league"], LeagueConfig, "league.", source)
+        data["league"] = LeagueConfig(**(league | {"zoo": tuple(league["zoo"])}))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: {exc}") from exc
     try:
         return TrainConfig(**data)
     except (TypeError, ValueError) as exc:
@@ -299,16 +313,144 @@ class Trainer:
         """Seconds collecting (physics and rules), acting, learning (off-policy updates run in a
         thread: they overlap "env" when overlap_learning is on; PPO's run inline) and waiting
         for learning."""
+        self.league: League | None = None
+        """The self-play league (``cfg.self_play``): pools whose members take the seats that do not learn."""
+        self.seat_members: list[list[str | None]] = [[None] * probe.n_agents for _ in range(cfg.n_envs)]
+        """Per match, per seat: the league member playing it this match (None: a learner's or fixed seat)."""
+        self.seat_policies: list[dict[int, Any]] = [{} for _ in range(cfg.n_envs)]
+        self._member_policies: dict[tuple[str, str], Any] = {}
+        if cfg.self_play:
+            self._setup_league(pairs)
         if resume:
             self._restore(from_checkpoint)
         else:
             for k in range(cfg.n_envs):
+                self._seat_opponents(k)
                 self.obs.append(self.batch.reset_one(k, seed=self._episode_seed())[0])
             with checkpoint.writing(self.run_dir / "config.json"):
                 atomic_write_bytes(self.run_dir / "config.json",
                                    (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
         self.log = MetricsLog(self.run_dir, self.agents, [s.name for s in self.specs],
                               self.epochs_done if resume else None, cfg.tensorboard)
+
+    # ------------------------------------------------------------------ self-play
+    def _setup_league(self, pairs: tuple[str, ...]) -> None:
+        """Sides, roles and seeds of the league (README "Self-play"); errors name the config field.
+
+        A side is a team of the roster (paper: ``team`` = Ant and Bug, ``spider``); in a free-for-all
+        (every team one agent) one side ``ffa`` whose one role takes any seat. A side learns as a
+        whole or not at all; the seats of sides that do not learn are drawn from their pools, each
+        pool seeded by ``league.zoo`` or else by those seats' ``policies`` (passive when not named).
+        """
+        cfg, probe = self.cfg, self.batch.matches[0]
+        roster = list(probe.agents)
+        teams = {a.name: a.team for a in self.match_cfg.agents}
+        fixed = [a for a in roster if a not in self.agents]
+        if not fixed:
+            raise ValueError(f"TrainConfig.self_play: every agent learns ({roster}); self-play draws the seats of "
+                             "the agents that do not learn from pools, so leave at least one agent out of learn")
+        self.ffa = len(set(teams.values())) == len(roster)
+        if self.ffa:
+            if len(self.specs) != 1:
+                raise ValueError(f"TrainConfig.self_play in a free-for-all (scenario {cfg.scenario!r}) takes one "
+                                 f"learner whose snapshots fill the other seats, got {[s.name for s in self.specs]}")
+            if len(set(probe.observer.sizes.values())) > 1 or len(set(probe.action_sizes)) > 1:
+                raise ValueError(f"TrainConfig.self_play (scenario {cfg.scenario!r}): the seats have different "
+                                 "observation or action sizes, so one network cannot take them all")
+            sides: dict[str, list[str]] = {"ffa": ["ffa"]}
+            self.side_of = dict.fromkeys(roster, "ffa")
+            self.role_of = dict.fromkeys(roster, "ffa")
+        else:
+            sides = {}
+            for a in roster:
+                sides.setdefault(teams[a], []).append(a)
+            self.side_of, self.role_of = dict(teams), {a: a for a in roster}
+            for side, members in sides.items():
+                learning = [a for a in members if a in self.agents]
+                if learning and len(learning) != len(members):
+                    raise ValueError(
+                        f"TrainConfig.self_play: side {side!r} has learning agents {learning} and fixed ones "
+                        f"{[a for a in members if a not in learning]}; a side learns as a whole (e.g. "
+                        f"--learn {' '.join(f'{a}=sac' for a in members)} --share team) or not at all")
+        self.learning_sides = list(dict.fromkeys(self.side_of[a] for a in self.agents))
+        self.opponent_sides = list(dict.fromkeys(self.side_of[a] for a in fixed))
+        spec_of = dict(p.split("=", 1) for p in pairs)
+        seeded = {e.split("=", 1)[0] for e in cfg.league.zoo}
+        extra: list[str] = []
+        for side in self.opponent_sides:
+            roles = sides[side]
+            if not any(r in seeded for r in roles):
+                extra += [f"{r}={spec_of.get(a, 'passive')}" for r, a in
+                          zip(roles, [a for a in fixed if self.side_of[a] == side], strict=False)]
+        lcfg = dataclasses.replace(cfg.league, zoo=(*cfg.league.zoo, *extra))
+        try:
+            self.league = League(self.run_dir, lcfg, sides, seed=int(self.rng.integers(2**31 - 1)))
+        except ValueError as err:
+            raise ValueError(f"TrainConfig.league: {err}") from None
+        empty = [s for s in self.opponent_sides if not self.league.pools[s].members]
+        if empty:
+            raise ValueError(f"TrainConfig.league.zoo: the pools of {empty} would start empty; name a policy for "
+                             f"every role of a side ({ {s: sides[s] for s in empty} }) or none")
+
+    def _seat_opponents(self, k: int) -> None:
+        """Draw match ``k``'s opponents from the pools of the sides that do not learn (at its start)."""
+        league = self.league
+        if league is None:
+            return
+        roster = self.batch.matches[0].agents
+        members: list[str | None] = [None] * len(roster)
+        for side in self.opponent_sides:
+            seats = [i for i, a in enumerate(roster) if self.side_of[a] == side and a not in self.agents]
+            picks = league.sample(side, len(seats) if self.ffa else 1)
+            for j, i in enumerate(seats):
+                members[i] = picks[j if self.ffa else 0].id
+        seed = int(league.rng.integers(2**31 - 1))
+        self.seat_members[k] = members
+        self.seat_policies[k] = self._policies_of(members, seed)
+
+    def _policies_of(self, members: list[str | None], seed: int) -> dict[int, Any]:
+        """Seat index -> the policy of the member seated there (policy files loaded once, then shared)."""
+        assert self.league is not None
+        probe, out = self.batch.matches[0], {}
+        for i, member_id in enumerate(members):
+            if member_id is None:
+                continue
+            member, role = self.league.member(member_id), self.role_of[probe.agents[i]]
+            spec = member.policies[role]
+            if spec in BUILTIN:
+                size = probe.action_sizes[i]
+                out[i] = BUILTIN[spec](seed + i, action_size=size) if spec == "random" else BUILTIN[spec](size)
+            else:
+                key = (member_id, role)
+                if key not in self._member_policies:
+                    self._member_policies[key] = load_fixed_policy(self.league.root / spec)[0]
+                out[i] = self._member_policies[key]
+        return out
+
+    def _league_match(self, k: int, res: StepResult) -> None:
+        """Rate match ``k`` (places; seats still in play when every learner is out share the best place),
+        admit the learning sides that are due, and log the league's epoch."""
+        league = self.league
+        assert league is not None
+        if not any(is_error(info) for info in res.infos):
+            players = [self.seat_members[k][i] or League.learner(self.side_of[a])
+                       for i, a in enumerate(self.batch.matches[k].agents)]
+            places = [float(info["place"]) if int(info["place"]) > 0 else 1.0 for info in res.infos]
+            league.record_seats(players, places)
+        for side in self.learning_sides:
+            if league.admit_due(side, self.epochs_done):
+                league.admit(side, self.epochs_done, write=functools.partial(self._write_snapshot, side))
+                self._member_policies = {key: p for key, p in self._member_policies.items()
+                                         if key[0] in {m.id for pool in league.pools.values() for m in pool.members}}
+        self.log.scalars(league.epoch_end(self.epochs_done), self.epochs_done)
+
+    def _write_snapshot(self, side: str, stems: Mapping[str, Path]) -> None:
+        """A learning side's snapshot: each role's policy files from the learner acting for it."""
+        for role, stem in stems.items():
+            agent = self.specs[0].agents[0] if self.ffa else role
+            learner = next(lr for lr in self.learners if agent in lr.spec.agents)
+            manifest = self.manifest(learner) | {"league_member": stem.parent.name, "side": side, "role": role}
+            save_policy(stem, learner.algo.export_actor(), manifest, obs_norm=learner.algo.obs_norm)
 
     # ------------------------------------------------------------------ helpers
     def _dims(self, match: Match, spec: LearnerSpec) -> tuple[int, int]:
@@ -352,7 +494,11 @@ class Trainer:
             seen.append(obs)
             acted.append(act)
         for i, policy in self.others:
-            actions[:, i, :probe.action_sizes[i]] = act_batch(policy, np.stack([o[i] for o in self.obs]))
+            if self.league is None:
+                actions[:, i, :probe.action_sizes[i]] = act_batch(policy, np.stack([o[i] for o in self.obs]))
+        for k, seated in enumerate(self.seat_policies):
+            for i, policy in seated.items():
+                actions[k, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[k][i][None])[0]
         t1 = time.perf_counter()
         # The off-policy updates due at this step learn from the replay as it was before the
         # step, so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and
@@ -440,6 +586,9 @@ class Trainer:
         self.finished_epoch_steps.append(max(int(info["step"]) for info in res.infos))
         for learner in self.learners:
             self.log.learned(learner.name, self.epochs_done, learner.algo.num_updates, learner.take_stats())
+        if self.league is not None:
+            self._league_match(k, res)
+            self._seat_opponents(k)
         self.obs[k] = self.batch.reset_one(k, seed=self._episode_seed())[0]
         for learner in self.learners:
             rows = learner.rows_of(k)
@@ -566,6 +715,12 @@ class Trainer:
             "acc": self.acc, "final": self.final, "timers": self.timers,
             "policy_rngs": {a: p.rng.bit_generator.state for a, p in self.policies.items() if hasattr(p, "rng")},
         }
+        if self.league is not None:
+            self.league.save()
+            state["league"] = self.league.state_dict()
+            state["seats"] = self.seat_members
+            state["seat_rngs"] = [{str(i): p.rng.bit_generator.state for i, p in seated.items() if hasattr(p, "rng")}
+                                  for seated in self.seat_policies]
         keep_replay = self.cfg.save_replay and bool(replay)
         folder = checkpoint.save(self.run_dir, self.epochs_done, tensors, state, arrays,
                                  replay if keep_replay else None)
@@ -599,7 +754,9 @@ class Trainer:
         replay: Mapping[str, np.ndarray] | None = lazy_replay
         if "learners" not in state and "optimizer" in state:
             tensors, state, arrays, replay = self._one_learner_checkpoint(tensors, state, arrays, replay)
-        need_state = ("config", "learners", "rng", "matches", "epochs_done", "env_steps", "acc", "final")
+        need_state: tuple[str, ...] = ("config", "learners", "rng", "matches", "epochs_done", "env_steps", "acc",
+                                       "final")
+        need_state += ("league", "seats", "seat_rngs") if self.league is not None else ()
         missing = [k for k in need_state if k not in state]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'state.json'}: missing entries {missing}")
@@ -608,7 +765,7 @@ class Trainer:
         except ValueError as exc:
             raise checkpoint.CheckpointError(str(exc)) from exc
         for name in ("learner", "learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
-                     "reward", "ddpg", "td3", "sac", "ppo", "seed"):
+                     "reward", "ddpg", "td3", "sac", "ppo", "seed", "self_play", "league"):
             # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
             if getattr(saved, name) != getattr(self.cfg, name):
                 raise checkpoint.CheckpointError(
@@ -666,6 +823,14 @@ class Trainer:
         self.final = {a: state["final"][a] for a in self.agents}
         self.lwr = {a: [float(x) for x in arrays[f"lwr.{a}"]] for a in self.agents}
         self.timers = {**self.timers, **state.get("timers", {})}
+        if self.league is not None:
+            self.league.load_state_dict(state["league"])
+            self.league.truncate_log(self.epochs_done)
+            self.seat_members = [list(m) for m in state["seats"]]
+            for k, members in enumerate(self.seat_members):
+                self.seat_policies[k] = self._policies_of(members, 0)
+                for i, rng_state in state["seat_rngs"][k].items():
+                    self.seat_policies[k][int(i)].rng.bit_generator.state = rng_state
 
     def finish_outputs(self) -> None:
         """Plots from the metrics CSVs (skipped for an agent without a finished epoch)."""
@@ -720,6 +885,8 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
             out = run_dir / "plots" if path.name == "metrics.csv" else run_dir / "plots" / agent
             paths += plot_run(metrics, out, window=window, title=f"{agent} training ({run_dir.name})",
                               label=agent.capitalize())
+    if (run_dir / "league" / "league.csv").is_file():  # a self-play run: rating curves and pool members
+        paths.append(plot_league(run_dir))
     return paths
 
 

@@ -1,0 +1,171 @@
+"""Self-play training (``--self-play``): learners against pools of their own snapshots and the zoo.
+
+Tiny runs (4 matches of 150 steps at once, 16-unit networks, a few seconds each): snapshots
+are admitted and rated, seats are drawn from the pools, resume equals uninterrupted, and bad
+self-play configs fail naming the field.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from triplesumo.agents.policy_file import load_policy
+from triplesumo.algos.sac import SACConfig
+from triplesumo.cli import main
+from triplesumo.train import checkpoint
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.league import League, LeagueConfig
+from triplesumo.train.loop import Trainer, config_from_json, config_to_json, train
+
+SAC = SACConfig(hidden=(16, 16), buffer_size=4000, learning_starts=600, batch_size=16, learn_every=16)
+LEAGUE = LeagueConfig(threshold=0.0, window=2, snapshot_every=2, max_size=3)
+"""Admit at every even epoch whose last two matches hold a win: in 150 steps a random
+quadruped often walks itself out of the ring, so a still learner wins."""
+
+
+def tiny(out: Path, name: str, **fields: Any) -> TrainConfig:
+    values: dict[str, Any] = {
+        "name": name, "out": str(out), "epochs": 8, "steps_per_epoch": 150, "n_envs": 4,
+        "checkpoint_every": 4, "seed": 3, "sac": SAC, "progress": False, "tensorboard": False,
+        "self_play": True, "league": LEAGUE,
+    }
+    return TrainConfig(**(values | fields))
+
+
+SPIDER = {"learn": ("spider=sac",), "policies": ("ant=random", "bug=random")}
+FFA = {"scenario": "ffa", "learn": ("ant=sac",), "policies": ("*=random",)}
+
+
+def rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_spider_learns_against_the_team_pool_and_its_snapshots_join_its_own(tmp_path: Path) -> None:
+    trainer = Trainer(tiny(tmp_path, "spider", **SPIDER))
+    trainer.run()
+    league = trainer.league
+    assert league is not None
+    team, spider = league.pools["team"], league.pools["spider"]
+    # the team seats come from the team pool, seeded from --policies (ant=random, bug=random)
+    assert [m.policies for m in team.members] == [{"ant": "random", "bug": "random"}]
+    assert {tuple(seats) for seats in trainer.seat_members} == {("team-0001", "team-0001", None)}
+    assert team.members[0].games >= 8
+    # the Spider learner's snapshots were admitted (its pool started empty) and are policy files
+    assert len(spider) >= 2 and all(m.source == "self" for m in spider.members)
+    snap = spider.members[-1]
+    net, manifest = load_policy(league.root / snap.policies["spider"])
+    assert manifest["algo"] == "sac" and manifest["seed"] == 3 and manifest["epochs"] == snap.epoch
+    assert manifest["league_member"] == snap.id and "--self-play" in manifest["command"]
+    # ratings moved: the learner's uncertainty shrank from the prior's
+    me = league.ratings[League.learner("spider")]
+    assert me.sigma < 25 / 3 - 1
+    log = rows(league.root / "league.csv")
+    assert [int(r["epoch"]) for r in log if r["side"] == "spider"] == list(range(1, trainer.epochs_done + 1))
+    assert sum(int(r["admitted"]) for r in log if r["side"] == "spider") == len(spider) + len(spider.evicted)
+    assert (trainer.run_dir / "plots" / "league.png").stat().st_size > 10_000
+    assert json.loads((league.root / "pool.json").read_text())["pools"]["spider"]["members"][-1]["id"] == snap.id
+
+
+def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) -> None:
+    trainer = Trainer(tiny(tmp_path, "ffa", **FFA))
+    trainer.run()
+    league = trainer.league
+    assert league is not None and list(league.pools) == ["ffa"]
+    pool = league.pools["ffa"]
+    assert pool.members[0].source == "zoo" and pool.members[0].policies == {"ffa": "random"}
+    assert len(pool) + len(pool.evicted) >= 2  # the seed and at least one snapshot
+    assert len(pool) <= LEAGUE.max_size and pool.members[0].id == "ffa-0001"  # FIFO keeps the first
+    met = [m for m in (*pool.members, *pool.evicted) if m.source == "self" and m.games > 0]
+    assert met, "no admitted snapshot was ever drawn to play"
+    for seats in trainer.seat_members:
+        assert seats[0] is None and all(s is not None for s in seats[1:])
+    assert league.ratings[League.learner("ffa")].mu != 25.0
+
+
+def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
+    cfg = tiny(tmp_path, "pursuit", scenario="pursuit", learn=("evader=sac",), epochs=4, tensorboard=True,
+               policies=("*=random",), league=LeagueConfig(zoo=("pursuer_0=passive", "pursuer_1=random",
+                                                                "pursuer_2=passive")))
+    trainer = Trainer(cfg)
+    trainer.run()
+    league = trainer.league
+    assert league is not None
+    assert [m.policies for m in league.pools["pursuers"].members] == [
+        {"pursuer_0": "passive", "pursuer_1": "random", "pursuer_2": "passive"}]
+    assert {tuple(s) for s in trainer.seat_members} == {("pursuers-0001",) * 3 + (None,)}
+    assert league.pools["pursuers"].members[0].games == 4
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(trainer.run_dir / "tensorboard"))
+    events.Reload()
+    sizes = [e.value for e in events.Scalars("league/pursuers/pool_size")]
+    assert len(sizes) == trainer.epochs_done and set(sizes) == {1.0}
+    assert len(events.Scalars("league/evader/learner_mu")) == trainer.epochs_done
+
+
+def test_resume_restores_the_league_exactly(tmp_path: Path) -> None:
+    command = "triplesumo train --self-play"  # the same in both runs' manifests (it names --epochs otherwise)
+    full = Trainer(tiny(tmp_path / "a", "run", **FFA), command=command)
+    full.run()
+    half_cfg = tiny(tmp_path / "b", "run", epochs=4, **FFA)
+    half = Trainer(half_cfg, command=command)
+    half.run()
+    assert half.league is not None and len(half.league.pools["ffa"]) >= 2  # admitted before the checkpoint
+    resumed = Trainer(dataclasses.replace(half_cfg, epochs=8), run_dir=tmp_path / "b/run", resume=True,
+                      command=command)
+    resumed.run()
+    assert full.league is not None and resumed.league is not None
+    a, b = full.league.state_dict(), resumed.league.state_dict()
+    assert a == b
+    assert full.seat_members == resumed.seat_members
+    assert (tmp_path / "a/run/league/league.csv").read_text() == (tmp_path / "b/run/league/league.csv").read_text()
+    for m in full.league.pools["ffa"].members:
+        for rel, digest in m.sha256.items():
+            assert resumed.league.member(m.id).sha256[rel] == digest, rel
+    last = checkpoint.latest(tmp_path / "a/run")
+    assert last.name == checkpoint.latest(tmp_path / "b/run").name
+    with np.load(last / "arrays.npz") as x, np.load(tmp_path / "b/run/checkpoints" / last.name / "arrays.npz") as y:
+        for key in x.files:
+            assert np.array_equal(x[key], y[key]), key
+
+
+def test_resume_through_train_and_config_round_trip(tmp_path: Path) -> None:
+    cfg = tiny(tmp_path, "rt", epochs=2, checkpoint_every=2, **SPIDER)
+    assert config_from_json(config_to_json(cfg)) == cfg
+    old = {k: v for k, v in config_to_json(cfg).items() if k not in ("self_play", "league")}
+    assert config_from_json(old).self_play is False
+    train(cfg)
+    result = train(cfg, resume_dir=tmp_path / "rt", overrides={"epochs": 4})
+    assert result.epochs >= 4
+    assert int(rows(tmp_path / "rt/league/league.csv")[-1]["epoch"]) == result.epochs
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"learn": ("ant=sac", "bug=sac", "spider=sac")}, "every agent learns"),
+    ({"learn": ("bug=sac",)}, "side 'team' has learning agents ['bug'] and fixed ones ['ant']"),
+    ({"scenario": "ffa", "learn": ("ant=sac", "bug=sac")}, "free-for-all"),
+    ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("ant=random",))}, "would start empty"),
+    ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("beetle=random",))}, "TrainConfig.league"),
+])
+def test_bad_self_play_configs_name_the_problem(tmp_path: Path, fields: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        Trainer(tiny(tmp_path, "bad", **({"policies": ("*=random",)} | fields)))
+
+
+def test_league_options_without_self_play_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="TrainConfig.league is set .* add --self-play"):
+        tiny(tmp_path, "off", self_play=False, **SPIDER)
+    assert tiny(tmp_path, "off", self_play=False, league=LeagueConfig(), **SPIDER).self_play is False
+
+
+def test_cli_parses_self_play_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["train", "--self-play", "--league.threshold", "2", "--out", str(tmp_path)]) != 0
+    assert "LeagueConfig.threshold" in capsys.readouterr().err
