@@ -13,7 +13,7 @@ from gymnasium.error import ResetNeeded
 from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
-from triplesumo.rules.scenarios import get_scenario
+from triplesumo.rules.scenarios import resolve
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """Any callable from one observation to one normalised action in [-1, 1]^8. If it has a
@@ -71,12 +71,7 @@ class TripleSumoEnv(MatchAccess, gym.Env):
     def __init__(self, learner: str | None = None, policies: Mapping[str, Policy] | None = None,
                  render_mode: str | None = None, width: int = 480, height: int = 480,
                  config: MatchConfig | None = None, scenario: str = "paper", **config_fields: Any) -> None:
-        if config is not None and config_fields:
-            raise ValueError("pass either config=MatchConfig(...) or MatchConfig fields, not both")
-        chosen = get_scenario(scenario)
-        if config is None:
-            config = chosen.config(**config_fields)
-        learner = chosen.learner if learner is None else learner
+        chosen, config, learner = resolve(scenario, config, learner, config_fields)
         self.scenario = chosen.name
         self.match = Match(config)
         if learner not in self.match.agents:

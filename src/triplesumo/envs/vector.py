@@ -19,7 +19,7 @@ from gymnasium.vector.utils import batch_space
 
 from triplesumo.envs.batch import VectorMatches
 from triplesumo.rules.config import MatchConfig
-from triplesumo.rules.scenarios import get_scenario
+from triplesumo.rules.scenarios import resolve
 
 BatchPolicy = Callable[[np.ndarray], np.ndarray]
 """A fixed policy for the vector view: ``(n, obs_dim)`` observations to ``(n, 8)`` actions
@@ -70,12 +70,7 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
         if render_mode is not None:
             raise ValueError(f"the vector view does not render (render_mode={render_mode!r}); render one "
                              "match with gym.make(id, render_mode='rgb_array')")
-        if config is not None and config_fields:
-            raise ValueError("pass either config=MatchConfig(...) or MatchConfig fields, not both")
-        chosen = get_scenario(scenario)
-        if config is None:
-            config = chosen.config(**config_fields)
-        learner = chosen.learner if learner is None else learner
+        _, config, learner = resolve(scenario, config, learner, config_fields)
         if config.rules == "elimination":
             raise ValueError(f"scenario {scenario!r}: the single-learner vector view plays first-out rules only "
                              "(a learner eliminated mid-match would need its slot reset while the match goes "

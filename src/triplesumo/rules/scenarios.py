@@ -242,6 +242,16 @@ def get_scenario(name: str) -> Scenario:
     return SCENARIOS[name]
 
 
+def resolve(scenario: str, config: MatchConfig | None, learner: str | None,
+            fields: Mapping[str, Any]) -> tuple[Scenario, MatchConfig, str]:
+    """What a single-learner view was asked for: the scenario, its config (``config`` or the
+    scenario's with ``fields``, not both) and the learner (default: the scenario's)."""
+    if config is not None and fields:
+        raise ValueError("pass either config=MatchConfig(...) or MatchConfig fields, not both")
+    chosen = get_scenario(scenario)
+    return chosen, config if config is not None else chosen.config(**fields), learner or chosen.learner
+
+
 def scenario_config(name: str, **overrides: Any) -> MatchConfig:
     """The :class:`MatchConfig` of scenario ``name`` with ``overrides`` (roster sizes or fields)."""
     return get_scenario(name).config(**overrides)
