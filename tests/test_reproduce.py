@@ -17,7 +17,8 @@ def _record(out: Path) -> dict:
     return json.loads((out / "reproduce.json").read_text())
 
 
-def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed_one(tmp_path: Path) -> None:
+def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed_one(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "rep"
     argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "--seeds", "0", "--no-progress"]
     assert main(argv) == 0
@@ -62,6 +63,14 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert main(argv) == 0
     assert _record(out)["runs"][-1]["ran"] == ["evaluation"]
     assert metrics.read_text() == whole
+
+    # a Bug whose policy changed since its evaluation: the evaluation is not complete any more (and evaluate's
+    # resume names the changed file rather than mixing rows of two policies)
+    bug = out / "bug" / "learn=bug=ddpg,seed=0"
+    (bug / "policy.json").write_text((bug / "policy.json").read_text().replace('"seed": 0', '"seed": 5'))
+    capsys.readouterr()
+    assert main(argv) == 2
+    assert "learn=bug=ddpg,seed=0/policy" in capsys.readouterr().err
 
     # other options in the same folder are refused
     assert main([*argv, "--eval-epochs", "7"]) == 2

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.agents.zoo import policy_fingerprint
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
@@ -248,7 +249,8 @@ class Protocol:
         want = set(self.evaluation_config().policy) | {"passive", "random"}
         return ({r["policy"] for r in rows} == want and all(int(r["epochs"]) == self.epochs["eval"] for r in rows)
                 and all(_rows_in(self.out / "evaluation" / r["candidate"] / "metrics.csv") == self.epochs["eval"]
-                        for r in rows))  # a killed evaluation's rows: per_seed.csv may predate them
+                        for r in rows)  # a killed evaluation's rows: per_seed.csv may predate them
+                and all(r["sha256"] == policy_fingerprint(r["policy"]) for r in rows))  # not a retrained Bug's
 
     def _evaluation(self) -> list[str]:
         return self._evaluate(self.evaluation_config())
