@@ -19,7 +19,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "triplesumo"
 LEVEL = {
     "_gl": 0, "model": 0, "sim": 1, "rules": 2, "envs": 3, "registration": 3,
     "agents": 4, "algos": 4, "evaluation": 5, "train": 5, "benchmarks": 5, "integrations": 5,
-    "zoo": 6, "demo": 6, "cli": 7, "_dcargs": 7,
+    "zoo": 6, "demo": 6, "reproduce": 6, "cli": 7, "_dcargs": 7,
 }
 FORBIDDEN_THIRD_PARTY = {
     "model": {"torch", "gymnasium", "pettingzoo"},

@@ -61,6 +61,12 @@ def _parser() -> argparse.ArgumentParser:
                        help=_dcargs.field_docs(SweepConfig)["grid"] + " (repeat --grid for more fields)")
     _dcargs.add_arguments(sweep, SweepConfig, skip=("grid",))
     _dcargs.add_arguments(sweep, TrainConfig, skip=("out", "name"))
+    from triplesumo.reproduce import ReproduceConfig
+
+    reproduce = sub.add_parser("reproduce", help="the whole reproduction protocol (Ant, Spider, contest check, Bug per "
+                                                 "algorithm x seed, evaluation, compare, REPRODUCTION.md), "
+                                                 "resumable; --tiny for a smoke run")
+    _dcargs.add_arguments(reproduce, ReproduceConfig)
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv, or metrics-<agent>.csv per learning agent)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
@@ -151,6 +157,10 @@ def main(argv: list[str] | None = None) -> int:
             print(format_sweep(run_sweep(scfg, base)))
             print(f"summary: {scfg.out}/summary.csv, summary.json" + (f"; compare: {scfg.out}/compare/"
                                                                       if scfg.evaluate_epochs else ""))
+        elif args.command == "reproduce":
+            from triplesumo.reproduce import ReproduceConfig, run_reproduce
+
+            run_reproduce(_dcargs.build(ReproduceConfig, args))
         elif args.command == "plot":
             from triplesumo.train.loop import plot_metrics
 

@@ -1,0 +1,427 @@
+"""``triplesumo reproduce``: the whole reproduction protocol from one command, resumable.
+
+Six stages, in order, each a function with declared outputs under ``out``:
+
+1. ``ant``: Ant trained (DDPG) against a random Spider, Bug passive (``OUT/ant``).
+2. ``spider``: Spider trained against the stage-1 Ant, Bug passive (``OUT/spider``).
+3. ``contest``: the new pair evaluated with Bug passive (``OUT/contest``): a contest when
+   neither side wins more than 70 % of the test matches. Recorded; a warning, not a failure.
+4. ``bug``: Bug trained with each algorithm x seed in the stage-1/2 match, as the trials of
+   :mod:`triplesumo.train.sweep` run here one after another (``OUT/bug/learn=bug=ALGO,seed=S``).
+5. ``evaluation``: every Bug plus the passive and random baselines on the same seeded test
+   matches (``OUT/evaluation``, ``per_seed.csv``).
+6. ``compare``: IQM with bootstrap intervals by algorithm and its plot (``OUT/compare``).
+
+A stage whose outputs exist and are complete is skipped; a killed one goes on where it
+stopped (train runs resume from their last checkpoint, evaluations with ``resume``).
+``reproduce.json`` records the stages done, their commands and the code version, and
+``REPRODUCTION.md`` is written from the outputs each time. Redoing an earlier stage does
+not invalidate later ones: delete their folders to redo them too.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import datetime
+import json
+import shlex
+import subprocess
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.agents.zoo import policy_fingerprint
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.ppo import PPOConfig
+from triplesumo.algos.sac import SACConfig
+from triplesumo.algos.td3 import TD3Config
+from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
+from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+from triplesumo.train import checkpoint
+from triplesumo.train.config import ALGOS, TrainConfig
+from triplesumo.train.loop import command_for
+from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
+
+RECORD_FILE = "reproduce.json"
+REPORT_FILE = "REPRODUCTION.md"
+CONTEST_LIMIT = 0.7
+"""Neither side of the ongoing match may win more than this share of its test matches."""
+
+
+@dataclass(frozen=True)
+class ReproduceConfig:
+    """The reproduction protocol: Ant, Spider, the contest check, Bug per algorithm x seed, evaluation, compare."""
+
+    out: str = "runs/reproduce"
+    """Folder for every stage's outputs, reproduce.json and REPRODUCTION.md."""
+    algos: tuple[str, ...] = ALGOS
+    """Algorithms Bug is trained with (ddpg is the paper preset)."""
+    seeds: tuple[int, ...] = (0, 1, 2)
+    """Training seeds of Bug, for every algorithm."""
+    ant_epochs: int = 3000
+    """Stage 1: Ant's training epochs (the paper's 3,000)."""
+    spider_epochs: int = 20_000
+    """Stage 2: Spider's training epochs (the paper's 20,000)."""
+    bug_epochs: int = 12_000
+    """Stage 4: epochs per Bug run, the same for every algorithm: about 1 M env steps at the ~85 steps
+    a Bug epoch lasts in the shipped match (the env steps each run took are in the report)."""
+    contest_epochs: int = 400
+    """Stage 3: test matches of the new Ant-Spider pair with Bug passive."""
+    eval_epochs: int = 2000
+    """Stage 5: test matches per Bug policy and per baseline (the same seeded matches for all)."""
+    eval_seed: int = 10_000
+    """Test match i resets with eval_seed + i (stages 3 and 5), and seeds the bootstrap."""
+    ant_seed: int = 1
+    """Seed of the Ant run (the shipped zoo:ant's)."""
+    spider_seed: int = 2
+    """Seed of the Spider run (the shipped zoo:spider's)."""
+    n_envs: int = 16
+    """Matches collected or played at once."""
+    tiny: bool = False
+    """Budgets of seconds (a smoke run, CI): 2 epochs of 20-step matches, tiny networks, 4 test matches;
+    overrides the budgets above."""
+    publish: bool = False
+    """After stage 6, publish the stage-1 Ant, stage-2 Spider and the best Bug (highest test MWR) into the zoo."""
+    progress: bool = True
+    """Show progress bars."""
+
+    def __post_init__(self) -> None:
+        for name in ("algos", "seeds"):
+            value = getattr(self, name)
+            if isinstance(value, list):
+                object.__setattr__(self, name, tuple(value))
+            if not getattr(self, name) or len(set(getattr(self, name))) < len(getattr(self, name)):
+                raise ValueError(f"ReproduceConfig.{name} must be non-empty and without repeats, got {value!r}")
+        bad = [a for a in self.algos if a not in ALGOS]
+        if bad:
+            raise ValueError(f"ReproduceConfig.algos must be among {ALGOS}, got {bad}")
+        for name in ("ant_epochs", "spider_epochs", "bug_epochs", "contest_epochs", "eval_epochs", "n_envs"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"ReproduceConfig.{name} must be an int >= 1, got {value!r}")
+        if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in self.seeds):
+            raise ValueError(f"ReproduceConfig.seeds must be ints >= 0, got {self.seeds!r}")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage of the protocol: what it writes, whether that is complete, how to make it."""
+
+    name: str
+    title: str
+    outputs: tuple[Path, ...]
+    complete: Callable[[], bool]
+    run: Callable[[], list[str]]
+    """Makes (or finishes) the outputs; returns the commands that do the same by hand."""
+
+
+class Protocol:
+    """The stages of one reproduction folder, built from its config."""
+
+    def __init__(self, cfg: ReproduceConfig) -> None:
+        self.cfg = cfg
+        self.out = Path(cfg.out).resolve()
+        tiny = cfg.tiny
+        self.steps = 20 if tiny else 500
+        self.n_envs = 2 if tiny else cfg.n_envs
+        self.epochs = {"ant": 2, "spider": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
+            "ant": cfg.ant_epochs, "spider": cfg.spider_epochs, "bug": cfg.bug_epochs,
+            "contest": cfg.contest_epochs, "eval": cfg.eval_epochs}
+        self.ant_policy = str(self.out / "ant" / "policy")
+        self.spider_policy = str(self.out / "spider" / "policy")
+        self.stages = [
+            Stage("ant", "Ant vs random Spider, Bug passive", (self.out / "ant" / "policy.json",),
+                  lambda: self._trained(self._ant()), lambda: self._train(self._ant())),
+            Stage("spider", "Spider vs the stage-1 Ant, Bug passive", (self.out / "spider" / "policy.json",),
+                  lambda: self._trained(self._spider()), lambda: self._train(self._spider())),
+            Stage("contest", "is the new pair a contest? (Bug passive)", (self.out / "contest" / "contest.json",),
+                  self._contest_complete, self._contest),
+            Stage("bug", "Bug per algorithm x seed in the stage-1/2 match", (self.out / "bug",),
+                  lambda: all(finished(t) for t in self.bug_trials()), self._bugs),
+            Stage("evaluation", "every Bug and the baselines on the same test matches",
+                  (self.out / "evaluation" / "per_seed.csv",), self._evaluation_complete, self._evaluation),
+            Stage("compare", "IQM [CI] by algorithm", (self.out / "compare" / "compare.json",),
+                  self._compare_complete, self._compare),
+        ]
+
+    # ------------------------------------------------------------ train stages
+    def _base(self, **kw: Any) -> TrainConfig:
+        """A train config at the protocol's budgets; tiny networks and buffers when tiny."""
+        extra: dict[str, Any] = {}
+        if self.cfg.tiny:
+            small: dict[str, Any] = {"hidden": (16, 16), "buffer_size": 2000, "learning_starts": 10, "batch_size": 8}
+            extra = {"ddpg": DDPGConfig(learn_every=4, **small), "td3": TD3Config(learn_every=4, **small),
+                     "sac": SACConfig(learn_every=4, **small),
+                     "ppo": PPOConfig(hidden=(16, 16), n_steps=8, n_minibatches=2, n_epochs=2),
+                     "checkpoint_every": 1}
+        return TrainConfig(out=str(self.out), steps_per_epoch=self.steps, n_envs=self.n_envs,
+                           progress=self.cfg.progress, tensorboard=not self.cfg.tiny, **extra, **kw)
+
+    def _ant(self) -> TrainConfig:
+        base = self._base(name="ant", learner="ant", policies=("spider=random", "bug=zero"),
+                          epochs=self.epochs["ant"], seed=self.cfg.ant_seed)
+        # stages 1-2 learn every 5 transitions, as the shipped pair did (docs/REPRODUCTION.md)
+        return base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
+                                                              checkpoint_every=500)
+
+    def _spider(self) -> TrainConfig:
+        base = self._base(name="spider", learner="spider", policies=(f"ant={self.ant_policy}", "bug=zero"),
+                          epochs=self.epochs["spider"], seed=self.cfg.spider_seed)
+        return base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
+                                                              checkpoint_every=500)
+
+    def _trained(self, cfg: TrainConfig) -> bool:
+        run = Path(cfg.out) / cfg.name
+        saved = checkpoint.checkpoints(run)
+        return bool(saved) and saved[-1][0] >= cfg.epochs and (run / "policy.json").exists()
+
+    def _train(self, cfg: TrainConfig) -> list[str]:
+        run_trial(cfg)  # resumes the run from its last checkpoint when there is one
+        return [command_for(cfg)]
+
+    def sweep(self) -> SweepConfig:
+        return SweepConfig(grid=("learn=" + ",".join(f"bug={a}" for a in self.cfg.algos),
+                                 "seed=" + ",".join(map(str, self.cfg.seeds))), out=str(self.out / "bug"))
+
+    def bug_base(self) -> TrainConfig:
+        return self._base(name="bug", learner="bug", policies=(f"ant={self.ant_policy}",
+                                                               f"spider={self.spider_policy}"),
+                          epochs=self.epochs["bug"], **({} if self.cfg.tiny else {"checkpoint_every": 500}))
+
+    def bug_trials(self) -> list[Trial]:
+        return trials(self.sweep(), self.bug_base())
+
+    def _bugs(self) -> list[str]:
+        commands = []
+        for t in self.bug_trials():
+            if not finished(t):
+                print(f"  Bug trial {t.name}")
+                run_trial(t.config)
+            commands.append(command_for(t.config))
+        return commands
+
+    # ------------------------------------------------------------ evaluations
+    def _evaluate(self, ecfg: EvaluateConfig) -> list[str]:
+        from triplesumo import _dcargs
+
+        resume = (Path(ecfg.out) / "evaluation.json").exists()
+        evaluate(dataclasses.replace(ecfg, resume=resume))
+        return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]
+
+    def contest_config(self) -> EvaluateConfig:
+        return EvaluateConfig(learner="spider", policy=(self.spider_policy,),
+                              policies=(f"ant={self.ant_policy}", "bug=zero"), baselines=(),
+                              epochs=self.epochs["contest"], seed=self.cfg.eval_seed, steps_per_epoch=self.steps,
+                              out=str(self.out / "contest"), n_envs=self.n_envs, progress=self.cfg.progress)
+
+    def _contest_complete(self) -> bool:
+        path = self.out / "contest" / "contest.json"
+        return path.exists() and json.loads(path.read_text())["matches"] == self.epochs["contest"]
+
+    def _contest(self) -> list[str]:
+        commands = self._evaluate(self.contest_config())
+        summary = json.loads((self.out / "contest" / "summary.json").read_text())
+        c = next(iter(summary["candidates"].values()))
+        n = c["n"]
+        facts = {"matches": n, "spider_wins": c["n_win"] / n, "ant_wins": c["n_loss"] / n, "draws": c["n_draw"] / n,
+                 "limit": CONTEST_LIMIT}
+        facts["contest"] = max(facts["spider_wins"], facts["ant_wins"]) <= CONTEST_LIMIT
+        if not facts["contest"]:
+            print(f"  warning: the new pair is not a contest: Spider wins {facts['spider_wins']:.0%}, Ant wins "
+                  f"{facts['ant_wins']:.0%} of {n} matches with Bug passive (limit {CONTEST_LIMIT:.0%})")
+        atomic_write_bytes(self.out / "contest" / "contest.json", (json.dumps(facts, indent=2) + "\n").encode())
+        return commands
+
+    def evaluation_config(self) -> EvaluateConfig:
+        return EvaluateConfig(learner="bug", policy=tuple(str(self.out / "bug" / t.name / "policy")
+                                                          for t in self.bug_trials()),
+                              policies=(f"ant={self.ant_policy}", f"spider={self.spider_policy}"),
+                              baselines=("passive", "random"), epochs=self.epochs["eval"], seed=self.cfg.eval_seed,
+                              steps_per_epoch=self.steps, out=str(self.out / "evaluation"), n_envs=self.n_envs,
+                              progress=self.cfg.progress)
+
+    def _evaluation_complete(self) -> bool:
+        rows = _read_csv(self.out / "evaluation" / "per_seed.csv")
+        want = set(self.evaluation_config().policy) | {"passive", "random"}
+        return ({r["policy"] for r in rows} == want and all(int(r["epochs"]) == self.epochs["eval"] for r in rows)
+                and all(_rows_in(self.out / "evaluation" / r["candidate"] / "metrics.csv") == self.epochs["eval"]
+                        for r in rows)  # a killed evaluation's rows: per_seed.csv may predate them
+                and all(r["sha256"] == policy_fingerprint(r["policy"]) for r in rows))  # not a retrained Bug's
+
+    def _evaluation(self) -> list[str]:
+        return self._evaluate(self.evaluation_config())
+
+    def compare_config(self) -> CompareConfig:
+        return CompareConfig(folders=(str(self.out / "evaluation"),), by="algo", out=str(self.out / "compare"),
+                             seed=self.cfg.eval_seed, reps=1000 if self.cfg.tiny else 10_000)
+
+    def _compare_complete(self) -> bool:
+        path = self.out / "compare" / "compare.json"
+        if not path.exists() or not (self.out / "compare" / "compare.png").exists():
+            return False
+        table = json.loads(path.read_text())
+        rows = _read_csv(self.out / "evaluation" / "per_seed.csv")
+        return sorted(s for g in table["groups"] for s in g["scores"]) == sorted(float(r["test_mwr"]) for r in rows)
+
+    def _compare(self) -> list[str]:
+        ccfg = self.compare_config()
+        print(format_compare(compare(ccfg)))
+        return [f"triplesumo compare {shlex.quote(ccfg.folders[0])} --by algo --seed {ccfg.seed} --reps {ccfg.reps} "
+                f"--out {shlex.quote(ccfg.out)}"]
+
+
+def _read_csv(path: Path) -> list[dict[str, str]]:
+    if not path.exists():
+        return []
+    with path.open(newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _rows_in(path: Path) -> int:
+    """Complete rows of a metrics CSV (lines ending in a newline, less the header)."""
+    if not path.exists():
+        return 0
+    return max(path.read_bytes().count(b"\n") - 1, 0)
+
+
+def code_version() -> str:
+    """``git describe`` of the source tree when it is a checkout, else the package version."""
+    from importlib import metadata
+
+    try:
+        done = subprocess.run(["git", "describe", "--always", "--dirty", "--tags"], cwd=Path(__file__).parent,
+                              capture_output=True, text=True, timeout=10, check=False)
+        if done.returncode == 0 and done.stdout.strip():
+            return f"git {done.stdout.strip()}"
+    except OSError:
+        pass
+    try:
+        return f"triplesumo {metadata.version('triplesumo')}"
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
+    """Run (or finish) every stage in order, skipping complete ones; write reproduce.json and the report."""
+    protocol = Protocol(cfg)
+    out = protocol.out
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / RECORD_FILE
+    record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+    config = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    if record and {k: v for k, v in record["config"].items() if k != "progress"} != {
+            k: v for k, v in config.items() if k != "progress"}:
+        raise ValueError(f"{out} holds a reproduction with other options ({record['config']}); re-running resumes "
+                         "it and needs the same options: choose another --out")
+    record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", [])}
+    run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
+    record["runs"].append(run_now)
+    for k, stage in enumerate(protocol.stages, 1):
+        if stage.complete():
+            print(f"[{k}/6] {stage.name}: complete, skipped ({stage.title})")
+            run_now["skipped"].append(stage.name)
+            continue
+        print(f"[{k}/6] {stage.name}: {stage.title}")
+        start = time.perf_counter()
+        commands = stage.run()
+        if not stage.complete():
+            raise RuntimeError(f"stage {stage.name} ran but its outputs are not complete: {stage.outputs}")
+        record["stages"][stage.name] = {"done": _now(), "seconds": round(time.perf_counter() - start, 3),
+                                        "version": run_now["version"], "commands": commands,
+                                        "outputs": [str(p.relative_to(out)) for p in stage.outputs]}
+        run_now["ran"].append(stage.name)
+        atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+    if cfg.publish:
+        record["published"] = _publish(protocol)
+    atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+    atomic_write_bytes(out / REPORT_FILE, report(protocol, record).encode())
+    print(f"report: {out / REPORT_FILE}; record: {path}")
+    return record
+
+
+def _now() -> str:
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def _publish(protocol: Protocol) -> list[str]:
+    from triplesumo.agents import zoo
+
+    rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["group"] == "trained"]
+    best = max(rows, key=lambda r: float(r["test_mwr"]))
+    made = [zoo.publish(Path(protocol.ant_policy), "ant"), zoo.publish(Path(protocol.spider_policy), "spider"),
+            zoo.publish(Path(best["policy"]), "bug", {"test_mwr": float(best["test_mwr"]),
+                                                      "epochs": int(best["epochs"])})]
+    return [str(p) for p in made]
+
+
+# ---------------------------------------------------------------- the report
+def _run_row(protocol: Protocol, name: str) -> str:
+    run = protocol.out / name
+    if not (run / "metrics.csv").exists():
+        return f"| {name} | - | - | - |"
+    facts = run_facts(run, 200)
+    return f"| {name} | {facts['epochs']:,} | {facts['env_steps']:,} | {facts['final_mwr']:+.3f} |"
+
+
+def report(protocol: Protocol, record: dict[str, Any]) -> str:
+    """``REPRODUCTION.md`` of a reproduction folder, every number read from the files it wrote."""
+    out, cfg = protocol.out, protocol.cfg
+    lines = [f"# Reproduction report ({out.name})", "",
+             f"Written by `triplesumo reproduce` from the files in this folder; code version "
+             f"{record['runs'][-1]['version']}." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
+                                                    if cfg.tiny else ""), "",
+             "## Stages 1-2: the ongoing match", "",
+             "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |",
+             _run_row(protocol, "ant"), _run_row(protocol, "spider"), ""]
+    contest_path = out / "contest" / "contest.json"
+    lines += ["## Stage 3: is it a contest? (Bug passive)", ""]
+    if contest_path.exists():
+        c = json.loads(contest_path.read_text())
+        verdict = "a contest" if c["contest"] else f"**not a contest** (one side above {c['limit']:.0%})"
+        lines += ["| test matches | Spider wins | Ant wins | draws | verdict |", "| ---: | ---: | ---: | ---: | --- |",
+                  f"| {c['matches']:,} | {c['spider_wins']:.1%} | {c['ant_wins']:.1%} | {c['draws']:.1%} | {verdict} |",
+                  ""]
+    lines += ["## Stage 4: Bug per algorithm and seed (training)", "",
+              "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |"]
+    lines += [_run_row(protocol, f"bug/{t.name}") for t in protocol.bug_trials()] + [""]
+    rows = _read_csv(out / "evaluation" / "per_seed.csv")
+    epochs = rows[0]["epochs"] if rows else "-"
+    lines += [f"## Stage 5: test MWR per seed ({epochs} seeded test matches each, the same for all)", "",
+              "| algorithm | train seed | test MWR [95% CI] | wins | losses | draws |",
+              "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        lines.append(f"| {r['algo']} | {r['train_seed'] or '-'} | {float(r['test_mwr']):+.3f} "
+                     f"[{float(r['test_mwr_lo']):+.3f}, {float(r['test_mwr_hi']):+.3f}] | {r['n_win']} | "
+                     f"{r['n_loss']} | {r['n_draw']} |")
+    lines.append("")
+    cmp_path = out / "compare" / "compare.json"
+    if cmp_path.exists():
+        table = json.loads(cmp_path.read_text())
+        pct = round(100 * table["confidence"])
+        lines += ["## Stage 6: per algorithm across seeds (IQM, stratified bootstrap)", "",
+                  f"| algorithm | seeds | per-seed test MWR | IQM [{pct}% CI] |", "| --- | ---: | --- | ---: |"]
+        for g in table["groups"]:
+            kind = " (baseline)" if g["group"] in ("passive", "random") else ""
+            lines.append(f"| {g['group']}{kind} | {g['n_seeds']} | {' '.join(f'{s:+.3f}' for s in g['scores'])} | "
+                         f"{g['iqm']:+.3f} [{g['lo']:+.3f}, {g['hi']:+.3f}] |")
+        lines += ["", "Plots: `compare/compare.png` (IQM by algorithm), `evaluation/compare_mwr.png` (test curves), "
+                  "`*/plots/` (training curves).", ""]
+    lines += ["## Commands", "", "The whole protocol: `triplesumo reproduce "
+              + " ".join(shlex.quote(a) for a in _argv(cfg)) + "`. Stage by stage:", "", "```bash"]
+    for name, stage in record["stages"].items():
+        lines.append(f"# {name} ({stage['seconds']:.0f} s, {stage['version']}, done {stage['done']})")
+        lines += stage["commands"]
+    lines += ["```", ""]
+    if record.get("published"):
+        lines += ["Published into the zoo: " + ", ".join(f"`{p}`" for p in record["published"]), ""]
+    return "\n".join(lines)
+
+
+def _argv(cfg: ReproduceConfig) -> list[str]:
+    from triplesumo import _dcargs
+
+    return [a for a in _dcargs.to_argv(cfg) if a != "--no-progress"]
