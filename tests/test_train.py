@@ -9,6 +9,7 @@ demand the very same bits.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -548,3 +549,20 @@ def test_a_run_of_the_one_learner_trainer_resumes_exactly(uninterrupted: Trained
     rows = list(csv.reader((killed / "learning.csv").open()))
     assert all(cell == "" for row in rows[1:E + 1] for cell in row[1:])  # the epochs before: empty learning rows
     assert int(rows[-1][1]) == uninterrupted.result.updates
+
+
+def test_max_env_steps_stops_at_the_first_epoch_end_past_the_budget(tmp_path: Path) -> None:
+    """An env-step budget ends the run at the first epoch end past it, with a checkpoint there,
+    and ``training_done`` (what sweeps and ``reproduce`` skip on) sees the run as done."""
+    from triplesumo.train.loop import training_done
+
+    cfg = TrainConfig(name="budget", out=str(tmp_path), policies=("spider=random", "ant=zero"), epochs=1000,
+                      steps_per_epoch=20, n_envs=2, checkpoint_every=1000, max_env_steps=60, progress=False,
+                      tensorboard=False, ddpg=DDPGConfig(hidden=(8, 8), buffer_size=500, learning_starts=1000))
+    result = train(cfg)
+    assert 60 <= result.env_steps < 60 + 2 * 20 and result.epochs < 1000
+    saved = checkpoint.checkpoints(result.run_dir)
+    assert saved and saved[-1][0] == result.epochs  # the stop left a checkpoint
+    assert training_done(cfg) and not training_done(dataclasses.replace(cfg, max_env_steps=0))
+    with pytest.raises(ValueError, match="TrainConfig.max_env_steps must be an int >= 0"):
+        TrainConfig(max_env_steps=-1)

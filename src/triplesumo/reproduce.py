@@ -41,9 +41,8 @@ from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
-from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
-from triplesumo.train.loop import command_for
+from triplesumo.train.loop import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
 
 RECORD_FILE = "reproduce.json"
@@ -66,9 +65,11 @@ class ReproduceConfig:
     """Stage 1: Ant's training epochs (the paper's 3,000)."""
     spider_epochs: int = 20_000
     """Stage 2: Spider's training epochs (the paper's 20,000)."""
-    bug_epochs: int = 12_000
-    """Stage 4: epochs per Bug run, the same for every algorithm: about 1 M env steps at the ~85 steps
-    a Bug epoch lasts in the shipped match (the env steps each run took are in the report)."""
+    bug_epochs: int = 20_000
+    """Stage 4: at most this many epochs per Bug run (the paper's 20,000)."""
+    bug_env_steps: int = 1_000_000
+    """Stage 4: the env-step budget of every Bug run, the same for every algorithm whatever its matches
+    last (``train --max-env-steps``); a run stops at the first epoch end past it. 0: epochs only."""
     contest_epochs: int = 400
     """Stage 3: test matches of the new Ant-Spider pair with Bug passive."""
     eval_epochs: int = 2000
@@ -99,6 +100,9 @@ class ReproduceConfig:
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
             raise ValueError(f"ReproduceConfig.algos must be among {ALGOS}, got {bad}")
+        if (not isinstance(self.bug_env_steps, int) or isinstance(self.bug_env_steps, bool)
+                or self.bug_env_steps < 0):
+            raise ValueError(f"ReproduceConfig.bug_env_steps must be an int >= 0, got {self.bug_env_steps!r}")
         for name in ("ant_epochs", "spider_epochs", "bug_epochs", "contest_epochs", "eval_epochs", "n_envs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -175,9 +179,7 @@ class Protocol:
                                                               checkpoint_every=500)
 
     def _trained(self, cfg: TrainConfig) -> bool:
-        run = Path(cfg.out) / cfg.name
-        saved = checkpoint.checkpoints(run)
-        return bool(saved) and saved[-1][0] >= cfg.epochs and (run / "policy.json").exists()
+        return training_done(cfg) and (Path(cfg.out) / cfg.name / "policy.json").exists()
 
     def _train(self, cfg: TrainConfig) -> list[str]:
         run_trial(cfg)  # resumes the run from its last checkpoint when there is one
@@ -190,7 +192,9 @@ class Protocol:
     def bug_base(self) -> TrainConfig:
         return self._base(name="bug", learner="bug", policies=(f"ant={self.ant_policy}",
                                                                f"spider={self.spider_policy}"),
-                          epochs=self.epochs["bug"], **({} if self.cfg.tiny else {"checkpoint_every": 500}))
+                          epochs=self.epochs["bug"],
+                          **({} if self.cfg.tiny else {"checkpoint_every": 500,
+                                                       "max_env_steps": self.cfg.bug_env_steps}))
 
     def bug_trials(self) -> list[Trial]:
         return trials(self.sweep(), self.bug_base())

@@ -92,6 +92,9 @@ class TrainConfig:
     """Write TensorBoard events beside the CSV."""
     max_minutes: float = 0.0
     """Stop (after a checkpoint) once this many minutes have passed; 0 = no limit."""
+    max_env_steps: int = 0
+    """Stop (after a checkpoint, at the next epoch end) once this many env steps were collected, a
+    budget that compares algorithms whose matches last differently; 0 = no limit."""
     scenario: str = "paper"
     """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
     for every other agent. Under elimination rules the learner's epoch ends when it is out."""
@@ -130,6 +133,8 @@ class TrainConfig:
                 raise ValueError(f"TrainConfig.{name} must be an int >= 1, got {value!r}")
         if self.obs_mode not in OBS_MODES:
             raise ValueError(f"TrainConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
+        if not isinstance(self.max_env_steps, int) or isinstance(self.max_env_steps, bool) or self.max_env_steps < 0:
+            raise ValueError(f"TrainConfig.max_env_steps must be an int >= 0, got {self.max_env_steps!r}")
         if not (math.isfinite(self.max_minutes) and self.max_minutes >= 0):
             raise ValueError(f"TrainConfig.max_minutes must be >= 0, got {self.max_minutes!r}")
         if not self.self_play and self.league != LeagueConfig():

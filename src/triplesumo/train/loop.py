@@ -117,14 +117,17 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
     return dict(data)
 
 
+ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps")
+"""TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
+budget): a config.json without them gets their defaults; any other missing key is an error."""
+
+
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
-    if isinstance(data, dict) and "ddpg" in data and "learn" not in data:  # written before several learners
-        data = {**data, **{k: v for k, v in config_to_json(TrainConfig()).items()
-                           if k in ("learn", "share", "td3", "sac", "ppo")}}
-    if isinstance(data, dict) and "self_play" not in data and "league" not in data:  # written before self-play
-        data = {**data, **{k: v for k, v in config_to_json(TrainConfig()).items() if k in ("self_play", "league")}}
+    if isinstance(data, dict):  # written before a field existed: that field's default, what the run used
+        defaults = config_to_json(TrainConfig())
+        data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
     data = _check_keys(data, TrainConfig, "", source)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
     for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
@@ -143,6 +146,18 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         return TrainConfig(**data)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{source}: {exc}") from exc
+
+
+def training_done(cfg: TrainConfig, run_dir: Path | None = None) -> bool:
+    """Whether the run of ``cfg`` (in ``run_dir``, default ``OUT/NAME``) has a checkpoint at its budget:
+    ``epochs`` reached, or ``max_env_steps`` collected."""
+    saved = checkpoint.checkpoints(Path(run_dir) if run_dir is not None else Path(cfg.out) / cfg.name)
+    if not saved:
+        return False
+    epoch, folder = saved[-1]
+    if epoch >= cfg.epochs:
+        return True
+    return cfg.max_env_steps > 0 and int(load_json(folder / "state.json").get("env_steps", 0)) >= cfg.max_env_steps
 
 
 def command_for(cfg: TrainConfig) -> str:
@@ -258,7 +273,7 @@ class _Updates(threading.Thread):
 
 
 class Trainer:
-    """Trains the learners of ``cfg``; :meth:`run` until ``cfg.epochs`` or ``max_minutes``.
+    """Trains the learners of ``cfg``; :meth:`run` until ``cfg.epochs``, ``max_env_steps`` or ``max_minutes``.
 
     One *epoch* is one match: it ends when the match is over or when every learning agent in
     it is out (elimination rules); each learning agent then gets one row in its metrics CSV.
@@ -652,7 +667,8 @@ class Trainer:
                     mwrs = {f"MWR {a}" if len(self.agents) > 1 else "MWR": f"{self.mwr(a):+.3f}" for a in self.agents}
                     bar.set_postfix(mwrs | {"steps_s": f"{rate:.0f}"}, refresh=False)
                 crossed = finished and (self.epochs_done // cfg.checkpoint_every > before // cfg.checkpoint_every)
-                timed_out = cfg.max_minutes > 0 and (time.perf_counter() - start) > cfg.max_minutes * 60
+                timed_out = ((cfg.max_minutes > 0 and (time.perf_counter() - start) > cfg.max_minutes * 60)
+                             or 0 < cfg.max_env_steps <= self.env_steps)
                 if crossed or (timed_out and finished) or self.epochs_done >= cfg.epochs:
                     self.save()
                 if timed_out and finished:

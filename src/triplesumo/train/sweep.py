@@ -44,7 +44,7 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.metrics import moving_winning_rate
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.loop import config_to_json, holds_run, train
+from triplesumo.train.loop import config_to_json, holds_run, train, training_done
 
 RECORD_FILE = "sweep.json"
 SUMMARY_COLUMNS = ("trial", "group", "epochs", "env_steps", "final_mwr", "resumed_from", "seconds", "test_mwr",
@@ -194,9 +194,8 @@ def run_trial(cfg: TrainConfig) -> dict[str, Any]:
 
 
 def finished(trial: Trial) -> bool:
-    """Whether the trial's run holds a checkpoint at (or past) its epochs."""
-    saved = checkpoint.checkpoints(Path(trial.config.out) / trial.name)
-    return bool(saved) and saved[-1][0] >= trial.config.epochs
+    """Whether the trial's run holds a checkpoint at its budget (epochs, or ``max_env_steps``)."""
+    return training_done(trial.config, Path(trial.config.out) / trial.name)
 
 
 def run_facts(run_dir: Path, window: int) -> dict[str, Any]:
