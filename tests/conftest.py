@@ -7,16 +7,19 @@ import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from collections.abc import Callable  # noqa: E402
+from collections.abc import Callable, Iterator  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+from triplesumo.algos.ddpg import DDPGConfig  # noqa: E402
 from triplesumo.envs.match import Match  # noqa: E402
 from triplesumo.rules.config import MatchConfig, ResetNoise  # noqa: E402
+from triplesumo.train.config import TrainConfig  # noqa: E402
 
 NO_NOISE = ResetNoise(position=0.0, yaw=0.0, joints=0.0, velocity=0.0)
 
@@ -104,3 +107,30 @@ def tiny_zoo(tmp_path_factory: pytest.TempPathFactory) -> TinyZoo:
     bug = _train_tiny(root / "runs", "bug", ("ant=zero", "spider=random"))
     publish(bug / "policy", "bug", zoo_dir=zoo_dir)
     return TinyZoo(zoo_dir, runs["ant"], bug / "policy")
+
+
+E = 2
+"""Checkpoint interval of the tiny training runs; the uninterrupted reference run trains 2E epochs."""
+TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=5000, learning_starts=50, batch_size=16, learn_every=2)
+
+
+def tiny(out: Path, name: str = "run", **fields: Any) -> TrainConfig:
+    """A training config small enough for a test: 2 matches of 30 steps, 16-unit networks."""
+    values: dict[str, Any] = {
+        "name": name, "out": str(out), "learner": "bug", "policies": ("spider=random", "ant=zero"),
+        "epochs": 2 * E, "steps_per_epoch": 30, "n_envs": 2, "checkpoint_every": E, "seed": 0,
+        "ddpg": TINY_DDPG, "progress": False, "tensorboard": False,
+    }
+    values.update(fields)
+    return TrainConfig(**values)
+
+
+@pytest.fixture(scope="module")
+def ray_session() -> Iterator[Any]:
+    """A real local Ray of 2 CPUs for the module's tests (skipped without the ``ray`` extra)."""
+    ray = pytest.importorskip("ray", reason='the "ray" extra is not installed (pip install "triplesumo[ray]")')
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        yield ray
+    finally:
+        ray.shutdown()

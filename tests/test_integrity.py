@@ -28,8 +28,8 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file
 
+from conftest import TINY_DDPG, E, tiny
 from triplesumo.agents import policy_file
-from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.cli import main
 from triplesumo.envs.match import Match
 from triplesumo.envs.single import TripleSumoEnv
@@ -44,20 +44,7 @@ from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS, repair_metrics_csv
 from triplesumo.train.loop import DivergenceError, RunExistsError, Trainer, train
 
-E = 2
-"""Checkpoint interval; the reference run trains 2E epochs."""
-TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=5000, learning_starts=50, batch_size=16, learn_every=2)
 SRC = Path(__file__).resolve().parents[1] / "src"
-
-
-def tiny(out: Path, name: str = "run", **fields: Any) -> TrainConfig:
-    values: dict[str, Any] = {
-        "name": name, "out": str(out), "learner": "bug", "policies": ("spider=random", "ant=zero"),
-        "epochs": 2 * E, "steps_per_epoch": 30, "n_envs": 2, "checkpoint_every": E, "seed": 0,
-        "ddpg": TINY_DDPG, "progress": False, "tensorboard": False,
-    }
-    values.update(fields)
-    return TrainConfig(**values)
 
 
 def rows_of(run: Path) -> list[dict[str, str]]:

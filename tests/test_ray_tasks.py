@@ -7,7 +7,6 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,15 +20,10 @@ OTHERS = {"ant": "zoo:ant", "spider": "zoo:spider"}
 
 
 @pytest.fixture(scope="module")
-def ray_tasks() -> Iterator[Any]:
-    ray = pytest.importorskip("ray", reason='the "ray" extra is not installed (pip install "triplesumo[ray]")')
+def ray_tasks(ray_session: Any) -> Any:
     from triplesumo.integrations import ray_tasks
 
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        yield ray_tasks
-    finally:
-        ray.shutdown()
+    return ray_tasks
 
 
 def test_rows_on_ray_equal_a_local_run(ray_tasks: Any) -> None:

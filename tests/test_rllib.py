@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -29,14 +28,8 @@ def rllib() -> Any:
 
 
 @pytest.fixture(scope="module")
-def local_ray(rllib: Any) -> Iterator[None]:
-    import ray
-
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
-    try:
-        yield
-    finally:
-        ray.shutdown()
+def local_ray(rllib: Any, ray_session: Any) -> None:
+    """The module's RLlib tests run on the shared local Ray (conftest's ``ray_session``)."""
 
 
 def _tiny(config: Any) -> Any:

@@ -24,6 +24,7 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
+from conftest import TINY_DDPG, E, tiny
 from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.cli import main
@@ -35,22 +36,8 @@ from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS
 from triplesumo.train.loop import Trainer, TrainResult, config_from_json, train
 
-TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=5000, learning_starts=50, batch_size=16, learn_every=2)
 PLOTS = ("rewards.png", "reward_terms.png", "mwr.png", "steps_to_win.png")
 LWR = {"win": 1.0, "loss": -1.0, "draw": 0.0, "error": 0.0}
-E = 2
-"""Checkpoint interval of the resume tests; the uninterrupted run trains 2E epochs."""
-
-
-def tiny(out: Path, name: str = "run", **fields: Any) -> TrainConfig:
-    """A training config small enough for a test: 2 matches of 30 steps, 16-unit networks."""
-    values: dict[str, Any] = {
-        "name": name, "out": str(out), "learner": "bug", "policies": ("spider=random", "ant=zero"),
-        "epochs": 2 * E, "steps_per_epoch": 30, "n_envs": 2, "checkpoint_every": E, "seed": 0,
-        "ddpg": TINY_DDPG, "progress": False, "tensorboard": False,
-    }
-    values.update(fields)
-    return TrainConfig(**values)
 
 
 def read_rows(run: Path) -> tuple[list[str], list[dict[str, str]]]:
