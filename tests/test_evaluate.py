@@ -32,6 +32,7 @@ from triplesumo.evaluation.evaluate import (
     play_test_epochs,
 )
 from triplesumo.evaluation.metrics import OUTCOMES
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import DENSE_TERMS
 from triplesumo.train.logger import COLUMNS
@@ -294,6 +295,8 @@ def test_resume_refuses_what_would_change_the_rows(
         evaluate(dataclasses.replace(cfg, resume=True, seed=7))
     with pytest.raises(ValueError, match="candidate 'trained'"):
         evaluate(dataclasses.replace(cfg, resume=True, policy=("zoo:bug",)))
+    with pytest.raises(ValueError, match="physics was None, now .*'border_rim': True"):  # another ring
+        evaluate(dataclasses.replace(cfg, resume=True, physics=PhysicsConfig(border_rim=True)))
     # The same path, other contents: the policy file was retrained in place.
     stem = tmp_path / "bug"
     for suffix in (".json", ".safetensors"):

@@ -15,7 +15,7 @@ import math
 import os
 import re
 import shutil
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,13 +28,14 @@ from conftest import TINY_DDPG, E, tiny
 from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.cli import main
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.rewards import DENSE_TERMS
 from triplesumo.train import checkpoint
 from triplesumo.train import loop as train_loop
 from triplesumo.train.checkpoint import CheckpointError
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS
-from triplesumo.train.loop import Trainer, TrainResult, config_from_json, train
+from triplesumo.train.loop import Trainer, TrainResult, config_from_json, config_to_json, train
 
 PLOTS = ("rewards.png", "reward_terms.png", "mwr.png", "steps_to_win.png")
 LWR = {"win": 1.0, "loss": -1.0, "draw": 0.0, "error": 0.0}
@@ -425,6 +426,22 @@ def test_config_errors_name_the_field(tmp_path: Path, fields: dict[str, Any], na
 def test_trainer_rejects_unknown_agents_and_policies(tmp_path: Path, fields: dict[str, Any], named: str) -> None:
     with pytest.raises(ValueError, match=named):
         Trainer(tiny(tmp_path, **fields))
+
+
+def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_default_ring(tmp_path: Path) -> None:
+    rim = Trainer(tiny(tmp_path, physics=PhysicsConfig(border_rim=True)))
+    try:
+        assert rim.match_cfg.physics.border_rim
+        model = rim.batch.matches[0].model
+        border = [g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("border")]
+        assert border and all(model.geom_contype[g] or model.geom_conaffinity[g] for g in border)  # solid rim
+    finally:
+        rim.batch.close()
+    saved = config_to_json(tiny(tmp_path))
+    del saved["physics"]  # a run folder written before the field existed
+    assert config_from_json(saved).physics == PhysicsConfig()
+    with pytest.raises(ValueError, match="PhysicsConfig.frame_skip"):
+        config_from_json({**config_to_json(tiny(tmp_path)), "physics": {**asdict(PhysicsConfig()), "frame_skip": 0}})
 
 
 # -------------------------------------------------------------------------- CLI

@@ -41,6 +41,7 @@ from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
@@ -82,6 +83,12 @@ class ReproduceConfig:
     """Seed of the Spider run (the shipped zoo:spider's)."""
     n_envs: int = 16
     """Matches collected or played at once."""
+    border_rim: bool = True
+    """Train and evaluate on the paper's ring, whose border cylinders form a solid rim (``PhysicsConfig.border_rim``);
+    False: the visual-only markers the first shipped zoo was trained on."""
+    save_replay: bool = True
+    """Checkpoints hold the replay buffer (an exact resume); False keeps them small enough to commit
+    (a resume then starts with an empty buffer)."""
     tiny: bool = False
     """Budgets of seconds (a smoke run, CI): 2 epochs of 20-step matches, tiny networks, 4 test matches;
     overrides the budgets above."""
@@ -135,6 +142,7 @@ class Protocol:
         self.epochs = {"ant": 2, "spider": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
             "ant": cfg.ant_epochs, "spider": cfg.spider_epochs, "bug": cfg.bug_epochs,
             "contest": cfg.contest_epochs, "eval": cfg.eval_epochs}
+        self.physics = PhysicsConfig(border_rim=cfg.border_rim)
         self.ant_policy = str(self.out / "ant" / "policy")
         self.spider_policy = str(self.out / "spider" / "policy")
         self.stages = [
@@ -163,7 +171,8 @@ class Protocol:
                      "ppo": PPOConfig(hidden=(16, 16), n_steps=8, n_minibatches=2, n_epochs=2),
                      "checkpoint_every": 1}
         return TrainConfig(out=str(self.out), steps_per_epoch=self.steps, n_envs=self.n_envs,
-                           progress=self.cfg.progress, tensorboard=not self.cfg.tiny, **extra, **kw)
+                           progress=self.cfg.progress, tensorboard=not self.cfg.tiny, physics=self.physics,
+                           save_replay=self.cfg.save_replay, **extra, **kw)
 
     def _ant(self) -> TrainConfig:
         base = self._base(name="ant", learner="ant", policies=("spider=random", "bug=zero"),
@@ -220,6 +229,7 @@ class Protocol:
         return EvaluateConfig(learner="spider", policy=(self.spider_policy,),
                               policies=(f"ant={self.ant_policy}", "bug=zero"), baselines=(),
                               epochs=self.epochs["contest"], seed=self.cfg.eval_seed, steps_per_epoch=self.steps,
+                              physics=self.physics,
                               out=str(self.out / "contest"), n_envs=self.n_envs, progress=self.cfg.progress)
 
     def _contest_complete(self) -> bool:
@@ -245,6 +255,7 @@ class Protocol:
                                                           for t in self.bug_trials()),
                               policies=(f"ant={self.ant_policy}", f"spider={self.spider_policy}"),
                               baselines=("passive", "random"), epochs=self.epochs["eval"], seed=self.cfg.eval_seed,
+                              physics=self.physics,
                               steps_per_epoch=self.steps, out=str(self.out / "evaluation"), n_envs=self.n_envs,
                               progress=self.cfg.progress)
 

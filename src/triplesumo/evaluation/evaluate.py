@@ -28,7 +28,7 @@ import json
 import math
 from collections.abc import Callable
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +41,7 @@ from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.video import check_writable
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train.logger import COLUMNS, repair_metrics_csv
@@ -69,6 +70,8 @@ class EvaluateConfig:
     """Step limit of a match (a draw when reached)."""
     obs_mode: str = "paper"
     """Observation mode the policies expect."""
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    """The simulation (``border_rim``: the paper's solid ring rim); as the policies were trained on."""
     window: int = 200
     """λ of the MWR and rolling curves (paper: 200)."""
     out: str = "runs/evaluation"
@@ -198,7 +201,8 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
 
     out = check_writable(Path(cfg.out), folder=True)
-    match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode)
+    match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
+                                physics=cfg.physics)
     probe = Match(match_cfg)
     sizes = probe.observer.sizes
     motors = dict(zip(probe.agents, probe.action_sizes, strict=True))
@@ -393,6 +397,8 @@ def _record(cfg: EvaluateConfig, candidates: dict[str, str]) -> dict[str, Any]:
     fields = json.loads(json.dumps({f: getattr(cfg, f) for f in ROW_FIELDS}))  # tuples as JSON lists
     if cfg.scenario != "paper":  # (records of the paper's matches stay as they were)
         fields["scenario"] = cfg.scenario
+    if cfg.physics != PhysicsConfig():  # (likewise records made on the default physics)
+        fields["physics"] = asdict(cfg.physics)
     return {
         "rows_depend_on": fields,
         "others": {pair: policy_fingerprint(pair.split("=", 1)[1]) for pair in cfg.policies},
@@ -412,9 +418,11 @@ def _previous_candidates(path: Path, record: dict[str, Any]) -> dict[str, Any]:
         old_fields, old_others, old_candidates = old["rows_depend_on"], old["others"], old["candidates"]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"cannot resume {folder}: {path} is unreadable or corrupt ({exc})") from None
-    for name, value in record["rows_depend_on"].items():
-        if old_fields.get(name) != value:
-            raise ValueError(f"cannot resume {folder}: {name} was {old_fields.get(name)!r}, now {value!r}")
+    now_fields = record["rows_depend_on"]
+    for name in [*now_fields, *(k for k in old_fields if k not in now_fields)]:
+        if old_fields.get(name) != now_fields.get(name):
+            raise ValueError(f"cannot resume {folder}: {name} was {old_fields.get(name)!r}, "
+                             f"now {now_fields.get(name)!r}")
     if old_others != record["others"]:
         raise ValueError(f"cannot resume {folder}: the other agents' policy files changed "
                          f"(sha256 {old_others} then, {record['others']} now)")

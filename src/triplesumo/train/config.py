@@ -11,6 +11,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, RewardConfig
 from triplesumo.rules.scenarios import scenarios
 from triplesumo.train.league import LeagueConfig
@@ -67,6 +68,8 @@ class TrainConfig:
     """Observation mode of the learner: paper or egocentric."""
     reward: RewardConfig = field(default_factory=RewardConfig)
     """The hybrid reward's weights (C1, C2, C3, still punishment, win/loss/draw)."""
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    """The simulation (timestep, integrator, start layout, ``border_rim``: the paper's solid ring rim)."""
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     """DDPG hyper-parameters (paper Table 2)."""
     td3: TD3Config = field(default_factory=TD3Config)

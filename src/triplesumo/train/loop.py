@@ -52,6 +52,7 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import Match, StepResult
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import RewardConfig
 from triplesumo.rules.outcome import PLAYING
 from triplesumo.rules.outcome import outcome_name as code_name
@@ -117,7 +118,7 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
     return dict(data)
 
 
-ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps")
+ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget): a config.json without them gets their defaults; any other missing key is an error."""
 
@@ -130,6 +131,10 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
     data = _check_keys(data, TrainConfig, "", source)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
+    try:
+        data["physics"] = PhysicsConfig(**_check_keys(data["physics"], PhysicsConfig, "physics.", source))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: {exc}") from exc
     for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
         try:
             data[name] = cls(**_check_keys(data[name], cls, f"{name}.", source))
@@ -283,7 +288,7 @@ class Trainer:
                  command: str | None = None, start_over: bool = False, from_checkpoint: str | None = None) -> None:
         self.cfg = cfg
         self.match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
-                                         reward=cfg.reward)
+                                         reward=cfg.reward, physics=cfg.physics)
         agent_names = list(self.match_cfg.agent_names)
         self.specs = learner_specs(cfg, agent_names, {a.name: a.team for a in self.match_cfg.agents})
         self.agents = [a for spec in self.specs for a in spec.agents]
