@@ -81,8 +81,9 @@ def _parser() -> argparse.ArgumentParser:
                                            "checking it re-simulates bit for bit")
     replay.add_argument("file", help="match file (.npz)")
     _dcargs.add_arguments(replay, ReplayConfig)
-    bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train' or 'bench ray' (--help for each)")
-    bench.add_argument("which", choices=["env", "train", "ray"])
+    bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train', 'bench ray' or 'bench skill' "
+                                         "(time to skill per algorithm) (--help for each)")
+    bench.add_argument("which", choices=["env", "train", "ray", "skill"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
     return parser
 
@@ -196,6 +197,10 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.train import main as bench_train
 
                 bench_train(args.rest)
+            elif args.which == "skill":
+                from triplesumo.benchmarks.skill import main as bench_skill
+
+                bench_skill(args.rest)
             else:
                 from triplesumo.benchmarks.ray import main as bench_ray
 

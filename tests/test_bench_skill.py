@@ -1,0 +1,136 @@
+"""``triplesumo bench skill`` on tiny runs (16-unit networks, 20-step matches, 4 test matches): the JSON
+it writes, the stop rule (the first evaluation at the target; "not reached" when the budget is spent),
+and resuming (a raised budget, an evaluation lost with a kill, a lower target on a recorded curve)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.ppo import PPOConfig
+from triplesumo.benchmarks.skill import SkillConfig, outcome, run_skill
+from triplesumo.cli import main
+from triplesumo.train import checkpoint
+from triplesumo.train.config import TrainConfig
+
+TINY_TRAIN = TrainConfig(policies=("ant=random", "spider=random"), steps_per_epoch=20, n_envs=2, progress=False,
+                         tensorboard=False, ddpg=DDPGConfig(hidden=(16, 16), buffer_size=2000, learning_starts=10,
+                                                            batch_size=8),
+                         ppo=PPOConfig(hidden=(16, 16), n_steps=8, n_minibatches=2, n_epochs=2))
+EVERY = 40
+"""Env steps between evaluations: one 20-step epoch of each of the 2 matches."""
+
+
+def _tiny(out: Path, **kw: Any) -> SkillConfig:
+    return SkillConfig(**{"algos": ("ddpg",), "eval_every": EVERY, "eval_epochs": 4, "max_env_steps": 3 * EVERY,
+                          "out": str(out), "train": TINY_TRAIN, **kw})
+
+
+def _checkpoint_steps(run_dir: Path) -> list[int]:
+    return [json.loads((folder / "state.json").read_text())["env_steps"]
+            for _, folder in checkpoint.checkpoints(run_dir)]
+
+
+@pytest.fixture(scope="module")
+def not_reached(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    out = tmp_path_factory.mktemp("skill") / "b"
+    return out, run_skill(_tiny(out, target=1.0))  # 4 wins in 4 twenty-step matches: not within 120 steps
+
+
+def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_curve(
+        not_reached: tuple[Path, dict[str, Any]]) -> None:
+    out, result = not_reached
+    assert json.loads((out / "skill.json").read_text()) == result and (out / "skill.png").stat().st_size > 0
+    entry = result["algos"]["ddpg"]
+    ev = entry["evaluations"]
+    assert entry["status"] == "not reached" and entry["reached"] is False and entry["env_steps"] is None
+    assert [e["budget"] for e in ev] == [EVERY, 2 * EVERY, 3 * EVERY]
+    assert all(e["budget"] <= e["env_steps"] < e["budget"] + EVERY for e in ev)  # the first epoch end past it
+    assert all(e["test_mwr"] < 1.0 and e["n_win"] + e["n_loss"] + e["n_draw"] == 4 for e in ev)
+    assert entry["best_test_mwr"] == max(e["test_mwr"] for e in ev)
+    for key in ("train_seconds", "eval_seconds", "wall_seconds"):
+        assert all(a[key] < b[key] for a, b in zip(ev, ev[1:], strict=False)), key  # cumulative
+    assert all(e["wall_seconds"] > e["train_seconds"] + e["eval_seconds"] - 1e-3 for e in ev)
+    # the project's own training run, stopped at the last evaluation point with a checkpoint there
+    assert _checkpoint_steps(out / "ddpg")[-1] == ev[-1]["env_steps"]
+    config = json.loads((out / "ddpg" / "config.json").read_text())
+    assert config["learn"] == ["bug=ddpg"] and config["steps_per_epoch"] == 20
+    assert result["command"].startswith("triplesumo bench skill") and "--target 1.0" in result["command"]
+
+
+def test_resume_raised_budget_lost_evaluation_and_lower_target(not_reached: tuple[Path, dict[str, Any]]) -> None:
+    out, result = not_reached
+    ev = result["algos"]["ddpg"]["evaluations"]
+    # a raised budget trains one more chunk from the last checkpoint; the recorded curve is kept
+    more = run_skill(_tiny(out, target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]
+    assert more["evaluations"][:3] == ev and more["evaluations"][3]["budget"] == 4 * EVERY
+    assert more["status"] == "not reached"
+    # an evaluation lost with a kill is played again on the same policy file, without training
+    record = json.loads((out / "skill.json").read_text())
+    lost = record["algos"]["ddpg"]["evaluations"].pop()
+    (out / "skill.json").write_text(json.dumps(record))
+    steps = _checkpoint_steps(out / "ddpg")
+    again = run_skill(_tiny(out, target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]["evaluations"][3]
+    assert _checkpoint_steps(out / "ddpg") == steps
+    assert {k: again[k] for k in ("env_steps", "budget", "test_mwr", "n_win", "n_loss", "n_draw")} == {
+        k: lost[k] for k in ("env_steps", "budget", "test_mwr", "n_win", "n_loss", "n_draw")}
+    # a lower target on the recorded curve: the first evaluation at it, no training
+    record = json.loads((out / "skill.json").read_text())
+    for e, mwr in zip(record["algos"]["ddpg"]["evaluations"], (-0.5, 0.25, 0.75, 0.5), strict=True):
+        e["test_mwr"] = mwr
+    (out / "skill.json").write_text(json.dumps(record))
+    lower = run_skill(_tiny(out, target=0.2, max_env_steps=4 * EVERY))["algos"]["ddpg"]
+    assert lower["status"] == "reached" and lower["at"] == 1
+    assert lower["env_steps"] == lower["evaluations"][1]["env_steps"]
+    assert lower["train_seconds"] == lower["evaluations"][1]["train_seconds"]
+    assert _checkpoint_steps(out / "ddpg") == steps
+    with pytest.raises(ValueError, match="other eval_epochs"):
+        run_skill(_tiny(out, eval_epochs=5))
+
+
+def test_a_reached_target_stops_training_at_the_first_evaluation_past_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out, path = tmp_path / "b", tmp_path / "r" / "skill.json"
+    argv = ["bench", "skill", "--algos", "ppo", "--target", "-1", "--eval-every", str(EVERY), "--eval-epochs", "4",
+            "--max-env-steps", str(10 * EVERY), "--out", str(out), "--json", str(path),
+            "--train.policies", "ant=random", "spider=random", "--train.steps-per-epoch", "20", "--train.n-envs",
+            "2", "--no-train.progress", "--no-train.tensorboard", "--train.ppo.hidden", "16", "16",
+            "--train.ppo.n-steps", "8", "--train.ppo.n-minibatches", "2", "--train.ppo.n-epochs", "2"]
+    assert main(argv) == 0
+    result = json.loads(path.read_text())
+    assert result == json.loads((out / "skill.json").read_text())
+    entry = result["algos"]["ppo"]
+    assert entry["status"] == "reached" and entry["at"] == 0 and len(entry["evaluations"]) == 1
+    assert entry["env_steps"] == entry["evaluations"][0]["env_steps"] == max(_checkpoint_steps(out / "ppo"))
+    assert entry["train_seconds"] <= entry["wall_seconds"]
+    table = capsys.readouterr().out
+    assert f"{'ppo':6s} {'yes':>11s} {entry['env_steps']:11,d}" in table
+
+
+def test_the_stop_rule_on_a_curve() -> None:
+    cfg = SkillConfig(target=0.2, eval_every=10, max_env_steps=30)
+
+    def curve(*mwrs: float) -> list[dict[str, Any]]:
+        return [{"env_steps": 10 * k + 3, "budget": 10 * k, "test_mwr": m, "train_seconds": float(k),
+                 "wall_seconds": 2.0 * k} for k, m in enumerate(mwrs, 1)]
+
+    assert outcome(cfg, curve(0.1, 0.2, 0.5))["at"] == 1  # the first one at the target, not the best
+    assert outcome(cfg, curve(0.1, 0.19))["status"] == "running"
+    done = outcome(cfg, curve(0.1, 0.19, 0.0))
+    assert done["status"] == "not reached" and done["best_test_mwr"] == 0.19 and done["best_at_env_steps"] == 23
+    assert outcome(cfg, curve(0.1, 0.1, 0.1, 0.9))["status"] == "not reached"  # beyond the budget: not counted
+
+
+@pytest.mark.parametrize(("kw", "message"), [
+    ({"target": 1.5}, "SkillConfig.target must be a test MWR in"),
+    ({"algos": ("ddpg,a2c",)}, "SkillConfig.algos must be among"),
+    ({"eval_every": 0}, "SkillConfig.eval_every must be an int >= 1"),
+    ({"max_env_steps": 10, "eval_every": 20}, "SkillConfig.max_env_steps"),
+])
+def test_bad_options_name_the_field(kw: dict[str, Any], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        SkillConfig(**kw)
