@@ -9,7 +9,10 @@ from pathlib import Path
 
 import pytest
 
+import triplesumo.agents.zoo
+from triplesumo.agents.zoo import make_policy
 from triplesumo.cli import main
+from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.reproduce import ReproduceConfig
 
 
@@ -18,11 +21,14 @@ def _record(out: Path) -> dict:
 
 
 def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed_one(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    out = tmp_path / "rep"
-    argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "--seeds", "0", "--no-progress"]
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    out, zoo = tmp_path / "rep", tmp_path / "zoo"
+    zoo.mkdir()
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", zoo)
+    argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "ppo", "--seeds", "0", "--no-progress",
+            "--ablations", "noise=gaussian", "still=-1", "--publish"]
     assert main(argv) == 0
-    stages = ["ant", "spider", "contest", "bug", "evaluation", "compare"]
+    stages = ["ant", "spider", "contest", "bug", "ablations", "evaluation", "compare"]
     record = _record(out)
     assert record["runs"][-1]["ran"] == stages and record["runs"][-1]["version"]
     for name in stages:
@@ -35,14 +41,44 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert contest["matches"] == 4 and contest["spider_wins"] + contest["ant_wins"] + contest["draws"] == 1.0
     with (out / "evaluation" / "per_seed.csv").open() as fh:
         rows = list(csv.DictReader(fh))
-    assert sorted(r["algo"] for r in rows) == ["ddpg", "passive", "random"]
+    assert sorted(r["algo"] for r in rows) == ["ddpg", "ddpg", "ddpg", "passive", "ppo", "random"]
     assert {r["epochs"] for r in rows} == {"4"}
     assert (out / "compare" / "compare.png").exists()
+    # the ablations: the DDPG Bug run with one change each, the same seeds and budgets otherwise
+    base = json.loads((out / "bug" / "learn=bug=ddpg,seed=0" / "config.json").read_text())
+    for name, field, value in (("ddpg.noise=gaussian", "ddpg", {**base["ddpg"], "noise": "gaussian"}),
+                               ("reward.still=-1", "reward", {**base["reward"], "still": -1.0})):
+        ablated = json.loads((out / "ablations" / f"learn=bug=ddpg,{name},seed=0" / "config.json").read_text())
+        assert ablated == {**base, field: value, "name": ablated["name"], "out": str(out / "ablations")}
+    groups = {g["group"]: g for g in json.loads((out / "compare" / "compare.json").read_text())["groups"]}
+    assert set(groups) == {"ddpg", "ppo", "ddpg,ddpg.noise=gaussian", "ddpg,reward.still=-1", "passive", "random"}
     report = (out / "REPRODUCTION.md").read_text()
-    assert "## Stage 6: per algorithm across seeds" in report
-    ddpg = next(r for r in rows if r["algo"] == "ddpg")
+    assert "## Stage 6: per algorithm across seeds" in report and "Ring: `border_rim=True`" in report
+    ddpg = next(r for r in rows if r["policy"].endswith("learn=bug=ddpg,seed=0/policy"))
     assert f"| ddpg | 1 | {float(ddpg['test_mwr']):+.3f} |" in report  # the number read from per_seed.csv
     assert "| passive (baseline) | 1 |" in report and "triplesumo evaluate --policy" in report
+    ablations = report[report.index("## Ablations"):]
+    g = groups["ddpg,reward.still=-1"]
+    assert f"| reward.still=-1 | 1 | {g['scores'][0]:+.3f} | {g['iqm']:+.3f} [" in ablations
+    assert "| ddpg,reward.still=-1 |" not in report.split("## Ablations")[0].split("## Stage 6")[1]
+    # published: the paper-preset DDPG Bug as zoo:bug, the best Bug of any algorithm (not an ablation) as bug-ALGO
+    trained = [r for r in rows if "/bug/" in r["policy"]]
+    best = max(trained, key=lambda r: float(r["test_mwr"]))
+    assert sorted(p.stem for p in zoo.glob("*.json")) == sorted(["ant", "spider", "bug", f"bug-{best['algo']}"])
+    shipped = json.loads((zoo / f"bug-{best['algo']}.json").read_text())
+    assert shipped["algo"] == best["algo"] and shipped["code_version"] == _record(out)["runs"][-1]["version"]
+    assert shipped["command"].startswith("triplesumo train") and shipped["seed"] == 0 and shipped["env_steps"] > 0
+    assert [shipped["evaluation"][k] for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")] == [
+        float(best[k]) for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")]
+    assert json.loads((zoo / "bug.json").read_text())["algo"] == "ddpg"
+    assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 |" in report
+    # zoo:bug-ALGO resolves where a zoo spec is accepted: a policy, an evaluated candidate, another agent's seat
+    assert make_policy(f"zoo:bug-{best['algo']}", expect_obs_mode="paper") is not None
+    summary = evaluate(EvaluateConfig(policy=(f"zoo:bug-{best['algo']}",), policies=("ant=zoo:ant",
+                                                                                      "spider=zoo:spider"),
+                                      baselines=(), epochs=2, steps_per_epoch=20, n_envs=2, progress=False,
+                                      out=str(tmp_path / "ev")))
+    assert summary["candidates"]["trained"]["n"] == 2
 
     policy = (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.safetensors").stat().st_mtime_ns
     assert main(argv) == 0  # everything complete: nothing trained or evaluated again

@@ -8,9 +8,18 @@ Six stages, in order, each a function with declared outputs under ``out``:
    neither side wins more than 70 % of the test matches. Recorded; a warning, not a failure.
 4. ``bug``: Bug trained with each algorithm x seed in the stage-1/2 match, as the trials of
    :mod:`triplesumo.train.sweep` run here one after another (``OUT/bug/learn=bug=ALGO,seed=S``).
-5. ``evaluation``: every Bug plus the passive and random baselines on the same seeded test
-   matches (``OUT/evaluation``, ``per_seed.csv``).
-6. ``compare``: IQM with bootstrap intervals by algorithm and its plot (``OUT/compare``).
+   With ``ablations`` (``--ablations noise=gaussian still=-1``), stage ``ablations`` then trains
+   the paper-preset DDPG Bug with each one change over the same seeds and env-step budget
+   (``OUT/ablations/learn=bug=ddpg,ddpg.noise=gaussian,seed=S``).
+5. ``evaluation``: every Bug (ablations included) plus the passive and random baselines on the
+   same seeded test matches (``OUT/evaluation``, ``per_seed.csv``).
+6. ``compare``: IQM with bootstrap intervals by trial (each algorithm, each ablation) and its
+   plot (``OUT/compare``).
+
+``--publish`` then ships the stage-1 Ant and stage-2 Spider, the paper-preset DDPG Bug of the
+best seed as ``zoo:bug`` and the best Bug of any algorithm as ``zoo:bug-<algo>``, each manifest
+with its command, seed, env steps, the code version and its test MWR with 95 % interval. A
+``triplesumo bench skill --out OUT/skill`` run (time to skill) is reported when present.
 
 A stage whose outputs exist and are complete is skipped; a killed one goes on where it
 stopped (train runs resume from their last checkpoint, evaluations with ``resume``).
@@ -39,9 +48,10 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
+from triplesumo.evaluation.compare import CompareConfig, compare, format_compare, trial_group
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.model.specs import PhysicsConfig
+from triplesumo.train import sweep
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
@@ -50,6 +60,31 @@ RECORD_FILE = "reproduce.json"
 REPORT_FILE = "REPRODUCTION.md"
 CONTEST_LIMIT = 0.7
 """Neither side of the ongoing match may win more than this share of its test matches."""
+ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
+"""Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
+PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
+"""TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
+SKILL_RECORD = Path("skill") / "skill.json"
+"""Where a time-to-skill bench (``triplesumo bench skill --out OUT/skill``) is looked for."""
+
+
+def ablation(item: str) -> tuple[str, str, Any]:
+    """``"noise=gaussian"`` -> ``("ddpg.noise", "gaussian", "gaussian")``: the TrainConfig field (aliases
+    :data:`ABLATION_ALIASES`), the value as given and as typed; ``ValueError`` names the problem."""
+    key, sep, raw = item.partition("=")
+    if not sep or not key or not raw or "," in raw:
+        raise ValueError(f"ReproduceConfig.ablations: expected FIELD=VALUE (one change, e.g. noise=gaussian, "
+                         f"still=-1, ddpg.noise_sigma=0.1), got {item!r}")
+    field_name = ABLATION_ALIASES.get(key, key)
+    if field_name.split(".")[0] in PROTOCOL_FIELDS:
+        raise ValueError(f"ReproduceConfig.ablations: {field_name} is set by the protocol for every Bug run, got "
+                         f"{item!r}")
+    try:
+        value = sweep.field_value(field_name, raw)
+        sweep.with_field(TrainConfig(), field_name, value)  # the field's own validation
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"ReproduceConfig.ablations: {item!r}: {exc}") from None
+    return field_name, raw, value
 
 
 @dataclass(frozen=True)
@@ -96,8 +131,18 @@ class ReproduceConfig:
     """After stage 6, publish the stage-1 Ant, stage-2 Spider and the best Bug (highest test MWR) into the zoo."""
     progress: bool = True
     """Show progress bars."""
+    ablations: tuple[str, ...] = ()
+    """FIELD=VALUE changes of the paper-preset DDPG Bug, each trained over the same seeds and env-step budget and
+    compared as its own group (noise=gaussian, still=-1, or any TrainConfig field: ddpg.noise_sigma=0.1)."""
 
     def __post_init__(self) -> None:
+        if isinstance(self.ablations, list):
+            object.__setattr__(self, "ablations", tuple(self.ablations))
+        fields = [ablation(a)[0] + "=" + ablation(a)[1] for a in self.ablations]
+        if len(set(fields)) < len(fields):
+            raise ValueError(f"ReproduceConfig.ablations: a change given twice: {self.ablations}")
+        if self.ablations and "ddpg" not in self.algos:
+            raise ValueError("ReproduceConfig.ablations change the paper-preset DDPG Bug: algos must include ddpg")
         for name in ("algos", "seeds"):
             value = getattr(self, name)
             if isinstance(value, list):
@@ -153,7 +198,10 @@ class Protocol:
             Stage("contest", "is the new pair a contest? (Bug passive)", (self.out / "contest" / "contest.json",),
                   self._contest_complete, self._contest),
             Stage("bug", "Bug per algorithm x seed in the stage-1/2 match", (self.out / "bug",),
-                  lambda: all(finished(t) for t in self.bug_trials()), self._bugs),
+                  lambda: all(finished(t) for t in self.bug_trials()), lambda: self._train_trials(self.bug_trials())),
+            *([Stage("ablations", "paper-preset DDPG Bug with one change each, per seed", (self.out / "ablations",),
+                     lambda: all(finished(t) for t in self.ablation_trials()),
+                     lambda: self._train_trials(self.ablation_trials()))] if cfg.ablations else []),
             Stage("evaluation", "every Bug and the baselines on the same test matches",
                   (self.out / "evaluation" / "per_seed.csv",), self._evaluation_complete, self._evaluation),
             Stage("compare", "IQM [CI] by algorithm", (self.out / "compare" / "compare.json",),
@@ -208,9 +256,19 @@ class Protocol:
     def bug_trials(self) -> list[Trial]:
         return trials(self.sweep(), self.bug_base())
 
-    def _bugs(self) -> list[str]:
+    def ablation_trials(self) -> list[Trial]:
+        """The DDPG Bug trials with each ablation (its own grid value), over the same seeds and budgets."""
+        made: list[Trial] = []
+        for item in self.cfg.ablations:
+            field_name, raw, _ = ablation(item)
+            made += trials(SweepConfig(grid=("learn=bug=ddpg", f"{field_name}={raw}",
+                                             "seed=" + ",".join(map(str, self.cfg.seeds))),
+                                       out=str(self.out / "ablations")), self.bug_base())
+        return made
+
+    def _train_trials(self, todo: list[Trial]) -> list[str]:
         commands = []
-        for t in self.bug_trials():
+        for t in todo:
             if not finished(t):
                 print(f"  Bug trial {t.name}")
                 run_trial(t.config)
@@ -251,8 +309,8 @@ class Protocol:
         return commands
 
     def evaluation_config(self) -> EvaluateConfig:
-        return EvaluateConfig(learner="bug", policy=tuple(str(self.out / "bug" / t.name / "policy")
-                                                          for t in self.bug_trials()),
+        return EvaluateConfig(learner="bug", policy=tuple(str(Path(t.config.out) / t.name / "policy")
+                                                          for t in self.bug_trials() + self.ablation_trials()),
                               policies=(f"ant={self.ant_policy}", f"spider={self.spider_policy}"),
                               baselines=("passive", "random"), epochs=self.epochs["eval"], seed=self.cfg.eval_seed,
                               physics=self.physics,
@@ -271,7 +329,7 @@ class Protocol:
         return self._evaluate(self.evaluation_config())
 
     def compare_config(self) -> CompareConfig:
-        return CompareConfig(folders=(str(self.out / "evaluation"),), by="algo", out=str(self.out / "compare"),
+        return CompareConfig(folders=(str(self.out / "evaluation"),), by="trial", out=str(self.out / "compare"),
                              seed=self.cfg.eval_seed, reps=1000 if self.cfg.tiny else 10_000)
 
     def _compare_complete(self) -> bool:
@@ -285,8 +343,8 @@ class Protocol:
     def _compare(self) -> list[str]:
         ccfg = self.compare_config()
         print(format_compare(compare(ccfg)))
-        return [f"triplesumo compare {shlex.quote(ccfg.folders[0])} --by algo --seed {ccfg.seed} --reps {ccfg.reps} "
-                f"--out {shlex.quote(ccfg.out)}"]
+        return [f"triplesumo compare {shlex.quote(ccfg.folders[0])} --by {ccfg.by} --seed {ccfg.seed} "
+                f"--reps {ccfg.reps} --out {shlex.quote(ccfg.out)}"]
 
 
 def _read_csv(path: Path) -> list[dict[str, str]]:
@@ -328,6 +386,9 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
+    if record:  # options added since the record was written: their defaults, what that run used
+        record["config"] = {**{k: v for k, v in defaults.items() if k not in record["config"]}, **record["config"]}
     if record and {k: v for k, v in record["config"].items() if k != "progress"} != {
             k: v for k, v in config.items() if k != "progress"}:
         raise ValueError(f"{out} holds a reproduction with other options ({record['config']}); re-running resumes "
@@ -335,12 +396,13 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", [])}
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
     record["runs"].append(run_now)
+    n = len(protocol.stages)
     for k, stage in enumerate(protocol.stages, 1):
         if stage.complete():
-            print(f"[{k}/6] {stage.name}: complete, skipped ({stage.title})")
+            print(f"[{k}/{n}] {stage.name}: complete, skipped ({stage.title})")
             run_now["skipped"].append(stage.name)
             continue
-        print(f"[{k}/6] {stage.name}: {stage.title}")
+        print(f"[{k}/{n}] {stage.name}: {stage.title}")
         start = time.perf_counter()
         commands = stage.run()
         if not stage.complete():
@@ -351,7 +413,7 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
         run_now["ran"].append(stage.name)
         atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
     if cfg.publish:
-        record["published"] = _publish(protocol)
+        record["published"] = _publish(protocol, run_now["version"])
     atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
     atomic_write_bytes(out / REPORT_FILE, report(protocol, record).encode())
     print(f"report: {out / REPORT_FILE}; record: {path}")
@@ -362,15 +424,44 @@ def _now() -> str:
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
 
 
-def _publish(protocol: Protocol) -> list[str]:
+def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
+    """Ship Ant, Spider, the paper-preset DDPG Bug of the best seed (``bug``) and the best Bug of any algorithm
+    (``bug-<algo>``); each manifest with the code version and the Bug's test MWR with its 95 % interval."""
     from triplesumo.agents import zoo
 
-    rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["group"] == "trained"]
-    best = max(rows, key=lambda r: float(r["test_mwr"]))
-    made = [zoo.publish(Path(protocol.ant_policy), "ant"), zoo.publish(Path(protocol.spider_policy), "spider"),
-            zoo.publish(Path(best["policy"]), "bug", {"test_mwr": float(best["test_mwr"]),
-                                                      "epochs": int(best["epochs"])})]
-    return [str(p) for p in made]
+    cfg = protocol.cfg
+    ours = {str(Path(t.config.out) / t.name / "policy") for t in protocol.bug_trials()}  # not the ablations
+    rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["policy"] in ours]
+    extra = {"code_version": version, "reproduction": str(protocol.out), "border_rim": cfg.border_rim}
+
+    def evaluation(row: dict[str, str]) -> dict[str, Any]:
+        return {"test_mwr": float(row["test_mwr"]), "test_mwr_lo": float(row["test_mwr_lo"]),
+                "test_mwr_hi": float(row["test_mwr_hi"]), "confidence": 0.95, "test_matches": int(row["epochs"]),
+                "eval_seed": int(row["eval_seed"]), "n_win": int(row["n_win"]), "n_loss": int(row["n_loss"]),
+                "n_draw": int(row["n_draw"]), "opponents": [f"ant={protocol.ant_policy}",
+                                                            f"spider={protocol.spider_policy}"]}
+
+    def mwr(row: dict[str, str]) -> float:
+        return float(row["test_mwr"])
+
+    ship: list[tuple[Path, str, dict[str, str] | None]] = [(Path(protocol.ant_policy), "ant", None),
+                                                           (Path(protocol.spider_policy), "spider", None)]
+    preset = [r for r in rows if r["algo"] == "ddpg"]
+    if preset:
+        top = max(preset, key=mwr)
+        ship.append((Path(top["policy"]), "bug", top))
+    else:
+        print("  publish: no paper-preset DDPG Bug (ddpg not in --algos): zoo:bug is left as it is")
+    best = max(rows, key=mwr)
+    ship.append((Path(best["policy"]), f"bug-{best['algo']}", best))
+    made = []
+    for stem, name, row in ship:
+        path = zoo.publish(stem, name, None if row is None else evaluation(row), extra=extra)
+        made.append({"name": name, "file": str(path), "policy": str(stem),
+                     **({} if row is None else {"algo": row["algo"], "train_seed": row["train_seed"],
+                                                "test_mwr": mwr(row), "test_mwr_lo": float(row["test_mwr_lo"]),
+                                                "test_mwr_hi": float(row["test_mwr_hi"])})})
+    return made
 
 
 # ---------------------------------------------------------------- the report
@@ -382,13 +473,25 @@ def _run_row(protocol: Protocol, name: str) -> str:
     return f"| {name} | {facts['epochs']:,} | {facts['env_steps']:,} | {facts['final_mwr']:+.3f} |"
 
 
+def _trial_group(trial: Trial) -> str:
+    """The compare group of a trial's policy (``ddpg``, ``ddpg,ddpg.noise=gaussian``)."""
+    return trial_group({"group": "trained", "algo": "", "policy": str(Path(trial.config.out) / trial.name / "policy")})
+
+
+def _ci(x: float, lo: float, hi: float) -> str:
+    return f"{x:+.3f} [{lo:+.3f}, {hi:+.3f}]"
+
+
 def report(protocol: Protocol, record: dict[str, Any]) -> str:
     """``REPRODUCTION.md`` of a reproduction folder, every number read from the files it wrote."""
     out, cfg = protocol.out, protocol.cfg
+    ring = ("`border_rim=True`: the paper's ring, whose four border cylinders collide (a solid 3 cm rim)"
+            if cfg.border_rim else "`border_rim=False`: visual-only border markers (the ring of the first shipped zoo)")
     lines = [f"# Reproduction report ({out.name})", "",
              f"Written by `triplesumo reproduce` from the files in this folder; code version "
              f"{record['runs'][-1]['version']}." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
                                                     if cfg.tiny else ""), "",
+             f"Ring: {ring}; every stage trained and was evaluated on it.", "",
              "## Stages 1-2: the ongoing match", "",
              "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |",
              _run_row(protocol, "ant"), _run_row(protocol, "spider"), ""]
@@ -397,22 +500,26 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
     if contest_path.exists():
         c = json.loads(contest_path.read_text())
         verdict = "a contest" if c["contest"] else f"**not a contest** (one side above {c['limit']:.0%})"
-        lines += ["| test matches | Spider wins | Ant wins | draws | verdict |", "| ---: | ---: | ---: | ---: | --- |",
+        lines += [f"Neither side may win more than {c['limit']:.0%} of the test matches with Bug passive.", "",
+                  "| test matches | Spider wins | Ant wins | draws | verdict |", "| ---: | ---: | ---: | ---: | --- |",
                   f"| {c['matches']:,} | {c['spider_wins']:.1%} | {c['ant_wins']:.1%} | {c['draws']:.1%} | {verdict} |",
                   ""]
-    lines += ["## Stage 4: Bug per algorithm and seed (training)", "",
+    budget = "" if cfg.tiny else f" (budget {cfg.bug_env_steps:,} env steps per run)"
+    lines += [f"## Stage 4: Bug per algorithm and seed (training){budget}", "",
               "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |"]
-    lines += [_run_row(protocol, f"bug/{t.name}") for t in protocol.bug_trials()] + [""]
+    lines += [_run_row(protocol, f"bug/{t.name}") for t in protocol.bug_trials()]
+    lines += [_run_row(protocol, f"ablations/{t.name}") for t in protocol.ablation_trials()] + [""]
     rows = _read_csv(out / "evaluation" / "per_seed.csv")
     epochs = rows[0]["epochs"] if rows else "-"
     lines += [f"## Stage 5: test MWR per seed ({epochs} seeded test matches each, the same for all)", "",
-              "| algorithm | train seed | test MWR [95% CI] | wins | losses | draws |",
+              "| run | train seed | test MWR [95% CI] | wins | losses | draws |",
               "| --- | ---: | ---: | ---: | ---: | ---: |"]
     for r in rows:
-        lines.append(f"| {r['algo']} | {r['train_seed'] or '-'} | {float(r['test_mwr']):+.3f} "
-                     f"[{float(r['test_mwr_lo']):+.3f}, {float(r['test_mwr_hi']):+.3f}] | {r['n_win']} | "
-                     f"{r['n_loss']} | {r['n_draw']} |")
+        lines.append(f"| {trial_group(r)} | {r['train_seed'] or '-'} | "
+                     f"{_ci(float(r['test_mwr']), float(r['test_mwr_lo']), float(r['test_mwr_hi']))} | "
+                     f"{r['n_win']} | {r['n_loss']} | {r['n_draw']} |")
     lines.append("")
+    ablated = {_trial_group(t): t.name for t in protocol.ablation_trials()}
     cmp_path = out / "compare" / "compare.json"
     if cmp_path.exists():
         table = json.loads(cmp_path.read_text())
@@ -420,20 +527,77 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
         lines += ["## Stage 6: per algorithm across seeds (IQM, stratified bootstrap)", "",
                   f"| algorithm | seeds | per-seed test MWR | IQM [{pct}% CI] |", "| --- | ---: | --- | ---: |"]
         for g in table["groups"]:
+            if g["group"] in ablated:
+                continue
             kind = " (baseline)" if g["group"] in ("passive", "random") else ""
             lines.append(f"| {g['group']}{kind} | {g['n_seeds']} | {' '.join(f'{s:+.3f}' for s in g['scores'])} | "
-                         f"{g['iqm']:+.3f} [{g['lo']:+.3f}, {g['hi']:+.3f}] |")
-        lines += ["", "Plots: `compare/compare.png` (IQM by algorithm), `evaluation/compare_mwr.png` (test curves), "
+                         f"{_ci(g['iqm'], g['lo'], g['hi'])} |")
+        lines += ["", "Plots: `compare/compare.png` (IQM by group), `evaluation/compare_mwr.png` (test curves), "
                   "`*/plots/` (training curves).", ""]
+        lines += _ablation_section(table, ablated, pct)
+    lines += _skill_section(out)
+    if record.get("published"):
+        lines += ["## Published into the zoo", "", "| zoo name | algorithm | train seed | test MWR [95% CI] | file |",
+                  "| --- | --- | ---: | ---: | --- |"]
+        for p in record["published"]:
+            if isinstance(p, str):  # a record written before the table
+                lines.append(f"| - | - | - | - | `{p}` |")
+                continue
+            mwr = _ci(p["test_mwr"], p["test_mwr_lo"], p["test_mwr_hi"]) if "test_mwr" in p else "-"
+            lines.append(f"| `zoo:{p['name']}` | {p.get('algo', '-')} | {p.get('train_seed', '-')} | {mwr} | "
+                         f"`{p['file']}` |")
+        lines.append("")
     lines += ["## Commands", "", "The whole protocol: `triplesumo reproduce "
               + " ".join(shlex.quote(a) for a in _argv(cfg)) + "`. Stage by stage:", "", "```bash"]
     for name, stage in record["stages"].items():
         lines.append(f"# {name} ({stage['seconds']:.0f} s, {stage['version']}, done {stage['done']})")
         lines += stage["commands"]
     lines += ["```", ""]
-    if record.get("published"):
-        lines += ["Published into the zoo: " + ", ".join(f"`{p}`" for p in record["published"]), ""]
     return "\n".join(lines)
+
+
+def _ablation_section(table: dict[str, Any], ablated: dict[str, str], pct: int) -> list[str]:
+    """The ablations of the paper preset against it: IQM per change and P(change > preset)."""
+    if not ablated:
+        return []
+    lines = ["## Ablations of the paper preset (DDPG Bug, one change each, same seeds and budget)", "",
+             "Why: with a still punishment of -4 per step and gamma 0.99 the discounted cost of surviving is about the "
+             "loss penalty, and OU noise reset per match stays small early in each match. The paper preset is kept "
+             "as it is; these runs measure whether the choices matter.", "",
+             f"| change | seeds | per-seed test MWR | IQM [{pct}% CI] | P(change > preset) [{pct}% CI] |",
+             "| --- | ---: | --- | ---: | ---: |"]
+    poi = {(p["x"], p["y"]): p for p in table["improvement"]}
+    for g in table["groups"]:
+        if g["group"] not in ablated:
+            continue
+        p = poi.get((g["group"], "ddpg"))
+        vs = "-" if p is None else f"{p['poi']:.2f} [{p['lo']:.2f}, {p['hi']:.2f}]"
+        change = g["group"].removeprefix("ddpg,")
+        lines.append(f"| {change} | {g['n_seeds']} | {' '.join(f'{s:+.3f}' for s in g['scores'])} | "
+                     f"{_ci(g['iqm'], g['lo'], g['hi'])} | {vs} |")
+    return [*lines, ""]
+
+
+def _skill_section(out: Path) -> list[str]:
+    """Time to skill, from a ``triplesumo bench skill --out OUT/skill`` run when there is one."""
+    path = out / SKILL_RECORD
+    if not path.exists():
+        return []
+    result = json.loads(path.read_text())
+    lines = ["## Time to skill (`triplesumo bench skill`)", "",
+             f"Wall time and env steps until Bug's team first reaches a test MWR of {result['target']:+.2f} "
+             f"({result['eval_epochs']} seeded test matches every {result['eval_every']:,} env steps, at most "
+             f"{result['max_env_steps']:,}), measured on the machine that ran it. Made by `{result['command']}`.", "",
+             "| algorithm | reached | env steps | training wall time (s) | with evaluations (s) | test MWR curve |",
+             "| --- | --- | ---: | ---: | ---: | --- |"]
+    for algo, e in result["algos"].items():
+        curve = " ".join(f"{x['test_mwr']:+.2f}" for x in e["evaluations"])
+        if e["reached"]:
+            lines.append(f"| {algo} | yes | {e['env_steps']:,} | {e['train_seconds']:.0f} | {e['wall_seconds']:.0f} | "
+                         f"{curve} |")
+        else:
+            lines.append(f"| {algo} | {e['status']} | - | - | - | {curve} |")
+    return [*lines, "", "![time to skill](skill/skill.png)", ""]
 
 
 def _argv(cfg: ReproduceConfig) -> list[str]:

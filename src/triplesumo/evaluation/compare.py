@@ -3,7 +3,8 @@
 Reads the ``per_seed.csv`` of evaluation folders (written by ``triplesumo evaluate``,
 one row per candidate policy: each training seed of ``--policy runs/s0/policy
 runs/s1/policy ...`` is its own row) and groups the rows (``by``: the candidate group,
-``trained``/``passive``/``random``/...; the algorithm that made the policy; or the folder).
+``trained``/``passive``/``random``/...; the algorithm that made the policy; the sweep trial that
+trained it, :func:`trial_group`; or the folder).
 For each group it reports the test MWR of each seed, their **interquartile mean** (IQM,
 the 25 % trimmed mean, :func:`rliable.metrics.aggregate_iqm`) with a **stratified
 bootstrap** percentile interval, and for each pair of groups the **probability of
@@ -41,7 +42,7 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, PER_SEED_FILE
 from triplesumo.evaluation.video import check_writable
 
-BY = ("group", "algo", "folder")
+BY = ("group", "algo", "folder", "trial")
 
 
 @dataclass(frozen=True)
@@ -51,7 +52,9 @@ class CompareConfig:
     folders: tuple[str, ...] = ()
     """Evaluation folders (each holds per_seed.csv from triplesumo evaluate)."""
     by: str = "group"
-    """Group the seeds by: group (trained, passive, random, ...), algo (from the policy manifest) or folder."""
+    """Group the seeds by: group (trained, passive, random, ...), algo (from the policy manifest), folder, or trial
+    (the sweep trial of the policy's run folder without its seed: learn=bug=ddpg,ddpg.noise=gaussian,seed=0 ->
+    ddpg,ddpg.noise=gaussian)."""
     reps: int = 10_000
     """Bootstrap resamples."""
     confidence: float = 0.95
@@ -124,6 +127,21 @@ def interval_estimates(scores: dict[str, NDArray[np.float64]], reps: int = 10_00
     return {"groups": groups, "pairs": pairs}
 
 
+def trial_group(row: dict[str, str]) -> str:
+    """The trial group of a per-seed row: the name of the policy's run folder (a ``triplesumo sweep`` or
+    ``reproduce`` trial, ``learn=bug=ddpg,ddpg.noise=gaussian,seed=0``) without its ``seed=`` value, a leading
+    one-learner ``learn=AGENT=ALGO`` shortened to ALGO (``ddpg,ddpg.noise=gaussian``); the row's algo for a
+    trained policy from elsewhere, its group for a baseline or compared policy."""
+    if row["group"] != "trained":
+        return row["group"]
+    values = Path(row["policy"]).parent.name.split(",")
+    if not all("=" in v for v in values):  # not a trial's run folder
+        return row["algo"]
+    kept = [v for v in values if not v.startswith("seed=")]
+    kept = [v.split("=")[2] if v.startswith("learn=") and v.count("=") == 2 and "+" not in v else v for v in kept]
+    return ",".join(kept) or row["algo"]
+
+
 def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str, str]]]:
     """The per-seed rows of evaluation folders, grouped; repeated evaluations counted once."""
     if not folders:
@@ -145,7 +163,8 @@ def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str,
             if key in seen:
                 continue
             seen.add(key)
-            name = {"group": row["group"], "algo": row["algo"], "folder": f"{Path(folder).name}/{row['group']}"}[by]
+            name = {"group": row["group"], "algo": row["algo"], "folder": f"{Path(folder).name}/{row['group']}",
+                    "trial": trial_group(row) if by == "trial" else ""}[by]
             grouped.setdefault(name, []).append({**row, "folder": str(folder)})
     return grouped
 

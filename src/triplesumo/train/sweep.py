@@ -118,6 +118,11 @@ def _convert(tp: Any, text: str, where: str) -> Any:
         raise ValueError(f"--grid {where}: {text!r} is not a {getattr(tp, '__name__', tp)}") from None
 
 
+def field_value(dotted: str, raw: str) -> Any:
+    """The value ``raw`` typed for TrainConfig field ``dotted`` (``reward.still``, ``"-1"`` -> ``-1.0``)."""
+    return _convert(_field_type(dotted), raw, f"{dotted}={raw}")
+
+
 def parse_grid(grid: tuple[str, ...]) -> list[tuple[str, list[tuple[str, Any]]]]:
     """``("seed=0,1", "ddpg.actor_lr=1e-4,1e-3")`` -> ``[("seed", [("0", 0), ("1", 1)]), ...]``:
     each field with its values as given and as typed."""

@@ -35,8 +35,9 @@ def load(name: str, expect_obs_mode: str | None = None) -> tuple[Any, dict[str, 
 
 
 def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = None,
-            zoo_dir: Path | None = None) -> Path:
-    """Copy a trained policy file pair into the zoo as ``name``, adding evaluation results.
+            zoo_dir: Path | None = None, extra: dict[str, Any] | None = None) -> Path:
+    """Copy a trained policy file pair into the zoo as ``name`` (``bug``, ``bug-sac``, ...), adding
+    evaluation results and ``extra`` manifest entries (e.g. the code version).
 
     The manifest keeps the command, seed and epochs the training run recorded; nothing
     but the project's own training output can be published this way.
@@ -48,7 +49,7 @@ def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = No
     if not re.fullmatch(r"[a-z][a-z0-9_-]*", name):
         raise ValueError(f"zoo name must be lower-case letters, digits, - or _, got {name!r}")
     zoo_dir = Path(zoo_dir) if zoo_dir is not None else ZOO_DIR
-    manifest = {**manifest, "zoo_name": name}
+    manifest = {**manifest, **(extra or {}), "zoo_name": name}
     if evaluation is not None:
         manifest["evaluation"] = evaluation
     save_policy(zoo_dir / name, policy.actor, {k: v for k, v in manifest.items()
