@@ -169,3 +169,16 @@ def test_bad_input_gives_clear_errors(tmp_path: Path) -> None:
     assert main(["compare", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     with pytest.raises(ValueError, match="at least one policy"):
         EvaluateConfig(policy=())
+
+
+@pytest.mark.parametrize(("policy", "group", "algo", "expected"), [
+    ("/r/bug/learn=bug=ddpg,seed=0/policy", "trained", "ddpg", "ddpg"),
+    ("/r/ablations/learn=bug=ddpg,reward.still=-1,seed=2/policy", "trained", "ddpg", "ddpg,reward.still=-1"),
+    ("/r/sweep/seed=1,ddpg.actor_lr=0.001/policy", "trained", "ddpg", "ddpg.actor_lr=0.001"),
+    ("/r/runs/bug/policy", "trained", "td3", "td3"),
+    ("passive", "passive", "passive", "passive"),
+])
+def test_trial_group_is_the_run_folder_without_its_seed(policy: str, group: str, algo: str, expected: str) -> None:
+    from triplesumo.evaluation.compare import trial_group
+
+    assert trial_group({"policy": policy, "group": group, "algo": algo}) == expected

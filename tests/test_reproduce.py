@@ -13,7 +13,7 @@ import triplesumo.agents.zoo
 from triplesumo.agents.zoo import make_policy
 from triplesumo.cli import main
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
-from triplesumo.reproduce import ReproduceConfig
+from triplesumo.reproduce import ReproduceConfig, check_same_options
 
 
 def _record(out: Path) -> dict:
@@ -117,7 +117,24 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     ({"seeds": ()}, "ReproduceConfig.seeds must be non-empty"),
     ({"seeds": (0, 0)}, "without repeats"),
     ({"bug_epochs": 0}, "ReproduceConfig.bug_epochs must be an int >= 1"),
+    ({"ablations": ("noise=brownian",)}, r"ReproduceConfig.ablations: 'noise=brownian': .*DDPGConfig.noise"),
+    ({"ablations": ("still=2",)}, "RewardConfig.still is a punishment"),
+    ({"ablations": ("seed=3",)}, "seed is set by the protocol"),
+    ({"ablations": ("noise",)}, "expected FIELD=VALUE"),
+    ({"ablations": ("ddpg.colour=red",)}, "has no field 'colour'"),
+    ({"ablations": ("noise=gaussian", "ddpg.noise=gaussian")}, "a change given twice"),
+    ({"ablations": ("noise=gaussian",), "algos": ("sac",)}, "algos must include ddpg"),
 ])
 def test_bad_options_name_the_field(kw: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         ReproduceConfig(**kw)
+
+
+def test_a_record_written_before_an_option_existed_resumes_with_its_default(tmp_path: Path) -> None:
+    import dataclasses
+
+    recorded = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig(tiny=True))))
+    del recorded["ablations"]  # a record of a version without --ablations
+    check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, progress=False))
+    with pytest.raises(ValueError, match="other options"):
+        check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ablations=("still=-1",)))

@@ -378,6 +378,17 @@ def code_version() -> str:
         return "unknown"
 
 
+def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:
+    """``ValueError`` unless the reproduction recorded in ``out`` was made with ``cfg``'s options (progress aside);
+    an option added since the record was written counts as its default, what that run used."""
+    config = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
+    recorded = {**{k: v for k, v in defaults.items() if k not in recorded}, **recorded}
+    if {k: v for k, v in recorded.items() if k != "progress"} != {k: v for k, v in config.items() if k != "progress"}:
+        raise ValueError(f"{out} holds a reproduction with other options ({recorded}); re-running resumes "
+                         "it and needs the same options: choose another --out")
+
+
 def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     """Run (or finish) every stage in order, skipping complete ones; write reproduce.json and the report."""
     protocol = Protocol(cfg)
@@ -386,13 +397,8 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
-    defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
-    if record:  # options added since the record was written: their defaults, what that run used
-        record["config"] = {**{k: v for k, v in defaults.items() if k not in record["config"]}, **record["config"]}
-    if record and {k: v for k, v in record["config"].items() if k != "progress"} != {
-            k: v for k, v in config.items() if k != "progress"}:
-        raise ValueError(f"{out} holds a reproduction with other options ({record['config']}); re-running resumes "
-                         "it and needs the same options: choose another --out")
+    if record:
+        check_same_options(out, record["config"], cfg)
     record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", [])}
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
     record["runs"].append(run_now)
