@@ -10,9 +10,10 @@ from pathlib import Path
 import pytest
 
 import triplesumo.agents.zoo
-from triplesumo.agents.zoo import make_policy
+from triplesumo.agents.zoo import make_policy, policies_from_pairs
 from triplesumo.cli import main
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+from triplesumo.evaluation.tournament import _manifest as tournament_manifest
 from triplesumo.reproduce import ReproduceConfig, check_same_options
 
 
@@ -54,6 +55,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert set(groups) == {"ddpg", "ppo", "ddpg,ddpg.noise=gaussian", "ddpg,reward.still=-1", "passive", "random"}
     report = (out / "REPRODUCTION.md").read_text()
     assert "## Stage 6: per algorithm across seeds" in report and "Ring: `border_rim=True`" in report
+    assert f"triplesumo bench skill --out {out / 'skill'}" in report  # not measured here: how to
     ddpg = next(r for r in rows if r["policy"].endswith("learn=bug=ddpg,seed=0/policy"))
     assert f"| ddpg | 1 | {float(ddpg['test_mwr']):+.3f} |" in report  # the number read from per_seed.csv
     assert "| passive (baseline) | 1 |" in report and "triplesumo evaluate --policy" in report
@@ -72,16 +74,31 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
         float(best[k]) for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")]
     assert json.loads((zoo / "bug.json").read_text())["algo"] == "ddpg"
     assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 |" in report
-    # zoo:bug-ALGO resolves where a zoo spec is accepted: a policy, an evaluated candidate, another agent's seat
+    # zoo:bug-ALGO resolves where a zoo spec is accepted: a policy, an evaluated candidate, a seat, a tournament entry
     assert make_policy(f"zoo:bug-{best['algo']}", expect_obs_mode="paper") is not None
     summary = evaluate(EvaluateConfig(policy=(f"zoo:bug-{best['algo']}",), policies=("ant=zoo:ant",
                                                                                       "spider=zoo:spider"),
                                       baselines=(), epochs=2, steps_per_epoch=20, n_envs=2, progress=False,
                                       out=str(tmp_path / "ev")))
     assert summary["candidates"]["trained"]["n"] == 2
+    seats = policies_from_pairs((f"bug=zoo:bug-{best['algo']}",), 0, "paper")  # what train and evaluate seat
+    assert set(seats) == {"bug"}
+    assert tournament_manifest(f"zoo:bug-{best['algo']}", "paper")["zoo_name"] == f"bug-{best['algo']}"
+
+    # a time-to-skill bench in OUT/skill goes into the report
+    skill = {"target": 0.2, "eval_epochs": 200, "eval_every": 1000, "max_env_steps": 5000,
+             "command": "triplesumo bench skill --out OUT/skill", "algos": {
+                 "sac": {"reached": True, "status": "reached", "env_steps": 2011, "train_seconds": 61.5,
+                         "wall_seconds": 80.2, "evaluations": [{"test_mwr": 0.1}, {"test_mwr": 0.25}]},
+                 "ppo": {"reached": False, "status": "not reached", "env_steps": None, "train_seconds": None,
+                         "wall_seconds": None, "evaluations": [{"test_mwr": -0.1}]}}}
+    (out / "skill").mkdir()
+    (out / "skill" / "skill.json").write_text(json.dumps(skill))
 
     policy = (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.safetensors").stat().st_mtime_ns
     assert main(argv) == 0  # everything complete: nothing trained or evaluated again
+    report = (out / "REPRODUCTION.md").read_text()
+    assert "| sac | yes | 2,011 | 62 | 80 | +0.10 +0.25 |" in report and "| ppo | not reached | - |" in report
     assert _record(out)["runs"][-1]["ran"] == [] and _record(out)["runs"][-1]["skipped"] == stages
     assert (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.safetensors").stat().st_mtime_ns == policy
 

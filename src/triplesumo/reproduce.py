@@ -541,7 +541,7 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
         lines += ["", "Plots: `compare/compare.png` (IQM by group), `evaluation/compare_mwr.png` (test curves), "
                   "`*/plots/` (training curves).", ""]
         lines += _ablation_section(table, ablated, pct)
-    lines += _skill_section(out)
+    lines += _skill_section(out, cfg.border_rim)
     if record.get("published"):
         lines += ["## Published into the zoo", "", "| zoo name | algorithm | train seed | test MWR [95% CI] | file |",
                   "| --- | --- | ---: | ---: | --- |"]
@@ -584,11 +584,16 @@ def _ablation_section(table: dict[str, Any], ablated: dict[str, str], pct: int) 
     return [*lines, ""]
 
 
-def _skill_section(out: Path) -> list[str]:
+def _skill_section(out: Path, border_rim: bool) -> list[str]:
     """Time to skill, from a ``triplesumo bench skill --out OUT/skill`` run when there is one."""
     path = out / SKILL_RECORD
     if not path.exists():
-        return []
+        command = (f"triplesumo bench skill --out {shlex.quote(str(out / 'skill'))} --train.policies "
+                   f"ant={shlex.quote(str(out / 'ant' / 'policy'))} "
+                   f"spider={shlex.quote(str(out / 'spider' / 'policy'))}"
+                   + (" --train.physics.border-rim" if border_rim else ""))
+        return ["## Time to skill", "", f"Not measured in this folder. In this match: `{command}`, then run "
+                "`triplesumo reproduce` again to add it here.", ""]
     result = json.loads(path.read_text())
     lines = ["## Time to skill (`triplesumo bench skill`)", "",
              f"Wall time and env steps until Bug's team first reaches a test MWR of {result['target']:+.2f} "

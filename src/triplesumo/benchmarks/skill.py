@@ -105,7 +105,10 @@ class SkillConfig:
 
 
 def _depends(cfg: SkillConfig) -> dict[str, Any]:
-    return json.loads(json.dumps({k: dataclasses.asdict(cfg)[k] for k in CURVE_DEPENDS_ON}))
+    values: dict[str, Any] = json.loads(json.dumps({k: dataclasses.asdict(cfg)[k] for k in CURVE_DEPENDS_ON}))
+    for name in ("progress", "tensorboard", "out", "name"):  # (how it shows, or set per algorithm by the bench)
+        values["train"].pop(name)
+    return values
 
 
 def _latest(run_dir: Path) -> int:
