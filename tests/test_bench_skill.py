@@ -130,6 +130,8 @@ def test_the_stop_rule_on_a_curve() -> None:
     ({"algos": ("ddpg,a2c",)}, "SkillConfig.algos must be among"),
     ({"eval_every": 0}, "SkillConfig.eval_every must be an int >= 1"),
     ({"max_env_steps": 10, "eval_every": 20}, "SkillConfig.max_env_steps"),
+    ({"train": TrainConfig(name="mine")}, "SkillConfig.train.name is set by the bench"),
+    ({"train": TrainConfig(max_env_steps=5)}, "SkillConfig.train.max_env_steps is set by the bench"),
 ])
 def test_bad_options_name_the_field(kw: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):

@@ -95,8 +95,11 @@ class SkillConfig:
         if self.max_env_steps < self.eval_every:
             raise ValueError(f"SkillConfig.max_env_steps ({self.max_env_steps}) must be >= eval_every "
                              f"({self.eval_every}): no evaluation would be made")
-        if self.train.learner != "bug" and not self.train.learn:
-            raise ValueError("SkillConfig.train: Bug is the learner of the bench (--train.learner must stay bug)")
+        set_here = [f"train.{name}" for name in ("out", "name", "learner", "learn", "epochs", "max_env_steps")
+                    if getattr(self.train, name) != getattr(TrainConfig(), name)]
+        if set_here:
+            raise ValueError(f"SkillConfig.{set_here[0]} is set by the bench (Bug learns each of algos in OUT/ALGO "
+                             "up to max_env_steps, evaluated every eval_every): leave it out")
 
     def run_config(self, algo: str) -> TrainConfig:
         """The train config of ``algo``'s run (its first chunk: the first evaluation's budget)."""
