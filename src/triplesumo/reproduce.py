@@ -204,7 +204,7 @@ class Protocol:
                      lambda: self._train_trials(self.ablation_trials()))] if cfg.ablations else []),
             Stage("evaluation", "every Bug and the baselines on the same test matches",
                   (self.out / "evaluation" / "per_seed.csv",), self._evaluation_complete, self._evaluation),
-            Stage("compare", "IQM [CI] by algorithm", (self.out / "compare" / "compare.json",),
+            Stage("compare", "IQM [CI] by trial (algorithm, ablation)", (self.out / "compare" / "compare.json",),
                   self._compare_complete, self._compare),
         ]
 
