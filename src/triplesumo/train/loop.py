@@ -14,6 +14,9 @@ With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents t
 learn: at every match start one member of each such side's pool is drawn (in a free-for-all
 one per seat); at every match end its players are rated, due learning sides are admitted
 (their actors written as policy files under ``RUN/league``) and the league's epoch is logged.
+When both sides learn, each match is live or one learner plays the other side's pool
+(``League.draw_live``); the learner whose seats a member takes sits the match out (no
+transitions, no metrics row: its metrics CSV counts its own matches).
 
 Nothing is lost: a folder that already holds a run is never trained into again without
 ``resume`` (continue it) or ``start_over`` (move it aside first); the memory the replay
