@@ -293,7 +293,8 @@ class Trainer:
     """Trains the learners of ``cfg``; :meth:`run` until ``cfg.epochs``, ``max_env_steps`` or ``max_minutes``.
 
     One *epoch* is one match: it ends when the match is over or when every learning agent in
-    it is out (elimination rules); each learning agent then gets one row in its metrics CSV.
+    it is out (elimination rules); each learning agent then gets one row in its metrics CSV
+    (self-play with both sides learning: each agent that played it; one that sat it out has none).
     """
 
     def __init__(self, cfg: TrainConfig, run_dir: Path | None = None, resume: bool = False,
