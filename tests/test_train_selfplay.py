@@ -243,6 +243,10 @@ def test_live_or_pool_draws_follow_live_share(tmp_path: Path) -> None:
     assert league.draw_live(["spider"]) == ["spider"] and league.rng.bit_generator.state == before
     with pytest.raises(ValueError, match="LeagueConfig.live_share"):
         LeagueConfig(live_share=1.5)
+    # a config.json written before live_share existed reads with its default
+    saved = config_to_json(tiny(tmp_path, "old", **SPIDER))
+    del saved["league"]["live_share"]
+    assert config_from_json(saved).league.live_share == LeagueConfig().live_share
 
 
 def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Trainer, tmp_path: Path) -> None:
