@@ -206,11 +206,10 @@ class MetricsLog:
     def _tag(self, name: str, tag: str) -> str:
         return f"{name}/{tag}" if self.several else tag
 
-    def epoch(self, agent: str, row: dict[str, Any], mwr: float, step: int | None = None) -> None:
-        """The metrics row of ``agent``; TensorBoard's step is ``step`` (the run's epoch) or ``row["epoch"]``."""
+    def epoch(self, agent: str, row: dict[str, Any], mwr: float) -> None:
         self.metrics[agent].write(row)
         if self._tb is not None:
-            e = row["epoch"] if step is None else step
+            e = row["epoch"]
             self._tb.add_scalar(self._tag(agent, "charts/mwr"), mwr, e)
             self._tb.add_scalar(self._tag(agent, "charts/local_winning_rate"), row["local_winning_rate"], e)
             self._tb.add_scalar(self._tag(agent, "charts/episodic_length"), row["steps"], e)

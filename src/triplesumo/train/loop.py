@@ -653,7 +653,7 @@ class Trainer:
         row = {"epoch": len(self.lwr[agent]), "outcome": last["outcome"], "local_winning_rate": lwr,
                "steps": last["step"], "total_reward": total, **acc, "env_steps": self.env_steps,
                "wall_time": round(time.time(), 3)}  # epoch: the agent's own matches (= the run's, unless it sat out)
-        self.log.epoch(agent, row, self.mwr(agent), step=self.epochs_done)
+        self.log.epoch(agent, row, self.mwr(agent))
         self.acc[agent][k] = self._empty_acc()
 
     def mwr(self, agent: str | None = None) -> float:
