@@ -269,3 +269,15 @@ def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Tr
             assert np.array_equal(x[key], y[key]), key
     for learner in ("ant+bug", "spider"):
         assert (a / f"policy-{learner}.safetensors").read_bytes() == (b / f"policy-{learner}.safetensors").read_bytes()
+
+
+def test_tournament_seats_a_shared_team_network_and_its_snapshots_in_the_team_seats(both_run: Trainer) -> None:
+    from triplesumo.evaluation.tournament import _manifest, eligible_seats
+
+    assert both_run.league is not None
+    match = both_run.batch.matches[0]
+    member = both_run.league.pools["team"].members[0]
+    for stem, seats in ((both_run.run_dir / "policy-ant+bug", ["ant", "bug"]),
+                        (both_run.league.root / member.policies["bug"], ["ant", "bug"]),
+                        (both_run.run_dir / "policy-spider", ["spider"])):
+        assert eligible_seats(str(stem), _manifest(str(stem), "paper"), match) == seats, stem
