@@ -2,7 +2,9 @@
 
 Tiny runs (4 matches of 150 steps at once, 16-unit networks, a few seconds each): snapshots
 are admitted and rated, seats are drawn from the pools, resume equals uninterrupted, and bad
-self-play configs fail naming the field.
+self-play configs fail naming the field. Both sides of the 2-vs-1 learning in one run: 2
+matches of 20 steps at once, started 1.7 m from the centre so that quadrupeds leave the ring
+within 20 steps (wins, hence admissions, on both sides).
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ import numpy as np
 import pytest
 
 from triplesumo.agents.policy_file import load_policy
+from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.cli import main
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.league import League, LeagueConfig
@@ -149,7 +153,6 @@ def test_resume_through_train_and_config_round_trip(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("fields", "message"), [
-    ({"learn": ("ant=sac", "bug=sac", "spider=sac")}, "every agent learns"),
     ({"learn": ("bug=sac",)}, "side 'team' has learning agents ['bug'] and fixed ones ['ant']"),
     ({"scenario": "ffa", "learn": ("ant=sac", "bug=sac")}, "free-for-all"),
     ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("ant=random",))}, "would start empty"),
@@ -169,3 +172,112 @@ def test_league_options_without_self_play_are_refused(tmp_path: Path) -> None:
 def test_cli_parses_self_play_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["train", "--self-play", "--league.threshold", "2", "--out", str(tmp_path)]) != 0
     assert "LeagueConfig.threshold" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------- both sides learn in one run
+BOTH_LEAGUE = LeagueConfig(threshold=0.0, window=2, snapshot_every=2, max_size=3, live_share=0.5)
+DDPG = DDPGConfig(hidden=(16, 16), buffer_size=4000, learning_starts=40, batch_size=8, learn_every=8)
+BOTH_COMMAND = "triplesumo train --self-play --learn ant=ddpg bug=ddpg spider=ddpg --share team"
+
+
+def both(out: Path, epochs: int = 16) -> TrainConfig:
+    return TrainConfig(name="both", out=str(out), epochs=epochs, steps_per_epoch=20, n_envs=2, checkpoint_every=8,
+                       seed=3, ddpg=DDPG, progress=False, tensorboard=False, self_play=True, league=BOTH_LEAGUE,
+                       learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"), share="team",
+                       physics=PhysicsConfig(start_radius=1.7))
+
+
+@pytest.fixture(scope="module")
+def both_run(tmp_path_factory: pytest.TempPathFactory) -> Trainer:
+    trainer = Trainer(both(tmp_path_factory.mktemp("both")), command=BOTH_COMMAND)
+    trainer.run()
+    return trainer
+
+
+def test_both_sides_learn_against_each_other_and_each_others_pools(both_run: Trainer) -> None:
+    league, run = both_run.league, both_run.run_dir
+    assert league is not None and both_run.epochs_done == 16
+    for side, role in (("team", "ant"), ("spider", "spider")):
+        pool = league.pools[side]
+        assert pool.members and all(m.source == "self" for m in (*pool.members, *pool.evicted)), side
+        _, manifest = load_policy(league.root / pool.members[0].policies[role])
+        assert manifest["league_member"] == pool.members[0].id and manifest["side"] == side
+        me = league.ratings[League.learner(side)]
+        assert me.mu != 25.0 and me.sigma < 25 / 3 - 1, side
+    # a match is live (both learners) or one learner against the other side's pool: every pool match is one
+    # member's game, and the learner whose seats the member took wrote no metrics row for it
+    pool_matches = sum(m.games for p in league.pools.values() for m in (*p.members, *p.evicted))
+    team_rows, spider_rows = (rows(run / f"metrics-{a}.csv") for a in ("ant", "spider"))
+    assert rows(run / "metrics-bug.csv") and len(rows(run / "metrics-bug.csv")) == len(team_rows)
+    assert 0 < pool_matches < 16 and len(team_rows) < 16 and len(spider_rows) < 16
+    assert len(team_rows) + len(spider_rows) == 16 + (16 - pool_matches)
+    for table in (team_rows, spider_rows):  # each agent's own matches, in order
+        assert [int(r["epoch"]) for r in table] == list(range(1, len(table) + 1))
+        steps = [int(r["env_steps"]) for r in table]
+        assert steps == sorted(steps)
+    for learner in ("ant+bug", "spider"):  # learning rows: one per match of the run
+        assert len(rows(run / f"learning-{learner}.csv")) == 16
+    log = rows(league.root / "league.csv")
+    assert [(int(r["epoch"]), r["side"]) for r in log] == [(e, s) for e in range(1, 17) for s in ("team", "spider")]
+    assert (run / "plots" / "league.png").stat().st_size > 10_000
+
+
+def test_live_or_pool_draws_follow_live_share(tmp_path: Path) -> None:
+    sides = {"team": ("ant", "bug"), "spider": ("spider",)}
+    seeded = LeagueConfig(live_share=0.35, zoo=("ant=random", "bug=random", "spider=passive"))
+    league = League(tmp_path / "a", seeded, sides, seed=1)
+    n = 20_000
+    draws = [tuple(league.draw_live(["team", "spider"])) for _ in range(n)]
+    share = {d: draws.count(d) / n for d in set(draws)}
+    assert set(share) == {("team", "spider"), ("team",), ("spider",)}
+    tol = 4 * (0.25 / n) ** 0.5  # 4 binomial standard deviations at most
+    assert abs(share[("team", "spider")] - 0.35) < tol
+    assert abs(share[("team",)] - 0.325) < tol and abs(share[("spider",)] - 0.325) < tol
+    # empty pools: live until a side has members; then only the other side plays against it
+    fresh = League(tmp_path / "b", LeagueConfig(live_share=0.0), sides, seed=1)
+    assert all(fresh.draw_live(["team", "spider"]) == ["team", "spider"] for _ in range(50))
+    fresh.admit("spider", 1, builtin={"spider": "passive"})
+    assert all(fresh.draw_live(["team", "spider"]) == ["team"] for _ in range(50))
+    # one learning side: no draw (the league's generator is untouched)
+    before = league.rng.bit_generator.state
+    assert league.draw_live(["spider"]) == ["spider"] and league.rng.bit_generator.state == before
+    with pytest.raises(ValueError, match="LeagueConfig.live_share"):
+        LeagueConfig(live_share=1.5)
+    # a config.json written before live_share existed reads with its default
+    saved = config_to_json(tiny(tmp_path, "old", **SPIDER))
+    del saved["league"]["live_share"]
+    assert config_from_json(saved).league.live_share == LeagueConfig().live_share
+
+
+def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Trainer, tmp_path: Path) -> None:
+    half = Trainer(both(tmp_path, epochs=8), command=BOTH_COMMAND)
+    half.run()
+    assert half.league is not None and half.league.pools["spider"].members  # admitted before the checkpoint
+    resumed = Trainer(both(tmp_path, epochs=16), run_dir=tmp_path / "both", resume=True, command=BOTH_COMMAND)
+    resumed.run()
+    assert both_run.league is not None and resumed.league is not None
+    assert both_run.league.state_dict() == resumed.league.state_dict()
+    assert both_run.seat_members == resumed.seat_members
+    a, b = both_run.run_dir, resumed.run_dir
+    assert (a / "league/league.csv").read_text() == (b / "league/league.csv").read_text()
+    for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
+        strip = [{k: v for k, v in r.items() if k != "wall_time"} for r in rows(a / name)]
+        assert strip == [{k: v for k, v in r.items() if k != "wall_time"} for r in rows(b / name)], name
+    last = checkpoint.latest(a)
+    with np.load(last / "arrays.npz") as x, np.load(b / "checkpoints" / last.name / "arrays.npz") as y:
+        for key in x.files:
+            assert np.array_equal(x[key], y[key]), key
+    for learner in ("ant+bug", "spider"):
+        assert (a / f"policy-{learner}.safetensors").read_bytes() == (b / f"policy-{learner}.safetensors").read_bytes()
+
+
+def test_tournament_seats_a_shared_team_network_and_its_snapshots_in_the_team_seats(both_run: Trainer) -> None:
+    from triplesumo.evaluation.tournament import _manifest, eligible_seats
+
+    assert both_run.league is not None
+    match = both_run.batch.matches[0]
+    member = both_run.league.pools["team"].members[0]
+    for stem, seats in ((both_run.run_dir / "policy-ant+bug", ["ant", "bug"]),
+                        (both_run.league.root / member.policies["bug"], ["ant", "bug"]),
+                        (both_run.run_dir / "policy-spider", ["spider"])):
+        assert eligible_seats(str(stem), _manifest(str(stem), "paper"), match) == seats, stem

@@ -9,9 +9,10 @@ take:
 * built-in policies (``passive``/``zero``, ``random``) take any seat;
 * a policy file takes a seat whose observation size is its ``obs_dim``, in the
   observation mode it was trained with; with ``paper`` observations (one global vector,
-  the same for every agent, not relative to the seat) only the seat it was trained in,
+  the same for every agent, not relative to the seat) only the seat it was trained in
+  (a team's shared network, ``--share team``: the seats its manifest's ``plays`` names),
   in the roster it was trained in, since nothing in the vector tells it which quadruped
-  it drives.
+  it drives. To seat a shared network in both team seats, enter it twice under two names.
 
 Schedules: ``round-robin`` plays every lineup once per round for ``rounds`` rounds; in
 round ``r`` every match resets with seed ``seed + r``, so all lineups meet the same
@@ -185,7 +186,8 @@ def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> 
         trained_roster = manifest.get("agents")
         if trained_roster is not None and list(trained_roster) != list(match.agents):
             return []
-        seats = [a for a in seats if a == manifest.get("agent")]
+        plays = manifest.get("plays") or [manifest.get("agent")]  # a team's shared network: its team's seats
+        seats = [a for a in seats if a in plays]
     return seats
 
 

@@ -34,6 +34,14 @@ The rules, after AlphaStar's league and RLlib's league example:
   counts 0.5), with AlphaStar's weightings ``hard``: ``f(p) = (1 - p) ** exponent``
   (mostly the opponents it loses to) or ``variance``: ``f(p) = p (1 - p)`` (mostly the
   even matches).
+* **Live or pool (several learning sides).** When more than one side learns in the run (the
+  paper's 2-vs-1 with ``--learn ant=ddpg bug=ddpg spider=ddpg``), :meth:`League.draw_live` decides at
+  every match start who plays: with probability :attr:`LeagueConfig.live_share` the live learners
+  meet (AlphaStar's main agents play 35% of their matches against themselves); otherwise one
+  learning side, drawn uniformly among those whose opponents' pools all have members, plays
+  against members of the other learning sides' pools (those learners sit the match out). While
+  no such side exists (both pools still empty in a run from scratch) every match is live. With
+  one learning side nothing is drawn.
 * **Size limit.** Past :attr:`LeagueConfig.max_size` members the oldest is evicted
   (FIFO), except the first member and the best-rated one (highest ``mu``). An evicted
   member's files stay under ``members/`` (listed as ``evicted``), so any checkpoint
@@ -108,6 +116,9 @@ class LeagueConfig:
     zoo: tuple[str, ...] = ()
     """ROLE=POLICY entries seeding each pool with one member (zero, passive, random, zoo:NAME or a policy
     file); a pool is seeded when every one of its roles is named."""
+    live_share: float = 0.35
+    """With several learning sides (both sides of the 2-vs-1 learn): the probability that a match is between
+    the live learners; otherwise one learning side (uniform) plays members of the others' pools."""
     rating_model: str = "PlackettLuce"
     """openskill model of the ratings: PlackettLuce, BradleyTerryFull, BradleyTerryPart,
     ThurstoneMostellerFull or ThurstoneMostellerPart."""
@@ -116,6 +127,9 @@ class LeagueConfig:
         if not (isinstance(self.threshold, int | float) and not isinstance(self.threshold, bool)
                 and 0.0 <= self.threshold < 1.0):
             raise ValueError(f"LeagueConfig.threshold must be a number in [0, 1), got {self.threshold!r}")
+        if not (isinstance(self.live_share, int | float) and not isinstance(self.live_share, bool)
+                and 0.0 <= self.live_share <= 1.0):
+            raise ValueError(f"LeagueConfig.live_share must be a number in [0, 1], got {self.live_share!r}")
         for name, minimum in (("window", 1), ("max_size", 3), ("snapshot_every", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
@@ -288,6 +302,17 @@ class League:
         w = pool.weights()
         picks = self.rng.choice(len(w), size=k, replace=bool(k > np.count_nonzero(w)), p=w)
         return [pool.members[int(i)] for i in picks]
+
+    def draw_live(self, sides: Sequence[str]) -> list[str]:
+        """The learning ``sides`` whose learners play the next match (module docstring, "Live or pool");
+        the seats of the others go to members of their pools. One side: itself, no draw."""
+        if len(sides) < 2:
+            return list(sides)
+        live = self.rng.random() < self.config.live_share
+        ready = [s for s in sides if all(len(self._pool(o)) for o in sides if o != s)]
+        if live or not ready:
+            return list(sides)
+        return [ready[int(self.rng.integers(len(ready)))]]
 
     def policies(self, member: Snapshot, seed: int | None = None,
                  action_sizes: Mapping[str, int] | None = None) -> dict[str, Any]:

@@ -14,7 +14,7 @@ import csv
 import io
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -181,14 +181,17 @@ class MetricsLog:
     are prefixed with the name (``ant/charts/mwr``, ``ant+bug/losses/critic_loss``).
 
     ``resume_epoch`` None starts new CSVs; otherwise each is cut back to the rows of epochs
-    1..``resume_epoch`` (:func:`repair_metrics_csv`), which must all be there.
+    1..``resume_epoch`` (:func:`repair_metrics_csv`), which must all be there; an agent's metrics
+    CSV to its ``resume_rows`` entry where given (its own matches: in self-play with several
+    learning sides an agent that sits a match out writes no row for it).
     """
 
     def __init__(self, run_dir: Path, agents: list[str], learners: list[str], resume_epoch: int | None,
-                 tensorboard: bool) -> None:
+                 tensorboard: bool, resume_rows: Mapping[str, int] | None = None) -> None:
         self.several = len(agents) > 1 or len(learners) > 1 or agents != learners
         self.metrics = {a: _Table(Path(run_dir) / run_file("metrics", a, self.several, ".csv"), COLUMNS,
-                                  _row_problem, resume_epoch, "metrics CSV") for a in agents}
+                                  _row_problem, resume_epoch if resume_rows is None else resume_rows[a],
+                                  "metrics CSV") for a in agents}
         self.learning = {n: _Table(Path(run_dir) / run_file("learning", n, self.several, ".csv"), LEARNING_COLUMNS,
                                    _learning_row_problem, resume_epoch, "learning CSV", backfill=True)
                          for n in learners}

@@ -14,6 +14,9 @@ With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents t
 learn: at every match start one member of each such side's pool is drawn (in a free-for-all
 one per seat); at every match end its players are rated, due learning sides are admitted
 (their actors written as policy files under ``RUN/league``) and the league's epoch is logged.
+When both sides learn, each match is live or one learner plays the other side's pool
+(``League.draw_live``); the learner whose seats a member takes sits the match out (no
+transitions, no metrics row: its metrics CSV counts its own matches).
 
 Nothing is lost: a folder that already holds a run is never trained into again without
 ``resume`` (continue it) or ``start_over`` (move it aside first); the memory the replay
@@ -89,6 +92,10 @@ class TrainResult:
     """MWR of every learning agent."""
 
 
+SAT_OUT: dict[str, Any] = {"outcome": "", "step": 0, "sat_out": True}
+"""The ``final`` entry of a learning agent whose seat a league member takes for a match (self-play
+with several learning sides): its epoch does not wait for it, and it writes no metrics row."""
+
 RUN_FILES = ("config.json", "metrics.csv", "checkpoints", "policy.json", "policy.safetensors")
 """What makes a folder hold a run: training never writes into such a folder afresh (with
 ``metrics-*.csv`` and ``policy-*.json`` of runs with several learners)."""
@@ -121,6 +128,8 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
 ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget): a config.json without them gets their defaults; any other missing key is an error."""
+LEAGUE_ADDED_LATER = ("live_share",)
+"""LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
 
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
@@ -142,6 +151,9 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
             raise ValueError(f"{source}: {exc}") from exc
     data["policies"] = tuple(data["policies"])
     data["learn"] = tuple(data["learn"])
+    if isinstance(data["league"], dict):
+        league_defaults = dataclasses.asdict(LeagueConfig())
+        data["league"] = {**{k: league_defaults[k] for k in LEAGUE_ADDED_LATER}, **data["league"]}
     try:
         league: dict[str, Any] = _check_keys(data["league"], LeagueConfig, "league.", source)
         data["league"] = LeagueConfig(**(league | {"zoo": tuple(league["zoo"])}))
@@ -281,7 +293,8 @@ class Trainer:
     """Trains the learners of ``cfg``; :meth:`run` until ``cfg.epochs``, ``max_env_steps`` or ``max_minutes``.
 
     One *epoch* is one match: it ends when the match is over or when every learning agent in
-    it is out (elimination rules); each learning agent then gets one row in its metrics CSV.
+    it is out (elimination rules); each learning agent then gets one row in its metrics CSV
+    (self-play with both sides learning: each agent that played it; one that sat it out has none).
     """
 
     def __init__(self, cfg: TrainConfig, run_dir: Path | None = None, resume: bool = False,
@@ -351,7 +364,8 @@ class Trainer:
                 atomic_write_bytes(self.run_dir / "config.json",
                                    (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
         self.log = MetricsLog(self.run_dir, self.agents, [s.name for s in self.specs],
-                              self.epochs_done if resume else None, cfg.tensorboard)
+                              self.epochs_done if resume else None, cfg.tensorboard,
+                              {a: len(self.lwr[a]) for a in self.agents} if resume else None)
 
     # ------------------------------------------------------------------ self-play
     def _setup_league(self, pairs: tuple[str, ...]) -> None:
@@ -366,9 +380,6 @@ class Trainer:
         roster = list(probe.agents)
         teams = {a.name: a.team for a in self.match_cfg.agents}
         fixed = [a for a in roster if a not in self.agents]
-        if not fixed:
-            raise ValueError(f"TrainConfig.self_play: every agent learns ({roster}); self-play draws the seats of "
-                             "the agents that do not learn from pools, so leave at least one agent out of learn")
         self.ffa = len(set(teams.values())) == len(roster)
         if self.ffa:
             if len(self.specs) != 1:
@@ -393,7 +404,11 @@ class Trainer:
                         f"{[a for a in members if a not in learning]}; a side learns as a whole (e.g. "
                         f"--learn {' '.join(f'{a}=sac' for a in members)} --share team) or not at all")
         self.learning_sides = list(dict.fromkeys(self.side_of[a] for a in self.agents))
+        """Sides whose learners learn; with several, each match is live or one plays the others' pools."""
         self.opponent_sides = list(dict.fromkeys(self.side_of[a] for a in fixed))
+        if not fixed and len(self.learning_sides) < 2:
+            raise ValueError(f"TrainConfig.self_play: every agent learns ({roster}) in one side; self-play draws "
+                             "the seats of the agents that do not learn from pools, so leave a side out of learn")
         spec_of = dict(p.split("=", 1) for p in pairs)
         seeded = {e.split("=", 1)[0] for e in cfg.league.zoo}
         extra: list[str] = []
@@ -413,20 +428,33 @@ class Trainer:
                              f"every role of a side ({ {s: sides[s] for s in empty} }) or none")
 
     def _seat_opponents(self, k: int) -> None:
-        """Draw match ``k``'s opponents from the pools of the sides that do not learn (at its start)."""
+        """Draw match ``k``'s opponents (at its start) from the pools of the sides that do not learn and,
+        when several sides learn, of the learning sides that sit this match out (``League.draw_live``):
+        their learners' rows are out of play and they get no metrics row for it."""
         league = self.league
         if league is None:
             return
         roster = self.batch.matches[0].agents
         members: list[str | None] = [None] * len(roster)
-        for side in self.opponent_sides:
-            seats = [i for i, a in enumerate(roster) if self.side_of[a] == side and a not in self.agents]
+        live = league.draw_live(self.learning_sides)
+        for side in (*self.opponent_sides, *(s for s in self.learning_sides if s not in live)):
+            seats = [i for i, a in enumerate(roster)
+                     if self.side_of[a] == side and not (a in self.agents and side in live)]
             picks = league.sample(side, len(seats) if self.ffa else 1)
             for j, i in enumerate(seats):
                 members[i] = picks[j if self.ffa else 0].id
         seed = int(league.rng.integers(2**31 - 1))
         self.seat_members[k] = members
         self.seat_policies[k] = self._policies_of(members, seed)
+        for learner in self.learners:
+            plays = self._plays(learner, k)
+            learner.active[learner.rows_of(k)] = plays
+            for agent in learner.spec.agents:
+                self.final[agent][k] = None if plays else dict(SAT_OUT)
+
+    def _plays(self, learner: Learner, k: int) -> bool:
+        """Whether ``learner`` plays match ``k`` (a league member may take its seats, see ``_seat_opponents``)."""
+        return all(self.seat_members[k][i] is None for i in learner.index)
 
     def _policies_of(self, members: list[str | None], seed: int) -> dict[int, Any]:
         """Seat index -> the policy of the member seated there (policy files loaded once, then shared)."""
@@ -601,7 +629,8 @@ class Trainer:
         for agent in self.agents:
             i = self.batch.matches[k].agents.index(agent)
             last = self.final[agent][k] or {"outcome": outcome_name(res.infos[i]), "step": int(res.infos[i]["step"])}
-            self._agent_row(agent, k, last)
+            if "sat_out" not in last:  # a learner that sat the match out (self-play) has no row for it
+                self._agent_row(agent, k, last)
             self.final[agent][k] = None
         self.finished_epoch_steps.append(max(int(info["step"]) for info in res.infos))
         for learner in self.learners:
@@ -612,7 +641,7 @@ class Trainer:
         self.obs[k] = self.batch.reset_one(k, seed=self._episode_seed())[0]
         for learner in self.learners:
             rows = learner.rows_of(k)
-            learner.active[rows] = True
+            learner.active[rows] = self._plays(learner, k)
             learner.reset_rows(rows)
         return True
 
@@ -621,9 +650,9 @@ class Trainer:
         lwr = float(local_winning_rate([last["outcome"]])[0])
         self.lwr[agent].append(lwr)
         total = acc["dense_reward"] + acc["sparse_reward"]
-        row = {"epoch": self.epochs_done, "outcome": last["outcome"], "local_winning_rate": lwr,
+        row = {"epoch": len(self.lwr[agent]), "outcome": last["outcome"], "local_winning_rate": lwr,
                "steps": last["step"], "total_reward": total, **acc, "env_steps": self.env_steps,
-               "wall_time": round(time.time(), 3)}
+               "wall_time": round(time.time(), 3)}  # epoch: the agent's own matches (= the run's, unless it sat out)
         self.log.epoch(agent, row, self.mwr(agent))
         self.acc[agent][k] = self._empty_acc()
 
