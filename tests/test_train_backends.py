@@ -13,15 +13,17 @@ The Warp runs use Warp's CPU device (CI has no GPU); they skip, saying why, with
 from __future__ import annotations
 
 import csv
+import json
+import math
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from conftest import tiny
 from safetensors.numpy import load_file
 
+from conftest import tiny
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
 from triplesumo.rules.outcome import OUTCOME_CODES
@@ -138,3 +140,19 @@ def test_a_warp_run_resumes_restarting_its_unfinished_matches(warp_runs: dict[st
     assert result.epochs >= before + 3 and len(rows) == result.epochs
     assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
     assert all(int(r["steps"]) <= 20 for r in rows)
+
+
+def test_bench_train_measures_the_warp_trainer_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
+    from triplesumo.benchmarks.train import main
+
+    path = tmp_path / "b.json"
+    assert main(["--backend", "warp", "--device", "cpu", "--quick", "--json", str(path)]) == 0
+    result = json.loads(path.read_text())
+    printed = capsys.readouterr().out
+    assert result["setup"]["backend"] == "warp" and result["setup"]["device"] == "cpu"
+    assert set(result["rates"]) == {"env_only", "train_ddpg", "train_ppo"}
+    assert all(math.isfinite(r) and r > 0 for r in result["rates"].values())
+    assert result["updates_per_s"]["env_only"] == 0 and result["updates_per_s"]["train_ddpg"] > 0
+    assert result["updates_per_s"]["train_ppo"] > 0
+    assert "not a speed figure" in printed

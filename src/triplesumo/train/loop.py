@@ -49,7 +49,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.envs.batch import VectorMatches
+from triplesumo.envs.batch import MatchBatch, VectorMatches  # noqa: F401  (MatchBatch: what VectorMatches steps)
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.model.specs import PhysicsConfig
