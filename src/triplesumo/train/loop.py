@@ -49,7 +49,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.envs.batch import MatchBatch, VectorMatches  # noqa: F401  (MatchBatch: what VectorMatches steps)
+from triplesumo.envs.batch import MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.model.specs import PhysicsConfig
@@ -531,6 +531,14 @@ class Trainer:
     def _rows(self, learner: Learner) -> Any:
         """The learner's observations, ``(n_envs x len(agents), obs_dim)``, match-major."""
         return self.obs[:, learner.index].reshape(-1, learner.obs_dim)
+
+    @property
+    def batch(self) -> MatchBatch:
+        """The matches of a ``cpu`` run (``VectorMatches.batch``), e.g. for a scenario test placing an
+        agent by hand (then ``batch.reload(k)``); a ``warp`` run has none."""
+        if not isinstance(self.env, VectorMatches):
+            raise AttributeError("a backend='warp' run has no MatchBatch (its matches live on the device)")
+        return self.env.batch
 
     @property
     def updates(self) -> int:
