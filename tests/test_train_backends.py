@@ -89,12 +89,14 @@ def test_warp_refuses_what_it_cannot_play_naming_the_option(tmp_path: Path) -> N
 
 @pytest.fixture(scope="module")
 def warp_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Trainer]:
-    """A tiny DDPG and a tiny PPO run on Warp's CPU device (3 matches, 20-step epochs, 16-unit networks)."""
+    """A tiny DDPG run (random Spider: host policy) and a tiny PPO run (the zoo's Ant and Spider, acting on
+    the device) on Warp's CPU device (3 matches, 20-step epochs, 16-unit networks)."""
     pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
     out = tmp_path_factory.mktemp("warp-train")
     runs = {}
-    for name, fields in (("ddpg", {}), ("ppo", {"learn": ("bug=ppo",), "ppo": PPOConfig(
-            hidden=(16, 16), n_steps=10, n_minibatches=2, n_epochs=2)})):
+    for name, fields in (("ddpg", {}), ("ppo", {"learn": ("bug=ppo",), "policies": ("ant=zoo:ant", "spider=zoo:spider"),
+                                                 "ppo": PPOConfig(hidden=(16, 16), n_steps=10, n_minibatches=2,
+                                                                  n_epochs=2)})):
         cfg = tiny(out, name, backend="warp", device="cpu", n_envs=3, steps_per_epoch=20, epochs=6,
                    checkpoint_every=3, **fields)
         trainer = Trainer(cfg)
@@ -156,3 +158,29 @@ def test_bench_train_measures_the_warp_trainer_rows(tmp_path: Path, capsys: pyte
     assert result["updates_per_s"]["env_only"] == 0 and result["updates_per_s"]["train_ddpg"] > 0
     assert result["updates_per_s"]["train_ppo"] > 0
     assert "not a speed figure" in printed
+
+
+def test_a_frozen_policy_on_the_device_acts_as_on_the_host() -> None:
+    from triplesumo.agents.frozen import FrozenPolicy
+
+    rng = np.random.default_rng(0)
+    policy = FrozenPolicy([rng.normal(size=(16, 6)), rng.normal(size=(4, 16))], [rng.normal(size=16),
+                          rng.normal(size=4)], obs_mean=rng.normal(size=6), obs_var=rng.uniform(0.5, 2, 6))
+    obs = rng.normal(size=(32, 6)).astype(np.float32)
+    on_device = policy.on_device(torch.device("cpu"))(torch.as_tensor(obs))
+    assert on_device.dtype == torch.float32 and on_device.shape == (32, 4)
+    np.testing.assert_allclose(on_device.numpy(), policy(obs), rtol=0, atol=1e-6)
+
+
+def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
+        warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
+    cpu = Trainer(tiny(tmp_path, "cpu", n_envs=3))
+    warp = Trainer(tiny(tmp_path, "warp", n_envs=3, backend="warp", device="cpu"))
+    try:
+        assert isinstance(cpu.obs, np.ndarray) and isinstance(warp.obs, torch.Tensor)
+        np.testing.assert_allclose(warp.obs.numpy(), cpu.obs, rtol=0, atol=1e-4)  # float32 physics on Warp
+        assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state  # the same seeds were drawn
+    finally:
+        for trainer in (cpu, warp):
+            trainer.log.close()
+            trainer.env.close()

@@ -292,13 +292,14 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
 
 
 def run_warp_train_benchmark(steps: int = 2048, n_envs: int = 1024, device: str | None = None, rounds: int = 3,
-                             chunk: int = 1024, policies: tuple[str, ...] = ("ant=zero", "spider=zero"), seed: int = 0,
+                             chunk: int = 1024, policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider"),
+                             seed: int = 0,
                              learning_starts: int = 10_000, gradient_steps: int = 4, batch_size: int = 4096,
                              ppo_steps: int = 16) -> dict[str, Any]:
     """Env steps/s of the trainer on ``backend="warp"`` (``device``): collection alone, DDPG with
     ``gradient_steps`` updates of ``batch_size`` per collection step of ``n_envs`` matches, and PPO
     with rollouts of ``ppo_steps`` steps x ``n_envs`` matches; JSON-able dict (interleaved rounds,
-    medians). Fixed policies other than ``zero`` act on the host (a copy per step)."""
+    medians). Trained fixed policies (the zoo's) act on the device, ``random`` ones on the host."""
     base = TrainConfig(name="bench", policies=policies, n_envs=n_envs, seed=seed, backend="warp", device=device,
                        progress=False, tensorboard=False, save_replay=False, epochs=10**9)
     ddpg = DDPGConfig(learning_starts=learning_starts, learn_every=n_envs, gradient_steps=gradient_steps,
@@ -417,7 +418,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=3, help="repetitions; the median is reported (default: 3)")
     parser.add_argument("--chunk", type=int, default=2000, help="env steps per turn of a variant (default: 2000)")
     parser.add_argument("--policies", nargs="*", default=None,
-                        help="AGENT=POLICY of the other agents (default: ant=random spider=random; warp: zero)")
+                        help="AGENT=POLICY of the other agents (default: ant=random spider=random; warp: zoo)")
     parser.add_argument("--backend", choices=["cpu", "warp"], default="cpu",
                         help="cpu (default) or warp: the trainer on MuJoCo Warp (env only, DDPG, PPO rows)")
     parser.add_argument("--device", default=None, help="warp's device: cuda or cpu (default: cuda if Warp sees one)")
@@ -438,7 +439,8 @@ def main(argv: list[str] | None = None) -> int:
             envs, args.rounds, steps, chunk, learning_starts = 4, 1, 16, 8, 8
             args.batch_size, args.gradient_steps = 16, 2
         result = run_warp_train_benchmark(steps=steps, n_envs=envs, device=args.device, rounds=args.rounds,
-                                          chunk=chunk, policies=tuple(args.policies or ("ant=zero", "spider=zero")),
+                                          chunk=chunk,
+                                          policies=tuple(args.policies or ("ant=zoo:ant", "spider=zoo:spider")),
                                           seed=args.seed, learning_starts=learning_starts,
                                           gradient_steps=args.gradient_steps, batch_size=args.batch_size,
                                           ppo_steps=4 if args.quick else 16)

@@ -42,6 +42,7 @@ import torch
 
 from triplesumo import ENV_VERSION, __version__
 from triplesumo.agents.builtin import BUILTIN, ZeroPolicy, act_batch
+from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.policy_file import atomic_write_bytes, load_fixed_policy, load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.algos.base import DivergedError
@@ -322,6 +323,9 @@ class Trainer:
         except ValueError as err:
             raise ValueError(f"TrainConfig.policies (scenario {cfg.scenario!r}): {err}") from None
         self.others = [(probe.agents.index(a), p) for a, p in self.policies.items()]
+        self.on_device = {i: p.on_device(self.device) for i, p in self.others
+                          if self.device is not None and isinstance(p, FrozenPolicy)}
+        """Roster index -> a trained fixed policy acting on the device (``warp``; others act on the host)."""
         self.learners = [make_learner(spec, [probe.agents.index(a) for a in spec.agents], position, cfg,
                                       *dims[spec.name], self.device) for position, spec in enumerate(self.specs)]
         self.rng = np.random.default_rng(cfg.seed)
@@ -561,8 +565,12 @@ class Trainer:
             seen.append(obs)
             acted.append(act)
         for i, policy in self.others:
-            if self.league is None and not (self.device is not None and isinstance(policy, ZeroPolicy)):
-                fixed = act_batch(policy, self._host(self.obs[:, i]))  # fixed policies act on the host
+            if self.league is not None or (self.device is not None and isinstance(policy, ZeroPolicy)):
+                continue
+            if i in self.on_device:
+                actions[:, i, :probe.action_sizes[i]] = self.on_device[i](self.obs[:, i])
+            else:  # on the host (warp: random policies, a copy each way)
+                fixed = act_batch(policy, self._host(self.obs[:, i]))
                 actions[:, i, :probe.action_sizes[i]] = fixed if self.device is None else torch.as_tensor(
                     fixed, dtype=torch.float32, device=self.device)
         for k, seated in enumerate(self.seat_policies):
