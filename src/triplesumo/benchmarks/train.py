@@ -1,7 +1,7 @@
 """``triplesumo bench train``: training speed against the env alone and against SB3, in one run.
 
 Variants, all on the same collection setup (``n_envs`` matches in a
-:class:`~triplesumo.envs.batch.MatchBatch` on ``n_threads`` threads, learner Bug, the
+:class:`~triplesumo.envs.batch.VectorMatches` on ``n_threads`` threads, learner Bug, the
 other agents following ``policies``):
 
 ``env_only``

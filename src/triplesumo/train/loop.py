@@ -10,6 +10,14 @@ metrics CSV, every learner's update count and mean losses a row of its learning 
 match is reset with fresh seeded noise. The one-learner case (``--learner bug``, DDPG) is
 the paper's, bit for bit.
 
+The matches are the public batched API (``triplesumo.vector_env``'s contract): arrays
+``(n_envs, n_agents, ...)`` in and out, Gymnasium SAME_STEP autoreset (a finished match's last
+observation, outcome codes and reward terms in ``infos``), each next match seeded from the
+trainer's generator through ``reset_seed``. ``backend="cpu"`` is :class:`VectorMatches`
+(numpy; checkpoints hold every match's exact state), ``backend="warp"`` is MuJoCo Warp's
+``WarpMatchBatch`` (torch tensors on ``device``, kept there by the learners; a resume restarts
+the matches in progress). One collection path serves both.
+
 With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents that do not
 learn: at every match start one member of each such side's pool is drawn (in a free-for-all
 one per seat); at every match end its players are rated, due learning sides are admitted
