@@ -21,7 +21,8 @@ actions. Why not torch for a policy that never learns:
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -98,3 +99,26 @@ class FrozenPolicy:
                 h = np.maximum(h, LEAKY_SLOPE * h)
         action = np.tanh(h).astype(np.float32)
         return action[0] if x.ndim == 1 else action
+
+    def on_device(self, device: Any) -> Callable[[Any], Any]:
+        """The same policy on torch tensors on ``device`` (``(n, obs_dim)`` in, float32 ``(n, act_dim)``
+        out, computed in float64 as :meth:`__call__`), for a collection whose observations live on a
+        GPU (``train --backend warp``). torch is imported here only: loading stays fork-safe."""
+        import torch
+
+        ws = [torch.as_tensor(w, device=device) for w in self._w]
+        bs = [torch.as_tensor(b, device=device) for b in self._b]
+        norm = None if self._norm is None else tuple(torch.as_tensor(a, device=device) for a in self._norm)
+        last = len(ws) - 1
+
+        def act(obs: Any) -> Any:
+            h = obs.to(torch.float32).to(torch.float64)
+            if norm is not None:
+                h = ((h - norm[0]) / norm[1]).clamp(-NORM_CLIP, NORM_CLIP).to(torch.float32).to(torch.float64)
+            for k, (w, b) in enumerate(zip(ws, bs, strict=True)):
+                h = h @ w + b
+                if k < last:
+                    h = torch.maximum(h, LEAKY_SLOPE * h)
+            return torch.tanh(h).to(torch.float32)
+
+        return act

@@ -132,8 +132,13 @@ class Algorithm:
         if self.obs_norm is not None:
             self.obs_norm.update(obs)
 
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """Deterministic action in [-1, 1] (float32), as a policy file would give it."""
+    def act(self, obs: np.ndarray | torch.Tensor) -> Any:
+        """Deterministic action in [-1, 1] (float32), as a policy file would give it: numpy for
+        numpy observations, a tensor on the learner's device for a tensor (a device-resident
+        collection, ``train --backend warp``)."""
+        if isinstance(obs, torch.Tensor):
+            with torch.inference_mode():
+                return self.actor(self.normalize(self.tensor(obs)))
         return self.policy(obs)
 
     def export_actor(self) -> Actor:

@@ -33,6 +33,7 @@ empties it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -169,12 +170,13 @@ class PPO(Algorithm):
         """Whether ``n_steps`` steps have been recorded (time for :meth:`update`)."""
         return self.step >= self.config.n_steps
 
-    def explore(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def explore(self, obs: np.ndarray | torch.Tensor, rng: np.random.Generator) -> Any:
         """Sample ``a = tanh(u)``, ``u ~ N(μ(s), σ)`` (ε from ``rng``) for ``(N, obs_dim)`` obs.
 
         Remembers the normalised obs, ``u``, ``log π(u|s)`` and ``V(s)`` for :meth:`record`.
         """
-        x = self.normalize(self.tensor(np.asarray(obs, dtype=np.float32)))
+        on_device = isinstance(obs, torch.Tensor)  # a device-resident collection: stay a tensor
+        x = self.normalize(self.tensor(obs if on_device else np.asarray(obs, dtype=np.float32)))
         if x.ndim != 2 or x.shape[1] != self.obs_dim:
             raise ValueError(f"obs must have shape (N, {self.obs_dim}), got {tuple(x.shape)}")
         with torch.no_grad():
@@ -182,10 +184,11 @@ class PPO(Algorithm):
             u = mean + log_std.exp() * self.tensor(rng.standard_normal(mean.shape))
             self._pending = {"obs": x, "u": u, "log_prob": gaussian_log_prob(u, mean, log_std),
                              "value": self.critic(x)}
-        return torch.tanh(u).cpu().numpy().astype(np.float32, copy=False)
+        return torch.tanh(u) if on_device else torch.tanh(u).cpu().numpy().astype(np.float32, copy=False)
 
-    def record(self, reward: np.ndarray, terminated: np.ndarray, truncated: np.ndarray,
-               final_obs: np.ndarray | None = None, valid: np.ndarray | None = None) -> None:
+    def record(self, reward: np.ndarray | torch.Tensor, terminated: np.ndarray | torch.Tensor,
+               truncated: np.ndarray | torch.Tensor, final_obs: np.ndarray | torch.Tensor | None = None,
+               valid: np.ndarray | torch.Tensor | None = None) -> None:
         """Store the step just taken: ``(N,)`` rewards and end flags, and for truncated
         matches their real final observations (rows of ``final_obs``, raw) to bootstrap from.
 
@@ -200,9 +203,9 @@ class PPO(Algorithm):
         step = dict(self._pending)
         n = step["obs"].shape[0]
         step["reward"], step["terminated"], step["truncated"] = (
-            self.tensor(np.asarray(x, dtype=np.float32).reshape(n)) for x in (reward, terminated, truncated))
+            self.tensor(_float32(x)).reshape(n) for x in (reward, terminated, truncated))
         step["valid"] = torch.ones(n, device=self.device) if valid is None else self.tensor(
-            np.asarray(valid, dtype=np.float32).reshape(n))
+            _float32(valid)).reshape(n)
         step["bootstrap"] = torch.zeros(n, device=self.device)
         if bool(step["truncated"].any()):
             if final_obs is None:
@@ -247,7 +250,7 @@ class PPO(Algorithm):
 
     # ------------------------------------------------------------------------ learning
 
-    def advantages(self, next_obs: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+    def advantages(self, next_obs: np.ndarray | torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """GAE advantages and returns ``(T, N)`` of the full rollout; ``next_obs`` follows its last step."""
         r = self.rollout
         with torch.no_grad():
@@ -258,7 +261,7 @@ class PPO(Algorithm):
                   self.config.gamma, self.config.gae_lambda)
         return adv, adv + r["value"]
 
-    def update(self, next_obs: np.ndarray) -> dict[str, float]:
+    def update(self, next_obs: np.ndarray | torch.Tensor) -> dict[str, float]:
         """Train on the full rollout (``n_epochs`` x ``n_minibatches`` Adam steps) and empty it.
 
         Returns the means over minibatches of ``actor_loss``, ``critic_loss``, ``entropy``,
@@ -312,3 +315,8 @@ class PPO(Algorithm):
         return {"actor_loss": policy_loss.item(), "critic_loss": value_loss.item(),
                 "entropy": entropy.item(), "approx_kl": approx_kl.item(),
                 "clip_fraction": clip_fraction.item()}
+
+
+def _float32(x: Any) -> np.ndarray | torch.Tensor:
+    """``x`` as float32: numpy stays numpy, a tensor (device-resident collection) stays on its device."""
+    return x.to(torch.float32) if isinstance(x, torch.Tensor) else np.asarray(x, dtype=np.float32)

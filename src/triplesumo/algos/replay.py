@@ -1,4 +1,5 @@
-"""Uniform experience replay for off-policy learners (DDPG), in preallocated numpy arrays.
+"""Uniform experience replay for off-policy learners (DDPG), in preallocated numpy arrays
+(or torch tensors on a device: :class:`TorchReplayBuffer`).
 
 What goes in (the caller's contract):
 
@@ -17,8 +18,10 @@ The buffer is circular: once full, each new transition overwrites the oldest one
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
+import torch
 
 FIELDS = ("obs", "act", "rew", "next_obs", "done")
 """Names of the stored arrays, as used in sampled batches and in the state dict."""
@@ -184,3 +187,81 @@ class ReplayBuffer:
                 target[size:self._size] = 0.0  # pages are still the allocation's zeros: never touch them)
         self._pos = pos
         self._size = size
+
+
+class TorchReplayBuffer(ReplayBuffer):
+    """:class:`ReplayBuffer` whose storage is float32 torch tensors on ``device`` (a GPU run:
+    ``train --backend warp --device cuda``), fed and sampled with tensors on that device.
+
+    Transitions arrive as tensors on the device and never visit the host: :meth:`add_batch`
+    writes them in place, :meth:`sample` gathers a batch on the device. The sample's indices
+    are drawn by the same numpy generator as the numpy buffer's (``batch_size`` integers
+    copied to the device), so its stream and checkpoint are those of the numpy buffer:
+    :meth:`state_dict` gives (and :meth:`load_state_dict` takes) the same numpy arrays.
+    The whole capacity is allocated on the device up front.
+    """
+
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: str | torch.device = "cpu") -> None:
+        self._capacity = _positive_int("capacity", capacity)
+        self.obs_dim = _positive_int("obs_dim", obs_dim)
+        self.act_dim = _positive_int("act_dim", act_dim)
+        self.device = torch.device(device)
+        shapes = self._row_shapes()
+        for name in FIELDS:
+            setattr(self, name, torch.zeros((self._capacity, *shapes[name]), dtype=torch.float32, device=self.device))
+        self._pos = 0
+        self._size = 0
+
+    def add_batch(self, obs: Any, act: Any, rew: Any, next_obs: Any, done: Any) -> None:
+        """Store ``n`` transitions (tensors, or anything ``torch.as_tensor`` takes), in order, wrapping."""
+        arrays = {"obs": obs, "act": act, "rew": rew, "next_obs": next_obs, "done": done}
+        checked = {name: torch.as_tensor(arrays[name], dtype=torch.float32, device=self.device) for name in FIELDS}
+        n = int(checked["obs"].shape[0]) if checked["obs"].ndim > 0 else 0
+        for name, row_shape in self._row_shapes().items():
+            if tuple(checked[name].shape) != (n, *row_shape):
+                raise ValueError(f"{name} must have shape {(n, *row_shape)}, got {tuple(checked[name].shape)}")
+        if n == 0:
+            return
+        start = max(0, n - self._capacity)
+        idx = torch.remainder(torch.arange(self._pos + start, self._pos + n, device=self.device), self._capacity)
+        for name, arr in checked.items():
+            getattr(self, name)[idx] = arr[start:]
+        self._pos = int((self._pos + n) % self._capacity)
+        self._size = min(self._size + n, self._capacity)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, Any]:
+        """``batch_size`` transitions drawn uniformly (with replacement), as tensors on the device."""
+        batch_size = _positive_int("batch_size", batch_size)
+        if self._size == 0:
+            raise ValueError("cannot sample from an empty ReplayBuffer")
+        idx = torch.as_tensor(rng.integers(0, self._size, size=batch_size), device=self.device)
+        return {name: getattr(self, name)[idx] for name in FIELDS}
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """As :meth:`ReplayBuffer.state_dict`: numpy arrays of the filled part (copied to the host)."""
+        state = {name: getattr(self, name)[: self._size].cpu().numpy() for name in FIELDS}
+        state["pos"] = np.asarray(self._pos, dtype=np.int64)
+        state["size"] = np.asarray(self._size, dtype=np.int64)
+        state["capacity"] = np.asarray(self._capacity, dtype=np.int64)
+        return state
+
+    def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restore :meth:`state_dict` output (or a numpy buffer's); errors as :meth:`ReplayBuffer.load_state_dict`."""
+        for key in (*FIELDS, "pos", "size", "capacity"):
+            if key not in state:
+                raise KeyError(f"replay state is missing {key!r}")
+        capacity, size, pos = (int(np.asarray(state[k])) for k in ("capacity", "size", "pos"))
+        if capacity != self._capacity:
+            raise ValueError(f"capacity: saved {capacity}, this buffer has {self._capacity}")
+        if not 0 <= size <= capacity:
+            raise ValueError(f"size must be in [0, {capacity}], got {size}")
+        if not 0 <= pos < capacity or (size < capacity and pos != size):
+            raise ValueError(f"pos {pos} is inconsistent with size {size} and capacity {capacity}")
+        for name, row_shape in self._row_shapes().items():
+            arr = np.asarray(state[name], dtype=np.float32)
+            if arr.shape != (size, *row_shape):
+                raise ValueError(f"{name} must have shape {(size, *row_shape)}, got {arr.shape}")
+            target = getattr(self, name)
+            target[:size] = torch.as_tensor(arr, device=self.device)
+            target[size:] = 0.0
+        self._pos, self._size = pos, size

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -167,17 +168,18 @@ class SAC(OffPolicyAlgorithm):
 
     # ------------------------------------------------------------------------- acting
 
-    def explore(self, obs: np.ndarray, rng: np.random.Generator,
-                noise: ActionNoise | None = None) -> np.ndarray:
+    def explore(self, obs: Any, rng: np.random.Generator,
+                noise: ActionNoise | None = None) -> Any:
         """Training action sampled from the policy, ``tanh(μ(s) + σ(s) ε)``, ε from ``rng``.
 
         SAC explores by its own stochasticity: passing a noise process is an error.
         """
         if noise is not None:
             raise ValueError("SAC explores by sampling its policy; do not pass an action noise")
-        obs = np.asarray(obs, dtype=np.float32)
+        on_device = isinstance(obs, torch.Tensor)  # a device-resident collection: stay a tensor
+        obs = obs if on_device else np.asarray(obs, dtype=np.float32)
         with torch.inference_mode():
             mean, log_std = self.actor.distribution(self.normalize(self.tensor(obs)))
             eps = self.tensor(rng.standard_normal(mean.shape))
             action = torch.tanh(mean + log_std.exp() * eps)
-        return action.cpu().numpy().astype(np.float32, copy=False)
+        return action if on_device else action.cpu().numpy().astype(np.float32, copy=False)

@@ -97,7 +97,7 @@ def _trainer_ppo(budget: int, seed: int, out: str) -> dict[str, Any]:
         wall = time.perf_counter() - start
     finally:
         trainer.log.close()
-        trainer.batch.close()
+        trainer.env.close()
     return {"env_steps": trainer.env_steps, "seconds": wall, "env_steps_per_s": trainer.env_steps / wall}
 
 

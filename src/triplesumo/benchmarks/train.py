@@ -1,7 +1,7 @@
 """``triplesumo bench train``: training speed against the env alone and against SB3, in one run.
 
 Variants, all on the same collection setup (``n_envs`` matches in a
-:class:`~triplesumo.envs.batch.MatchBatch` on ``n_threads`` threads, learner Bug, the
+:class:`~triplesumo.envs.batch.VectorMatches` on ``n_threads`` threads, learner Bug, the
 other agents following ``policies``):
 
 ``env_only``
@@ -33,6 +33,13 @@ other agents following ``policies``):
     schedule (``train_freq = n_envs`` steps; PPO ``n_steps = 2048``, batch 64, 10 epochs).
     The algorithm rows run ``algo_steps`` env steps per round; ``updates/s`` counts
     gradient steps (PPO: minibatch steps).
+
+``--backend warp --device DEV`` measures the trainer on MuJoCo Warp instead
+(:func:`run_warp_train_benchmark`): ``env_only``, ``train_ddpg`` and ``train_ppo`` on a
+massively parallel schedule (``n_envs`` matches, DDPG ``gradient_steps`` updates of
+``batch_size`` per collection step, PPO rollouts of ``ppo_steps`` steps of every match),
+observations, actions, replay and rollouts on the device. Warp's ``cpu`` device runs it
+(a check that it works, no speed); GPU figures need a GPU.
 
 Warm-ups (``learning_starts`` transitions) run before timing. The variants take turns
 in chunks of about ``chunk`` env steps for ``rounds`` rounds; a rate is the median over
@@ -284,6 +291,80 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     return result
 
 
+def run_warp_train_benchmark(steps: int = 2048, n_envs: int = 1024, device: str | None = None, rounds: int = 3,
+                             chunk: int = 1024, policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider"),
+                             seed: int = 0,
+                             learning_starts: int = 10_000, gradient_steps: int = 4, batch_size: int = 4096,
+                             ppo_steps: int = 16) -> dict[str, Any]:
+    """Env steps/s of the trainer on ``backend="warp"`` (``device``): collection alone, DDPG with
+    ``gradient_steps`` updates of ``batch_size`` per collection step of ``n_envs`` matches, and PPO
+    with rollouts of ``ppo_steps`` steps x ``n_envs`` matches; JSON-able dict (interleaved rounds,
+    medians). Trained fixed policies (the zoo's) act on the device, ``random`` ones on the host."""
+    base = TrainConfig(name="bench", policies=policies, n_envs=n_envs, seed=seed, backend="warp", device=device,
+                       progress=False, tensorboard=False, save_replay=False, epochs=10**9)
+    ddpg = DDPGConfig(learning_starts=learning_starts, learn_every=n_envs, gradient_steps=gradient_steps,
+                      batch_size=batch_size, buffer_size=max(1_000_000, 4 * learning_starts))
+    tmp = tempfile.TemporaryDirectory(prefix="triplesumo-bench-")
+    root = Path(tmp.name)
+    variants = {
+        "env_only": _TrainerVariant(TrainConfig(**{**base.__dict__, "ddpg": DDPGConfig(learning_starts=10**12)}),
+                                    root / "env", 0),
+        "train_ddpg": _TrainerVariant(TrainConfig(**{**base.__dict__, "ddpg": ddpg}), root / "ddpg", learning_starts),
+        "train_ppo": _TrainerVariant(TrainConfig(**{**base.__dict__, "learn": ("bug=ppo",),
+                                                    "ppo": PPOConfig(n_steps=ppo_steps, n_minibatches=4)}),
+                                     root / "ppo", 0),
+    }
+    for v in variants.values():
+        v.warm_up()
+    per_round: dict[str, list[float]] = {name: [] for name in variants}
+    update_rounds: dict[str, list[float]] = {name: [] for name in variants}
+    for _ in range(rounds):
+        done, spent = dict.fromkeys(variants, 0), dict.fromkeys(variants, 0.0)
+        grads = {name: v.gradient_steps() for name, v in variants.items()}
+        while any(done[name] < steps for name in variants):
+            for name, variant in variants.items():
+                if done[name] < steps:
+                    n, seconds = variant.run(min(chunk, steps - done[name]))
+                    done[name], spent[name] = done[name] + n, spent[name] + seconds
+        for name, variant in variants.items():
+            per_round[name].append(done[name] / spent[name])
+            update_rounds[name].append((variant.gradient_steps() - grads[name]) / spent[name])
+    trainer = variants["env_only"].trainer
+    result = {
+        "setup": {"backend": "warp", "device": str(trainer.device), "steps": steps, "rounds": rounds,
+                  "chunk": chunk, "n_envs": n_envs, "policies": list(policies), "seed": seed,
+                  "learning_starts": learning_starts,
+                  "ddpg_schedule": {"learn_every": n_envs, "gradient_steps": gradient_steps, "batch_size": batch_size},
+                  "ppo_schedule": {"n_steps": ppo_steps, "rollout": ppo_steps * n_envs, "n_minibatches": 4,
+                                   "n_epochs": PPOConfig().n_epochs},
+                  "cpu_count": os.cpu_count(), "versions": _versions()},
+        "rates": {name: float(np.median(r)) for name, r in per_round.items()},
+        "updates_per_s": {name: float(np.median(r)) for name, r in update_rounds.items()},
+    }
+    for v in variants.values():
+        v.trainer.log.close()
+        v.trainer.env.close()
+    tmp.cleanup()
+    return result
+
+
+def format_warp_table(result: dict[str, Any]) -> str:
+    s, rates, updates = result["setup"], result["rates"], result["updates_per_s"]
+    d, p = s["ddpg_schedule"], s["ppo_schedule"]
+    lines = [f"TripleSumo training benchmark, backend warp on {s['device']}: {s['n_envs']} matches, others "
+             f"{s['policies']}; median of {s['rounds']} rounds x {s['steps']} env steps",
+             f"DDPG: {d['gradient_steps']} updates of batch {d['batch_size']} per collection step; PPO: rollouts of "
+             f"{p['rollout']} steps, {p['n_epochs']} epochs of {p['n_minibatches']} minibatches",
+             "", f"{'variant':38s} {'env steps/s':>11s} {'vs env only':>11s} {'updates/s':>9s}"]
+    labels = {"env_only": "env alone (collection, no learning)", "train_ddpg": "training DDPG, on the device",
+              "train_ppo": "training PPO, on the device"}
+    for name, rate in rates.items():
+        lines.append(f"{labels[name]:38s} {rate:11.0f} {rate / rates['env_only']:11.2f} {updates[name]:9.1f}")
+    if s["device"] == "cpu":
+        lines += ["", "Warp's CPU device: a check that the GPU path runs, not a speed figure"]
+    return "\n".join(lines)
+
+
 def format_table(result: dict[str, Any]) -> str:
     s, rates, ratios = result["setup"], result["rates"], result["ratios"]
     lines = [
@@ -330,13 +411,19 @@ def format_table(result: dict[str, Any]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="triplesumo bench train", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=int, default=6000, help="env steps per variant and round (default: 6000)")
-    parser.add_argument("--envs", type=int, default=16, help="matches collected at once (default: 16)")
+    parser.add_argument("--steps", type=int, default=None,
+                        help="env steps per variant and round (default: 6000; warp: 2048)")
+    parser.add_argument("--envs", type=int, default=None, help="matches collected at once (default: 16; warp: 1024)")
     parser.add_argument("--threads", type=int, default=1, help="MuJoCo threads (default: 1, the trainer's)")
     parser.add_argument("--rounds", type=int, default=3, help="repetitions; the median is reported (default: 3)")
     parser.add_argument("--chunk", type=int, default=2000, help="env steps per turn of a variant (default: 2000)")
-    parser.add_argument("--policies", nargs="*", default=["ant=random", "spider=random"],
-                        help="AGENT=POLICY of the other agents (default: ant=random spider=random)")
+    parser.add_argument("--policies", nargs="*", default=None,
+                        help="AGENT=POLICY of the other agents (default: ant=random spider=random; warp: zoo)")
+    parser.add_argument("--backend", choices=["cpu", "warp"], default="cpu",
+                        help="cpu (default) or warp: the trainer on MuJoCo Warp (env only, DDPG, PPO rows)")
+    parser.add_argument("--device", default=None, help="warp's device: cuda or cpu (default: cuda if Warp sees one)")
+    parser.add_argument("--gradient-steps", type=int, default=4, help="warp: DDPG updates per collection step")
+    parser.add_argument("--batch-size", type=int, default=4096, help="warp: DDPG batch size (default: 4096)")
     parser.add_argument("--no-sb3", action="store_true", help="skip the Stable-Baselines3 comparison")
     parser.add_argument("--algo-steps", type=int, default=2048,
                         help="env steps per round of the TD3/SAC/PPO/3-learner rows and their SB3 rows (default: 2048)")
@@ -346,6 +433,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
     args = parser.parse_args(argv)
     learning_starts = 1000
+    if args.backend == "warp":
+        steps, envs, chunk, learning_starts = args.steps or 2048, args.envs or 1024, args.steps or 2048, 10_000
+        if args.quick:
+            envs, args.rounds, steps, chunk, learning_starts = 4, 1, 16, 8, 8
+            args.batch_size, args.gradient_steps = 16, 2
+        result = run_warp_train_benchmark(steps=steps, n_envs=envs, device=args.device, rounds=args.rounds,
+                                          chunk=chunk,
+                                          policies=tuple(args.policies or ("ant=zoo:ant", "spider=zoo:spider")),
+                                          seed=args.seed, learning_starts=learning_starts,
+                                          gradient_steps=args.gradient_steps, batch_size=args.batch_size,
+                                          ppo_steps=4 if args.quick else 16)
+        report(format_warp_table(result), result, args.json)
+        return 0
+    if args.device not in (None, "cpu"):
+        parser.error(f"--device {args.device} needs --backend warp")
+    args.policies = args.policies or ["ant=random", "spider=random"]
+    args.steps, args.envs = args.steps or 6000, args.envs or 16
     if args.quick:
         args.steps, args.envs, args.rounds, args.chunk, learning_starts = 64, 2, 1, 32, 32
         args.algo_steps = 64

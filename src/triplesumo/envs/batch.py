@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import operator
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
@@ -344,9 +344,37 @@ class VectorMatches:
                 term[k] |= np.asarray(r.eliminated, bool)
         return obs.copy(), rewards, term, np.repeat(truncated[:, None], a, 1), infos
 
+    reset_seed: Callable[[int], int | None] | None = None
+    """Who seeds slot ``k``'s next match at an autoreset: ``reset_seed(k)`` is called for each
+    finished slot in ascending ``k`` during :meth:`step` (a trainer that draws every match's
+    seed from its own generator sets it); ``None`` (default) continues each match's generator."""
+
     def _next_seed(self, k: int) -> int | None:
         """Seed of slot ``k``'s next match at an autoreset: ``None`` continues its generator."""
-        return None
+        return None if self.reset_seed is None else self.reset_seed(k)
+
+    def restart(self, k: int, seed: int | None = None) -> np.ndarray:
+        """End slot ``k``'s match now and start its next one (``Match.reset(seed)``); returns its
+        first observation ``(n_agents, obs_dim)``. For a caller whose episode ends before the
+        match does (a trainer whose learning agents are all out under elimination rules)."""
+        self._obs[k] = self.batch.reset_one(k, seed)[0]
+        return self._obs[k].copy()
+
+    def snapshot(self) -> list[dict[str, Any]]:
+        """Every match's :meth:`Match.snapshot` (physics incl. warm start, step, generator, who
+        is in play), slot order: with the last returned observations, an exact resume."""
+        return [m.snapshot() for m in self.batch.matches]
+
+    def restore(self, snapshots: Sequence[dict[str, Any]], obs: np.ndarray) -> None:
+        """Continue from :meth:`snapshot` and the observations ``(num_envs, n_agents, obs_dim)``
+        returned with it; the next :meth:`step` goes on exactly."""
+        if len(snapshots) != self.num_envs:
+            raise ValueError(f"need {self.num_envs} match snapshots, got {len(snapshots)}")
+        for k, (match, snap) in enumerate(zip(self.batch.matches, snapshots, strict=True)):
+            match.restore(snap)
+            self.batch.reload(k)
+        self._obs[:] = obs
+        self._seeded = True
 
     def _infos(self, per_match: list[list[dict[str, Any]]], steps: list[int]) -> dict[str, np.ndarray]:
         n, a = self.num_envs, self.n_agents

@@ -46,7 +46,7 @@ imported only when ``backend="warp"`` is asked for.
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import mujoco
@@ -220,14 +220,26 @@ class WarpMatchBatch:
         self.steps[index] = 0
 
     # -------------------------------------------------------------------- API
-    def reset(self, seed: int | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    reset_seed: Callable[[int], int | None] | None = None
+    """Who seeds slot ``k``'s next match at an autoreset, as ``VectorMatches.reset_seed``:
+    called for each finished slot in ascending ``k`` during :meth:`step`; the match then draws
+    its start from ``np.random.default_rng(seed)`` as ``Match.reset(seed)`` does (``None``:
+    continue the slot's stream)."""
+
+    def reset(self, seed: int | Sequence[int | None] | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Start every match: match ``k`` from ``match_seeds(seed, num_envs)[k]``'s stream.
 
         ``infos`` has the keys of :meth:`step`'s (terms zero, outcome 0, no valid final_obs).
 
         ``seed=None`` keeps the streams of the last seeded reset (fresh entropy the first time,
-        or the ``seed`` given at construction).
+        or the ``seed`` given at construction). A list of ``num_envs`` seeds seeds match ``k``
+        as ``Match.reset(seed[k])`` does (as ``VectorMatches.reset``; ``None`` keeps its stream).
         """
+        if isinstance(seed, Sequence):
+            if len(seed) != self.num_envs or (None in seed and not self._rngs):
+                raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            self._rngs = [self._rngs[k] if s is None else np.random.default_rng(s) for k, s in enumerate(seed)]
+            seed = None
         if seed is None and not self._rngs:
             seed = self._seed if self._seed is not None else int(np.random.SeedSequence().generate_state(1)[0])
         if seed is not None:
@@ -287,6 +299,10 @@ class WarpMatchBatch:
                 k = int(torch.nonzero(trouble)[0])
                 raise PhysicsError(f"MuJoCo Warp: bad state or overflow in match {k} at step {int(self.steps[k])}")
             if len(rows):
+                if self.reset_seed is not None:
+                    for k in rows.tolist():
+                        if (chosen := self.reset_seed(k)) is not None:
+                            self._rngs[k] = np.random.default_rng(chosen)
                 self._restart(rows)
                 obs = torch.where(done[:, None, None], self._observe(self._state()), obs)
             self._last_obs = obs

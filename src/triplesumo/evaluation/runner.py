@@ -145,34 +145,56 @@ def play_matches(
     Under elimination rules a match's result is taken when seat ``end_seat`` is eliminated
     (its own match is over), if given. Matches ``< record`` are written as replayable match
     files ``record_dir/epoch_NNNNN.npz`` (``policy_names`` stored in them).
+
+    The matches run through the batched API (:class:`~triplesumo.envs.batch.VectorMatches`,
+    autoreset): a slot whose match ends draws the schedule's next match and its seed while the
+    env resets it (``VectorMatches.reset_seed``).
     """
-    from triplesumo.envs.batch import MatchBatch
+    from triplesumo.envs.batch import VectorMatches
     from triplesumo.rules.rewards import TERMS
 
     if not 0 <= first < n:
         raise ValueError(f"first must be in [0, n={n}), got {first}")
     n_envs = min(n_envs, n - first)
-    batch = MatchBatch(match_cfg, n_envs, n_threads)
+    env = VectorMatches(n_envs, match_cfg, n_threads)
+    matches = env.matches
     n_agents = len(match_cfg.agents)
     copies: list[dict[tuple[int, int], Any]] = [{} for _ in range(n_envs)]
     seated: list[list[Any]] = [[] for _ in range(n_envs)]
     slot_match = [-1] * n_envs
-    obs: list[list[np.ndarray]] = [[] for _ in range(n_envs)]
     keys = ("dense_reward", "sparse_reward", *TERMS)
     acc: list[dict[int, dict[str, float]]] = [{} for _ in range(n_envs)]
     recorders: list[MatchRecorder | None] = [None] * n_envs
-    sizes, width = batch.matches[0].action_sizes, batch.action_width
+    sizes, width = env.action_sizes, env.act_dim
     results: dict[int, SeatedResult] = {}
     next_match, next_result = first, first
+    upcoming: dict[int, tuple[int, int]] = {}
+    """Slot -> (schedule index, reset seed) of its next match, drawn when its match ends."""
+    actions = np.zeros((n_envs, n_agents, width))
+
+    def draw(k: int) -> int:
+        """The next match of the schedule for slot ``k`` (-1: a filler, discarded); returns its reset seed."""
+        nonlocal next_match
+        i = next_match if next_match < n else -1
+        next_match += 1
+        seed = reset_seed(i if i >= 0 else n - 1)
+        upcoming[k] = (i, seed)
+        return seed if i >= 0 else seed + 1 + k
+
+    def ending(k: int) -> int:
+        """Slot ``k``'s match has ended inside ``env.step`` (its state is still the last one): record
+        its last step, then draw its next match (``VectorMatches.reset_seed``)."""
+        recorder = recorders[k]
+        if recorder is not None:
+            recorder.step(actions[k])
+        return draw(k)
 
     def start(k: int) -> None:
-        nonlocal next_match
-        i = next_match if next_match < n else -1  # -1: a filler match, discarded
-        next_match += 1
+        """Seat slot ``k``'s drawn match (the env has just reset it with that match's seed)."""
+        i, seed = upcoming.pop(k)
         policies = list(lineup(i if i >= 0 else n - 1))
         if len(policies) != n_agents:
             raise ValueError(f"lineup({i}) has {len(policies)} policies for {n_agents} seats")
-        seed = reset_seed(i if i >= 0 else n - 1)
         for seat, p in enumerate(policies):
             if p is not None and callable(getattr(p, "reset", None)):
                 p = copies[k].setdefault((seat, id(p)), copy.deepcopy(p))
@@ -180,58 +202,56 @@ def play_matches(
                 policies[seat] = p
         seated[k] = policies
         slot_match[k] = i
-        obs[k] = batch.reset_one(k, seed=seed if i >= 0 else seed + 1 + k)[0]
         acc[k] = {seat: dict.fromkeys(keys, 0.0) for seat in terms_of}
-        recorders[k] = (MatchRecorder(batch.matches[k], seed, dict(policy_names or {}))
+        recorders[k] = (MatchRecorder(matches[k], seed, dict(policy_names or {}))
                         if record_dir is not None and 0 <= i < record else None)
-
-    def finish_record(k: int, res: Any) -> None:
-        recorder = recorders[k]
-        if recorder is not None and record_dir is not None:
-            agents = batch.matches[k].agents
-            outcomes = {a: outcome_name(info["outcome"]) for a, info in zip(agents, res.infos, strict=True)}
-            recorder.finish(outcomes).save(record_dir / f"epoch_{slot_match[k] + 1:05d}.npz")
-            recorders[k] = None
 
     bar = None
     if progress is not None:
         from tqdm import tqdm
 
         bar = tqdm(total=n, initial=first, unit="match", desc=progress, dynamic_ncols=True)
-    for k in range(n_envs):
-        start(k)
     try:
-        with batch:
+        with env:
+            obs = env.reset(seed=[draw(k) for k in range(n_envs)])[0]
+            for k in range(n_envs):
+                start(k)
+            env.reset_seed = ending
             while len(results) < n - first:
                 actions = np.zeros((n_envs, n_agents, width))
                 for k in range(n_envs):
-                    alive = batch.matches[k].alive
+                    alive = matches[k].alive
                     for seat, p in enumerate(seated[k]):
                         if p is not None and alive[seat]:  # an eliminated agent no longer acts
                             actions[k, seat, :sizes[seat]] = p(obs[k][seat])
-                for k, res in enumerate(batch.step(actions)):
-                    recorder = recorders[k]
-                    if recorder is not None:
-                        recorder.step(actions[k])
+                obs, _, terminated, _, infos = env.step(actions)  # finished matches are already reset
+                done = infos["_final_obs"]
+                for k in range(n_envs):
                     for seat, sums in acc[k].items():
-                        info = res.infos[seat]
                         for key in sums:
-                            sums[key] += info[key]
-                    gone = end_seat is not None and res.eliminated is not None and res.eliminated[end_seat]
-                    if res.terminated or res.truncated or gone:
-                        finish_record(k, res)
-                        i = slot_match[k]
-                        if i >= 0:
-                            results[i] = SeatedResult(i, [outcome_name(info["outcome"]) for info in res.infos],
-                                                      int(res.infos[0]["step"]), acc[k])
-                            if bar is not None:
-                                bar.update(1)
-                            while on_result is not None and next_result in results:
-                                on_result(results[next_result])
-                                next_result += 1
-                        start(k)
-                    else:
-                        obs[k] = res.observations
+                            sums[key] += float(infos[key][k, seat])
+                    gone = end_seat is not None and bool(terminated[k, end_seat])  # its own match is over
+                    recorder = recorders[k]
+                    if recorder is not None and not done[k]:
+                        recorder.step(actions[k])
+                    if not (done[k] or gone):
+                        continue
+                    codes = infos["outcome"][k]
+                    if recorder is not None and record_dir is not None:
+                        outcomes = {a: outcome_name(int(c)) for a, c in zip(env.agents, codes, strict=True)}
+                        recorder.finish(outcomes).save(record_dir / f"epoch_{slot_match[k] + 1:05d}.npz")
+                    i = slot_match[k]
+                    if i >= 0:
+                        results[i] = SeatedResult(i, [outcome_name(int(c)) for c in codes], int(infos["step"][k]),
+                                                  acc[k])
+                        if bar is not None:
+                            bar.update(1)
+                        while on_result is not None and next_result in results:
+                            on_result(results[next_result])
+                            next_result += 1
+                    if not done[k]:  # the seat followed left a match that goes on: start the next one now
+                        obs[k] = env.restart(k, draw(k))
+                    start(k)
     finally:
         if bar is not None:
             bar.close()

@@ -19,6 +19,8 @@ from triplesumo.train.league import LeagueConfig
 ALGOS = ("ddpg", "td3", "sac", "ppo")
 """Algorithms a learner can use (``--learn AGENT=ALGO``); each has its config field."""
 SHARE_MODES = ("none", "team")
+BACKENDS = ("cpu", "warp")
+DEVICES = (None, "cpu", "cuda")
 DEFAULT_POLICIES = ("ant=zoo:ant", "spider=zoo:spider")
 """The other agents of the paper's third stage: the ongoing match of the trained Ant and Spider."""
 
@@ -106,6 +108,13 @@ class TrainConfig:
     match start; the learners' snapshots join their side's pool when they beat it (see league)."""
     league: LeagueConfig = field(default_factory=LeagueConfig)
     """The self-play league's rules (used with self_play): admission, sampling, pool size, zoo seeds."""
+    backend: str = "cpu"
+    """Where the matches run: cpu (MuJoCo, numpy; the exact reference) or warp (MuJoCo Warp on
+    device, first-out rules and one body kind; observations, actions, replay and rollouts stay
+    torch tensors on the device). See the README's "GPU training"."""
+    device: str | None = None
+    """Torch/Warp device of backend warp: cuda, or cpu (Warp's CPU device: tests, no speed);
+    default cuda when Warp sees a GPU. backend cpu runs on the CPU (None or cpu)."""
 
     def __post_init__(self) -> None:
         for name in ("policies", "learn"):
@@ -142,6 +151,16 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.max_minutes must be >= 0, got {self.max_minutes!r}")
         if not self.self_play and self.league != LeagueConfig():
             raise ValueError("TrainConfig.league is set (--league.*) but self_play is off: add --self-play")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"TrainConfig.backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.device not in DEVICES:
+            raise ValueError(f"TrainConfig.device must be one of {DEVICES}, got {self.device!r}")
+        if self.backend == "cpu" and self.device == "cuda":
+            raise ValueError("TrainConfig.device='cuda' needs backend='warp' (--backend warp): backend='cpu' "
+                             "steps MuJoCo on the CPU")
+        if self.backend == "warp" and self.self_play:
+            raise ValueError("TrainConfig.self_play runs on backend='cpu' (its per-match seats act on the host); "
+                             "drop --backend warp or --self-play")
         if self.scenario not in scenarios():
             raise ValueError(f"TrainConfig.scenario must be one of {scenarios()}, got {self.scenario!r}")
 

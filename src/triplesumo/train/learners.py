@@ -10,6 +10,12 @@ the physics (:meth:`OffPolicyLearner.run_updates`); PPO records its rows into it
 rollout and updates when the rollout is full (:meth:`PPOLearner.finish_step`). A row whose
 agent is out of its match (elimination rules) stays out until the match is reset: it adds no
 transition (PPO keeps it in the rollout's shape, marked invalid).
+
+On a device-resident collection (``train --backend warp``) observations, actions, rewards and
+flags arrive as torch tensors on the learner's ``device`` and stay there: the networks act on
+them, the replay buffer (:class:`~triplesumo.algos.replay.TorchReplayBuffer`) and PPO's rollout
+store them; only the random draws (warm-up actions, exploration noise, replay indices) come from
+the host generators, which keeps their streams and checkpoints those of the CPU path.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ from triplesumo.algos.ddpg import DDPG
 from triplesumo.algos.noise import ActionNoise, make_noise
 from triplesumo.algos.offpolicy import OffPolicyAlgorithm
 from triplesumo.algos.ppo import PPO
-from triplesumo.algos.replay import FIELDS, ReplayBuffer
+from triplesumo.algos.replay import FIELDS, ReplayBuffer, TorchReplayBuffer
 from triplesumo.algos.sac import SAC
 from triplesumo.algos.td3 import TD3
 from triplesumo.train.config import TrainConfig
@@ -80,10 +86,13 @@ class Learner:
     algo: Algorithm
 
     def __init__(self, spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig,
-                 obs_dim: int, act_dim: int) -> None:
+                 obs_dim: int, act_dim: int, device: torch.device | None = None) -> None:
         self.spec, self.name, self.index = spec, spec.name, index
         self.config: Any = getattr(cfg, spec.algo)
-        self.algo = ALGORITHMS[spec.algo](obs_dim, act_dim, self.config, seed=cfg.seed + position)
+        self.device = device
+        """Torch device of a device-resident collection (its inputs are tensors there); None: numpy."""
+        self.algo = ALGORITHMS[spec.algo](obs_dim, act_dim, self.config, seed=cfg.seed + position,
+                                          device=device or "cpu")
         self.obs_dim, self.act_dim = obs_dim, act_dim
         self.n_rows = cfg.n_envs * len(index)
         self.active = np.ones(self.n_rows, dtype=bool)
@@ -107,8 +116,8 @@ class Learner:
         """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)``."""
         raise NotImplementedError
 
-    def store(self, obs: np.ndarray, action: np.ndarray, reward: np.ndarray, next_obs: np.ndarray,
-              terminated: np.ndarray, truncated: np.ndarray, valid: np.ndarray, played: np.ndarray) -> None:
+    def store(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
+              valid: Any, played: np.ndarray) -> None:
         """Take the step of every row: ``played`` rows were in their match, ``valid`` ones are
         real steps (no physics error); ``terminated`` rows end without a bootstrap."""
         raise NotImplementedError
@@ -160,10 +169,11 @@ class OffPolicyLearner(Learner):
     algo: OffPolicyAlgorithm
 
     def __init__(self, spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig,
-                 obs_dim: int, act_dim: int) -> None:
-        super().__init__(spec, index, position, cfg, obs_dim, act_dim)
+                 obs_dim: int, act_dim: int, device: torch.device | None = None) -> None:
+        super().__init__(spec, index, position, cfg, obs_dim, act_dim, device)
         c = self.config
-        self.replay = ReplayBuffer(c.buffer_size, obs_dim, act_dim)
+        self.replay = (ReplayBuffer(c.buffer_size, obs_dim, act_dim) if device is None
+                       else TorchReplayBuffer(c.buffer_size, obs_dim, act_dim, device))
         self.noise: ActionNoise | None = None
         """The exploration noise process (DDPG, TD3); SAC samples its own policy."""
         if hasattr(c, "noise"):
@@ -171,18 +181,21 @@ class OffPolicyLearner(Learner):
         self.sample_rng = np.random.default_rng([cfg.seed, 1 + position])
         """Replay sampling only (used by the update thread; never shared with collection)."""
 
-    def act(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def act(self, obs: Any, rng: np.random.Generator) -> Any:
         self.algo.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
         if self.collected < self.config.learning_starts:
-            return rng.uniform(-1.0, 1.0, (self.n_rows, self.act_dim))  # warm-up
+            warm = rng.uniform(-1.0, 1.0, (self.n_rows, self.act_dim))  # warm-up
+            return warm if self.device is None else self.algo.tensor(warm)
         if self.noise is None:
             action = self.algo.explore(obs, rng)
-            if not np.isfinite(action).all():
+            if not _finite(action):
                 raise DivergedError("its actions are not finite")
             return action
         raw = self.algo.act(obs)
-        if not np.isfinite(raw).all():
+        if not _finite(raw):
             raise DivergedError("its actions are not finite")
+        if self.device is not None:
+            return (raw + self.algo.tensor(self.noise.sample(rng))).clamp(-1.0, 1.0)
         return np.clip(raw + self.noise.sample(rng), -1.0, 1.0)
 
     def updates_due(self) -> int:
@@ -204,12 +217,17 @@ class OffPolicyLearner(Learner):
         if due and (problem := self.check_parameters()):
             raise DivergedError(problem)
 
-    def store(self, obs: np.ndarray, action: np.ndarray, reward: np.ndarray, next_obs: np.ndarray,
-              terminated: np.ndarray, truncated: np.ndarray, valid: np.ndarray, played: np.ndarray) -> None:
+    def store(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
+              valid: Any, played: np.ndarray) -> None:
         """Store the rows that played this step (``played``) and are real steps (``valid``):
         done = terminated (a draw by time limit bootstraps)."""
         del truncated
         self.collected += int(played.sum())
+        if self.device is not None:  # tensors on the device: the rows kept are gathered there
+            keep_t = valid & torch.as_tensor(played, device=self.device)
+            self.replay.add_batch(obs[keep_t], action[keep_t], reward[keep_t], next_obs[keep_t],
+                                  terminated[keep_t].to(torch.float32))
+            return
         keep = valid & played
         if keep.any():
             self.replay.add_batch(obs[keep], action[keep], reward[keep], next_obs[keep],
@@ -245,18 +263,23 @@ class PPOLearner(Learner):
 
     algo: PPO
 
-    def act(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def act(self, obs: Any, rng: np.random.Generator) -> Any:
         self.algo.observe(obs)
         action = self.algo.explore(obs, rng)
-        if not np.isfinite(action).all():
+        if not _finite(action):
             raise DivergedError("its actions are not finite")
         return action
 
-    def store(self, obs: np.ndarray, action: np.ndarray, reward: np.ndarray, next_obs: np.ndarray,
-              terminated: np.ndarray, truncated: np.ndarray, valid: np.ndarray, played: np.ndarray) -> None:
+    def store(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
+              valid: Any, played: np.ndarray) -> None:
         """Record the step of every row; rows out of play or with a physics error are invalid."""
         del obs, action
         self.collected += int(played.sum())
+        if self.device is not None:  # tensors on the device
+            ok_t = valid & torch.as_tensor(played, device=self.device)
+            self.algo.record(torch.where(ok_t, reward, 0.0), torch.where(ok_t, terminated, True),
+                             torch.where(ok_t, truncated, False), next_obs, valid=ok_t)
+            return
         ok = valid & played
         self.algo.record(np.where(ok, reward, 0.0), np.where(ok, terminated, True), np.where(ok, truncated, False),
                          next_obs, valid=ok)
@@ -280,7 +303,13 @@ class PPOLearner(Learner):
 
 
 def make_learner(spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig,
-                 obs_dim: int, act_dim: int) -> OffPolicyLearner | PPOLearner:
-    """The learner for ``spec`` (``position``: its place among the run's learners, which offsets its seeds)."""
+                 obs_dim: int, act_dim: int, device: torch.device | None = None) -> OffPolicyLearner | PPOLearner:
+    """The learner for ``spec`` (``position``: its place among the run's learners, which offsets its seeds;
+    ``device``: where a device-resident collection keeps its tensors, None for numpy)."""
     cls = PPOLearner if spec.algo == "ppo" else OffPolicyLearner
-    return cls(spec, index, position, cfg, obs_dim, act_dim)
+    return cls(spec, index, position, cfg, obs_dim, act_dim, device)
+
+
+def _finite(x: Any) -> bool:
+    """Whether every entry of ``x`` (a numpy array or a tensor) is finite."""
+    return bool(torch.isfinite(x).all()) if isinstance(x, torch.Tensor) else bool(np.isfinite(x).all())

@@ -10,6 +10,14 @@ metrics CSV, every learner's update count and mean losses a row of its learning 
 match is reset with fresh seeded noise. The one-learner case (``--learner bug``, DDPG) is
 the paper's, bit for bit.
 
+The matches are the public batched API (``triplesumo.vector_env``'s contract): arrays
+``(n_envs, n_agents, ...)`` in and out, Gymnasium SAME_STEP autoreset (a finished match's last
+observation, outcome codes and reward terms in ``infos``), each next match seeded from the
+trainer's generator through ``reset_seed``. ``backend="cpu"`` is :class:`VectorMatches`
+(numpy; checkpoints hold every match's exact state), ``backend="warp"`` is MuJoCo Warp's
+``WarpMatchBatch`` (torch tensors on ``device``, kept there by the learners; a resume restarts
+the matches in progress). One collection path serves both.
+
 With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents that do not
 learn: at every match start one member of each such side's pool is drawn (in a free-for-all
 one per seat); at every match end its players are rated, due learning sides are admitted
@@ -44,7 +52,8 @@ import numpy as np
 import torch
 
 from triplesumo import ENV_VERSION, __version__
-from triplesumo.agents.builtin import BUILTIN, act_batch
+from triplesumo.agents.builtin import BUILTIN, ZeroPolicy, act_batch
+from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.policy_file import atomic_write_bytes, load_fixed_policy, load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.algos.base import DivergedError
@@ -52,12 +61,12 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.envs.batch import MatchBatch
-from triplesumo.envs.match import Match, StepResult
+from triplesumo.envs.batch import MatchBatch, VectorMatches
+from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import RewardConfig
-from triplesumo.rules.outcome import PLAYING
+from triplesumo.rules.outcome import ERROR_CODE, PLAYING
 from triplesumo.rules.outcome import outcome_name as code_name
 from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
@@ -125,7 +134,8 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
     return dict(data)
 
 
-ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics")
+ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics", "backend",
+               "device")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget): a config.json without them gets their defaults; any other missing key is an error."""
 LEAGUE_ADDED_LATER = ("live_share",)
@@ -316,11 +326,17 @@ class Trainer:
         if not resume:
             refuse_existing_run(run_dir, start_over)
         check_replay_memory(cfg, [(spec.algo, *dims[spec.name]) for spec in self.specs])
+        self.probe = probe = sizing
+        """A match of the run's config (never stepped): roster, observation and action sizes."""
+        self.elimination = probe.elimination
+        """Elimination rules (ffa, pursuit): an agent may leave its match before the match ends."""
+        self.env = self._make_env()
+        """The matches, through the batched API (arrays ``(n_envs, n_agents, ...)``, autoreset)."""
+        self.device: torch.device | None = getattr(self.env, "device", None) if cfg.backend == "warp" else None
+        """Where a ``warp`` run keeps observations, actions, replay and rollouts (None: numpy on the host)."""
         self.run_dir = prepare_run_dir(run_dir)
         self.command = command or command_for(cfg)
         torch.set_num_threads(cfg.torch_threads)
-        self.batch = MatchBatch(self.match_cfg, cfg.n_envs, cfg.n_threads)
-        probe = self.batch.matches[0]
         try:
             self.policies = policies_from_pairs(
                 pairs, cfg.seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
@@ -328,20 +344,29 @@ class Trainer:
         except ValueError as err:
             raise ValueError(f"TrainConfig.policies (scenario {cfg.scenario!r}): {err}") from None
         self.others = [(probe.agents.index(a), p) for a, p in self.policies.items()]
+        self.on_device = {i: p.on_device(self.device) for i, p in self.others
+                          if self.device is not None and isinstance(p, FrozenPolicy)}
+        """Roster index -> a trained fixed policy acting on the device (``warp``; others act on the host)."""
         self.learners = [make_learner(spec, [probe.agents.index(a) for a in spec.agents], position, cfg,
-                                      *dims[spec.name]) for position, spec in enumerate(self.specs)]
+                                      *dims[spec.name], self.device) for position, spec in enumerate(self.specs)]
         self.rng = np.random.default_rng(cfg.seed)
         """Warm-up actions, exploration, and every match's reset seed."""
+        self.env.reset_seed = lambda k: self._episode_seed()  # a finished match's next seed, in match order
+        self.agent_index = [probe.agents.index(a) for a in self.agents]
+        """Roster index of each learning agent."""
         self.epochs_done = 0
         self.env_steps = 0
         self.lwr: dict[str, list[float]] = {a: [] for a in self.agents}
         self.finished_epoch_steps: list[int] = []
         """Length of every epoch finished by this process (not restored on resume)."""
-        self.acc: dict[str, list[dict[str, float]]] = {a: [self._empty_acc() for _ in range(cfg.n_envs)]
-                                                       for a in self.agents}
+        self.acc: Any = self._zeros((cfg.n_envs, len(self.agents), len(ACC_KEYS)), float64=True)
+        """Each match's sums of :data:`ACC_KEYS` so far, per learning agent (on the device for warp)."""
         self.final: dict[str, list[dict[str, Any] | None]] = {a: [None] * cfg.n_envs for a in self.agents}
         """The last info (outcome, step) of a learning agent already out of a match still running."""
-        self.obs: list[list[np.ndarray]] = []
+        self.playing = np.ones((cfg.n_envs, len(self.agents)), dtype=bool)
+        """Per match, per learning agent: still in play (``final`` is None)."""
+        self.obs: Any = None
+        """Every match's current observations ``(n_envs, n_agents, obs_dim)`` (numpy, or a device tensor)."""
         self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0, "wait": 0.0}
         """Seconds collecting (physics and rules), acting, learning (off-policy updates run in a
         thread: they overlap "env" when overlap_learning is on; PPO's run inline) and waiting
@@ -359,7 +384,9 @@ class Trainer:
         else:
             for k in range(cfg.n_envs):
                 self._seat_opponents(k)
-                self.obs.append(self.batch.reset_one(k, seed=self._episode_seed())[0])
+            self.playing = np.array([[self.final[a][k] is None for a in self.agents] for k in range(cfg.n_envs)],
+                                    dtype=bool)  # False: the agent sits the match out
+            self.obs = self.env.reset(seed=[self._episode_seed() for _ in range(cfg.n_envs)])[0]
             with checkpoint.writing(self.run_dir / "config.json"):
                 atomic_write_bytes(self.run_dir / "config.json",
                                    (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
@@ -376,7 +403,7 @@ class Trainer:
         whole or not at all; the seats of sides that do not learn are drawn from their pools, each
         pool seeded by ``league.zoo`` or else by those seats' ``policies`` (passive when not named).
         """
-        cfg, probe = self.cfg, self.batch.matches[0]
+        cfg, probe = self.cfg, self.probe
         roster = list(probe.agents)
         teams = {a.name: a.team for a in self.match_cfg.agents}
         fixed = [a for a in roster if a not in self.agents]
@@ -434,7 +461,7 @@ class Trainer:
         league = self.league
         if league is None:
             return
-        roster = self.batch.matches[0].agents
+        roster = self.probe.agents
         members: list[str | None] = [None] * len(roster)
         live = league.draw_live(self.learning_sides)
         for side in (*self.opponent_sides, *(s for s in self.learning_sides if s not in live)):
@@ -459,7 +486,7 @@ class Trainer:
     def _policies_of(self, members: list[str | None], seed: int) -> dict[int, Any]:
         """Seat index -> the policy of the member seated there (policy files loaded once, then shared)."""
         assert self.league is not None
-        probe, out = self.batch.matches[0], {}
+        probe, out = self.probe, {}
         for i, member_id in enumerate(members):
             if member_id is None:
                 continue
@@ -475,16 +502,15 @@ class Trainer:
                 out[i] = self._member_policies[key]
         return out
 
-    def _league_match(self, k: int, res: StepResult) -> None:
-        """Rate match ``k`` (places; seats still in play when every learner is out share the best place),
-        admit the learning sides that are due, and log the league's epoch."""
+    def _league_match(self, k: int, outcomes: np.ndarray, places: np.ndarray) -> None:
+        """Rate match ``k`` (its seats' outcome codes and places; seats still in play when every learner
+        is out share the best place), admit the learning sides that are due, and log the league's epoch."""
         league = self.league
         assert league is not None
-        if not any(is_error(info) for info in res.infos):
+        if not (outcomes == ERROR_CODE).any():
             players = [self.seat_members[k][i] or League.learner(self.side_of[a])
-                       for i, a in enumerate(self.batch.matches[k].agents)]
-            places = [float(info["place"]) if int(info["place"]) > 0 else 1.0 for info in res.infos]
-            league.record_seats(players, places)
+                       for i, a in enumerate(self.probe.agents)]
+            league.record_seats(players, [float(p) if int(p) > 0 else 1.0 for p in places])
         for side in self.learning_sides:
             if league.admit_due(side, self.epochs_done):
                 league.admit(side, self.epochs_done, write=functools.partial(self._write_snapshot, side))
@@ -512,13 +538,49 @@ class Trainer:
     def _episode_seed(self) -> int:
         return int(self.rng.integers(2**31 - 1))
 
-    @staticmethod
-    def _empty_acc() -> dict[str, float]:
-        return dict.fromkeys(("dense_reward", "sparse_reward", *TERMS), 0.0)
+    def _make_env(self) -> Any:
+        """The run's matches through the batched API (``triplesumo.vector_env``'s contract):
+        :class:`VectorMatches` (``backend="cpu"``, numpy) or ``WarpMatchBatch`` (``"warp"``,
+        torch tensors on the device). Errors name the option."""
+        cfg = self.cfg
+        if cfg.backend == "warp":
+            try:
+                from triplesumo.envs.warp import make_warp_vector_env
+            except ImportError as exc:
+                raise ImportError(f"TrainConfig.backend='warp' needs MuJoCo Warp: pip install \"triplesumo[gpu]\" "
+                                  f"({exc})") from None
+            try:
+                return make_warp_vector_env(self.match_cfg, cfg.n_envs, cfg.device)
+            except (NotImplementedError, ValueError) as exc:
+                raise ValueError(f"TrainConfig.backend='warp' (scenario {cfg.scenario!r}, device {cfg.device!r}): "
+                                 f"{exc}") from None
+        try:
+            return VectorMatches(cfg.n_envs, self.match_cfg, cfg.n_threads)
+        except ValueError as exc:
+            raise ValueError(f"TrainConfig (scenario {cfg.scenario!r}, obs_mode {cfg.obs_mode!r}): {exc}") from None
 
-    def _rows(self, learner: Learner) -> np.ndarray:
+    def _zeros(self, shape: tuple[int, ...], float64: bool = False) -> Any:
+        """Zeros where the run's arrays live: numpy float64 on ``cpu``, a float32 (or float64) tensor on the device."""
+        if self.device is None:
+            return np.zeros(shape)
+        return torch.zeros(shape, dtype=torch.float64 if float64 else torch.float32, device=self.device)
+
+    @staticmethod
+    def _host(x: Any) -> np.ndarray:
+        """``x`` as a numpy array (a device tensor is copied to the host)."""
+        return x.cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+
+    def _rows(self, learner: Learner) -> Any:
         """The learner's observations, ``(n_envs x len(agents), obs_dim)``, match-major."""
-        return np.stack([o[i] for o in self.obs for i in learner.index])
+        return self.obs[:, learner.index].reshape(-1, learner.obs_dim)
+
+    @property
+    def batch(self) -> MatchBatch:
+        """The matches of a ``cpu`` run (``VectorMatches.batch``), e.g. for a scenario test placing an
+        agent by hand (then ``batch.reload(k)``); a ``warp`` run has none."""
+        if not isinstance(self.env, VectorMatches):
+            raise AttributeError("a backend='warp' run has no MatchBatch (its matches live on the device)")
+        return self.env.batch
 
     @property
     def updates(self) -> int:
@@ -527,10 +589,9 @@ class Trainer:
     # -------------------------------------------------------------------- loop
     def collect_step(self) -> int:
         """Step every match once; returns the number of epochs that finished."""
-        cfg, n = self.cfg, self.cfg.n_envs
+        cfg, n, probe = self.cfg, self.cfg.n_envs, self.probe
         t0 = time.perf_counter()
-        probe = self.batch.matches[0]
-        actions = np.zeros((n, probe.n_agents, probe.action_width))
+        actions = self._zeros((n, probe.n_agents, probe.action_width))
         seen, acted = [], []
         for learner in self.learners:
             obs = self._rows(learner)
@@ -542,11 +603,17 @@ class Trainer:
             seen.append(obs)
             acted.append(act)
         for i, policy in self.others:
-            if self.league is None:
-                actions[:, i, :probe.action_sizes[i]] = act_batch(policy, np.stack([o[i] for o in self.obs]))
+            if self.league is not None or (self.device is not None and isinstance(policy, ZeroPolicy)):
+                continue
+            if i in self.on_device:
+                actions[:, i, :probe.action_sizes[i]] = self.on_device[i](self.obs[:, i])
+            else:  # on the host (warp: random policies, a copy each way)
+                fixed = act_batch(policy, self._host(self.obs[:, i]))
+                actions[:, i, :probe.action_sizes[i]] = fixed if self.device is None else torch.as_tensor(
+                    fixed, dtype=torch.float32, device=self.device)
         for k, seated in enumerate(self.seat_policies):
             for i, policy in seated.items():
-                actions[k, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[k][i][None])[0]
+                actions[k, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[k, i][None])[0]
         t1 = time.perf_counter()
         # The off-policy updates due at this step learn from the replay as it was before the
         # step, so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and
@@ -557,17 +624,19 @@ class Trainer:
             updates.start()
         elif due:
             updates.run()
-        results = self.batch.step(actions)
+        obs, _, terminated, truncated, infos = self.env.step(actions)  # finished matches are already reset
         t2 = time.perf_counter()
         updates.finish()
         t_joined = time.perf_counter()
         self.env_steps += n  # counted before epochs end, so their rows include this step
-        for learner, obs, act in zip(self.learners, seen, acted, strict=True):
-            self._store(learner, obs, act, results)
-        finished = 0
-        for k, res in enumerate(results):
-            if self._match_step(k, res):
-                finished += 1
+        where = np.where if self.device is None else torch.where
+        done = infos["_final_obs"]
+        next_obs = where(done[:, None, None], infos["final_obs"], obs)  # a finished match's last observation
+        reward = infos["dense_reward"] + infos["sparse_reward"]
+        error = infos["outcome"] == ERROR_CODE
+        for learner, seen_obs, act in zip(self.learners, seen, acted, strict=True):
+            self._store(learner, seen_obs, act, next_obs, reward, terminated, truncated, error)
+        finished = self._account(obs, terminated, infos)
         t3 = time.perf_counter()
         for learner in self.learners:
             if isinstance(learner, PPOLearner):
@@ -582,79 +651,94 @@ class Trainer:
         self.timers["wait"] += t_joined - t2
         return finished
 
-    def _store(self, learner: Learner, obs: np.ndarray, act: np.ndarray, results: list[StepResult]) -> None:
-        """Hand the learner its rows' step: rewards, next observations, ends, which rows played."""
-        m, rows = len(learner.index), learner.n_rows
-        reward, terminated, truncated = np.zeros(rows), np.zeros(rows, dtype=bool), np.zeros(rows, dtype=bool)
-        valid = np.ones(rows, dtype=bool)
-        next_obs = list(obs)
-        for k, res in enumerate(results):
-            for j, i in enumerate(learner.index):
-                r = k * m + j
-                if not learner.active[r]:
-                    continue
-                valid[r] = not is_error(res.infos[i])  # a physics error's transition is never learned from
-                reward[r] = res.rewards[i]
-                next_obs[r] = res.observations[i]
-                out = res.eliminated is not None and res.eliminated[i]  # the agent left the match
-                terminated[r] = res.terminated or out
-                truncated[r] = res.truncated and not terminated[r]  # a draw by time limit bootstraps
-        played = learner.active.copy()
-        learner.store(obs, act, reward, np.stack(next_obs), terminated, truncated, valid, played)
-        for k, res in enumerate(results):
-            for j, i in enumerate(learner.index):
-                if res.eliminated is not None and res.eliminated[i]:
-                    learner.active[k * m + j] = False
+    def _store(self, learner: Learner, obs: Any, act: Any, next_obs: Any, reward: Any, terminated: Any,
+               truncated: Any, error: Any) -> None:
+        """Hand the learner its rows' step (``(n_envs, n_agents, ...)`` arrays of the whole batch):
+        rewards, next observations, ends, which rows played."""
+        idx = learner.index
+        rew = reward[:, idx].reshape(-1)
+        nxt = next_obs[:, idx].reshape(-1, learner.obs_dim)
+        term = terminated[:, idx].reshape(-1)  # the match was won or lost, or the agent left it
+        trunc = truncated[:, idx].reshape(-1) & ~term  # a draw by time limit bootstraps
+        valid = ~error[:, idx].reshape(-1)  # a physics error's transition is never learned from
+        active = learner.active
+        if not active.all():  # rows of agents already out of their match (elimination rules): nothing
+            rew, term, trunc = np.where(active, rew, 0.0), term & active, trunc & active
+            valid, nxt = valid | ~active, np.where(active[:, None], nxt, obs)
+        learner.store(obs, act, rew, nxt, term, trunc, valid, active.copy())
+        if self.elimination:  # an agent that left stays out until its match is reset
+            learner.active &= ~term
 
-    def _match_step(self, k: int, res: StepResult) -> bool:
-        """Account match ``k``'s step for every learning agent; end the epoch (rows, reset) when
-        the match is over or all its learning agents are out. Returns whether it ended."""
-        out_now = []
-        for agent in self.agents:
-            if self.final[agent][k] is not None:
-                continue  # out earlier: its epoch waits for the match
-            i = self.batch.matches[k].agents.index(agent)
-            info = res.infos[i]
-            acc = self.acc[agent][k]
-            for key in acc:
-                acc[key] += info[key]
-            if res.eliminated is not None and res.eliminated[i]:
-                self.final[agent][k] = {"outcome": outcome_name(info), "step": int(info["step"])}
-                out_now.append(agent)
-        over = res.terminated or res.truncated
-        if not over and any(self.final[a][k] is None for a in self.agents):
-            self.obs[k] = res.observations
-            return False
-        self.epochs_done += 1
-        for agent in self.agents:
-            i = self.batch.matches[k].agents.index(agent)
-            last = self.final[agent][k] or {"outcome": outcome_name(res.infos[i]), "step": int(res.infos[i]["step"])}
-            if "sat_out" not in last:  # a learner that sat the match out (self-play) has no row for it
-                self._agent_row(agent, k, last)
-            self.final[agent][k] = None
-        self.finished_epoch_steps.append(max(int(info["step"]) for info in res.infos))
-        for learner in self.learners:
-            self.log.learned(learner.name, self.epochs_done, learner.algo.num_updates, learner.take_stats())
-        if self.league is not None:
-            self._league_match(k, res)
-            self._seat_opponents(k)
-        self.obs[k] = self.batch.reset_one(k, seed=self._episode_seed())[0]
-        for learner in self.learners:
-            rows = learner.rows_of(k)
-            learner.active[rows] = self._plays(learner, k)
-            learner.reset_rows(rows)
-        return True
+    def _account(self, obs: Any, terminated: Any, infos: Mapping[str, Any]) -> int:
+        """Add the step to every learning agent's sums; end the epoch of each match that is over
+        (already reset by the env) or whose learning agents are all out (reset here). Returns how
+        many epochs ended."""
+        terms: Any
+        if self.device is None:
+            terms = np.stack([infos[key][:, self.agent_index] for key in ACC_KEYS], axis=-1)
+        else:
+            terms = torch.stack([infos[key][:, self.agent_index] for key in ACC_KEYS], dim=-1).double()
+        if self.playing.all():
+            self.acc += terms
+        else:  # an agent out of a match still running adds nothing more to its epoch
+            self.acc += np.where(self.playing[..., None], terms, 0.0)
+        self.obs = obs
+        done = self._host(infos["_final_obs"])
+        out = self._host(terminated[:, self.agent_index]) if self.elimination else None
+        events = done | out.any(-1) if out is not None else done
+        rows = np.flatnonzero(events)
+        if not len(rows):
+            return 0
+        sel: Any = rows if self.device is None else torch.as_tensor(rows, device=self.device)
+        outcome, steps = self._host(infos["outcome"][sel]), self._host(infos["step"][sel])
+        places = self._host(infos["place"][sel]) if self.league is not None else None
+        sums = self._host(self.acc[sel])
+        ended = []
+        for r, k in enumerate(rows.tolist()):
+            if out is not None:
+                for j, agent in enumerate(self.agents):
+                    if self.final[agent][k] is None and out[k, j]:  # left the match: its epoch waits for the match
+                        code = outcome[r, self.agent_index[j]]
+                        self.final[agent][k] = {"outcome": _name(code), "step": int(steps[r])}
+                        self.playing[k, j] = False
+            over = bool(done[k])
+            if not over and any(self.final[a][k] is None for a in self.agents):
+                continue
+            self.epochs_done += 1
+            for j, agent in enumerate(self.agents):
+                code = outcome[r, self.agent_index[j]]
+                last = self.final[agent][k] or {"outcome": _name(code), "step": int(steps[r])}
+                if "sat_out" not in last:  # a learner that sat the match out (self-play) has no row for it
+                    self._agent_row(agent, last, sums[r, j])
+                self.final[agent][k] = None
+            self.finished_epoch_steps.append(int(steps[r]))
+            for learner in self.learners:
+                self.log.learned(learner.name, self.epochs_done, learner.algo.num_updates, learner.take_stats())
+            if self.league is not None:
+                assert places is not None
+                self._league_match(k, outcome[r], places[r])
+                self._seat_opponents(k)
+            if not over:  # every learning agent is out: the epoch ends before the match does
+                self.obs[k] = self.env.restart(k, self._episode_seed())
+            for learner in self.learners:
+                lrows = learner.rows_of(k)
+                learner.active[lrows] = self._plays(learner, k) if self.league is not None else True
+                learner.reset_rows(lrows)
+            self.playing[k] = [self.final[a][k] is None for a in self.agents]  # False: sits this match out
+            ended.append(k)
+        if ended:
+            self.acc[ended if self.device is None else torch.as_tensor(ended, device=self.device)] = 0.0
+        return len(ended)
 
-    def _agent_row(self, agent: str, k: int, last: dict[str, Any]) -> None:
-        acc = self.acc[agent][k]
+    def _agent_row(self, agent: str, last: dict[str, Any], acc: np.ndarray) -> None:
+        sums = dict(zip(ACC_KEYS, acc.tolist(), strict=True))
         lwr = float(local_winning_rate([last["outcome"]])[0])
         self.lwr[agent].append(lwr)
-        total = acc["dense_reward"] + acc["sparse_reward"]
+        total = sums["dense_reward"] + sums["sparse_reward"]
         row = {"epoch": len(self.lwr[agent]), "outcome": last["outcome"], "local_winning_rate": lwr,
-               "steps": last["step"], "total_reward": total, **acc, "env_steps": self.env_steps,
+               "steps": last["step"], "total_reward": total, **sums, "env_steps": self.env_steps,
                "wall_time": round(time.time(), 3)}  # epoch: the agent's own matches (= the run's, unless it sat out)
         self.log.epoch(agent, row, self.mwr(agent))
-        self.acc[agent][k] = self._empty_acc()
 
     def mwr(self, agent: str | None = None) -> float:
         """MWR of ``agent`` (default: the first learning agent) over the last λ epochs (mean
@@ -725,7 +809,7 @@ class Trainer:
         return self.run_dir / run_file("policy", learner.name, self.log.several)
 
     def manifest(self, learner: Learner) -> dict[str, Any]:
-        probe = self.batch.matches[0]
+        probe = self.probe
         spec = {a.name: a for a in self.match_cfg.agents}[learner.spec.agents[0]]
         return {
             "agent": learner.name, "algo": learner.spec.algo, "plays": list(learner.spec.agents),
@@ -748,12 +832,14 @@ class Trainer:
             arrays |= {f"{learner.name}.{k}": v for k, v in learner.arrays().items()}
             if isinstance(learner, OffPolicyLearner):
                 replay |= {f"{learner.name}.{k}": v for k, v in learner.replay.state_dict().items()}
-        snaps = [m.snapshot() for m in self.batch.matches]
+        # backend cpu: every match's exact state; warp: none (a resume restarts the unfinished matches)
+        snaps = self.env.snapshot() if self.device is None else []
         for k, s in enumerate(snaps):
             arrays[f"match{k}.physics"] = s["physics"]
             arrays[f"match{k}.last_obs"] = s["last_obs"]
             arrays[f"match{k}.warnings"] = s["warnings"]
-            arrays[f"match{k}.obs"] = np.stack(self.obs[k])
+            arrays[f"match{k}.obs"] = np.array(self.obs[k])
+        acc = self._host(self.acc).tolist()
         for agent, lwr in self.lwr.items():
             arrays[f"lwr.{agent}"] = np.array(lwr)
         state = {
@@ -762,7 +848,9 @@ class Trainer:
             "learners": {lr.name: lr.state() for lr in self.learners},
             "matches": [{key: s[key] for key in ("steps", "over", "rng", "alive", "places", "outcomes")}
                         for s in snaps],  # who is still in play (elimination rules) resumes too
-            "acc": self.acc, "final": self.final, "timers": self.timers,
+            "acc": {agent: [dict(zip(ACC_KEYS, per_match[j], strict=True)) for per_match in acc]
+                    for j, agent in enumerate(self.agents)},
+            "final": self.final, "timers": self.timers,
             "policy_rngs": {a: p.rng.bit_generator.state for a, p in self.policies.items() if hasattr(p, "rng")},
         }
         if self.league is not None:
@@ -815,14 +903,15 @@ class Trainer:
         except ValueError as exc:
             raise checkpoint.CheckpointError(str(exc)) from exc
         for name in ("learner", "learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
-                     "reward", "ddpg", "td3", "sac", "ppo", "seed", "self_play", "league"):
+                     "reward", "ddpg", "td3", "sac", "ppo", "seed", "self_play", "league", "backend"):
             # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
             if getattr(saved, name) != getattr(self.cfg, name):
                 raise checkpoint.CheckpointError(
                     f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
                     f"{getattr(saved, name)!r}, this run has {getattr(self.cfg, name)!r} (from config.json)")
         need_arrays = [f"lwr.{a}" for a in self.agents] + [f"{lr.name}.active" for lr in self.learners] + [
-            f"match{k}.{part}" for k in range(self.cfg.n_envs) for part in ("physics", "last_obs", "warnings", "obs")]
+            f"match{k}.{part}" for k in range(self.cfg.n_envs) for part in ("physics", "last_obs", "warnings", "obs")
+            if self.device is None]
         missing = [k for k in need_arrays if k not in arrays]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'arrays.npz'}: missing arrays {missing[:5]}")
@@ -859,18 +948,24 @@ class Trainer:
             if replay is not None and isinstance(learner, OffPolicyLearner):
                 learner.load_replay(replay, prefix)
         self.rng.bit_generator.state = state["rng"]
-        for k, match in enumerate(self.batch.matches):
-            meta = state["matches"][k]
-            match.restore({"physics": arrays[f"match{k}.physics"], "last_obs": arrays[f"match{k}.last_obs"],
-                           "warnings": arrays[f"match{k}.warnings"], **meta})
-            self.batch.reload(k)
-            self.obs.append(list(arrays[f"match{k}.obs"]))
+        n = self.cfg.n_envs
+        if self.device is None:  # every match continues exactly where it was
+            self.env.restore([{"physics": arrays[f"match{k}.physics"], "last_obs": arrays[f"match{k}.last_obs"],
+                               "warnings": arrays[f"match{k}.warnings"], **state["matches"][k]} for k in range(n)],
+                             np.stack([arrays[f"match{k}.obs"] for k in range(n)]))
+            self.obs = np.stack([np.asarray(arrays[f"match{k}.obs"], dtype=np.float32) for k in range(n)])
+            self.final = {a: state["final"][a] for a in self.agents}
+            self.acc = np.array([[[state["acc"][a][k][key] for key in ACC_KEYS] for a in self.agents]
+                                 for k in range(n)], dtype=np.float64)
+        else:  # backend warp keeps no match state: the unfinished matches restart (their epochs are dropped)
+            self.obs = self.env.reset(seed=[self._episode_seed() for _ in range(n)])[0]
+            for learner in self.learners:
+                learner.active[:] = True
+        self.playing = np.array([[self.final[a][k] is None for a in self.agents] for k in range(n)], dtype=bool)
         for agent, rng_state in state.get("policy_rngs", {}).items():
             self.policies[agent].rng.bit_generator.state = rng_state
         self.epochs_done = int(state["epochs_done"])
         self.env_steps = int(state["env_steps"])
-        self.acc = {a: state["acc"][a] for a in self.agents}
-        self.final = {a: state["final"][a] for a in self.agents}
         self.lwr = {a: [float(x) for x in arrays[f"lwr.{a}"]] for a in self.agents}
         self.timers = {**self.timers, **state.get("timers", {})}
         if self.league is not None:
@@ -905,16 +1000,13 @@ class _Prefixed(Mapping[str, np.ndarray]):
         return len(self.mapping)
 
 
-def is_error(info: Mapping[str, Any]) -> bool:
-    """Whether a step's info reports a physics error (the one place the trainer reads ``outcome`` codes)."""
-    return outcome_name(info) == "error"
+ACC_KEYS = ("dense_reward", "sparse_reward", *TERMS)
+"""What a learning agent's epoch sums (its metrics row's reward columns), in the order of ``state.json``'s ``acc``."""
 
 
-def outcome_name(info: Mapping[str, Any]) -> str:
-    """The outcome of an info as a name (win, loss, draw, error; "" while the match goes on):
-    the one place the trainer reads ``info["outcome"]`` (an int code, ``rules.outcome.OUTCOME_CODES``)."""
-    code = int(info["outcome"])
-    return "" if code == PLAYING else code_name(code)
+def _name(code: int) -> str:
+    """An outcome code as the metrics' name (win, loss, draw, error; "" while the match goes on)."""
+    return "" if int(code) == PLAYING else code_name(int(code))
 
 
 def plot_metrics(run_dir: Path, window: int) -> list[Path]:

@@ -1,0 +1,186 @@
+"""The trainer on the batched API: runs of the trainer before it still resume (and give the same
+results), and ``--backend warp`` trains on MuJoCo Warp with everything on the device.
+
+``data/old_trainer_run`` was written by the trainer that drove ``MatchBatch`` match by match
+(commit e666681): ``run`` is ``tiny(out, "run", epochs=2, checkpoint_every=2)`` (its checkpoint at
+epoch 2, replay included) and ``ref`` holds the metrics, learning CSV and policy of the same config
+trained straight to epoch 4 by that trainer.
+
+The Warp runs use Warp's CPU device (CI has no GPU); they skip, saying why, without
+``mujoco-warp``. Their first call compiles Warp's kernels (about 30 s, cached in ``~/.cache/warp``).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.numpy import load_file
+
+from conftest import tiny
+from triplesumo.algos.ppo import PPOConfig
+from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
+from triplesumo.rules.outcome import OUTCOME_CODES
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.loop import Trainer, train
+
+OLD_RUN = Path(__file__).parent / "data" / "old_trainer_run"
+
+
+def _metrics(path: Path) -> list[dict[str, str]]:
+    return [{k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader(path.open())]
+
+
+def _same_policy(a: Path, b: Path) -> bool:
+    x, y = load_file(a), load_file(b)
+    return x.keys() == y.keys() and all(np.array_equal(x[k], y[k]) for k in x)
+
+
+def test_a_checkpoint_of_the_previous_trainer_resumes_and_continues_its_run_exactly(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(OLD_RUN / "run", run)
+    result = train(TrainConfig(), resume_dir=run, overrides={"epochs": 4, "out": str(tmp_path)})
+    assert result.epochs == 4 and result.env_steps == 120
+    # the old trainer's uninterrupted run to epoch 4, row for row and weight for weight
+    assert _metrics(run / "metrics.csv") == _metrics(OLD_RUN / "ref" / "metrics.csv")
+    assert _same_policy(run / "policy.safetensors", OLD_RUN / "ref" / "policy.safetensors")
+    # and the new trainer, started afresh, makes that same run
+    fresh = train(tiny(tmp_path, "fresh", epochs=4, checkpoint_every=2))
+    assert _metrics(fresh.run_dir / "metrics.csv") == _metrics(OLD_RUN / "ref" / "metrics.csv")
+    assert _same_policy(fresh.run_dir / "policy.safetensors", OLD_RUN / "ref" / "policy.safetensors")
+
+
+def test_the_torch_replay_buffer_samples_what_the_numpy_one_does() -> None:
+    rng = np.random.default_rng(0)
+    data = {"obs": rng.normal(size=(7, 3)), "act": rng.normal(size=(7, 2)), "rew": rng.normal(size=7),
+            "next_obs": rng.normal(size=(7, 3)), "done": rng.integers(0, 2, 7).astype(float)}
+    host, device = ReplayBuffer(5, 3, 2), TorchReplayBuffer(5, 3, 2, "cpu")
+    host.add_batch(**data)
+    device.add_batch(**{k: torch.as_tensor(v) for k, v in data.items()})
+    assert len(device) == len(host) == 5 and device.pos == host.pos == 2
+    assert isinstance(device.obs, torch.Tensor) and device.obs.device == torch.device("cpu")
+    a, b = host.sample(4, np.random.default_rng(1)), device.sample(4, np.random.default_rng(1))
+    assert all(isinstance(b[k], torch.Tensor) and np.array_equal(a[k], b[k].numpy()) for k in a)
+    state = device.state_dict()
+    assert all(np.array_equal(state[k], v) for k, v in host.state_dict().items())
+    again = TorchReplayBuffer(5, 3, 2, "cpu")
+    again.load_state_dict(host.state_dict())
+    assert np.array_equal(again.sample(4, np.random.default_rng(2))["obs"].numpy(),
+                          host.sample(4, np.random.default_rng(2))["obs"])
+
+
+def test_warp_refuses_what_it_cannot_play_naming_the_option(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="TrainConfig.device='cuda' needs backend='warp'"):
+        tiny(tmp_path, device="cuda")
+    with pytest.raises(ValueError, match="TrainConfig.self_play runs on backend='cpu'"):
+        tiny(tmp_path, backend="warp", self_play=True, learn=("bug=sac",))
+    pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
+    with pytest.raises(ValueError, match=r"TrainConfig.backend='warp' \(scenario 'ffa'.*rules='elimination'"):
+        Trainer(tiny(tmp_path, backend="warp", device="cpu", scenario="ffa", learn=("ant=sac",),
+                     policies=("*=random",)))
+    assert not (tmp_path / "run").exists()  # refused before anything was made
+
+
+@pytest.fixture(scope="module")
+def warp_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Trainer]:
+    """A tiny DDPG run (random Spider: host policy) and a tiny PPO run (the zoo's Ant and Spider, acting on
+    the device) on Warp's CPU device (3 matches, 20-step epochs, 16-unit networks)."""
+    pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
+    out = tmp_path_factory.mktemp("warp-train")
+    runs = {}
+    for name, fields in (("ddpg", {}), ("ppo", {"learn": ("bug=ppo",), "policies": ("ant=zoo:ant", "spider=zoo:spider"),
+                                                 "ppo": PPOConfig(hidden=(16, 16), n_steps=10, n_minibatches=2,
+                                                                  n_epochs=2)})):
+        cfg = tiny(out, name, backend="warp", device="cpu", n_envs=3, steps_per_epoch=20, epochs=6,
+                   checkpoint_every=3, **fields)
+        trainer = Trainer(cfg)
+        trainer.run()
+        runs[name] = trainer
+    return runs
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "ppo"])
+def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
+        warp_runs: dict[str, Trainer], algo: str) -> None:
+    trainer = warp_runs[algo]
+    run = trainer.run_dir
+    assert isinstance(trainer.obs, torch.Tensor) and trainer.obs.device == torch.device("cpu")
+    for name in ("config.json", "metrics.csv", "learning.csv", "policy.json", "policy.safetensors"):
+        assert (run / name).is_file(), name
+    rows = list(csv.DictReader((run / "metrics.csv").open()))
+    assert trainer.epochs_done >= 6 and len(rows) == trainer.epochs_done
+    assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
+    assert {r["outcome"] for r in rows} <= set(OUTCOME_CODES) - {"error"}
+    for r in rows:  # the game's rules: a match lasts at most 20 steps, a draw only at the limit,
+        steps = int(r["steps"])  # and the outcome's sparse reward is the configured one
+        assert 1 <= steps <= 20 and (r["outcome"] != "draw" or steps == 20)
+        expected = {"win": trainer.cfg.reward.win, "loss": trainer.cfg.reward.loss, "draw": trainer.cfg.reward.draw}
+        assert float(r["sparse_reward"]) == pytest.approx(expected[r["outcome"]])
+        assert float(r["total_reward"]) == pytest.approx(float(r["dense_reward"]) + float(r["sparse_reward"]))
+    assert trainer.env_steps == int(rows[-1]["env_steps"]) and trainer.env_steps % 3 == 0
+    learner = trainer.learners[0]
+    assert trainer.updates > 0 and learner.algo.device == torch.device("cpu")
+    if algo == "ddpg":
+        replay = learner.replay  # type: ignore[attr-defined]
+        assert isinstance(replay, TorchReplayBuffer) and isinstance(replay.obs, torch.Tensor)
+        assert len(replay) == trainer.env_steps  # every Bug step was stored (no physics errors)
+    else:
+        assert all(v.device == torch.device("cpu") for v in learner.algo.rollout.values())  # type: ignore[attr-defined]
+
+
+def test_a_warp_run_resumes_restarting_its_unfinished_matches(warp_runs: dict[str, Trainer]) -> None:
+    trainer = warp_runs["ddpg"]
+    before = trainer.epochs_done
+    result = train(trainer.cfg, resume_dir=trainer.run_dir, overrides={"epochs": before + 3})
+    rows = list(csv.DictReader((trainer.run_dir / "metrics.csv").open()))
+    assert result.epochs >= before + 3 and len(rows) == result.epochs
+    assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
+    assert all(int(r["steps"]) <= 20 for r in rows)
+
+
+def test_bench_train_measures_the_warp_trainer_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
+    from triplesumo.benchmarks.train import main
+
+    path = tmp_path / "b.json"
+    assert main(["--backend", "warp", "--device", "cpu", "--quick", "--json", str(path)]) == 0
+    result = json.loads(path.read_text())
+    printed = capsys.readouterr().out
+    assert result["setup"]["backend"] == "warp" and result["setup"]["device"] == "cpu"
+    assert set(result["rates"]) == {"env_only", "train_ddpg", "train_ppo"}
+    assert all(math.isfinite(r) and r > 0 for r in result["rates"].values())
+    assert result["updates_per_s"]["env_only"] == 0 and result["updates_per_s"]["train_ddpg"] > 0
+    assert result["updates_per_s"]["train_ppo"] > 0
+    assert "not a speed figure" in printed
+
+
+def test_a_frozen_policy_on_the_device_acts_as_on_the_host() -> None:
+    from triplesumo.agents.frozen import FrozenPolicy
+
+    rng = np.random.default_rng(0)
+    policy = FrozenPolicy([rng.normal(size=(16, 6)), rng.normal(size=(4, 16))], [rng.normal(size=16),
+                          rng.normal(size=4)], obs_mean=rng.normal(size=6), obs_var=rng.uniform(0.5, 2, 6))
+    obs = rng.normal(size=(32, 6)).astype(np.float32)
+    on_device = policy.on_device(torch.device("cpu"))(torch.as_tensor(obs))
+    assert on_device.dtype == torch.float32 and on_device.shape == (32, 4)
+    np.testing.assert_allclose(on_device.numpy(), policy(obs), rtol=0, atol=1e-6)
+
+
+def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
+        warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
+    cpu = Trainer(tiny(tmp_path, "cpu", n_envs=3))
+    warp = Trainer(tiny(tmp_path, "warp", n_envs=3, backend="warp", device="cpu"))
+    try:
+        assert isinstance(cpu.obs, np.ndarray) and isinstance(warp.obs, torch.Tensor)
+        np.testing.assert_allclose(warp.obs.numpy(), cpu.obs, rtol=0, atol=1e-4)  # float32 physics on Warp
+        assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state  # the same seeds were drawn
+    finally:
+        for trainer in (cpu, warp):
+            trainer.log.close()
+            trainer.env.close()
