@@ -124,6 +124,23 @@ def bad_state(xp: Any, *arrays: Any) -> Any:
 
 
 # ------------------------------------------------------------------ rewards
+def ordered_sum(values: Any, axis: int) -> Any:
+    """Sum over ``axis`` (a small one: the roster) index by index, ``((v_0 + v_1) + v_2) + ...``.
+
+    The association of :class:`~triplesumo.rules.rewards.RewardRule`'s Python loops, so that
+    masked sums (zeros where an agent is not an opponent or partner; adding an exact zero
+    changes nothing) give its results bit for bit, where ``sum`` or ``@`` may pair the terms
+    in another order.
+    """
+    def at(j: int) -> tuple[Any, ...]:
+        return (*(slice(None),) * axis, j) if axis >= 0 else (..., j, *(slice(None),) * (-axis - 1))
+
+    total = values[at(0)]
+    for j in range(1, values.shape[axis]):
+        total = total + values[at(j)]
+    return total
+
+
 def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRules, xp: Any) -> dict[str, Any]:
     """Every reward term of :data:`~triplesumo.rules.rewards.TERMS` as ``(E, n)`` arrays, plus
     ``dense_reward``, ``sparse_reward`` and ``reward`` (= dense + sparse, summed in that order,
@@ -131,18 +148,21 @@ def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRu
 
     ``pos``, ``vel``: ``(E, n, >=2)`` torso positions and world-frame velocities after the
     step; ``code``: :func:`judge`'s codes; ``timed_out``: ``(E,)`` the step limit is reached.
+    In float64 the results equal :meth:`RewardRule.rows` bit for bit (the same operations
+    in the same order: :func:`ordered_sum`).
     """
     c1, c2, c3, still = rules.weights
     delta = pos[:, None, :, :2] - pos[:, :, None, :2]  # (E, a, o, 2): from a to o
     s = xp.sign(delta)
-    toward = (s * vel[:, :, None, :2]).sum(-1)  # (E, a, o): a moving toward o
-    away = (s * vel[:, None, :, :2]).sum(-1)  # (E, a, o): o moving away from a
+    v_a, v_o = vel[:, :, None, :2], vel[:, None, :, :2]
+    toward = s[..., 0] * v_a[..., 0] + s[..., 1] * v_a[..., 1]  # (E, a, o): a moving toward o
+    away = s[..., 0] * v_o[..., 0] + s[..., 1] * v_o[..., 1]  # (E, a, o): o moving away from a
     opp = rules.opponents
-    opponent = c1 * ((away * opp).sum(-1) / rules.n_opponents)
-    self_ = c2 * ((toward * opp).sum(-1) / rules.n_opponents)
+    opponent = c1 * (ordered_sum(away * opp, -1) / rules.n_opponents)
+    self_ = c2 * (ordered_sum(toward * opp, -1) / rules.n_opponents)
     # [e, j, i] = sum over the opponents o of i of toward[e, j, o], over i's opponents' count
-    per_partner = (toward @ opp.T) / rules.n_opponents
-    partner = c3 * ((per_partner * rules.partners.T).sum(1) / rules.n_partners)
+    per_partner = ordered_sum(toward[:, :, None, :] * opp, -1) / rules.n_opponents
+    partner = c3 * (ordered_sum(per_partner * rules.partners.T, 1) / rules.n_partners)
     win, loss, draw = rules.outcome_values
     sparse = xp.where(code == WIN_CODE, win, 0.0) + xp.where(code == LOSS_CODE, loss, 0.0)
     sparse = sparse + xp.where((code == DRAW_CODE) | (timed_out[:, None] & (code == GOES_ON)), draw, 0.0)
@@ -150,6 +170,13 @@ def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRu
     dense = opponent + self_ + partner + still_term
     terms = dict(zip(TERMS, (opponent, self_, partner, still_term, sparse), strict=True))
     return {**terms, "dense_reward": dense, "sparse_reward": sparse, "reward": dense + sparse}
+
+
+def first_out_places(code: Any, xp: Any) -> Any:
+    """``(E, n)`` place of every agent under ``first_out`` from :func:`judge`'s codes (a time-out
+    already a draw): 1 for a win or draw, 2 for a loss, 0 while the match goes on
+    (:func:`triplesumo.rules.outcome.first_out_places`)."""
+    return xp.where(code == LOSS_CODE, 2, xp.where(code == GOES_ON, 0, 1))
 
 
 # ------------------------------------------------------------- observations
