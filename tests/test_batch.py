@@ -193,8 +193,9 @@ ARRAY_CONFIGS = {
 }
 
 
+@pytest.mark.parametrize("backend", ["mujoco", "threads"])
 @pytest.mark.parametrize("config", ARRAY_CONFIGS.values(), ids=list(ARRAY_CONFIGS))
-def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig) -> None:
+def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig, backend: str) -> None:
     """The matches judged together (first-out rules) or one by one (elimination) give Match's results."""
     alone = [Match(config) for _ in range(N_MATCHES)]
     for match, s in zip(alone, match_seeds(11, N_MATCHES), strict=True):
@@ -202,7 +203,7 @@ def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig) -> 
     n, width = alone[0].n_agents, alone[0].action_width
     actions = np.random.default_rng(4).uniform(-1.3, 1.3, (N_STEPS, N_MATCHES, n, width))
     ends = 0
-    with MatchBatch(config, N_MATCHES, 2) as batch:
+    with MatchBatch(config, N_MATCHES, 2, backend=backend) as batch:
         batch.reset_all(11)
         for t in range(N_STEPS):
             got = batch.step_arrays(actions[t])
@@ -226,8 +227,9 @@ def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig) -> 
     assert ends >= N_MATCHES
 
 
-def test_step_arrays_with_a_physics_error_and_bad_actions() -> None:
-    with MatchBatch(None, N_MATCHES, 2) as batch:
+@pytest.mark.parametrize("backend", ["mujoco", "threads"])
+def test_step_arrays_with_a_physics_error_and_bad_actions(backend: str) -> None:
+    with MatchBatch(None, N_MATCHES, 2, backend=backend) as batch:
         batch.reset_all(0)
         actions = np.zeros((N_MATCHES, 3, 8))
         actions[1, 2, 0] = np.inf
@@ -247,7 +249,7 @@ def test_step_arrays_with_a_physics_error_and_bad_actions() -> None:
             batch.step_arrays(np.zeros((N_MATCHES, 3, 8)))
         batch.reset_one(2)
         assert batch.step_arrays(np.zeros((N_MATCHES, 3, 8))).infos["step"].tolist() == [2, 2, 1]
-    with MatchBatch(MatchConfig(on_physics_error="raise"), N_MATCHES, 2) as batch:
+    with MatchBatch(MatchConfig(on_physics_error="raise"), N_MATCHES, 2, backend=backend) as batch:
         batch.reset_all(0)
         batch.matches[1].data.qvel[:] = 1e12
         batch.reload(1)

@@ -43,6 +43,23 @@ steps with the rules (``triplesumo bench env``): ``mujoco`` 2 threads about 1.5-
 Finished matches are not reset here: after a step in which ``results[k]`` is terminated
 or truncated, call :meth:`reset_one` for ``k`` before the next :meth:`step`.
 
+:meth:`MatchBatch.step_arrays` is the same step with its results as arrays over the
+matches (:class:`BatchStep`), the path of :class:`VectorMatches`. Under ``first_out`` rules
+with the ``mujoco`` backend it judges the matches together, with the rules written once
+over arrays for this backend and MuJoCo Warp (:mod:`triplesumo.rules.batched`): controls
+of all actions in one array operation, qpos, qvel and warning counters read from the
+batch's rows, outcome, rewards, places, infos and ``paper`` observations computed over
+``(n_matches, n_agents, ...)`` arrays. What is left per match is the ``MjData`` copy, its
+``mj_rnePostConstraint`` for the contact forces (and under ``egocentric`` observations the
+match's own :class:`~triplesumo.rules.observations.ObservationBuilder`) and a few attribute
+updates. Results are bit for bit those of :meth:`step` (``tests/test_batch.py``): the
+batched reward sums run in :class:`~triplesumo.rules.rewards.RewardRule`'s order. A match
+with a new MuJoCo warning or a non-finite state is finished by :meth:`Match.finish_step`
+(its physics error); elimination rules, whose judgement carries per-match state, and the
+``threads`` backend take :meth:`step` and gather its results. ``triplesumo bench env``
+measures ``vector_env`` against raw ``mujoco.batch`` physics of the same matches
+(``docs/bench/env_vector_cpu.txt``).
+
 :class:`VectorMatches` (made by ``triplesumo.vector_env``) is the public face of a
 MatchBatch: arrays ``(num_envs, n_agents, ...)`` in and out, Gymnasium-style autoreset,
 seeds that depend only on ``(seed, k)``.
@@ -120,7 +137,7 @@ class MatchBatch:
             self._pool = ThreadPoolExecutor(n_threads, thread_name_prefix="MatchBatch")
             self._blocks = [b for b in np.array_split(np.arange(n_matches), n_threads) if len(b)]
         self._rules = rules_batched.BatchedRules.build(self.config, first.half_size)
-        self._judged_together = backend == "mujoco" and self.config.rules == "first_out"
+        self._judged_together = self.config.rules == "first_out"
         """:meth:`step_arrays` judges the matches together with :mod:`triplesumo.rules.batched`
         (elimination rules keep per-match state: they are judged match by match)."""
         sim = first.sim
@@ -130,10 +147,14 @@ class MatchBatch:
         """Contact forces of the step's ``paper`` observations (egocentric: each match builds its own)."""
         # Simulation.contact_forces over the matches: each match's cfrc_ext rows after
         # mj_rnePostConstraint, minus the xfrc_applied rows of every match at once (batch state).
-        body_rows = sim.body_force_rows
-        together = paper and body_rows is not None and self._batch is not None
-        self._cfrc = [m.sim.data.cfrc_ext[body_rows, 3:] if together else None for m in self.matches]
-        self._xfrc = self._batch.bind("xfrc_applied")[:, body_rows, :3] if together and self._batch else None
+        rows = sim.body_force_rows
+        self._body_forces = [(m.data.cfrc_ext[rows, 3:], m.data.xfrc_applied[rows, :3]) if paper and rows else None
+                             for m in self.matches]
+        """Per match: the views ``Simulation.contact_forces`` subtracts (``None``: call it)."""
+        if self._batch is None:  # the threads backend: each match's state gathered into rows after its step
+            self._qpos, self._qvel = np.empty((n_matches, first.model.nq)), np.empty((n_matches, first.model.nv))
+            self._warnings_now = np.zeros((n_matches, *first.data.warning.number.shape), np.int32)
+            self._warnings_seen = self._warnings_now.copy()
         self._pad = first.sim.action_mask
         self._ctrl_mid = (sim.ctrl_high + sim.ctrl_low) / 2.0
         self._ctrl_half = (sim.ctrl_high - sim.ctrl_low) / 2.0
@@ -164,6 +185,8 @@ class MatchBatch:
             match = self.matches[k]
             mujoco.mj_getState(match.model, match.data, self._batch.state[k], _INTEGRATION)
             self._warnings_seen[k] = self._batch.warning[k]
+        else:
+            self._warnings_seen[k] = self.matches[k].data.warning.number
 
     @property
     def over(self) -> np.ndarray:
@@ -221,11 +244,38 @@ class MatchBatch:
             return _gather(self.step(actions), self.n_agents)
         self._check_open()
         ctrl = self._controls(actions)
-        assert self._batch is not None
-        flat = ctrl.reshape(self.n_matches, -1)
-        self._ctrl[:, self._actuators] = flat if self._motor_columns is None else flat[:, self._motor_columns]
-        self._batch.step(nstep=self._frame_skip)
-        return self._judge_together()
+        if self._batch is not None:
+            flat = ctrl.reshape(self.n_matches, -1)
+            self._ctrl[:, self._actuators] = flat if self._motor_columns is None else flat[:, self._motor_columns]
+            self._batch.step(nstep=self._frame_skip)
+            return self._judge_together(self._batch.warning)
+        if self._pool is None:
+            self._physics_block(range(self.n_matches), ctrl)
+        else:
+            for _ in self._pool.map(self._physics_block, self._blocks, [ctrl] * len(self._blocks)):
+                pass
+        return self._judge_together(self._warnings_now)
+
+    def _physics_block(self, block: Any, ctrl: np.ndarray) -> None:
+        """The ``threads`` backend: step a block of matches on their own ``MjData`` (one thread of
+        the pool), then copy each one's state into the rows :meth:`_judge_together` reads, and
+        compute the contact forces of ``paper`` observations (``mj_rnePostConstraint`` releases
+        the GIL too)."""
+        for k in block:
+            sim = self.matches[k].sim
+            sim.step(ctrl[k])
+            data = sim.data
+            self._qpos[k], self._qvel[k], self._warnings_now[k] = data.qpos, data.qvel, data.warning.number
+            if sim.step_failed:
+                self._warnings_now[k] = -1  # a new "warning": the match is judged alone (its arena_overflow)
+            views = self._body_forces[k]
+            if self._forces is None:
+                continue
+            if views is not None:  # Simulation.contact_forces, without its method calls
+                mujoco.mj_rnePostConstraint(sim.model, data)
+                np.subtract(views[0], views[1], out=self._forces[k])
+            else:
+                self._forces[k] = sim.contact_forces()
 
     def _controls(self, actions: np.ndarray) -> np.ndarray:
         """:meth:`Match.prepare` of every match at once (first-out rules: every agent in play)."""
@@ -245,11 +295,10 @@ class MatchBatch:
                 raise ValueError(f"match {k}: action of {self.agents[i]!r} contains NaN or inf")
         return scale_actions(actions, self._ctrl_half, self._ctrl_mid)
 
-    def _judge_together(self) -> BatchStep:
+    def _judge_together(self, warnings: np.ndarray) -> BatchStep:
         """The second half of :meth:`step_arrays`: every match's step judged over arrays."""
-        assert self._batch is not None
         n, a = self.n_matches, self.n_agents
-        qpos, qvel, warnings = self._qpos, self._qvel, self._batch.warning
+        qpos, qvel = self._qpos, self._qvel
         trouble = np.zeros(n, bool)
         if not np.array_equal(warnings, self._warnings_seen):  # rare: find the matches with new warnings
             trouble = (warnings != self._warnings_seen).reshape(n, -1).any(axis=1)
@@ -260,23 +309,25 @@ class MatchBatch:
         own_obs: list[Any] = [None] * n
         """Observations built by each match itself (egocentric); the results of troubled matches."""
         steps = np.empty(n, np.int64)
-        get_data, post_constraint = self._batch.get_data, mujoco.mj_rnePostConstraint
-        for k, (match, bad, cfrc) in enumerate(zip(self.matches, trouble.tolist(), self._cfrc, strict=True)):
-            get_data(k, match.data)
+        get_data = None if self._batch is None else self._batch.get_data
+        post_constraint = mujoco.mj_rnePostConstraint
+        for k, (match, bad, views) in enumerate(zip(self.matches, trouble.tolist(), self._body_forces, strict=True)):
+            if get_data is not None:
+                get_data(k, match.data)
             if bad:
                 own_obs[k] = _finish(match)
             else:
                 match.steps += 1
-                if forces is not None and cfrc is not None:  # Simulation.contact_forces; xfrc_applied below
-                    post_constraint(match.model, match.data)
-                    forces[k] = cfrc
-                elif forces is not None:
-                    forces[k] = match.sim.contact_forces()
-                else:
+                if forces is None:
                     own_obs[k] = match.observer.build()
+                elif get_data is None:
+                    pass  # contact forces computed by _physics_block
+                elif views is not None:  # Simulation.contact_forces, without its method calls
+                    post_constraint(match.model, match.data)
+                    np.subtract(views[0], views[1], out=forces[k])
+                else:
+                    forces[k] = match.sim.contact_forces()
             steps[k] = match.steps
-        if self._xfrc is not None:
-            forces -= self._xfrc
         rules, xp = self._rules, np
         with np.errstate(all="ignore") if trouble.any() else nullcontext():  # troubled rows are replaced below
             pos, vel = qpos[:, self._torso_qpos], qvel[:, self._torso_qvel]
@@ -428,9 +479,16 @@ VECTOR_BACKENDS = ("cpu", "warp")
 class VectorMatches:
     """Many matches as arrays: TripleSumo's public batched API on the CPU (:func:`vector_env`).
 
-    It grows :class:`MatchBatch` (``mujoco.batch`` threaded physics, bit for bit the
-    trajectories of single matches) into the batched contract that the ``warp`` backend
-    shares: arrays in, arrays out, autoreset.
+    It grows :class:`MatchBatch` (threaded physics, bit for bit the trajectories of single
+    matches) into the batched contract that the ``warp`` backend shares: arrays in, arrays
+    out, autoreset. Each step is :meth:`MatchBatch.step_arrays` on the ``threads`` backend:
+    each thread steps its block of matches on their own ``MjData`` (``mj_step`` and
+    ``mj_rnePostConstraint`` release the GIL) and copies their states into rows, then the
+    rules judge all matches over arrays. The ``mujoco`` backend (``mujoco.batch``) would
+    have to copy every match's whole ``MjData`` out of the batch after each step for its
+    contact forces, which doubles the memory the physics runs through: measured on the
+    2-core box, 0.84-0.90 x raw ``mujoco.batch`` physics of the same matches against
+    0.94-0.97 x on threads (``docs/bench/env_vector_cpu.md``).
 
     Shapes (``N = num_envs``, ``A = n_agents``): observations ``(N, A, obs_dim)`` float32;
     actions ``(N, A, act_dim)`` in [-1, 1], scaled to each agent's control range as
@@ -459,7 +517,7 @@ class VectorMatches:
             usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
             num_threads = max(1, min(num_envs, usable))
         try:
-            self.batch = MatchBatch(config, num_envs, num_threads or 1)
+            self.batch = MatchBatch(config, num_envs, num_threads or 1, backend="threads")
         except ValueError as err:
             raise ValueError(str(err).replace("n_matches", "num_envs").replace("n_threads", "num_threads")) from None
         first = self.batch.matches[0]

@@ -164,6 +164,11 @@ class Simulation:
         except mujoco.FatalError as exc:  # e.g. the arena stack overflows: reported by new_warnings()
             self._fatal = str(exc)
 
+    @property
+    def step_failed(self) -> bool:
+        """``mj_step`` raised a MuJoCo fatal error since the last :meth:`new_warnings` (which reports it)."""
+        return bool(self._fatal)
+
     def torso_positions(self) -> np.ndarray:
         """``(n_agents, 3)`` torso centres from the free joints' qpos (current after a step)."""
         return self.data.qpos[self.torso_qpos]
