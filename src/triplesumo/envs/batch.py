@@ -251,9 +251,11 @@ class MatchBatch:
             return self._judge_together(self._batch.warning)
         if self._pool is None:
             self._physics_block(range(self.n_matches), ctrl)
-        else:
-            for _ in self._pool.map(self._physics_block, self._blocks, [ctrl] * len(self._blocks)):
-                pass
+        else:  # the calling thread steps the first block, as mujoco.batch's caller does
+            others = [self._pool.submit(self._physics_block, block, ctrl) for block in self._blocks[1:]]
+            self._physics_block(self._blocks[0], ctrl)
+            for future in others:
+                future.result()
         return self._judge_together(self._warnings_now)
 
     def _physics_block(self, block: Any, ctrl: np.ndarray) -> None:
