@@ -45,20 +45,21 @@ or truncated, call :meth:`reset_one` for ``k`` before the next :meth:`step`.
 
 :meth:`MatchBatch.step_arrays` is the same step with its results as arrays over the
 matches (:class:`BatchStep`), the path of :class:`VectorMatches`. Under ``first_out`` rules
-with the ``mujoco`` backend it judges the matches together, with the rules written once
-over arrays for this backend and MuJoCo Warp (:mod:`triplesumo.rules.batched`): controls
-of all actions in one array operation, qpos, qvel and warning counters read from the
-batch's rows, outcome, rewards, places, infos and ``paper`` observations computed over
-``(n_matches, n_agents, ...)`` arrays. What is left per match is the ``MjData`` copy, its
-``mj_rnePostConstraint`` for the contact forces (and under ``egocentric`` observations the
-match's own :class:`~triplesumo.rules.observations.ObservationBuilder`) and a few attribute
-updates. Results are bit for bit those of :meth:`step` (``tests/test_batch.py``): the
-batched reward sums run in :class:`~triplesumo.rules.rewards.RewardRule`'s order. A match
-with a new MuJoCo warning or a non-finite state is finished by :meth:`Match.finish_step`
-(its physics error); elimination rules, whose judgement carries per-match state, and the
-``threads`` backend take :meth:`step` and gather its results. ``triplesumo bench env``
-measures ``vector_env`` against raw ``mujoco.batch`` physics of the same matches
-(``docs/bench/env_vector_cpu.txt``).
+it judges the matches together, with the rules written once over arrays for this backend
+and MuJoCo Warp (:mod:`triplesumo.rules.batched`): controls of all actions in one array
+operation; qpos, qvel and warning counters in ``(n_matches, ...)`` rows (the batch's own
+rows with ``mujoco``; with ``threads`` each thread copies its matches' states into them
+after their physics, and computes their contact forces); outcome, rewards, places, infos
+and ``paper`` observations over ``(n_matches, n_agents, ...)`` arrays. Per match there
+remain a few attribute updates, with ``mujoco`` the copy of its ``MjData`` out of the batch
+and its ``mj_rnePostConstraint``, and under ``egocentric`` observations the match's own
+:class:`~triplesumo.rules.observations.ObservationBuilder`. Results are bit for bit those
+of :meth:`step` (``tests/test_batch.py``): the batched reward sums run in
+:class:`~triplesumo.rules.rewards.RewardRule`'s order. A match with a new MuJoCo warning, a
+failed ``mj_step`` or a non-finite state is finished by :meth:`Match.finish_step` (its
+physics error); elimination rules, whose judgement carries per-match state, take
+:meth:`step` and gather its results. ``triplesumo bench env`` measures ``vector_env``
+against raw ``mujoco.batch`` physics of the same matches (``docs/bench/env_vector_cpu.md``).
 
 :class:`VectorMatches` (made by ``triplesumo.vector_env``) is the public face of a
 MatchBatch: arrays ``(num_envs, n_agents, ...)`` in and out, Gymnasium-style autoreset,
@@ -231,14 +232,13 @@ class MatchBatch:
     def step_arrays(self, actions: np.ndarray) -> BatchStep:
         """:meth:`step` with its results as arrays over the matches (:class:`BatchStep`), bit for bit.
 
-        With the ``mujoco`` backend and ``first_out`` rules the matches are judged together:
-        controls from all actions at once, the states read from the batch's rows, warnings
-        compared in one array, outcome, rewards and places by :mod:`triplesumo.rules.batched`,
-        ``paper`` observations stacked over the matches; per match there remains only the
-        copy of its ``MjData`` (for the contact forces) and its bookkeeping. A match with a
-        new MuJoCo warning or a non-finite state takes :meth:`Match.finish_step` (its physics
-        error). Otherwise (elimination rules, ``threads`` backend) it is :meth:`step`,
-        gathered into arrays. Every agent's observation must have one size.
+        Under ``first_out`` rules the matches are judged together (see the module docstring):
+        controls from all actions at once, states and warnings read from ``(n_matches, ...)``
+        rows, outcome, rewards and places by :mod:`triplesumo.rules.batched`, ``paper``
+        observations stacked over the matches. A match with a new MuJoCo warning, a failed
+        ``mj_step`` or a non-finite state takes :meth:`Match.finish_step` (its physics error).
+        Under elimination rules it is :meth:`step`, gathered into arrays. Every agent's
+        observation must have one size.
         """
         if not self._judged_together:
             return _gather(self.step(actions), self.n_agents)
@@ -489,7 +489,7 @@ class VectorMatches:
     rules judge all matches over arrays. The ``mujoco`` backend (``mujoco.batch``) would
     have to copy every match's whole ``MjData`` out of the batch after each step for its
     contact forces, which doubles the memory the physics runs through: measured on the
-    2-core box, 0.84-0.90 x raw ``mujoco.batch`` physics of the same matches against
+    2-core box, 0.84-0.91 x raw ``mujoco.batch`` physics of the same matches against
     0.94-0.97 x on threads (``docs/bench/env_vector_cpu.md``).
 
     Shapes (``N = num_envs``, ``A = n_agents``): observations ``(N, A, obs_dim)`` float32;
