@@ -146,11 +146,11 @@ class MatchBatch:
         paper = self.config.obs_mode == "paper"
         self._forces = np.empty((n_matches, len(sim.agent_geoms), 3)) if paper else None
         """Contact forces of the step's ``paper`` observations (egocentric: each match builds its own)."""
-        # Simulation.contact_forces over the matches: each match's cfrc_ext rows after
-        # mj_rnePostConstraint, minus the xfrc_applied rows of every match at once (batch state).
+        # Simulation.contact_forces without its method calls: each match's cfrc_ext rows after
+        # mj_rnePostConstraint, minus its xfrc_applied rows.
         rows = sim.body_force_rows
-        self._body_forces = [(m.data.cfrc_ext[rows, 3:], m.data.xfrc_applied[rows, :3]) if paper and rows else None
-                             for m in self.matches]
+        self._body_forces = [(m.data.cfrc_ext[rows, 3:], m.data.xfrc_applied[rows, :3])
+                             if paper and rows is not None else None for m in self.matches]
         """Per match: the views ``Simulation.contact_forces`` subtracts (``None``: call it)."""
         if self._batch is None:  # the threads backend: each match's state gathered into rows after its step
             self._qpos, self._qvel = np.empty((n_matches, first.model.nq)), np.empty((n_matches, first.model.nv))
