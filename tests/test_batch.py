@@ -9,6 +9,7 @@ import pytest
 
 from triplesumo.envs.batch import MatchBatch, match_seeds
 from triplesumo.envs.match import Match
+from triplesumo.model import BODIES_AGENTS, AgentSpec
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.sim.physics import PhysicsError
@@ -178,3 +179,80 @@ def test_bad_arguments_and_closed_batch() -> None:
     batch.close()
     with pytest.raises(RuntimeError, match="closed"):
         batch.reset_all(0)
+
+
+# --------------------------------------------------------------- step_arrays
+ARRAY_CONFIGS = {
+    "paper": SHORT,
+    "egocentric": MatchConfig(max_steps=20, obs_mode="egocentric"),
+    "bodies": MatchConfig(max_steps=20, agents=BODIES_AGENTS),  # padded action columns
+    "2-vs-2": MatchConfig(max_steps=20, agents=(AgentSpec("a", "x", 0.2), AgentSpec("b", "x", 0.2),
+                                                AgentSpec("c", "y", 0.2), AgentSpec("d", "y", 0.2))),
+    "ffa": MatchConfig(max_steps=20, rules="elimination", agents=(AgentSpec("a", "a", 0.2), AgentSpec("b", "b", 0.2),
+                                                                   AgentSpec("c", "c", 0.2))),
+}
+
+
+@pytest.mark.parametrize("backend", ["mujoco", "threads"])
+@pytest.mark.parametrize("config", ARRAY_CONFIGS.values(), ids=list(ARRAY_CONFIGS))
+def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig, backend: str) -> None:
+    """The matches judged together (first-out rules) or one by one (elimination) give Match's results."""
+    alone = [Match(config) for _ in range(N_MATCHES)]
+    for match, s in zip(alone, match_seeds(11, N_MATCHES), strict=True):
+        match.reset(s)
+    n, width = alone[0].n_agents, alone[0].action_width
+    actions = np.random.default_rng(4).uniform(-1.3, 1.3, (N_STEPS, N_MATCHES, n, width))
+    ends = 0
+    with MatchBatch(config, N_MATCHES, 2, backend=backend) as batch:
+        batch.reset_all(11)
+        for t in range(N_STEPS):
+            got = batch.step_arrays(actions[t])
+            for k, match in enumerate(alone):
+                r = match.step_array(actions[t, k])
+                where = f"step {t}, match {k}"
+                assert np.array_equal(got.observations[k], np.stack(r.observations)), where
+                assert got.observations.dtype == np.float32
+                assert np.array_equal(got.rewards[k], r.rewards), where
+                assert (got.terminated[k], got.truncated[k]) == (r.terminated, r.truncated), where
+                assert got.leaving[k].tolist() == (r.eliminated or [False] * n), where
+                for key, value in got.infos.items():
+                    column = [info[key] for info in r.infos]
+                    assert np.array_equal(value[k], column[0] if key == "step" else column), (where, key)
+                assert np.array_equal(batch.matches[k].data.qpos, match.data.qpos), where
+                assert batch.matches[k].over == match.over and batch.matches[k].steps == match.steps, where
+                if match.over:
+                    match.reset()
+                    batch.reset_one(k)
+                    ends += 1
+    assert ends >= N_MATCHES
+
+
+@pytest.mark.parametrize("backend", ["mujoco", "threads"])
+def test_step_arrays_with_a_physics_error_and_bad_actions(backend: str) -> None:
+    with MatchBatch(None, N_MATCHES, 2, backend=backend) as batch:
+        batch.reset_all(0)
+        actions = np.zeros((N_MATCHES, 3, 8))
+        actions[1, 2, 0] = np.inf
+        with pytest.raises(ValueError, match=r"match 1: action of 'spider' contains NaN or inf"):
+            batch.step_arrays(actions)
+        with pytest.raises(ValueError, match=r"actions must have shape \(3, 3, 8\)"):
+            batch.step_arrays(np.zeros((N_MATCHES, 3, 7)))
+        batch.matches[2].data.qvel[:] = 1e12  # MuJoCo's bad-qvel warning and auto-reset
+        batch.reload(2)
+        got = batch.step_arrays(np.zeros((N_MATCHES, 3, 8)))
+        assert got.truncated.tolist() == [False, False, True] and not got.terminated.any()
+        assert got.infos["outcome"].tolist() == [[0] * 3, [0] * 3, [OUTCOME_CODES["error"]] * 3]
+        assert (got.rewards[2] == 0).all() and np.isfinite(got.observations).all()
+        assert "bad_qvel" in (batch.matches[2].physics_error or "")
+        assert got.infos["step"].tolist() == [1, 1, 1]
+        with pytest.raises(RuntimeError, match=r"matches \[2\] are over"):
+            batch.step_arrays(np.zeros((N_MATCHES, 3, 8)))
+        batch.reset_one(2)
+        assert batch.step_arrays(np.zeros((N_MATCHES, 3, 8))).infos["step"].tolist() == [2, 2, 1]
+    with MatchBatch(MatchConfig(on_physics_error="raise"), N_MATCHES, 2, backend=backend) as batch:
+        batch.reset_all(0)
+        batch.matches[1].data.qvel[:] = 1e12
+        batch.reload(1)
+        with pytest.raises(PhysicsError, match="match 1: MuJoCo reported bad_qvel"):
+            batch.step_arrays(np.zeros((N_MATCHES, 3, 8)))
+        assert [m.steps for m in batch.matches] == [1, 1, 1]

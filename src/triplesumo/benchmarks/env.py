@@ -28,7 +28,8 @@ Variants, each on its own compiled model of the same :class:`MatchConfig`:
     its episode ends (ring-exit test on the torso qpos, step limit); nothing else.
 ``vector_env_<n>t``
     The public batched API, ``triplesumo.vector_env(n_matches, num_threads=n)``: arrays
-    of actions in; observations, rewards, flags, info arrays and autoreset out. Target:
+    of actions in; observations, rewards, flags, info arrays and autoreset out (its physics
+    on Python threads, each match on its own ``MjData``; the rules over arrays). Target:
     ``vector_env_<n>t_vs_raw_batch`` >= 0.9 (issue 10: the batched path costs no more
     Python per match than the single one).
 

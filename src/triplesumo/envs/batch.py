@@ -43,6 +43,24 @@ steps with the rules (``triplesumo bench env``): ``mujoco`` 2 threads about 1.5-
 Finished matches are not reset here: after a step in which ``results[k]`` is terminated
 or truncated, call :meth:`reset_one` for ``k`` before the next :meth:`step`.
 
+:meth:`MatchBatch.step_arrays` is the same step with its results as arrays over the
+matches (:class:`BatchStep`), the path of :class:`VectorMatches`. Under ``first_out`` rules
+it judges the matches together, with the rules written once over arrays for this backend
+and MuJoCo Warp (:mod:`triplesumo.rules.batched`): controls of all actions in one array
+operation; qpos, qvel and warning counters in ``(n_matches, ...)`` rows (the batch's own
+rows with ``mujoco``; with ``threads`` each thread copies its matches' states into them
+after their physics, and computes their contact forces); outcome, rewards, places, infos
+and ``paper`` observations over ``(n_matches, n_agents, ...)`` arrays. Per match there
+remain a few attribute updates, with ``mujoco`` the copy of its ``MjData`` out of the batch
+and its ``mj_rnePostConstraint``, and under ``egocentric`` observations the match's own
+:class:`~triplesumo.rules.observations.ObservationBuilder`. Results are bit for bit those
+of :meth:`step` (``tests/test_batch.py``): the batched reward sums run in
+:class:`~triplesumo.rules.rewards.RewardRule`'s order. A match with a new MuJoCo warning, a
+failed ``mj_step`` or a non-finite state is finished by :meth:`Match.finish_step` (its
+physics error); elimination rules, whose judgement carries per-match state, take
+:meth:`step` and gather its results. ``triplesumo bench env`` measures ``vector_env``
+against raw ``mujoco.batch`` physics of the same matches (``docs/bench/env_vector_cpu.md``).
+
 :class:`VectorMatches` (made by ``triplesumo.vector_env``) is the public face of a
 MatchBatch: arrays ``(num_envs, n_agents, ...)`` in and out, Gymnasium-style autoreset,
 seeds that depend only on ``(seed, k)``.
@@ -50,10 +68,13 @@ seeds that depend only on ``(seed, k)``.
 
 from __future__ import annotations
 
+import math
 import operator
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
@@ -61,7 +82,8 @@ import mujoco.batch
 import numpy as np
 from gymnasium import spaces
 
-from triplesumo.envs.match import Match, StepResult
+from triplesumo.envs.match import Match, StepResult, scale_actions
+from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import REPORTED
 from triplesumo.rules.scenarios import scenario_config
@@ -109,9 +131,34 @@ class MatchBatch:
             # Every match compiles the same config to the same model; the batch steps a copy of it.
             self._batch = mujoco.batch.Batch(first.model, n_matches, nthread=n_threads, persistent=True)
             self._ctrl = self._batch.bind("ctrl")
+            self._qpos, self._qvel = self._batch.bind("qpos"), self._batch.bind("qvel")
+            self._warnings_seen = self._batch.warning.copy()
+            """Every simulation's MuJoCo warning counters as of its last judged step."""
         elif n_threads > 1:
             self._pool = ThreadPoolExecutor(n_threads, thread_name_prefix="MatchBatch")
             self._blocks = [b for b in np.array_split(np.arange(n_matches), n_threads) if len(b)]
+        self._rules = rules_batched.BatchedRules.build(self.config, first.half_size)
+        self._judged_together = self.config.rules == "first_out"
+        """:meth:`step_arrays` judges the matches together with :mod:`triplesumo.rules.batched`
+        (elimination rules keep per-match state: they are judged match by match)."""
+        sim = first.sim
+        self._torso_qpos, self._torso_qvel = sim.torso_qpos, sim.torso_qvel
+        paper = self.config.obs_mode == "paper"
+        self._forces = np.empty((n_matches, len(sim.agent_geoms), 3)) if paper else None
+        """Contact forces of the step's ``paper`` observations (egocentric: each match builds its own)."""
+        # Simulation.contact_forces without its method calls: each match's cfrc_ext rows after
+        # mj_rnePostConstraint, minus its xfrc_applied rows.
+        rows = sim.body_force_rows
+        self._body_forces = [(m.data.cfrc_ext[rows, 3:], m.data.xfrc_applied[rows, :3])
+                             if paper and rows is not None else None for m in self.matches]
+        """Per match: the views ``Simulation.contact_forces`` subtracts (``None``: call it)."""
+        if self._batch is None:  # the threads backend: each match's state gathered into rows after its step
+            self._qpos, self._qvel = np.empty((n_matches, first.model.nq)), np.empty((n_matches, first.model.nv))
+            self._warnings_now = np.zeros((n_matches, *first.data.warning.number.shape), np.int32)
+            self._warnings_seen = self._warnings_now.copy()
+        self._pad = first.sim.action_mask
+        self._ctrl_mid = (sim.ctrl_high + sim.ctrl_low) / 2.0
+        self._ctrl_half = (sim.ctrl_high - sim.ctrl_low) / 2.0
 
     # ------------------------------------------------------------------ reset
     def reset_all(self, seed: int) -> list[tuple[list[np.ndarray], list[dict[str, Any]]]]:
@@ -138,6 +185,9 @@ class MatchBatch:
             self._batch.reset(ids=[k], stage=_NO_STAGE)
             match = self.matches[k]
             mujoco.mj_getState(match.model, match.data, self._batch.state[k], _INTEGRATION)
+            self._warnings_seen[k] = self._batch.warning[k]
+        else:
+            self._warnings_seen[k] = self.matches[k].data.warning.number
 
     @property
     def over(self) -> np.ndarray:
@@ -178,6 +228,148 @@ class MatchBatch:
             if isinstance(outcome, PhysicsError):
                 raise PhysicsError(f"match {k}: {outcome}") from outcome
         return outcomes  # type: ignore[return-value]  # no PhysicsError left
+
+    def step_arrays(self, actions: np.ndarray) -> BatchStep:
+        """:meth:`step` with its results as arrays over the matches (:class:`BatchStep`), bit for bit.
+
+        Under ``first_out`` rules the matches are judged together (see the module docstring):
+        controls from all actions at once, states and warnings read from ``(n_matches, ...)``
+        rows, outcome, rewards and places by :mod:`triplesumo.rules.batched`, ``paper``
+        observations stacked over the matches. A match with a new MuJoCo warning, a failed
+        ``mj_step`` or a non-finite state takes :meth:`Match.finish_step` (its physics error).
+        Under elimination rules it is :meth:`step`, gathered into arrays. Every agent's
+        observation must have one size.
+        """
+        if not self._judged_together:
+            return _gather(self.step(actions), self.n_agents)
+        self._check_open()
+        ctrl = self._controls(actions)
+        if self._batch is not None:
+            flat = ctrl.reshape(self.n_matches, -1)
+            self._ctrl[:, self._actuators] = flat if self._motor_columns is None else flat[:, self._motor_columns]
+            self._batch.step(nstep=self._frame_skip)
+            return self._judge_together(self._batch.warning)
+        if self._pool is None:
+            self._physics_block(range(self.n_matches), ctrl)
+        else:  # the calling thread steps the first block, as mujoco.batch's caller does
+            others = [self._pool.submit(self._physics_block, block, ctrl) for block in self._blocks[1:]]
+            self._physics_block(self._blocks[0], ctrl)
+            for future in others:
+                future.result()
+        return self._judge_together(self._warnings_now)
+
+    def _physics_block(self, block: Any, ctrl: np.ndarray) -> None:
+        """The ``threads`` backend: step a block of matches on their own ``MjData`` (one thread of
+        the pool), then copy each one's state into the rows :meth:`_judge_together` reads, and
+        compute the contact forces of ``paper`` observations (``mj_rnePostConstraint`` releases
+        the GIL too)."""
+        for k in block:
+            sim = self.matches[k].sim
+            sim.step(ctrl[k])
+            data = sim.data
+            self._qpos[k], self._qvel[k], self._warnings_now[k] = data.qpos, data.qvel, data.warning.number
+            if sim.step_failed:
+                self._warnings_now[k] = -1  # a new "warning": the match is judged alone (its arena_overflow)
+            views = self._body_forces[k]
+            if self._forces is None:
+                continue
+            if views is not None:  # Simulation.contact_forces, without its method calls
+                mujoco.mj_rnePostConstraint(sim.model, data)
+                np.subtract(views[0], views[1], out=self._forces[k])
+            else:
+                self._forces[k] = sim.contact_forces()
+
+    def _controls(self, actions: np.ndarray) -> np.ndarray:
+        """:meth:`Match.prepare` of every match at once (first-out rules: every agent in play)."""
+        actions = np.asarray(actions, dtype=np.float64)
+        expected = (self.n_matches, self.n_agents, self.action_width)
+        if actions.shape != expected:
+            raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
+        finished = [k for k, m in enumerate(self.matches) if m.over]
+        if finished:
+            raise RuntimeError(f"matches {finished} are over (or were never started): call reset_one(k) first")
+        if self._pad is not None:  # columns past an agent's motors are ignored, whatever they hold
+            actions = np.where(self._pad, actions, 0.0)
+        if not math.isfinite(actions.sum()):  # NaN or inf somewhere (or an overflowing sum: look closer)
+            bad = ~np.isfinite(actions).all(axis=2)
+            if bad.any():
+                k, i = (int(x) for x in np.argwhere(bad)[0])
+                raise ValueError(f"match {k}: action of {self.agents[i]!r} contains NaN or inf")
+        return scale_actions(actions, self._ctrl_half, self._ctrl_mid)
+
+    def _judge_together(self, warnings: np.ndarray) -> BatchStep:
+        """The second half of :meth:`step_arrays`: every match's step judged over arrays."""
+        n, a = self.n_matches, self.n_agents
+        qpos, qvel = self._qpos, self._qvel
+        trouble = np.zeros(n, bool)
+        if not np.array_equal(warnings, self._warnings_seen):  # rare: find the matches with new warnings
+            trouble = (warnings != self._warnings_seen).reshape(n, -1).any(axis=1)
+            self._warnings_seen[trouble] = warnings[trouble]
+        if not math.isfinite(qpos.sum() + qvel.sum()):  # NaN or inf somewhere (or an overflowing sum)
+            trouble |= ~(np.isfinite(qpos.sum(axis=1)) & np.isfinite(qvel.sum(axis=1)))
+        forces = self._forces
+        own_obs: list[Any] = [None] * n
+        """Observations built by each match itself (egocentric); the results of troubled matches."""
+        steps = np.empty(n, np.int64)
+        get_data = None if self._batch is None else self._batch.get_data
+        post_constraint = mujoco.mj_rnePostConstraint
+        for k, (match, bad, views) in enumerate(zip(self.matches, trouble.tolist(), self._body_forces, strict=True)):
+            if get_data is not None:
+                get_data(k, match.data)
+            if bad:
+                own_obs[k] = _finish(match)
+            else:
+                match.steps += 1
+                if forces is None:
+                    own_obs[k] = match.observer.build()
+                elif get_data is None:
+                    pass  # contact forces computed by _physics_block
+                elif views is not None:  # Simulation.contact_forces, without its method calls
+                    post_constraint(match.model, match.data)
+                    np.subtract(views[0], views[1], out=forces[k])
+                else:
+                    forces[k] = match.sim.contact_forces()
+            steps[k] = match.steps
+        rules, xp = self._rules, np
+        with np.errstate(all="ignore") if trouble.any() else nullcontext():  # troubled rows are replaced below
+            pos, vel = qpos[:, self._torso_qpos], qvel[:, self._torso_qvel]
+            out = rules_batched.agents_out(pos, rules.half_size, xp)
+            ended = out.any(axis=1)
+            timed_out = ~ended & (steps >= rules.max_steps)
+            code = xp.where(timed_out[:, None], rules_batched.DRAW_CODE, rules_batched.judge(out, rules, xp))
+            terms = rules_batched.reward_terms(pos, vel, code, timed_out, rules, xp)
+            if forces is not None:
+                obs = rules_batched.paper_observation(pos, vel, forces, qpos, qvel, rules, xp).astype(np.float32)
+                obs = np.repeat(obs[:, None], a, axis=1)
+            else:
+                obs = np.empty((n, a, self.matches[0].observer.sizes[self.agents[0]]), np.float32)
+        infos: dict[str, np.ndarray] = {key: terms[key] for key in REPORTED}
+        infos["sparse_reward"] = infos["sparse_reward"].copy()  # reward_terms gives reward_outcome the same array
+        infos.update(outcome=code, out_of_ring=out, place=rules_batched.first_out_places(code, xp),
+                     eliminated=out.copy(), step=steps)
+        rewards = terms["reward"]
+        truncated = timed_out
+        leaving = np.zeros((n, a), bool)
+        errors = []
+        for k, (match, own, bad) in enumerate(zip(self.matches, own_obs, trouble.tolist(), strict=True)):
+            if not bad:
+                if own is not None:
+                    obs[k] = own
+                match.record_judged(bool(ended[k] or timed_out[k]), list(obs[k]))
+                continue
+            if isinstance(own, PhysicsError):
+                errors.append((k, own))
+                continue
+            result: StepResult = own
+            obs[k], rewards[k], ended[k], truncated[k] = result.observations, result.rewards, \
+                result.terminated, result.truncated
+            for key, column in zip(_ARRAY_INFOS, zip(*(_array_infos(info) for info in result.infos),
+                                                     strict=True), strict=True):
+                infos[key][k] = column
+        if errors:
+            k, err = errors[0]
+            raise PhysicsError(f"match {k}: {err}") from err
+        return BatchStep(obs, rewards, ended, truncated, leaving, infos)
 
     def _step_batch(self, ctrls: list[np.ndarray]) -> list[StepResult | PhysicsError]:
         assert self._batch is not None
@@ -223,6 +415,57 @@ class MatchBatch:
         self.close()
 
 
+@dataclass
+class BatchStep:
+    """One step of every match of a :class:`MatchBatch`, as arrays (``N`` matches, ``A`` agents).
+
+    What :meth:`MatchBatch.step` returns as a list of :class:`StepResult`, bit for bit."""
+
+    observations: np.ndarray
+    """``(N, A, obs_dim)`` float32."""
+    rewards: np.ndarray
+    """``(N, A)`` float64: ``dense + sparse``."""
+    terminated: np.ndarray
+    """``(N,)`` bool: the match ended by its rules."""
+    truncated: np.ndarray
+    """``(N,)`` bool: the match hit its step limit or a physics error."""
+    leaving: np.ndarray
+    """``(N, A)`` bool: eliminated on this step (elimination rules; all False under first_out)."""
+    infos: dict[str, np.ndarray]
+    """Every :data:`REPORTED` term ``(N, A)`` float64, ``outcome`` and ``place`` ``(N, A)`` int64,
+    ``out_of_ring`` and ``eliminated`` ``(N, A)`` bool, ``step`` ``(N,)`` int64."""
+
+
+def _gather(results: list[StepResult], n_agents: int) -> BatchStep:
+    """``MatchBatch.step``'s results as one :class:`BatchStep`."""
+    leaving = np.zeros((len(results), n_agents), bool)
+    for k, r in enumerate(results):
+        if r.eliminated is not None:
+            leaving[k] = r.eliminated
+    return BatchStep(np.array([r.observations for r in results], np.float32),
+                     np.array([r.rewards for r in results], np.float64),
+                     np.array([r.terminated for r in results], bool),
+                     np.array([r.truncated for r in results], bool), leaving,
+                     _infos([r.infos for r in results], [r.infos[0]["step"] for r in results], n_agents))
+
+
+def _infos(per_match: list[list[dict[str, Any]]], steps: list[int], n_agents: int) -> dict[str, np.ndarray]:
+    """Per-match info dicts as the arrays of :attr:`BatchStep.infos`."""
+    rows = [_array_infos(info) for infos in per_match for info in infos]
+    table = np.array(rows, np.float64).reshape(len(per_match), n_agents, len(_ARRAY_INFOS))
+    infos: dict[str, np.ndarray] = {key: table[..., j] for j, key in enumerate(REPORTED)}
+    infos["outcome"] = table[..., len(REPORTED)].astype(np.int64)
+    infos["out_of_ring"] = table[..., len(REPORTED) + 1].astype(bool)
+    infos["place"] = table[..., len(REPORTED) + 2].astype(np.int64)
+    infos["eliminated"] = table[..., len(REPORTED) + 3].astype(bool)
+    infos["step"] = np.array(steps, np.int64)
+    return infos
+
+
+_ARRAY_INFOS = (*REPORTED, "outcome", "out_of_ring", "place", "eliminated")
+_array_infos = operator.itemgetter(*_ARRAY_INFOS)
+
+
 def _finish(match: Match) -> StepResult | PhysicsError:
     """``match.finish_step()``, with a raised ``PhysicsError`` returned so the other matches still finish."""
     try:
@@ -238,9 +481,16 @@ VECTOR_BACKENDS = ("cpu", "warp")
 class VectorMatches:
     """Many matches as arrays: TripleSumo's public batched API on the CPU (:func:`vector_env`).
 
-    It grows :class:`MatchBatch` (``mujoco.batch`` threaded physics, bit for bit the
-    trajectories of single matches) into the batched contract that the ``warp`` backend
-    shares: arrays in, arrays out, autoreset.
+    It grows :class:`MatchBatch` (threaded physics, bit for bit the trajectories of single
+    matches) into the batched contract that the ``warp`` backend shares: arrays in, arrays
+    out, autoreset. Each step is :meth:`MatchBatch.step_arrays` on the ``threads`` backend:
+    each thread steps its block of matches on their own ``MjData`` (``mj_step`` and
+    ``mj_rnePostConstraint`` release the GIL) and copies their states into rows, then the
+    rules judge all matches over arrays. The ``mujoco`` backend (``mujoco.batch``) would
+    have to copy every match's whole ``MjData`` out of the batch after each step for its
+    contact forces, which doubles the memory the physics runs through: measured on the
+    2-core box, 0.84-0.91 x raw ``mujoco.batch`` physics of the same matches against
+    0.94-0.97 x on threads (``docs/bench/env_vector_cpu.md``).
 
     Shapes (``N = num_envs``, ``A = n_agents``): observations ``(N, A, obs_dim)`` float32;
     actions ``(N, A, act_dim)`` in [-1, 1], scaled to each agent's control range as
@@ -269,7 +519,7 @@ class VectorMatches:
             usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
             num_threads = max(1, min(num_envs, usable))
         try:
-            self.batch = MatchBatch(config, num_envs, num_threads or 1)
+            self.batch = MatchBatch(config, num_envs, num_threads or 1, backend="threads")
         except ValueError as err:
             raise ValueError(str(err).replace("n_matches", "num_envs").replace("n_threads", "num_threads")) from None
         first = self.batch.matches[0]
@@ -313,7 +563,7 @@ class VectorMatches:
         for k, s in enumerate(seeds):
             self._obs[k] = self.batch.reset_one(k, s)[0]
         self._seeded = True
-        infos = self._infos([m.reset_infos() for m in self.batch.matches], [0] * self.num_envs)
+        infos = _infos([m.reset_infos() for m in self.batch.matches], [0] * self.num_envs, self.n_agents)
         infos["final_obs"], infos["_final_obs"] = np.zeros_like(self._obs), np.zeros(self.num_envs, bool)
         return self._obs.copy(), infos
 
@@ -321,28 +571,22 @@ class VectorMatches:
         """One step of every match with ``(num_envs, n_agents, act_dim)`` actions; autoreset."""
         if not self._seeded:
             raise RuntimeError("call reset() before step()")
-        results = self.batch.step(actions)
-        a = self.n_agents
-        obs = self._obs
-        obs[:] = [r.observations for r in results]
-        rewards = np.array([r.rewards for r in results], np.float32)
-        terminated = np.array([r.terminated for r in results])
-        truncated = np.array([r.truncated for r in results])
+        result = self.batch.step_arrays(actions)
+        obs, terminated, truncated = result.observations, result.terminated, result.truncated
         final = terminated | truncated
         final_obs = np.zeros_like(obs)
         for k in np.flatnonzero(final).tolist():
             final_obs[k] = obs[k]
             obs[k] = self.batch.reset_one(k, self._next_seed(k))[0]
-        infos = self._infos([r.infos for r in results], [r.infos[0]["step"] for r in results])
+        self._obs = obs
+        infos = result.infos
         infos["final_obs"], infos["_final_obs"] = final_obs, final
         # All agents of a match end together; under elimination rules an agent also terminates
         # on the step it is eliminated (and its rows stay in the arrays, flagged by
         # infos["eliminated"], until its match ends).
-        term = np.repeat(terminated[:, None], a, 1)
-        for k, r in enumerate(results):
-            if r.eliminated is not None:
-                term[k] |= np.asarray(r.eliminated, bool)
-        return obs.copy(), rewards, term, np.repeat(truncated[:, None], a, 1), infos
+        a = self.n_agents
+        term = np.repeat(terminated[:, None], a, 1) | result.leaving
+        return obs.copy(), result.rewards.astype(np.float32), term, np.repeat(truncated[:, None], a, 1), infos
 
     reset_seed: Callable[[int], int | None] | None = None
     """Who seeds slot ``k``'s next match at an autoreset: ``reset_seed(k)`` is called for each
@@ -376,18 +620,6 @@ class VectorMatches:
         self._obs[:] = obs
         self._seeded = True
 
-    def _infos(self, per_match: list[list[dict[str, Any]]], steps: list[int]) -> dict[str, np.ndarray]:
-        n, a = self.num_envs, self.n_agents
-        rows = [_array_infos(info) for infos in per_match for info in infos]
-        table = np.array(rows, np.float64).reshape(n, a, len(_ARRAY_INFOS))
-        infos: dict[str, np.ndarray] = {key: table[..., j] for j, key in enumerate(REPORTED)}
-        infos["outcome"] = table[..., len(REPORTED)].astype(np.int64)
-        infos["out_of_ring"] = table[..., len(REPORTED) + 1].astype(bool)
-        infos["place"] = table[..., len(REPORTED) + 2].astype(np.int64)
-        infos["eliminated"] = table[..., len(REPORTED) + 3].astype(bool)
-        infos["step"] = np.array(steps, np.int64)
-        return infos
-
     def close(self) -> None:
         """Free the matches' threads and batch."""
         self.batch.close()
@@ -397,10 +629,6 @@ class VectorMatches:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-_ARRAY_INFOS = (*REPORTED, "outcome", "out_of_ring", "place", "eliminated")
-_array_infos = operator.itemgetter(*_ARRAY_INFOS)
 
 
 def vector_env(num_envs: int, scenario: str = "paper", backend: str = "cpu", device: str | None = None,

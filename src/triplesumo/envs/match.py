@@ -231,10 +231,7 @@ class Match:
             bad = ~np.isfinite(actions).all(axis=1)
             if bad.any():
                 raise ValueError(f"action of {self.agents[int(np.argmax(bad))]!r} contains NaN or inf")
-        ctrl = np.maximum(actions, -1.0)  # a clip; np.clip's dispatch costs several times more
-        np.minimum(ctrl, 1.0, out=ctrl)
-        ctrl *= self._ctrl_half
-        ctrl += self._ctrl_mid
+        ctrl = scale_actions(actions, self._ctrl_half, self._ctrl_mid)
         if not all(self.alive):  # an eliminated body no longer acts
             ctrl[[not playing for playing in self.alive]] = 0.0
         return ctrl
@@ -279,6 +276,14 @@ class Match:
         self.over = results is not None or timed_out
         self._last_obs = self._observe()
         return StepResult(self._last_obs, np.array(rewards), results is not None, timed_out, infos)
+
+    def record_judged(self, over: bool, observations: list[np.ndarray]) -> None:
+        """Take the result of a step judged outside the match: the batched rules of
+        :meth:`MatchBatch.step_arrays <triplesumo.envs.batch.MatchBatch.step_arrays>`, which
+        increment :attr:`steps` and judge many matches at once (what :meth:`finish_step`
+        does for one): whether the match ended, and its observations."""
+        self.over = over
+        self._last_obs = observations
 
     def _finish_elimination(self, pos: list[list[float]], vel: list[list[float]], out: list[bool]) -> StepResult:
         """:meth:`finish_step` under ``elimination`` rules."""
@@ -380,6 +385,16 @@ class Match:
             flags = np.array([0.0 if playing else 1.0 for playing in self.alive], dtype=np.float32)
             return np.concatenate([state, flags])
         return state
+
+
+def scale_actions(actions: np.ndarray, half_range: np.ndarray, mid: np.ndarray) -> np.ndarray:
+    """Finite normalised actions ``(..., n_agents, action_width)`` to controls (a new array):
+    clipped to [-1, 1], then ``mid + action * half_range`` per column (``Match.prepare``)."""
+    ctrl = np.maximum(actions, -1.0)  # a clip; np.clip's dispatch costs several times more
+    np.minimum(ctrl, 1.0, out=ctrl)
+    ctrl *= half_range
+    ctrl += mid
+    return ctrl
 
 
 def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -65,6 +65,8 @@ class BatchedRules:
     """C1, C2, C3 and the still punishment."""
     outcome_values: tuple[float, float, float]
     """Sparse reward of a win, a loss and a draw."""
+    outcome_table: Any
+    """``(5,)`` the sparse reward of each outcome code (0 for a match that goes on, and for an error)."""
 
     @classmethod
     def build(cls, config: MatchConfig, half_size: float) -> BatchedRules:
@@ -78,17 +80,19 @@ class BatchedRules:
             partners[i, teams.partners[i]] = 1.0
         others = np.stack([np.concatenate([teams.partners[i], teams.opponents[i]]) for i in range(n)]).astype(np.int64)
         r = config.reward
+        table = np.zeros(max(GOES_ON, WIN_CODE, LOSS_CODE, DRAW_CODE, ERROR_CODE) + 1)
+        table[[WIN_CODE, LOSS_CODE, DRAW_CODE]] = r.win, r.loss, r.draw
         return cls(n, float(half_size), config.max_steps, float(config.contact_force_clip), onehot, opponents,
                    partners, opponents.sum(1), np.maximum(partners.sum(1), 1.0), others,
                    (float(r.opponent_velocity), float(r.self_velocity), float(r.partner_velocity), float(r.still)),
-                   (float(r.win), float(r.loss), float(r.draw)))
+                   (float(r.win), float(r.loss), float(r.draw)), table)
 
     def to(self, convert: Any) -> BatchedRules:
         """The same rules with every matrix passed through ``convert`` (e.g. ``lambda a: torch.as_tensor(a, ...)``)."""
         return BatchedRules(self.n_agents, self.half_size, self.max_steps, self.force_clip,
                             convert(self.team_onehot), convert(self.opponents), convert(self.partners),
                             convert(self.n_opponents), convert(self.n_partners), convert(self.others),
-                            self.weights, self.outcome_values)
+                            self.weights, self.outcome_values, convert(self.outcome_table))
 
 
 # ------------------------------------------------------------------ outcome
@@ -124,6 +128,23 @@ def bad_state(xp: Any, *arrays: Any) -> Any:
 
 
 # ------------------------------------------------------------------ rewards
+def ordered_sum(values: Any, axis: int) -> Any:
+    """Sum over ``axis`` (a small one: the roster) index by index, ``((v_0 + v_1) + v_2) + ...``.
+
+    The association of :class:`~triplesumo.rules.rewards.RewardRule`'s Python loops, so that
+    masked sums (zeros where an agent is not an opponent or partner; adding an exact zero
+    changes nothing) give its results bit for bit, where ``sum`` or ``@`` may pair the terms
+    in another order.
+    """
+    def at(j: int) -> tuple[Any, ...]:
+        return (*(slice(None),) * axis, j) if axis >= 0 else (..., j, *(slice(None),) * (-axis - 1))
+
+    total = values[at(0)]
+    for j in range(1, values.shape[axis]):
+        total = total + values[at(j)]
+    return total
+
+
 def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRules, xp: Any) -> dict[str, Any]:
     """Every reward term of :data:`~triplesumo.rules.rewards.TERMS` as ``(E, n)`` arrays, plus
     ``dense_reward``, ``sparse_reward`` and ``reward`` (= dense + sparse, summed in that order,
@@ -131,25 +152,32 @@ def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRu
 
     ``pos``, ``vel``: ``(E, n, >=2)`` torso positions and world-frame velocities after the
     step; ``code``: :func:`judge`'s codes; ``timed_out``: ``(E,)`` the step limit is reached.
+    In float64 the results equal :meth:`RewardRule.rows` bit for bit (the same operations
+    in the same order: :func:`ordered_sum`).
     """
     c1, c2, c3, still = rules.weights
-    delta = pos[:, None, :, :2] - pos[:, :, None, :2]  # (E, a, o, 2): from a to o
-    s = xp.sign(delta)
-    toward = (s * vel[:, :, None, :2]).sum(-1)  # (E, a, o): a moving toward o
-    away = (s * vel[:, None, :, :2]).sum(-1)  # (E, a, o): o moving away from a
+    xy, v = pos[..., :2], vel[..., :2]
+    s = xp.sign(xy[:, None] - xy[:, :, None])  # (E, a, o, 2): the direction from a to o
+    toward = (s * v[:, :, None]).sum(-1)  # (E, a, o): a moving toward o (a sum of two: exact in any order)
+    away = (s * v[:, None]).sum(-1)  # (E, a, o): o moving away from a
     opp = rules.opponents
-    opponent = c1 * ((away * opp).sum(-1) / rules.n_opponents)
-    self_ = c2 * ((toward * opp).sum(-1) / rules.n_opponents)
+    opponent = c1 * (ordered_sum(away * opp, -1) / rules.n_opponents)
     # [e, j, i] = sum over the opponents o of i of toward[e, j, o], over i's opponents' count
-    per_partner = (toward @ opp.T) / rules.n_opponents
-    partner = c3 * ((per_partner * rules.partners.T).sum(1) / rules.n_partners)
-    win, loss, draw = rules.outcome_values
-    sparse = xp.where(code == WIN_CODE, win, 0.0) + xp.where(code == LOSS_CODE, loss, 0.0)
-    sparse = sparse + xp.where((code == DRAW_CODE) | (timed_out[:, None] & (code == GOES_ON)), draw, 0.0)
-    still_term = xp.zeros_like(opponent) + still
-    dense = opponent + self_ + partner + still_term
-    terms = dict(zip(TERMS, (opponent, self_, partner, still_term, sparse), strict=True))
+    per_partner = ordered_sum(toward[:, :, None, :] * opp, -1) / rules.n_opponents
+    roster = list(range(rules.n_agents))
+    self_ = c2 * per_partner[:, roster, roster]
+    partner = c3 * (ordered_sum(per_partner * rules.partners.T, 1) / rules.n_partners)
+    sparse = rules.outcome_table[xp.where(timed_out[:, None] & (code == GOES_ON), DRAW_CODE, code)]
+    dense = opponent + self_ + partner + still
+    terms = dict(zip(TERMS, (opponent, self_, partner, xp.zeros_like(opponent) + still, sparse), strict=True))
     return {**terms, "dense_reward": dense, "sparse_reward": sparse, "reward": dense + sparse}
+
+
+def first_out_places(code: Any, xp: Any) -> Any:
+    """``(E, n)`` place of every agent under ``first_out`` from :func:`judge`'s codes (a time-out
+    already a draw): 1 for a win or draw, 2 for a loss, 0 while the match goes on
+    (:func:`triplesumo.rules.outcome.first_out_places`)."""
+    return xp.where(code == LOSS_CODE, 2, xp.where(code == GOES_ON, 0, 1))
 
 
 # ------------------------------------------------------------- observations

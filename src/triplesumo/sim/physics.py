@@ -94,8 +94,12 @@ class Simulation:
         self._body_forces: tuple[np.ndarray, np.ndarray] | None = None
         """``cfrc_ext`` force and ``xfrc_applied`` force rows of the agent geoms' bodies, when each
         agent geom has a body of its own and those bodies are consecutive (every RoboSumo body's are)."""
+        self.body_force_rows: slice | None = None
+        """The rows of ``cfrc_ext`` and ``xfrc_applied`` that :meth:`contact_forces` reads (the agent
+        geoms' bodies), or ``None`` when it has to sum contact by contact."""
         if np.array_equal(bodies, np.arange(bodies[0], bodies[0] + len(bodies))):
             rows = slice(int(bodies[0]), int(bodies[0]) + len(bodies))
+            self.body_force_rows = rows
             self._body_forces = (data.cfrc_ext[rows, 3:], data.xfrc_applied[rows, :3])
         self._ctrl_index = self.actuator_ids[real]
         self._ctrl_flat = None if self.action_mask is None else self.action_mask.ravel()
@@ -159,6 +163,11 @@ class Simulation:
             mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         except mujoco.FatalError as exc:  # e.g. the arena stack overflows: reported by new_warnings()
             self._fatal = str(exc)
+
+    @property
+    def step_failed(self) -> bool:
+        """``mj_step`` raised a MuJoCo fatal error since the last :meth:`new_warnings` (which reports it)."""
+        return bool(self._fatal)
 
     def torso_positions(self) -> np.ndarray:
         """``(n_agents, 3)`` torso centres from the free joints' qpos (current after a step)."""
