@@ -32,7 +32,7 @@ from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.rewards import DENSE_TERMS
 from triplesumo.train import checkpoint
 from triplesumo.train import loop as train_loop
-from triplesumo.train.checkpoint import CheckpointError
+from triplesumo.train.checkpoint import CheckpointError, recorded_epoch
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS
 from triplesumo.train.loop import Trainer, TrainResult, config_from_json, config_to_json, train
@@ -266,8 +266,9 @@ def _latest_file(run: Path, name: str) -> Path:
 
 
 CORRUPTIONS = {
-    "missing-latest-json": (lambda run: (run / "checkpoints" / "latest.json").unlink(),
-                            lambda run: run / "checkpoints" / "latest.json", "file not found"),
+    "no-checkpoint-at-all": (lambda run: [shutil.rmtree(f) if f.is_dir() else f.unlink()
+                                          for f in (run / "checkpoints").iterdir()],
+                             lambda run: run / "checkpoints" / "latest.json", "file not found"),
     "latest-json-points-nowhere": (
         lambda run: (run / "checkpoints" / "latest.json").write_text('{"dir": "epoch-000777"}'),
         lambda run: run / "checkpoints" / "latest.json", "epoch-000777, which does not exist"),
@@ -299,6 +300,17 @@ def test_corrupt_checkpoint_error_names_file_and_reason(run_copy: Path, case: st
     corrupt(run_copy)
     with pytest.raises(PolicyFileError, match=f"{re.escape(str(path))}.*{re.escape(reason)}"):
         train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": 99})
+
+
+def test_a_run_killed_before_latest_json_was_written_resumes_from_its_newest_checkpoint(run_copy: Path) -> None:
+    """The checkpoint folder is renamed into place (complete) before ``latest.json`` names it."""
+    newest = checkpoint.latest(run_copy)
+    (run_copy / "checkpoints" / "latest.json").unlink()
+    assert checkpoint.latest(run_copy) == newest
+    result = train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": recorded_epoch(newest) + 2})
+    assert result.epochs >= recorded_epoch(newest) + 2
+    rows = [int(r["epoch"]) for r in read_rows(run_copy)[1]]
+    assert rows == list(range(1, len(rows) + 1))
 
 
 def test_corrupt_npz_members_are_checkpoint_errors(run_copy: Path) -> None:

@@ -177,11 +177,16 @@ def _json_bytes(value: dict[str, Any]) -> bytes:
 
 
 def latest(run_dir: Path) -> Path:
-    """The folder of the newest complete checkpoint of ``run_dir``."""
+    """The folder of the newest complete checkpoint of ``run_dir``: the one ``latest.json`` names, or,
+    when a run was killed after a checkpoint's folder was renamed into place but before
+    ``latest.json`` was written, the newest folder by recorded epoch (each is complete once renamed)."""
     pointer = Path(run_dir) / "checkpoints" / "latest.json"
     if not Path(run_dir).is_dir():
         raise CheckpointError(f"{run_dir}: run folder not found")
     if not pointer.exists():
+        saved = checkpoints(run_dir)
+        if saved:
+            return saved[-1][1]
         raise CheckpointError(f"{pointer}: no checkpoint to resume from (file not found)")
     try:
         info = load_json(pointer)
