@@ -13,6 +13,7 @@ The Warp runs use Warp's CPU device (CI has no GPU); they skip, saying why, with
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import shutil
@@ -27,6 +28,7 @@ from conftest import tiny
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
 from triplesumo.rules.outcome import OUTCOME_CODES
+from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer, train
 
@@ -134,11 +136,37 @@ def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
         assert all(v.device == torch.device("cpu") for v in learner.algo.rollout.values())  # type: ignore[attr-defined]
 
 
-def test_a_warp_run_resumes_restarting_its_unfinished_matches(warp_runs: dict[str, Trainer]) -> None:
-    trainer = warp_runs["ddpg"]
-    before = trainer.epochs_done
-    result = train(trainer.cfg, resume_dir=trainer.run_dir, overrides={"epochs": before + 3})
-    rows = list(csv.DictReader((trainer.run_dir / "metrics.csv").open()))
+def test_a_killed_warp_run_resumes_exactly(warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
+    """Killed after a checkpoint written 10 steps into its second matches (the loop writes one whenever an
+    epoch ends, other matches under way) and resumed, a warp run writes the rows, learning rows and policy
+    of the uninterrupted one, byte for byte (Warp's CPU device is deterministic)."""
+    whole = warp_runs["ddpg"]
+    cfg = dataclasses.replace(whole.cfg, out=str(tmp_path))
+    killed = Trainer(cfg)
+    while killed.env_steps < 30 * cfg.n_envs:
+        killed.collect_step()
+    killed.save()
+    killed.log.close()
+    assert killed.env.steps.tolist() == [10, 10, 10] and killed.epochs_done == 3  # the matches in progress
+    result = train(cfg, resume_dir=killed.run_dir)
+    assert (result.epochs, result.env_steps, result.updates) == (whole.epochs_done, whole.env_steps, whole.updates)
+    assert _metrics(killed.run_dir / "metrics.csv") == _metrics(whole.run_dir / "metrics.csv")
+    assert _metrics(killed.run_dir / "learning.csv") == _metrics(whole.run_dir / "learning.csv")
+    assert _same_policy(killed.run_dir / "policy.safetensors", whole.run_dir / "policy.safetensors")
+
+
+def test_a_warp_checkpoint_without_match_states_still_resumes_restarting_its_matches(
+        warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
+    """Checkpoints written before warp resumed exactly hold no match state: their unfinished matches restart."""
+    run = tmp_path / "old"
+    shutil.copytree(warp_runs["ppo"].run_dir, run)
+    before, folder = checkpoint.checkpoints(run)[-1]
+    tensors, state, arrays, _ = checkpoint.load(folder, need_replay=False)
+    shutil.rmtree(folder)
+    checkpoint.save(run, before, tensors, state | {"matches": []},
+                    {k: v for k, v in arrays.items() if not k.startswith("match")}, None)
+    result = train(warp_runs["ppo"].cfg, resume_dir=run, overrides={"epochs": before + 3})
+    rows = list(csv.DictReader((run / "metrics.csv").open()))
     assert result.epochs >= before + 3 and len(rows) == result.epochs
     assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
     assert all(int(r["steps"]) <= 20 for r in rows)

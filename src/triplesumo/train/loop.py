@@ -14,9 +14,9 @@ The matches are the public batched API (``triplesumo.vector_env``'s contract): a
 ``(n_envs, n_agents, ...)`` in and out, Gymnasium SAME_STEP autoreset (a finished match's last
 observation, outcome codes and reward terms in ``infos``), each next match seeded from the
 trainer's generator through ``reset_seed``. ``backend="cpu"`` is :class:`VectorMatches`
-(numpy; checkpoints hold every match's exact state), ``backend="warp"`` is MuJoCo Warp's
-``WarpMatchBatch`` (torch tensors on ``device``, kept there by the learners; a resume restarts
-the matches in progress). One collection path serves both.
+(numpy), ``backend="warp"`` is MuJoCo Warp's ``WarpMatchBatch`` (torch tensors on ``device``,
+kept there by the learners). On both a checkpoint holds every match's exact state (the env's
+``snapshot``), so a resume continues the matches in progress. One collection path serves both.
 
 With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents that do not
 learn: at every match start one member of each such side's pool is drawn (in a free-for-all
@@ -832,13 +832,12 @@ class Trainer:
             arrays |= {f"{learner.name}.{k}": v for k, v in learner.arrays().items()}
             if isinstance(learner, OffPolicyLearner):
                 replay |= {f"{learner.name}.{k}": v for k, v in learner.replay.state_dict().items()}
-        # backend cpu: every match's exact state; warp: none (a resume restarts the unfinished matches)
-        snaps = self.env.snapshot() if self.device is None else []
+        # every match's exact state (either backend): its arrays here, the rest in state.json's "matches"
+        snaps = self.env.snapshot()
+        obs = self._host(self.obs)
         for k, s in enumerate(snaps):
-            arrays[f"match{k}.physics"] = s["physics"]
-            arrays[f"match{k}.last_obs"] = s["last_obs"]
-            arrays[f"match{k}.warnings"] = s["warnings"]
-            arrays[f"match{k}.obs"] = np.array(self.obs[k])
+            arrays |= {f"match{k}.{key}": v for key, v in s.items() if isinstance(v, np.ndarray)}
+            arrays[f"match{k}.obs"] = np.array(obs[k])
         acc = self._host(self.acc).tolist()
         for agent, lwr in self.lwr.items():
             arrays[f"lwr.{agent}"] = np.array(lwr)
@@ -846,8 +845,8 @@ class Trainer:
             "config": config_to_json(self.cfg), "manifests": {lr.name: self.manifest(lr) for lr in self.learners},
             "epochs_done": self.epochs_done, "env_steps": self.env_steps, "rng": self.rng.bit_generator.state,
             "learners": {lr.name: lr.state() for lr in self.learners},
-            "matches": [{key: s[key] for key in ("steps", "over", "rng", "alive", "places", "outcomes")}
-                        for s in snaps],  # who is still in play (elimination rules) resumes too
+            "matches": [{key: v for key, v in s.items() if not isinstance(v, np.ndarray)}
+                        for s in snaps],  # steps, generator, who is still in play (elimination rules)
             "acc": {agent: [dict(zip(ACC_KEYS, per_match[j], strict=True)) for per_match in acc]
                     for j, agent in enumerate(self.agents)},
             "final": self.final, "timers": self.timers,
@@ -910,8 +909,7 @@ class Trainer:
                     f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
                     f"{getattr(saved, name)!r}, this run has {getattr(self.cfg, name)!r} (from config.json)")
         need_arrays = [f"lwr.{a}" for a in self.agents] + [f"{lr.name}.active" for lr in self.learners] + [
-            f"match{k}.{part}" for k in range(self.cfg.n_envs) for part in ("physics", "last_obs", "warnings", "obs")
-            if self.device is None]
+            f"match{k}.{part}" for k in range(self.cfg.n_envs) for part in self._match_parts(arrays)]
         missing = [k for k in need_arrays if k not in arrays]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'arrays.npz'}: missing arrays {missing[:5]}")
@@ -923,6 +921,14 @@ class Trainer:
             where = "replay.npz" if replay is not None and "replay arrays" in str(exc) else (
                 "state.json / arrays.npz / replay.npz / weights.safetensors")
             raise checkpoint.CheckpointError(f"{folder} ({where}): missing or malformed entry: {exc!r}") from exc
+
+    def _match_parts(self, arrays: Mapping[str, np.ndarray]) -> tuple[str, ...]:
+        """The arrays of each match (``match<k>.<part>``) a checkpoint of this backend holds: cpu every
+        ``Match.snapshot`` array; warp the world's state, or none in a checkpoint written before warp
+        resumed exactly (its matches then restart)."""
+        if self.device is None:
+            return ("physics", "last_obs", "warnings", "obs")
+        return ("physics", "obs") if "match0.physics" in arrays else ()
 
     def _one_learner_checkpoint(self, tensors: dict[str, torch.Tensor], state: dict[str, Any],
                                 arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> tuple[
@@ -948,16 +954,17 @@ class Trainer:
             if replay is not None and isinstance(learner, OffPolicyLearner):
                 learner.load_replay(replay, prefix)
         self.rng.bit_generator.state = state["rng"]
-        n = self.cfg.n_envs
-        if self.device is None:  # every match continues exactly where it was
-            self.env.restore([{"physics": arrays[f"match{k}.physics"], "last_obs": arrays[f"match{k}.last_obs"],
-                               "warnings": arrays[f"match{k}.warnings"], **state["matches"][k]} for k in range(n)],
-                             np.stack([arrays[f"match{k}.obs"] for k in range(n)]))
-            self.obs = np.stack([np.asarray(arrays[f"match{k}.obs"], dtype=np.float32) for k in range(n)])
+        n, parts = self.cfg.n_envs, self._match_parts(arrays)
+        if parts:  # every match continues exactly where it was
+            obs = np.stack([np.asarray(arrays[f"match{k}.obs"], dtype=np.float32) for k in range(n)])
+            self.obs = obs if self.device is None else torch.as_tensor(obs, device=self.device)
+            self.env.restore([{part: arrays[f"match{k}.{part}"] for part in parts if part != "obs"}
+                              | state["matches"][k] for k in range(n)], self.obs)
             self.final = {a: state["final"][a] for a in self.agents}
-            self.acc = np.array([[[state["acc"][a][k][key] for key in ACC_KEYS] for a in self.agents]
-                                 for k in range(n)], dtype=np.float64)
-        else:  # backend warp keeps no match state: the unfinished matches restart (their epochs are dropped)
+            acc = np.array([[[state["acc"][a][k][key] for key in ACC_KEYS] for a in self.agents]
+                            for k in range(n)], dtype=np.float64)
+            self.acc = acc if self.device is None else torch.as_tensor(acc, device=self.device)
+        else:  # a warp checkpoint of before exact warp resume: the unfinished matches restart (epochs dropped)
             self.obs = self.env.reset(seed=[self._episode_seed() for _ in range(n)])[0]
             for learner in self.learners:
                 learner.active[:] = True
