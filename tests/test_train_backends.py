@@ -25,11 +25,15 @@ import torch
 from safetensors.numpy import load_file
 
 from conftest import tiny
+from triplesumo.agents.builtin import act_batch
+from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
+from triplesumo.train.league import LeagueConfig
 from triplesumo.train.loop import Trainer, train
 
 OLD_RUN = Path(__file__).parent / "data" / "old_trainer_run"
@@ -80,8 +84,6 @@ def test_the_torch_replay_buffer_samples_what_the_numpy_one_does() -> None:
 def test_warp_refuses_what_it_cannot_play_naming_the_option(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="TrainConfig.device='cuda' needs backend='warp'"):
         tiny(tmp_path, device="cuda")
-    with pytest.raises(ValueError, match="TrainConfig.self_play runs on backend='cpu'"):
-        tiny(tmp_path, backend="warp", self_play=True, learn=("bug=sac",))
     pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
     with pytest.raises(ValueError, match=r"TrainConfig.backend='warp' \(scenario 'ffa'.*rules='elimination'"):
         Trainer(tiny(tmp_path, backend="warp", device="cpu", scenario="ffa", learn=("ant=sac",),
@@ -212,3 +214,54 @@ def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
         for trainer in (cpu, warp):
             trainer.log.close()
             trainer.env.close()
+
+
+def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_exactly(tmp_path: Path) -> None:
+    """``--self-play --backend warp`` (paper scenario, both sides learning, shared team network): live and pool
+    matches, snapshots admitted, the Spider pool's zoo member acting on the device, the team pool's random
+    seed member from its own generators; resumed from its epoch-3 checkpoint, the same league,
+    seats, rows and policies as the uninterrupted run. 2 matches of 20 steps, started 1.7 m out (ring-outs)."""
+    pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
+    ddpg = DDPGConfig(hidden=(16, 16), buffer_size=4000, learning_starts=40, batch_size=8, learn_every=8)
+    league = LeagueConfig(threshold=0.0, window=2, snapshot_every=2, max_size=3, live_share=0.5,
+                          zoo=("ant=random", "bug=random", "spider=zoo:spider"))
+
+    def both(name: str, epochs: int) -> TrainConfig:
+        return TrainConfig(name=name, out=str(tmp_path), epochs=epochs, steps_per_epoch=20, n_envs=2,
+                           checkpoint_every=3, seed=3, ddpg=ddpg, progress=False, tensorboard=False, self_play=True,
+                           league=league, learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"), share="team",
+                           physics=PhysicsConfig(start_radius=1.7), backend="warp", device="cpu")
+
+    whole = Trainer(both("whole", 6))
+    whole.run()
+    lg = whole.league
+    assert lg is not None
+    members = {m.id: m for pool in lg.pools.values() for m in (*pool.members, *pool.evicted)}
+    assert any(m.source == "self" for m in members.values())  # snapshots admitted
+    assert members["team-0001"].policies == {"ant": "random", "bug": "random"} and members["team-0001"].games > 0
+    assert members["spider-0001"].games > 0  # the zoo's Spider played (a trained network, on the device)
+    assert (lg.root / f"{members['spider-0001'].policies['spider']}.safetensors").is_file()
+    # the members' actions on the device are the host's: the network within float rounding, random draws alike
+    seats = (([None, None, "spider-0001"], 0), (["team-0001", "team-0001", None], 5))
+    whole.seat_policies = [whole._policies_of(members, seed) for members, seed in seats]
+    whole._seat_groups = None
+    twins = [whole._policies_of(members, seed) for members, seed in seats]  # fresh generators, same seeds
+    host = [{i: act_batch(p, whole.obs[k, i][None].numpy())[0] for i, p in seated.items()}
+            for k, seated in enumerate(twins)]
+    actions = torch.zeros((2, 3, 8))
+    whole._seat_actions_on_device(actions)
+    for k, seat, action in ((0, 2, host[0][2]), (1, 0, host[1][0]), (1, 1, host[1][1])):
+        np.testing.assert_allclose(actions[k, seat].numpy(), action, rtol=0, atol=1e-6)
+    assert not actions[0, :2].any() and not actions[1, 2].any()
+    run = whole.run_dir
+    team, spider = (list(csv.DictReader((run / f"metrics-{a}.csv").open())) for a in ("ant", "spider"))
+    assert 0 < len(team) < 6 or 0 < len(spider) < 6  # a learner sat a pool match out: no row for it
+    killed = tmp_path / "killed"  # the run again from its epoch-3 checkpoint (--from; the later files overwritten)
+    shutil.copytree(run, killed)
+    resumed = train(whole.cfg, resume_dir=killed, from_checkpoint="epoch-000003")
+    assert (resumed.epochs, resumed.env_steps) == (whole.epochs_done, whole.env_steps)
+    assert (run / "league" / "league.csv").read_text() == (killed / "league" / "league.csv").read_text()
+    for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
+        assert _metrics(run / name) == _metrics(killed / name), name
+    for learner in ("ant+bug", "spider"):
+        assert _same_policy(run / f"policy-{learner}.safetensors", killed / f"policy-{learner}.safetensors")

@@ -259,7 +259,7 @@ class WarpMatchBatch:
             self._last_obs = obs
             zeros = torch.zeros((self.num_envs, self.n_agents), device=self.device)
             infos = {name: zeros.clone() for name in (*TERMS, "dense_reward", "sparse_reward")}
-            infos.update(step=self.steps.clone(), outcome=zeros.long(), final_obs=obs.clone(),
+            infos.update(step=self.steps.clone(), outcome=zeros.long(), place=zeros.long(), final_obs=obs.clone(),
                          _final_obs=torch.zeros(self.num_envs, dtype=torch.bool, device=self.device))
         return obs, infos
 
@@ -300,7 +300,8 @@ class WarpMatchBatch:
             terminated = (ended & ~trouble)[:, None].expand(e, n).contiguous()
             truncated = (timed_out | trouble)[:, None].expand(e, n).contiguous()
             done = ended | timed_out | trouble
-            infos.update(outcome=code, step=self.steps.clone(), final_obs=obs, _final_obs=done)
+            infos.update(outcome=code, place=_first_out_place(code), step=self.steps.clone(),
+                         final_obs=obs, _final_obs=done)
             rows = torch.nonzero(done).flatten().cpu().numpy()  # the step's one host sync
             if len(rows) and self.config.on_physics_error == "raise" and bool(trouble.any()):
                 k = int(torch.nonzero(trouble)[0])
@@ -363,6 +364,14 @@ class WarpMatchBatch:
     def close(self) -> None:
         """Drop the captured graphs."""
         self._graphs.clear()
+
+
+def _first_out_place(code: torch.Tensor) -> torch.Tensor:
+    """``(E, n)`` place of every agent under the first-out rules (``infos["place"]``, as
+    :func:`triplesumo.rules.outcome.first_out_places`): 1 for a win or draw, 2 for a loss, 0 while the
+    match goes on (or on a physics error)."""
+    won = (code == rules_batched.WIN_CODE) | (code == rules_batched.DRAW_CODE)
+    return torch.where(code == rules_batched.LOSS_CODE, 2, torch.where(won, 1, 0))
 
 
 def make_warp_vector_env(config: MatchConfig | None, num_envs: int, device: str | None = None,

@@ -377,6 +377,9 @@ class Trainer:
         """Per match, per seat: the league member playing it this match (None: a learner's or fixed seat)."""
         self.seat_policies: list[dict[int, Any]] = [{} for _ in range(cfg.n_envs)]
         self._member_policies: dict[tuple[str, str], Any] = {}
+        self._seat_groups: tuple[list[tuple[int, Any, torch.Tensor]], list[tuple[int, int, Any]]] | None = None
+        """warp: the seats' trained members with the matches each plays, and the random seats (None: stale)."""
+        self._device_policies: dict[int, tuple[FrozenPolicy, Any]] = {}
         if cfg.self_play:
             self._setup_league(pairs)
         if resume:
@@ -473,6 +476,7 @@ class Trainer:
         seed = int(league.rng.integers(2**31 - 1))
         self.seat_members[k] = members
         self.seat_policies[k] = self._policies_of(members, seed)
+        self._seat_groups = None
         for learner in self.learners:
             plays = self._plays(learner, k)
             learner.active[learner.rows_of(k)] = plays
@@ -516,6 +520,8 @@ class Trainer:
                 league.admit(side, self.epochs_done, write=functools.partial(self._write_snapshot, side))
                 self._member_policies = {key: p for key, p in self._member_policies.items()
                                          if key[0] in {m.id for pool in league.pools.values() for m in pool.members}}
+                kept = {id(p) for p in self._member_policies.values()}
+                self._device_policies = {key: v for key, v in self._device_policies.items() if key in kept}
         self.log.scalars(league.epoch_end(self.epochs_done), self.epochs_done)
 
     def _write_snapshot(self, side: str, stems: Mapping[str, Path]) -> None:
@@ -611,9 +617,12 @@ class Trainer:
                 fixed = act_batch(policy, self._host(self.obs[:, i]))
                 actions[:, i, :probe.action_sizes[i]] = fixed if self.device is None else torch.as_tensor(
                     fixed, dtype=torch.float32, device=self.device)
-        for k, seated in enumerate(self.seat_policies):
-            for i, policy in seated.items():
-                actions[k, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[k, i][None])[0]
+        if self.device is None:
+            for k, seated in enumerate(self.seat_policies):
+                for i, policy in seated.items():
+                    actions[k, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[k, i][None])[0]
+        elif self.league is not None:
+            self._seat_actions_on_device(actions)
         t1 = time.perf_counter()
         # The off-policy updates due at this step learn from the replay as it was before the
         # step, so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and
@@ -651,6 +660,42 @@ class Trainer:
         self.timers["wait"] += t_joined - t2
         return finished
 
+    def _seat_actions_on_device(self, actions: torch.Tensor) -> None:
+        """The league members' actions of a ``warp`` run: each trained member acts once per seat on the
+        observations of all the matches it plays there (``FrozenPolicy.on_device``); passive members
+        leave their zeros; random ones draw on the host from their own generators (as on ``cpu``), one
+        copy to the device for all of them."""
+        if self._seat_groups is None:  # recomputed only when seats change (a match start, a resume)
+            groups: dict[tuple[int, int], tuple[Any, list[int]]] = {}
+            host: list[tuple[int, int, Any]] = []
+            for k, seated in enumerate(self.seat_policies):
+                for i, policy in seated.items():
+                    if isinstance(policy, FrozenPolicy):
+                        groups.setdefault((i, id(policy)), (policy, []))[1].append(k)
+                    elif not isinstance(policy, ZeroPolicy):
+                        host.append((k, i, policy))
+            self._seat_groups = ([(i, self._device_policy(p), torch.as_tensor(ks, device=self.device))
+                                  for (i, _), (p, ks) in groups.items()], host)
+        trained, host = self._seat_groups
+        sizes = self.probe.action_sizes
+        for i, act, rows in trained:
+            actions[rows, i, :sizes[i]] = act(self.obs[rows, i])
+        if host:  # one copy each way for all of them
+            ks, seats = (torch.as_tensor(v, device=self.device) for v in zip(*[(k, i) for k, i, _ in host],
+                                                                             strict=True))
+            seen = self._host(self.obs[ks, seats])
+            drawn = np.zeros((len(host), actions.shape[-1]), dtype=np.float32)
+            for r, (_, i, policy) in enumerate(host):
+                drawn[r, :sizes[i]] = policy(seen[r])
+            actions[ks, seats] = torch.as_tensor(drawn, device=self.device)
+
+    def _device_policy(self, policy: FrozenPolicy) -> Any:
+        """``policy.on_device`` (made once per member policy; dropped with the member)."""
+        key = id(policy)
+        if key not in self._device_policies:
+            self._device_policies[key] = (policy, policy.on_device(self.device))
+        return self._device_policies[key][1]
+
     def _store(self, learner: Learner, obs: Any, act: Any, next_obs: Any, reward: Any, terminated: Any,
                truncated: Any, error: Any) -> None:
         """Hand the learner its rows' step (``(n_envs, n_agents, ...)`` arrays of the whole batch):
@@ -662,9 +707,11 @@ class Trainer:
         trunc = truncated[:, idx].reshape(-1) & ~term  # a draw by time limit bootstraps
         valid = ~error[:, idx].reshape(-1)  # a physics error's transition is never learned from
         active = learner.active
-        if not active.all():  # rows of agents already out of their match (elimination rules): nothing
-            rew, term, trunc = np.where(active, rew, 0.0), term & active, trunc & active
-            valid, nxt = valid | ~active, np.where(active[:, None], nxt, obs)
+        if not active.all():  # rows out of play (elimination rules, or sat out in self-play): nothing
+            on: Any = active if self.device is None else torch.as_tensor(active, device=self.device)
+            where: Any = np.where if self.device is None else torch.where
+            rew, term, trunc = where(on, rew, 0.0), term & on, trunc & on
+            valid, nxt = valid | ~on, where(on[:, None], nxt, obs)
         learner.store(obs, act, rew, nxt, term, trunc, valid, active.copy())
         if self.elimination:  # an agent that left stays out until its match is reset
             learner.active &= ~term
@@ -680,8 +727,10 @@ class Trainer:
             terms = torch.stack([infos[key][:, self.agent_index] for key in ACC_KEYS], dim=-1).double()
         if self.playing.all():
             self.acc += terms
-        else:  # an agent out of a match still running adds nothing more to its epoch
+        elif self.device is None:  # an agent out of a match still running adds nothing more to its epoch
             self.acc += np.where(self.playing[..., None], terms, 0.0)
+        else:  # (or one sitting it out, self-play)
+            self.acc += torch.where(torch.as_tensor(self.playing[..., None], device=self.device), terms, 0.0)
         self.obs = obs
         done = self._host(infos["_final_obs"])
         out = self._host(terminated[:, self.agent_index]) if self.elimination else None
@@ -983,6 +1032,7 @@ class Trainer:
                 self.seat_policies[k] = self._policies_of(members, 0)
                 for i, rng_state in state["seat_rngs"][k].items():
                     self.seat_policies[k][int(i)].rng.bit_generator.state = rng_state
+            self._seat_groups = None
 
     def finish_outputs(self) -> None:
         """Plots from the metrics CSVs (skipped for an agent without a finished epoch)."""
