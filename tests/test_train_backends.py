@@ -190,6 +190,16 @@ def test_bench_train_measures_the_warp_trainer_rows(tmp_path: Path, capsys: pyte
     assert "not a speed figure" in printed
 
 
+def test_a_random_policy_draws_a_batch_as_it_draws_row_by_row() -> None:
+    from triplesumo.agents.builtin import RandomPolicy
+
+    one, many = RandomPolicy(4, action_size=5), RandomPolicy(4, action_size=5)
+    rows = np.stack([one(np.zeros(3)) for _ in range(7)])
+    batch = many.sample(7)
+    assert batch.dtype == np.float32 and batch.shape == (7, 5) and np.array_equal(batch, rows)
+    assert one.rng.bit_generator.state == many.rng.bit_generator.state
+
+
 def test_a_frozen_policy_on_the_device_acts_as_on_the_host() -> None:
     from triplesumo.agents.frozen import FrozenPolicy
 
@@ -210,6 +220,10 @@ def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
         assert isinstance(cpu.obs, np.ndarray) and isinstance(warp.obs, torch.Tensor)
         np.testing.assert_allclose(warp.obs.numpy(), cpu.obs, rtol=0, atol=1e-4)  # float32 physics on Warp
         assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state  # the same seeds were drawn
+        for trainer in (cpu, warp):  # a step: the random Spider and the warm-up draw the same numbers on both
+            trainer.collect_step()
+        assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state
+        assert cpu.policies["spider"].rng.bit_generator.state == warp.policies["spider"].rng.bit_generator.state
     finally:
         for trainer in (cpu, warp):
             trainer.log.close()

@@ -52,7 +52,7 @@ import numpy as np
 import torch
 
 from triplesumo import ENV_VERSION, __version__
-from triplesumo.agents.builtin import BUILTIN, ZeroPolicy, act_batch
+from triplesumo.agents.builtin import BUILTIN, RandomPolicy, ZeroPolicy, act_batch
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.policy_file import atomic_write_bytes, load_fixed_policy, load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
@@ -613,10 +613,13 @@ class Trainer:
                 continue
             if i in self.on_device:
                 actions[:, i, :probe.action_sizes[i]] = self.on_device[i](self.obs[:, i])
-            else:  # on the host (warp: random policies, a copy each way)
-                fixed = act_batch(policy, self._host(self.obs[:, i]))
-                actions[:, i, :probe.action_sizes[i]] = fixed if self.device is None else torch.as_tensor(
-                    fixed, dtype=torch.float32, device=self.device)
+            elif self.device is None:
+                actions[:, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[:, i])
+            else:  # warp: drawn on the host from the policy's own generator (its cpu stream), one copy
+                fixed = policy.sample(n) if isinstance(policy, RandomPolicy) else act_batch(
+                    policy, self._host(self.obs[:, i]))
+                actions[:, i, :probe.action_sizes[i]] = torch.as_tensor(fixed, dtype=torch.float32,
+                                                                        device=self.device)
         if self.device is None:
             for k, seated in enumerate(self.seat_policies):
                 for i, policy in seated.items():
@@ -680,13 +683,13 @@ class Trainer:
         sizes = self.probe.action_sizes
         for i, act, rows in trained:
             actions[rows, i, :sizes[i]] = act(self.obs[rows, i])
-        if host:  # one copy each way for all of them
+        if host:  # one copy to the device for all of them (and one of the observations only if one needs it)
             ks, seats = (torch.as_tensor(v, device=self.device) for v in zip(*[(k, i) for k, i, _ in host],
                                                                              strict=True))
-            seen = self._host(self.obs[ks, seats])
+            seen = None if all(isinstance(p, RandomPolicy) for *_, p in host) else self._host(self.obs[ks, seats])
             drawn = np.zeros((len(host), actions.shape[-1]), dtype=np.float32)
             for r, (_, i, policy) in enumerate(host):
-                drawn[r, :sizes[i]] = policy(seen[r])
+                drawn[r, :sizes[i]] = policy.sample(1)[0] if seen is None else policy(seen[r])
             actions[ks, seats] = torch.as_tensor(drawn, device=self.device)
 
     def _device_policy(self, policy: FrozenPolicy) -> Any:
