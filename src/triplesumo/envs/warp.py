@@ -38,6 +38,11 @@ per-world mask), sets qpos and qvel and runs ``mujoco_warp.forward`` for its con
 (on every world: it changes no state that the next step carries, only derived
 quantities that the step recomputes).
 
+``snapshot()``/``restore()`` carry every match across processes (the trainer's checkpoints):
+each world's MuJoCo integration state (``mujoco_warp.get_state``/``set_state`` of :data:`STATE`,
+the solver's warm start included), its step count and start stream; a restored batch steps on
+bit for bit on Warp's CPU device (``tests/test_warp_backend.py``).
+
 This module is the one place below ``agents`` that imports torch (``tests/test_layers.py``
 names it): the backend's whole point is tensors shared with the GPU simulator. It is
 imported only when ``backend="warp"`` is asked for.
