@@ -13,6 +13,7 @@ The Warp runs use Warp's CPU device (CI has no GPU); they skip, saying why, with
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import shutil
@@ -24,10 +25,15 @@ import torch
 from safetensors.numpy import load_file
 
 from conftest import tiny
+from triplesumo.agents.builtin import act_batch
+from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.outcome import OUTCOME_CODES
+from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
+from triplesumo.train.league import LeagueConfig
 from triplesumo.train.loop import Trainer, train
 
 OLD_RUN = Path(__file__).parent / "data" / "old_trainer_run"
@@ -78,8 +84,6 @@ def test_the_torch_replay_buffer_samples_what_the_numpy_one_does() -> None:
 def test_warp_refuses_what_it_cannot_play_naming_the_option(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="TrainConfig.device='cuda' needs backend='warp'"):
         tiny(tmp_path, device="cuda")
-    with pytest.raises(ValueError, match="TrainConfig.self_play runs on backend='cpu'"):
-        tiny(tmp_path, backend="warp", self_play=True, learn=("bug=sac",))
     pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
     with pytest.raises(ValueError, match=r"TrainConfig.backend='warp' \(scenario 'ffa'.*rules='elimination'"):
         Trainer(tiny(tmp_path, backend="warp", device="cpu", scenario="ffa", learn=("ant=sac",),
@@ -134,11 +138,37 @@ def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
         assert all(v.device == torch.device("cpu") for v in learner.algo.rollout.values())  # type: ignore[attr-defined]
 
 
-def test_a_warp_run_resumes_restarting_its_unfinished_matches(warp_runs: dict[str, Trainer]) -> None:
-    trainer = warp_runs["ddpg"]
-    before = trainer.epochs_done
-    result = train(trainer.cfg, resume_dir=trainer.run_dir, overrides={"epochs": before + 3})
-    rows = list(csv.DictReader((trainer.run_dir / "metrics.csv").open()))
+def test_a_killed_warp_run_resumes_exactly(warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
+    """Killed after a checkpoint written 10 steps into its second matches (the loop writes one whenever an
+    epoch ends, other matches under way) and resumed, a warp run writes the rows, learning rows and policy
+    of the uninterrupted one, byte for byte (Warp's CPU device is deterministic)."""
+    whole = warp_runs["ddpg"]
+    cfg = dataclasses.replace(whole.cfg, out=str(tmp_path))
+    killed = Trainer(cfg)
+    while killed.env_steps < 30 * cfg.n_envs:
+        killed.collect_step()
+    killed.save()
+    killed.log.close()
+    assert killed.env.steps.tolist() == [10, 10, 10] and killed.epochs_done == 3  # the matches in progress
+    result = train(cfg, resume_dir=killed.run_dir)
+    assert (result.epochs, result.env_steps, result.updates) == (whole.epochs_done, whole.env_steps, whole.updates)
+    assert _metrics(killed.run_dir / "metrics.csv") == _metrics(whole.run_dir / "metrics.csv")
+    assert _metrics(killed.run_dir / "learning.csv") == _metrics(whole.run_dir / "learning.csv")
+    assert _same_policy(killed.run_dir / "policy.safetensors", whole.run_dir / "policy.safetensors")
+
+
+def test_a_warp_checkpoint_without_match_states_still_resumes_restarting_its_matches(
+        warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
+    """Checkpoints written before warp resumed exactly hold no match state: their unfinished matches restart."""
+    run = tmp_path / "old"
+    shutil.copytree(warp_runs["ppo"].run_dir, run)
+    before, folder = checkpoint.checkpoints(run)[-1]
+    tensors, state, arrays, _ = checkpoint.load(folder, need_replay=False)
+    shutil.rmtree(folder)
+    checkpoint.save(run, before, tensors, state | {"matches": []},
+                    {k: v for k, v in arrays.items() if not k.startswith("match")}, None)
+    result = train(warp_runs["ppo"].cfg, resume_dir=run, overrides={"epochs": before + 3})
+    rows = list(csv.DictReader((run / "metrics.csv").open()))
     assert result.epochs >= before + 3 and len(rows) == result.epochs
     assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
     assert all(int(r["steps"]) <= 20 for r in rows)
@@ -158,6 +188,16 @@ def test_bench_train_measures_the_warp_trainer_rows(tmp_path: Path, capsys: pyte
     assert result["updates_per_s"]["env_only"] == 0 and result["updates_per_s"]["train_ddpg"] > 0
     assert result["updates_per_s"]["train_ppo"] > 0
     assert "not a speed figure" in printed
+
+
+def test_a_random_policy_draws_a_batch_as_it_draws_row_by_row() -> None:
+    from triplesumo.agents.builtin import RandomPolicy
+
+    one, many = RandomPolicy(4, action_size=5), RandomPolicy(4, action_size=5)
+    rows = np.stack([one(np.zeros(3)) for _ in range(7)])
+    batch = many.sample(7)
+    assert batch.dtype == np.float32 and batch.shape == (7, 5) and np.array_equal(batch, rows)
+    assert one.rng.bit_generator.state == many.rng.bit_generator.state
 
 
 def test_a_frozen_policy_on_the_device_acts_as_on_the_host() -> None:
@@ -180,7 +220,62 @@ def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
         assert isinstance(cpu.obs, np.ndarray) and isinstance(warp.obs, torch.Tensor)
         np.testing.assert_allclose(warp.obs.numpy(), cpu.obs, rtol=0, atol=1e-4)  # float32 physics on Warp
         assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state  # the same seeds were drawn
+        for trainer in (cpu, warp):  # a step: the random Spider and the warm-up draw the same numbers on both
+            trainer.collect_step()
+        assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state
+        assert cpu.policies["spider"].rng.bit_generator.state == warp.policies["spider"].rng.bit_generator.state
     finally:
         for trainer in (cpu, warp):
             trainer.log.close()
             trainer.env.close()
+
+
+def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_exactly(tmp_path: Path) -> None:
+    """``--self-play --backend warp`` (paper scenario, both sides learning, shared team network): live and pool
+    matches, snapshots admitted, the Spider pool's zoo member acting on the device, the team pool's random
+    seed member from its own generators; resumed from its epoch-3 checkpoint, the same league,
+    seats, rows and policies as the uninterrupted run. 2 matches of 20 steps, started 1.7 m out (ring-outs)."""
+    pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
+    ddpg = DDPGConfig(hidden=(16, 16), buffer_size=4000, learning_starts=40, batch_size=8, learn_every=8)
+    league = LeagueConfig(threshold=0.0, window=2, snapshot_every=2, max_size=3, live_share=0.5,
+                          zoo=("ant=random", "bug=random", "spider=zoo:spider"))
+
+    def both(name: str, epochs: int) -> TrainConfig:
+        return TrainConfig(name=name, out=str(tmp_path), epochs=epochs, steps_per_epoch=20, n_envs=2,
+                           checkpoint_every=3, seed=3, ddpg=ddpg, progress=False, tensorboard=False, self_play=True,
+                           league=league, learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"), share="team",
+                           physics=PhysicsConfig(start_radius=1.7), backend="warp", device="cpu")
+
+    whole = Trainer(both("whole", 6))
+    whole.run()
+    lg = whole.league
+    assert lg is not None
+    members = {m.id: m for pool in lg.pools.values() for m in (*pool.members, *pool.evicted)}
+    assert any(m.source == "self" for m in members.values())  # snapshots admitted
+    assert members["team-0001"].policies == {"ant": "random", "bug": "random"} and members["team-0001"].games > 0
+    assert members["spider-0001"].games > 0  # the zoo's Spider played (a trained network, on the device)
+    assert (lg.root / f"{members['spider-0001'].policies['spider']}.safetensors").is_file()
+    # the members' actions on the device are the host's: the network within float rounding, random draws alike
+    seats = (([None, None, "spider-0001"], 0), (["team-0001", "team-0001", None], 5))
+    whole.seat_policies = [whole._policies_of(members, seed) for members, seed in seats]
+    whole._seat_groups = None
+    twins = [whole._policies_of(members, seed) for members, seed in seats]  # fresh generators, same seeds
+    host = [{i: act_batch(p, whole.obs[k, i][None].numpy())[0] for i, p in seated.items()}
+            for k, seated in enumerate(twins)]
+    actions = torch.zeros((2, 3, 8))
+    whole._seat_actions_on_device(actions)
+    for k, seat, action in ((0, 2, host[0][2]), (1, 0, host[1][0]), (1, 1, host[1][1])):
+        np.testing.assert_allclose(actions[k, seat].numpy(), action, rtol=0, atol=1e-6)
+    assert not actions[0, :2].any() and not actions[1, 2].any()
+    run = whole.run_dir
+    team, spider = (list(csv.DictReader((run / f"metrics-{a}.csv").open())) for a in ("ant", "spider"))
+    assert 0 < len(team) < 6 or 0 < len(spider) < 6  # a learner sat a pool match out: no row for it
+    killed = tmp_path / "killed"  # the run again from its epoch-3 checkpoint (--from; the later files overwritten)
+    shutil.copytree(run, killed)
+    resumed = train(whole.cfg, resume_dir=killed, from_checkpoint="epoch-000003")
+    assert (resumed.epochs, resumed.env_steps) == (whole.epochs_done, whole.env_steps)
+    assert (run / "league" / "league.csv").read_text() == (killed / "league" / "league.csv").read_text()
+    for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
+        assert _metrics(run / name) == _metrics(killed / name), name
+    for learner in ("ant+bug", "spider"):
+        assert _same_policy(run / f"policy-{learner}.safetensors", killed / f"policy-{learner}.safetensors")

@@ -36,6 +36,11 @@ class RandomPolicy:
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         return self.rng.uniform(-1.0, 1.0, self.action_size).astype(np.float32)
 
+    def sample(self, n: int) -> np.ndarray:
+        """``n`` actions at once, ``(n, action_size)`` float32: the very numbers of ``n`` calls, in
+        order (one draw instead of ``n``; no observation needed)."""
+        return self.rng.uniform(-1.0, 1.0, (n, self.action_size)).astype(np.float32)
+
 
 BUILTIN = {"zero": ZeroPolicy, "passive": ZeroPolicy, "random": RandomPolicy}
 

@@ -38,6 +38,11 @@ per-world mask), sets qpos and qvel and runs ``mujoco_warp.forward`` for its con
 (on every world: it changes no state that the next step carries, only derived
 quantities that the step recomputes).
 
+``snapshot()``/``restore()`` carry every match across processes (the trainer's checkpoints):
+each world's MuJoCo integration state (``mujoco_warp.get_state``/``set_state`` of :data:`STATE`,
+the solver's warm start included), its step count and start stream; a restored batch steps on
+bit for bit on Warp's CPU device (``tests/test_warp_backend.py``).
+
 This module is the one place below ``agents`` that imports torch (``tests/test_layers.py``
 names it): the backend's whole point is tensors shared with the GPU simulator. It is
 imported only when ``backend="warp"`` is asked for.
@@ -62,6 +67,12 @@ from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import TERMS
 from triplesumo.sim.physics import PhysicsError
+
+STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION) & ~int(mujoco.mjtState.mjSTATE_PLUGIN)
+"""The state a world's next step depends on (``mujoco_warp.get_state``/``set_state`` signature): MuJoCo's
+``mjSTATE_INTEGRATION`` -- time, qpos, qvel, act, history, plastic, the solver's warm start
+``qacc_warmstart``, ctrl, applied forces, equality flags, mocap, userdata -- less plugin state,
+which MuJoCo Warp does not hold (the model has no plugins)."""
 
 
 class WarpMatchBatch:
@@ -139,6 +150,7 @@ class WarpMatchBatch:
             raise ValueError("graph=True needs a CUDA device (CUDA graphs)")
         self._rngs: list[np.random.Generator] = []
         self.steps = torch.zeros(num_envs, dtype=torch.long, device=dev)
+        self._state_size = mujoco.mj_stateSize(model, STATE)
         self._last_obs = torch.zeros((num_envs, self.n_agents, self.obs_dim), dtype=torch.float32, device=dev)
 
     # ---------------------------------------------------------------- physics
@@ -252,7 +264,7 @@ class WarpMatchBatch:
             self._last_obs = obs
             zeros = torch.zeros((self.num_envs, self.n_agents), device=self.device)
             infos = {name: zeros.clone() for name in (*TERMS, "dense_reward", "sparse_reward")}
-            infos.update(step=self.steps.clone(), outcome=zeros.long(), final_obs=obs.clone(),
+            infos.update(step=self.steps.clone(), outcome=zeros.long(), place=zeros.long(), final_obs=obs.clone(),
                          _final_obs=torch.zeros(self.num_envs, dtype=torch.bool, device=self.device))
         return obs, infos
 
@@ -293,7 +305,8 @@ class WarpMatchBatch:
             terminated = (ended & ~trouble)[:, None].expand(e, n).contiguous()
             truncated = (timed_out | trouble)[:, None].expand(e, n).contiguous()
             done = ended | timed_out | trouble
-            infos.update(outcome=code, step=self.steps.clone(), final_obs=obs, _final_obs=done)
+            infos.update(outcome=code, place=_first_out_place(code), step=self.steps.clone(),
+                         final_obs=obs, _final_obs=done)
             rows = torch.nonzero(done).flatten().cpu().numpy()  # the step's one host sync
             if len(rows) and self.config.on_physics_error == "raise" and bool(trouble.any()):
                 k = int(torch.nonzero(trouble)[0])
@@ -308,9 +321,62 @@ class WarpMatchBatch:
             self._last_obs = obs
         return obs, reward, terminated, truncated, infos
 
+    def snapshot(self) -> list[dict[str, Any]]:
+        """Every match's state, on the host, slot order: ``physics`` (float32, the world's
+        :data:`STATE` from ``mujoco_warp.get_state``, warm start included), ``steps`` and ``rng``
+        (its start-state generator). Arrays and JSON-able values only (no pickle). With the last
+        returned observations, :meth:`restore` continues exactly (as ``VectorMatches.snapshot``)."""
+        if not self._rngs:
+            raise RuntimeError("call reset() before snapshot()")
+        with self._on_stream(), wp.ScopedDevice(self.wp_device):
+            state = wp.zeros((self.num_envs, self._state_size), dtype=wp.float32)
+            mjw.get_state(self.m, self.d, state, STATE)
+            physics = state.numpy()
+        steps = self.steps.cpu().tolist()
+        return [{"physics": physics[k], "steps": int(steps[k]), "rng": self._rngs[k].bit_generator.state}
+                for k in range(self.num_envs)]
+
+    def restore(self, snapshots: Sequence[dict[str, Any]], obs: Any) -> None:
+        """Continue from :meth:`snapshot` and the observations ``(num_envs, n_agents, obs_dim)``
+        returned with it (the last trustworthy observation of a match that meets physics trouble
+        next): the next :meth:`step` is the one the snapshotted batch would have made, bit for
+        bit on a deterministic device (Warp's CPU device; see the README on CUDA's contact order)."""
+        if len(snapshots) != self.num_envs:
+            raise ValueError(f"need {self.num_envs} match snapshots, got {len(snapshots)}")
+        physics = np.stack([np.asarray(s["physics"], dtype=np.float32) for s in snapshots])
+        if physics.shape != (self.num_envs, self._state_size):
+            raise ValueError(f"match snapshots hold physics of shape {physics.shape[1:]}, this model's MuJoCo Warp "
+                             f"state has ({self._state_size},) (another model or backend)")
+        last = torch.as_tensor(obs, dtype=torch.float32, device=self.device)
+        if last.shape != (self.num_envs, self.n_agents, self.obs_dim):
+            raise ValueError(f"obs must have shape ({self.num_envs}, {self.n_agents}, {self.obs_dim}), "
+                             f"got {tuple(last.shape)}")
+        rngs = []
+        for snap in snapshots:
+            rng = np.random.default_rng()
+            rng.bit_generator.state = snap["rng"]
+            rngs.append(rng)
+        with self._on_stream():
+            if self._use_graph and "physics" not in self._graphs:
+                self.simulate()  # capture now (as reset does); the state set below overwrites it
+            with wp.ScopedDevice(self.wp_device):
+                mjw.set_state(self.m, self.d, wp.array(physics, dtype=wp.float32), STATE)
+            self._launch("derive")  # contacts and cfrc_ext of the restored state (no warm start is written)
+            self.steps.copy_(torch.as_tensor([int(s["steps"]) for s in snapshots], device=self.device))
+            self._last_obs = last.clone()
+        self._rngs = rngs
+
     def close(self) -> None:
         """Drop the captured graphs."""
         self._graphs.clear()
+
+
+def _first_out_place(code: torch.Tensor) -> torch.Tensor:
+    """``(E, n)`` place of every agent under the first-out rules (``infos["place"]``, as
+    :func:`triplesumo.rules.outcome.first_out_places`): 1 for a win or draw, 2 for a loss, 0 while the
+    match goes on (or on a physics error)."""
+    won = (code == rules_batched.WIN_CODE) | (code == rules_batched.DRAW_CODE)
+    return torch.where(code == rules_batched.LOSS_CODE, 2, torch.where(won, 1, 0))
 
 
 def make_warp_vector_env(config: MatchConfig | None, num_envs: int, device: str | None = None,

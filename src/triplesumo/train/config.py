@@ -158,9 +158,6 @@ class TrainConfig:
         if self.backend == "cpu" and self.device == "cuda":
             raise ValueError("TrainConfig.device='cuda' needs backend='warp' (--backend warp): backend='cpu' "
                              "steps MuJoCo on the CPU")
-        if self.backend == "warp" and self.self_play:
-            raise ValueError("TrainConfig.self_play runs on backend='cpu' (its per-match seats act on the host); "
-                             "drop --backend warp or --self-play")
         if self.scenario not in scenarios():
             raise ValueError(f"TrainConfig.scenario must be one of {scenarios()}, got {self.scenario!r}")
 

@@ -14,9 +14,9 @@ The matches are the public batched API (``triplesumo.vector_env``'s contract): a
 ``(n_envs, n_agents, ...)`` in and out, Gymnasium SAME_STEP autoreset (a finished match's last
 observation, outcome codes and reward terms in ``infos``), each next match seeded from the
 trainer's generator through ``reset_seed``. ``backend="cpu"`` is :class:`VectorMatches`
-(numpy; checkpoints hold every match's exact state), ``backend="warp"`` is MuJoCo Warp's
-``WarpMatchBatch`` (torch tensors on ``device``, kept there by the learners; a resume restarts
-the matches in progress). One collection path serves both.
+(numpy), ``backend="warp"`` is MuJoCo Warp's ``WarpMatchBatch`` (torch tensors on ``device``,
+kept there by the learners). On both a checkpoint holds every match's exact state (the env's
+``snapshot``), so a resume continues the matches in progress. One collection path serves both.
 
 With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents that do not
 learn: at every match start one member of each such side's pool is drawn (in a free-for-all
@@ -52,7 +52,7 @@ import numpy as np
 import torch
 
 from triplesumo import ENV_VERSION, __version__
-from triplesumo.agents.builtin import BUILTIN, ZeroPolicy, act_batch
+from triplesumo.agents.builtin import BUILTIN, RandomPolicy, ZeroPolicy, act_batch
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.policy_file import atomic_write_bytes, load_fixed_policy, load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
@@ -377,6 +377,9 @@ class Trainer:
         """Per match, per seat: the league member playing it this match (None: a learner's or fixed seat)."""
         self.seat_policies: list[dict[int, Any]] = [{} for _ in range(cfg.n_envs)]
         self._member_policies: dict[tuple[str, str], Any] = {}
+        self._seat_groups: tuple[list[tuple[int, Any, torch.Tensor]], list[tuple[int, int, Any]]] | None = None
+        """warp: the seats' trained members with the matches each plays, and the random seats (None: stale)."""
+        self._device_policies: dict[int, tuple[FrozenPolicy, Any]] = {}
         if cfg.self_play:
             self._setup_league(pairs)
         if resume:
@@ -473,6 +476,7 @@ class Trainer:
         seed = int(league.rng.integers(2**31 - 1))
         self.seat_members[k] = members
         self.seat_policies[k] = self._policies_of(members, seed)
+        self._seat_groups = None
         for learner in self.learners:
             plays = self._plays(learner, k)
             learner.active[learner.rows_of(k)] = plays
@@ -516,6 +520,8 @@ class Trainer:
                 league.admit(side, self.epochs_done, write=functools.partial(self._write_snapshot, side))
                 self._member_policies = {key: p for key, p in self._member_policies.items()
                                          if key[0] in {m.id for pool in league.pools.values() for m in pool.members}}
+                kept = {id(p) for p in self._member_policies.values()}
+                self._device_policies = {key: v for key, v in self._device_policies.items() if key in kept}
         self.log.scalars(league.epoch_end(self.epochs_done), self.epochs_done)
 
     def _write_snapshot(self, side: str, stems: Mapping[str, Path]) -> None:
@@ -607,13 +613,19 @@ class Trainer:
                 continue
             if i in self.on_device:
                 actions[:, i, :probe.action_sizes[i]] = self.on_device[i](self.obs[:, i])
-            else:  # on the host (warp: random policies, a copy each way)
-                fixed = act_batch(policy, self._host(self.obs[:, i]))
-                actions[:, i, :probe.action_sizes[i]] = fixed if self.device is None else torch.as_tensor(
-                    fixed, dtype=torch.float32, device=self.device)
-        for k, seated in enumerate(self.seat_policies):
-            for i, policy in seated.items():
-                actions[k, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[k, i][None])[0]
+            elif self.device is None:
+                actions[:, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[:, i])
+            else:  # warp: drawn on the host from the policy's own generator (its cpu stream), one copy
+                fixed = policy.sample(n) if isinstance(policy, RandomPolicy) else act_batch(
+                    policy, self._host(self.obs[:, i]))
+                actions[:, i, :probe.action_sizes[i]] = torch.as_tensor(fixed, dtype=torch.float32,
+                                                                        device=self.device)
+        if self.device is None:
+            for k, seated in enumerate(self.seat_policies):
+                for i, policy in seated.items():
+                    actions[k, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[k, i][None])[0]
+        elif self.league is not None:
+            self._seat_actions_on_device(actions)
         t1 = time.perf_counter()
         # The off-policy updates due at this step learn from the replay as it was before the
         # step, so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and
@@ -651,6 +663,42 @@ class Trainer:
         self.timers["wait"] += t_joined - t2
         return finished
 
+    def _seat_actions_on_device(self, actions: torch.Tensor) -> None:
+        """The league members' actions of a ``warp`` run: each trained member acts once per seat on the
+        observations of all the matches it plays there (``FrozenPolicy.on_device``); passive members
+        leave their zeros; random ones draw on the host from their own generators (as on ``cpu``), one
+        copy to the device for all of them."""
+        if self._seat_groups is None:  # recomputed only when seats change (a match start, a resume)
+            groups: dict[tuple[int, int], tuple[Any, list[int]]] = {}
+            host: list[tuple[int, int, Any]] = []
+            for k, seated in enumerate(self.seat_policies):
+                for i, policy in seated.items():
+                    if isinstance(policy, FrozenPolicy):
+                        groups.setdefault((i, id(policy)), (policy, []))[1].append(k)
+                    elif not isinstance(policy, ZeroPolicy):
+                        host.append((k, i, policy))
+            self._seat_groups = ([(i, self._device_policy(p), torch.as_tensor(ks, device=self.device))
+                                  for (i, _), (p, ks) in groups.items()], host)
+        trained, host = self._seat_groups
+        sizes = self.probe.action_sizes
+        for i, act, rows in trained:
+            actions[rows, i, :sizes[i]] = act(self.obs[rows, i])
+        if host:  # one copy to the device for all of them (and one of the observations only if one needs it)
+            ks, seats = (torch.as_tensor(v, device=self.device) for v in zip(*[(k, i) for k, i, _ in host],
+                                                                             strict=True))
+            seen = None if all(isinstance(p, RandomPolicy) for *_, p in host) else self._host(self.obs[ks, seats])
+            drawn = np.zeros((len(host), actions.shape[-1]), dtype=np.float32)
+            for r, (_, i, policy) in enumerate(host):
+                drawn[r, :sizes[i]] = policy.sample(1)[0] if seen is None else policy(seen[r])
+            actions[ks, seats] = torch.as_tensor(drawn, device=self.device)
+
+    def _device_policy(self, policy: FrozenPolicy) -> Any:
+        """``policy.on_device`` (made once per member policy; dropped with the member)."""
+        key = id(policy)
+        if key not in self._device_policies:
+            self._device_policies[key] = (policy, policy.on_device(self.device))
+        return self._device_policies[key][1]
+
     def _store(self, learner: Learner, obs: Any, act: Any, next_obs: Any, reward: Any, terminated: Any,
                truncated: Any, error: Any) -> None:
         """Hand the learner its rows' step (``(n_envs, n_agents, ...)`` arrays of the whole batch):
@@ -662,9 +710,11 @@ class Trainer:
         trunc = truncated[:, idx].reshape(-1) & ~term  # a draw by time limit bootstraps
         valid = ~error[:, idx].reshape(-1)  # a physics error's transition is never learned from
         active = learner.active
-        if not active.all():  # rows of agents already out of their match (elimination rules): nothing
-            rew, term, trunc = np.where(active, rew, 0.0), term & active, trunc & active
-            valid, nxt = valid | ~active, np.where(active[:, None], nxt, obs)
+        if not active.all():  # rows out of play (elimination rules, or sat out in self-play): nothing
+            on: Any = active if self.device is None else torch.as_tensor(active, device=self.device)
+            where: Any = np.where if self.device is None else torch.where
+            rew, term, trunc = where(on, rew, 0.0), term & on, trunc & on
+            valid, nxt = valid | ~on, where(on[:, None], nxt, obs)
         learner.store(obs, act, rew, nxt, term, trunc, valid, active.copy())
         if self.elimination:  # an agent that left stays out until its match is reset
             learner.active &= ~term
@@ -680,8 +730,10 @@ class Trainer:
             terms = torch.stack([infos[key][:, self.agent_index] for key in ACC_KEYS], dim=-1).double()
         if self.playing.all():
             self.acc += terms
-        else:  # an agent out of a match still running adds nothing more to its epoch
+        elif self.device is None:  # an agent out of a match still running adds nothing more to its epoch
             self.acc += np.where(self.playing[..., None], terms, 0.0)
+        else:  # (or one sitting it out, self-play)
+            self.acc += torch.where(torch.as_tensor(self.playing[..., None], device=self.device), terms, 0.0)
         self.obs = obs
         done = self._host(infos["_final_obs"])
         out = self._host(terminated[:, self.agent_index]) if self.elimination else None
@@ -832,13 +884,12 @@ class Trainer:
             arrays |= {f"{learner.name}.{k}": v for k, v in learner.arrays().items()}
             if isinstance(learner, OffPolicyLearner):
                 replay |= {f"{learner.name}.{k}": v for k, v in learner.replay.state_dict().items()}
-        # backend cpu: every match's exact state; warp: none (a resume restarts the unfinished matches)
-        snaps = self.env.snapshot() if self.device is None else []
+        # every match's exact state (either backend): its arrays here, the rest in state.json's "matches"
+        snaps = self.env.snapshot()
+        obs = self._host(self.obs)
         for k, s in enumerate(snaps):
-            arrays[f"match{k}.physics"] = s["physics"]
-            arrays[f"match{k}.last_obs"] = s["last_obs"]
-            arrays[f"match{k}.warnings"] = s["warnings"]
-            arrays[f"match{k}.obs"] = np.array(self.obs[k])
+            arrays |= {f"match{k}.{key}": v for key, v in s.items() if isinstance(v, np.ndarray)}
+            arrays[f"match{k}.obs"] = np.array(obs[k])
         acc = self._host(self.acc).tolist()
         for agent, lwr in self.lwr.items():
             arrays[f"lwr.{agent}"] = np.array(lwr)
@@ -846,8 +897,8 @@ class Trainer:
             "config": config_to_json(self.cfg), "manifests": {lr.name: self.manifest(lr) for lr in self.learners},
             "epochs_done": self.epochs_done, "env_steps": self.env_steps, "rng": self.rng.bit_generator.state,
             "learners": {lr.name: lr.state() for lr in self.learners},
-            "matches": [{key: s[key] for key in ("steps", "over", "rng", "alive", "places", "outcomes")}
-                        for s in snaps],  # who is still in play (elimination rules) resumes too
+            "matches": [{key: v for key, v in s.items() if not isinstance(v, np.ndarray)}
+                        for s in snaps],  # steps, generator, who is still in play (elimination rules)
             "acc": {agent: [dict(zip(ACC_KEYS, per_match[j], strict=True)) for per_match in acc]
                     for j, agent in enumerate(self.agents)},
             "final": self.final, "timers": self.timers,
@@ -910,8 +961,7 @@ class Trainer:
                     f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
                     f"{getattr(saved, name)!r}, this run has {getattr(self.cfg, name)!r} (from config.json)")
         need_arrays = [f"lwr.{a}" for a in self.agents] + [f"{lr.name}.active" for lr in self.learners] + [
-            f"match{k}.{part}" for k in range(self.cfg.n_envs) for part in ("physics", "last_obs", "warnings", "obs")
-            if self.device is None]
+            f"match{k}.{part}" for k in range(self.cfg.n_envs) for part in self._match_parts(arrays)]
         missing = [k for k in need_arrays if k not in arrays]
         if missing:
             raise checkpoint.CheckpointError(f"{folder / 'arrays.npz'}: missing arrays {missing[:5]}")
@@ -923,6 +973,14 @@ class Trainer:
             where = "replay.npz" if replay is not None and "replay arrays" in str(exc) else (
                 "state.json / arrays.npz / replay.npz / weights.safetensors")
             raise checkpoint.CheckpointError(f"{folder} ({where}): missing or malformed entry: {exc!r}") from exc
+
+    def _match_parts(self, arrays: Mapping[str, np.ndarray]) -> tuple[str, ...]:
+        """The arrays of each match (``match<k>.<part>``) a checkpoint of this backend holds: cpu every
+        ``Match.snapshot`` array; warp the world's state, or none in a checkpoint written before warp
+        resumed exactly (its matches then restart)."""
+        if self.device is None:
+            return ("physics", "last_obs", "warnings", "obs")
+        return ("physics", "obs") if "match0.physics" in arrays else ()
 
     def _one_learner_checkpoint(self, tensors: dict[str, torch.Tensor], state: dict[str, Any],
                                 arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> tuple[
@@ -948,16 +1006,17 @@ class Trainer:
             if replay is not None and isinstance(learner, OffPolicyLearner):
                 learner.load_replay(replay, prefix)
         self.rng.bit_generator.state = state["rng"]
-        n = self.cfg.n_envs
-        if self.device is None:  # every match continues exactly where it was
-            self.env.restore([{"physics": arrays[f"match{k}.physics"], "last_obs": arrays[f"match{k}.last_obs"],
-                               "warnings": arrays[f"match{k}.warnings"], **state["matches"][k]} for k in range(n)],
-                             np.stack([arrays[f"match{k}.obs"] for k in range(n)]))
-            self.obs = np.stack([np.asarray(arrays[f"match{k}.obs"], dtype=np.float32) for k in range(n)])
+        n, parts = self.cfg.n_envs, self._match_parts(arrays)
+        if parts:  # every match continues exactly where it was
+            obs = np.stack([np.asarray(arrays[f"match{k}.obs"], dtype=np.float32) for k in range(n)])
+            self.obs = obs if self.device is None else torch.as_tensor(obs, device=self.device)
+            self.env.restore([{part: arrays[f"match{k}.{part}"] for part in parts if part != "obs"}
+                              | state["matches"][k] for k in range(n)], self.obs)
             self.final = {a: state["final"][a] for a in self.agents}
-            self.acc = np.array([[[state["acc"][a][k][key] for key in ACC_KEYS] for a in self.agents]
-                                 for k in range(n)], dtype=np.float64)
-        else:  # backend warp keeps no match state: the unfinished matches restart (their epochs are dropped)
+            acc = np.array([[[state["acc"][a][k][key] for key in ACC_KEYS] for a in self.agents]
+                            for k in range(n)], dtype=np.float64)
+            self.acc = acc if self.device is None else torch.as_tensor(acc, device=self.device)
+        else:  # a warp checkpoint of before exact warp resume: the unfinished matches restart (epochs dropped)
             self.obs = self.env.reset(seed=[self._episode_seed() for _ in range(n)])[0]
             for learner in self.learners:
                 learner.active[:] = True
@@ -976,6 +1035,7 @@ class Trainer:
                 self.seat_policies[k] = self._policies_of(members, 0)
                 for i, rng_state in state["seat_rngs"][k].items():
                     self.seat_policies[k][int(i)].rng.bit_generator.state = rng_state
+            self._seat_groups = None
 
     def finish_outputs(self) -> None:
         """Plots from the metrics CSVs (skipped for an agent without a finished epoch)."""
