@@ -74,6 +74,21 @@ def test_a_snapshot_is_admitted_exactly_when_the_window_win_rate_passes_the_thre
     assert json.loads((tmp_path / "league" / "pool.json").read_text())["pools"]["team"]["members"][1]["id"] == snap.id
 
 
+def test_a_draw_counts_draw_score_in_the_window_so_a_league_of_draws_can_start(tmp_path: Path) -> None:
+    strict = league(tmp_path / "strict", threshold=0.4, window=10)
+    play(strict, ["draw"] * 8 + ["win"] * 2)
+    assert strict.pools["team"].win_rate == pytest.approx(0.2) and not strict.admit_due("team", 1)
+    half = league(tmp_path / "half", threshold=0.4, window=10, draw_score=0.5)
+    play(half, ["draw"] * 8 + ["win"] * 2)
+    assert half.pools["team"].win_rate == pytest.approx(0.6) and half.admit_due("team", 1)
+    play(half, ["loss"] * 10)
+    assert half.pools["team"].win_rate == 0.0  # a loss adds nothing
+    half.pools["team"].window.extend([0.5, 1, 0.5])
+    again = league(tmp_path / "half", threshold=0.4, window=10, draw_score=0.5)
+    again.load_state_dict(as_json(half.state_dict()))
+    assert list(again.pools["team"].window) == list(half.pools["team"].window)
+
+
 def test_admission_is_checked_only_every_snapshot_every_epochs(tmp_path: Path) -> None:
     lg = league(tmp_path, threshold=0.5, window=4, snapshot_every=5)
     play(lg, ["win"] * 4)
@@ -215,7 +230,8 @@ def test_rating_table_round_trips_exactly() -> None:
     ({"pfsp_exponent": 0.0}, "pfsp_exponent"), ({"max_size": 2}, "max_size"),
     ({"snapshot_every": 0}, "snapshot_every"), ({"zoo": ("spider",)}, "zoo"),
     ({"zoo": ("spider=zoo:nobody",)}, "zoo"), ({"zoo": ("spider=random", "spider=passive")}, "zoo"),
-    ({"rating_model": "Glicko"}, "rating_model"),
+    ({"rating_model": "Glicko"}, "rating_model"), ({"draw_score": 1.5}, "draw_score"),
+    ({"draw_score": True}, "draw_score"),
 ])
 def test_bad_config_names_the_field(kw: dict[str, object], field: str) -> None:
     with pytest.raises(ValueError, match=f"LeagueConfig.{field}"):

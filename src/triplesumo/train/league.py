@@ -17,7 +17,8 @@ The rules, after AlphaStar's league and RLlib's league example:
   teams); a player seated twice in one match is rated once, at its first seat
   (:meth:`League.record_seats` takes one player per seat, as
   :func:`~triplesumo.evaluation.runner.play_matches` reports them). Each learner
-  in the match appends 1 (it finished first, alone) or 0 to its side's win-rate window of
+  in the match appends 1 (it finished first, alone), ``draw_score`` (first, tied: a draw) or 0 to its
+  side's win-rate window of
   the last :attr:`LeagueConfig.window` matches, and each member it met counts the
   learner's result against it (win: better place, draw: same place, loss: worse).
 * **Admission.** At epochs that are multiples of :attr:`LeagueConfig.snapshot_every`, a
@@ -116,6 +117,10 @@ class LeagueConfig:
     zoo: tuple[str, ...] = ()
     """ROLE=POLICY entries seeding each pool with one member (zero, passive, random, zoo:NAME or a policy
     file); a pool is seeded when every one of its roles is named."""
+    draw_score: float = 0.0
+    """What a match a learner finishes first but not alone (a draw: the time limit, or tied places) adds to
+    its win-rate window: 0 (only a win counts, the default) or e.g. 0.5 (half a win, as chess scores it),
+    which lets a league started from scratch, where most matches are draws, admit its first snapshots."""
     live_share: float = 0.35
     """With several learning sides (both sides of the 2-vs-1 learn): the probability that a match is between
     the live learners; otherwise one learning side (uniform) plays members of the others' pools."""
@@ -127,6 +132,9 @@ class LeagueConfig:
         if not (isinstance(self.threshold, int | float) and not isinstance(self.threshold, bool)
                 and 0.0 <= self.threshold < 1.0):
             raise ValueError(f"LeagueConfig.threshold must be a number in [0, 1), got {self.threshold!r}")
+        if not (isinstance(self.draw_score, int | float) and not isinstance(self.draw_score, bool)
+                and 0.0 <= self.draw_score <= 1.0):
+            raise ValueError(f"LeagueConfig.draw_score must be a number in [0, 1], got {self.draw_score!r}")
         if not (isinstance(self.live_share, int | float) and not isinstance(self.live_share, bool)
                 and 0.0 <= self.live_share <= 1.0):
             raise ValueError(f"LeagueConfig.live_share must be a number in [0, 1], got {self.live_share!r}")
@@ -205,7 +213,7 @@ class OpponentPool:
         self.side, self.roles, self.config = side, roles, config
         self.members: list[Snapshot] = []
         self.evicted: list[Snapshot] = []
-        self.window: deque[int] = deque(maxlen=config.window)
+        self.window: deque[float] = deque(maxlen=config.window)
         self.created = 0
         self.admitted_since_log = 0
 
@@ -354,7 +362,9 @@ class League:
                 if not self._is_learner(name):
                     continue
                 pool = self.pools[name.split(":")[0]]
-                pool.window.append(int(place == best and list(places).count(best) == 1))
+                first, alone = place == best, list(places).count(best) == 1
+                pool.window.append(1 if first and alone else self.config.draw_score if first and
+                                   self.config.draw_score else 0)
                 for u, (other, other_place) in enumerate(zip(teams, places, strict=True)):
                     for opp in other if u != t else ():  # teammates are not opponents
                         if not self._is_learner(opp):
@@ -496,7 +506,7 @@ class League:
             pool = OpponentPool(side, self.pools[side].roles, self.config)
             pool.members = [Snapshot(**m) for m in data["members"]]
             pool.evicted = [Snapshot(**m) for m in data["evicted"]]
-            pool.window.extend(int(x) for x in data["window"])
+            pool.window.extend(x if isinstance(x, float) else int(x) for x in data["window"])
             pool.created, pool.admitted_since_log = int(data["created"]), int(data["admitted_since_log"])
             for m in (*pool.members, *pool.evicted):
                 for rel, digest in m.sha256.items():

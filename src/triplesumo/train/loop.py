@@ -138,7 +138,7 @@ ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "ma
                "device")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget): a config.json without them gets their defaults; any other missing key is an error."""
-LEAGUE_ADDED_LATER = ("live_share",)
+LEAGUE_ADDED_LATER = ("live_share", "draw_score")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
 
