@@ -122,7 +122,8 @@ class OffPolicyAlgorithm(Algorithm):
         """Polyak-average every target toward its online net: θ' <- τθ + (1 - τ)θ'.
 
         One multi-tensor ``lerp`` over all pairs (bit for bit the per-tensor ``lerp_``)."""
-        online, target = [], []
+        online: list[torch.Tensor] = []
+        target: list[torch.Tensor] = []
         for online_name, target_name in self.target_pairs:
             online_net: nn.Module = getattr(self, online_name)
             target_net: nn.Module = getattr(self, target_name)
