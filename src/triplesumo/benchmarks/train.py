@@ -30,9 +30,18 @@ other agents following ``policies``):
     Ant (SAC), Bug (TD3) and Spider (PPO) learning at once on that schedule.
 ``sb3_td3``, ``sb3_sac``, ``sb3_ppo``
     Stable-Baselines3's same algorithm on one Gymnasium env, same networks, batch and
-    schedule (``train_freq = n_envs`` steps; PPO ``n_steps = 2048``, batch 64, 10 epochs).
-    The algorithm rows run ``algo_steps`` env steps per round; ``updates/s`` counts
-    gradient steps (PPO: minibatch steps).
+    schedule (``train_freq = n_envs`` steps; PPO ``n_steps = 2048``, batch 64, 10 epochs,
+    the value update clipped as ours). The algorithm rows run ``algo_steps`` env steps per
+    round; ``updates/s`` counts gradient steps (PPO: minibatch steps).
+
+Every variant is also timed in CPU seconds of the whole process (its update thread
+included): ``cpu_rates`` are env steps per CPU-second and ``cpu_ratios`` ours against SB3's
+same algorithm on that basis. On a machine shared with other work the wall rates follow
+the load; the CPU rates barely do, but they give no credit for running the updates beside
+the physics (which pays off only when a core is free). ``update_profile_ms``
+(:func:`update_profile`) is the thread CPU of one gradient step of each algorithm, ours
+and SB3's, split into forward passes and the rest, backward, and Adam: where the time of
+an update goes.
 
 ``--backend warp --device DEV`` measures the trainer on MuJoCo Warp instead
 (:func:`run_warp_train_benchmark`): ``env_only``, ``train_ddpg`` and ``train_ppo`` on a
