@@ -109,3 +109,37 @@ def test_no_sb3_leaves_sb3_out(quick_no_sb3: tuple[int, str, dict[str, Any]]) ->
     assert LABELS["sb3_ddpg"] not in printed
     assert "train / SB3" not in printed
     assert any(line.startswith(LABELS["train_paper"]) for line in printed.splitlines())
+
+
+def test_quick_cpu_rates_and_the_update_profile_follow_from_each_other(quick: tuple) -> None:
+    _, printed, result, _ = quick
+    cpu = result["cpu_rates"]
+    assert set(cpu) == set(result["rates"]) and all(math.isfinite(r) and r > 0 for r in cpu.values())
+    for algo, ours in (("ddpg", "train_paper"), ("td3", "train_td3"), ("sac", "train_sac"), ("ppo", "train_ppo")):
+        assert result["cpu_ratios"][f"{algo}_vs_sb3"] == pytest.approx(cpu[ours] / cpu[f"sb3_{algo}"])
+    assert "per CPU-second of the process" in printed
+    profile = result["update_profile_ms"]
+    assert set(profile) == {"ddpg", "td3", "sac", "ppo"}
+    for algo, row in profile.items():
+        assert set(row) == {"ours", "sb3"}, algo
+        for side in row.values():
+            assert side["backward"] > 0 and side["optimizer"] > 0 and side["forward_and_rest"] > 0
+            assert side["forward_and_rest"] + side["backward"] + side["optimizer"] == pytest.approx(side["total"])
+        line = next(line for line in printed.splitlines() if line.strip().startswith(algo.upper() + " "))
+        assert float(line.split()[-1]) == pytest.approx(row["sb3"]["total"] / row["ours"]["total"], abs=0.005)
+
+
+def test_the_phase_timer_counts_backward_and_adam_and_puts_everything_back() -> None:
+    import torch
+
+    from triplesumo.benchmarks.train import _PhaseTimer
+
+    backward, step = torch.Tensor.backward, torch.optim.Adam.step
+    w = torch.nn.Parameter(torch.ones(300, 300))
+    opt = torch.optim.Adam([w])
+    with _PhaseTimer() as timer:
+        for _ in range(20):
+            (w @ w).square().sum().backward()
+            opt.step()
+    assert timer.backward > 0 and timer.optimizer > 0
+    assert (torch.Tensor.backward, torch.optim.Adam.step) == (backward, step)

@@ -119,14 +119,20 @@ class OffPolicyAlgorithm(Algorithm):
         return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
 
     def soft_update_targets(self) -> None:
-        """Polyak-average every target toward its online net: θ' <- τθ + (1 - τ)θ'."""
-        tau = self.config.tau
+        """Polyak-average every target toward its online net: θ' <- τθ + (1 - τ)θ'.
+
+        One multi-tensor ``lerp`` over all pairs (bit for bit the per-tensor ``lerp_``)."""
+        online: list[torch.Tensor] = []
+        target: list[torch.Tensor] = []
+        for online_name, target_name in self.target_pairs:
+            online_net: nn.Module = getattr(self, online_name)
+            target_net: nn.Module = getattr(self, target_name)
+            pairs = zip(online_net.parameters(), target_net.parameters(), strict=True)
+            for p, p_targ in pairs:
+                online.append(p)
+                target.append(p_targ)
         with torch.no_grad():
-            for online_name, target_name in self.target_pairs:
-                online: nn.Module = getattr(self, online_name)
-                target: nn.Module = getattr(self, target_name)
-                for p, p_targ in zip(online.parameters(), target.parameters(), strict=True):
-                    p_targ.lerp_(p, tau)
+            torch._foreach_lerp_(target, online, self.config.tau)
 
     # ------------------------------------------------------------------------- acting
 

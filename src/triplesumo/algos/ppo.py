@@ -143,6 +143,8 @@ class PPO(Algorithm):
     optimizers = ("optimizer",)
     uses_generator = True
     _ROLLOUT = ("obs", "u", "log_prob", "value", "reward", "terminated", "truncated", "bootstrap", "valid")
+    _MINIBATCH = ("obs", "u", "log_prob", "value", "advantage", "return")
+    """What a minibatch step reads: the first four from the rollout, then GAE's two."""
 
     def __init__(self, obs_dim: int, act_dim: int, config: PPOConfig, seed: int,
                  device: str | torch.device = "cpu") -> None:
@@ -271,9 +273,9 @@ class PPO(Algorithm):
             raise RuntimeError(f"the rollout holds {self.step} of {self.config.n_steps} steps")
         c = self.config
         adv, returns = self.advantages(next_obs)
-        flat = {k: v.flatten(0, 1) for k, v in self.rollout.items()} | {
+        flat = {k: self.rollout[k].flatten(0, 1) for k in self._MINIBATCH[:4]} | {
             "advantage": adv.flatten(), "return": returns.flatten()}
-        valid = flat.pop("valid") > 0
+        valid = self.rollout["valid"].flatten() > 0
         if not bool(valid.all()):
             flat = {k: v[valid] for k, v in flat.items()}
         size = flat["value"].shape[0]
@@ -283,7 +285,8 @@ class PPO(Algorithm):
         for _ in range(c.n_epochs):
             order = torch.randperm(size, generator=self.generator, device=self.device)
             for start in range(0, size - minibatch + 1, minibatch):
-                stats = self.minibatch_step({k: v[order[start:start + minibatch]] for k, v in flat.items()})
+                rows = order[start:start + minibatch]
+                stats = self.minibatch_step({k: v.index_select(0, rows) for k, v in flat.items()})
                 totals = {k: totals.get(k, 0.0) + v for k, v in stats.items()}
                 count += 1
             if c.target_kl is not None and count and stats["approx_kl"] > c.target_kl:
@@ -310,11 +313,11 @@ class PPO(Algorithm):
         loss = policy_loss - c.ent_coef * entropy + c.vf_coef * value_loss
         descend(self.optimizer, loss, c.max_grad_norm)
         with torch.no_grad():
-            approx_kl = ((log_ratio.exp() - 1.0) - log_ratio).mean()  # k3 estimator (CleanRL)
-            clip_fraction = ((log_ratio.exp() - 1.0).abs() > c.clip_coef).float().mean()
-        return {"actor_loss": policy_loss.item(), "critic_loss": value_loss.item(),
-                "entropy": entropy.item(), "approx_kl": approx_kl.item(),
-                "clip_fraction": clip_fraction.item()}
+            ratio_minus_1 = log_ratio.exp() - 1.0
+            approx_kl = (ratio_minus_1 - log_ratio).mean()  # k3 estimator (CleanRL)
+            clip_fraction = (ratio_minus_1.abs() > c.clip_coef).float().mean()
+            stats = torch.stack([policy_loss, value_loss, entropy, approx_kl, clip_fraction]).tolist()
+        return dict(zip(("actor_loss", "critic_loss", "entropy", "approx_kl", "clip_fraction"), stats, strict=True))
 
 
 def _float32(x: Any) -> np.ndarray | torch.Tensor:

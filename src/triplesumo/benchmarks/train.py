@@ -30,9 +30,18 @@ other agents following ``policies``):
     Ant (SAC), Bug (TD3) and Spider (PPO) learning at once on that schedule.
 ``sb3_td3``, ``sb3_sac``, ``sb3_ppo``
     Stable-Baselines3's same algorithm on one Gymnasium env, same networks, batch and
-    schedule (``train_freq = n_envs`` steps; PPO ``n_steps = 2048``, batch 64, 10 epochs).
-    The algorithm rows run ``algo_steps`` env steps per round; ``updates/s`` counts
-    gradient steps (PPO: minibatch steps).
+    schedule (``train_freq = n_envs`` steps; PPO ``n_steps = 2048``, batch 64, 10 epochs,
+    the value update clipped as ours). The algorithm rows run ``algo_steps`` env steps per
+    round; ``updates/s`` counts gradient steps (PPO: minibatch steps).
+
+Every variant is also timed in CPU seconds of the whole process (its update thread
+included): ``cpu_rates`` are env steps per CPU-second and ``cpu_ratios`` ours against SB3's
+same algorithm on that basis. On a machine shared with other work the wall rates follow
+the load; the CPU rates barely do, but they give no credit for running the updates beside
+the physics (which pays off only when a core is free). ``update_profile_ms``
+(:func:`update_profile`) is the thread CPU of one gradient step of each algorithm, ours
+and SB3's, split into forward passes and the rest, backward, and Adam: where the time of
+an update goes.
 
 ``--backend warp --device DEV`` measures the trainer on MuJoCo Warp instead
 (:func:`run_warp_train_benchmark`): ``env_only``, ``train_ddpg`` and ``train_ppo`` on a
@@ -53,9 +62,11 @@ projected wall time of the paper's 20,000 epochs uses the mean epoch length meas
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -123,6 +134,7 @@ class _SB3Variant:
                 "MlpPolicy", env, learning_rate=c.lr, n_steps=PPO_ROLLOUT, batch_size=PPO_ROLLOUT // c.n_minibatches,
                 n_epochs=c.n_epochs, gamma=c.gamma, gae_lambda=c.gae_lambda, clip_range=c.clip_coef,
                 ent_coef=c.ent_coef, vf_coef=c.vf_coef, max_grad_norm=c.max_grad_norm,
+                clip_range_vf=c.clip_coef if c.clip_value else None,  # ours clips the value update too
                 policy_kwargs={"net_arch": {"pi": list(c.hidden), "vf": list(c.hidden)}, "activation_fn": act},
                 **common)
             self.learning_starts = 0
@@ -166,13 +178,112 @@ class _SB3Variant:
         return self.model.num_timesteps - before, time.perf_counter() - t0
 
 
+PROFILE_STEPS = 64
+"""Off-policy gradient steps timed per side by :func:`update_profile` (PPO: two updates of 320 minibatches)."""
+
+
+class _PhaseTimer:
+    """Thread CPU seconds spent in ``Tensor.backward`` and in ``torch.optim.Adam.step`` while
+    entered: both libraries descend through these two, so the rest of a gradient step is its
+    forward passes, replay sampling and bookkeeping."""
+
+    def __enter__(self) -> _PhaseTimer:
+        self.backward = self.optimizer = 0.0
+        self._saved = (torch.Tensor.backward, torch.optim.Adam.step)
+
+        def timed(fn: Callable[..., Any], field: str) -> Callable[..., Any]:
+            def wrapper(*args: Any, **kwargs: Any) -> Any:
+                t = time.thread_time()
+                try:
+                    return fn(*args, **kwargs)
+                finally:
+                    setattr(self, field, getattr(self, field) + time.thread_time() - t)
+            return wrapper
+
+        setattr(torch.Tensor, "backward", timed(self._saved[0], "backward"))  # noqa: B010
+        setattr(torch.optim.Adam, "step", timed(self._saved[1], "optimizer"))  # noqa: B010
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        setattr(torch.Tensor, "backward", self._saved[0])  # noqa: B010
+        setattr(torch.optim.Adam, "step", self._saved[1])  # noqa: B010
+
+
+def _phases(run: Callable[[], tuple[int, float]]) -> dict[str, float]:
+    """Milliseconds of thread CPU per gradient step of ``run`` (which returns its gradient steps and
+    the thread CPU seconds of its timed part), split into forward-and-rest, backward and Adam."""
+    run()  # warm
+    with _PhaseTimer() as timer:
+        steps, total = run()
+    ms = 1e3 / steps
+    return {"forward_and_rest": (total - timer.backward - timer.optimizer) * ms, "backward": timer.backward * ms,
+            "optimizer": timer.optimizer * ms, "total": total * ms}
+
+
+def _timed(fn: Callable[[], Any], steps: int) -> Callable[[], tuple[int, float]]:
+    def run() -> tuple[int, float]:
+        t = time.thread_time()
+        fn()
+        return steps, time.thread_time() - t
+    return run
+
+
+def _ppo_update(algo: Any, n_rows: int, seed: int) -> Callable[[], tuple[int, float]]:
+    """A fresh PPO like ``algo`` (same networks and config) whose every call fills a synthetic rollout
+    of ``n_rows`` rows (the cost of an update does not depend on the data) and times the update."""
+    from triplesumo.algos.ppo import PPO
+
+    fresh = PPO(algo.obs_dim, algo.act_dim, algo.config, seed)
+    rng = np.random.default_rng(seed)
+    zeros, no = np.zeros(n_rows), np.zeros(n_rows, dtype=bool)
+
+    def run() -> tuple[int, float]:
+        obs = np.zeros((n_rows, fresh.obs_dim), np.float32)
+        while not fresh.rollout_full:
+            obs = rng.standard_normal((n_rows, fresh.obs_dim)).astype(np.float32)
+            fresh.observe(obs)
+            fresh.explore(obs, rng)
+            fresh.record(zeros, no, no)
+        t = time.thread_time()
+        fresh.update(obs)
+        return fresh.config.n_epochs * fresh.config.n_minibatches, time.thread_time() - t
+    return run
+
+
+def update_profile(variants: dict[str, Any], seed: int) -> dict[str, dict[str, dict[str, float]]]:
+    """Thread CPU milliseconds of one gradient step of each algorithm, ours against SB3's, at the
+    bench's networks and batch sizes, split by phase (:class:`_PhaseTimer`; PPO: one minibatch
+    step). Ours: the trainer's learner (replay sample, update, finite checks); SB3: ``model.train``
+    on its own replay or rollout; CPU time, so the machine's load barely moves it."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for algo, ours_name in (("ddpg", "train_paper"), ("td3", "train_td3"), ("sac", "train_sac"), ("ppo", "train_ppo")):
+        if ours_name not in variants:
+            continue
+        learner = variants[ours_name].trainer.learners[0]
+        row: dict[str, dict[str, float]] = {}
+        if algo == "ppo":
+            row["ours"] = _phases(_ppo_update(learner.algo, learner.n_rows, seed))
+            if "sb3_ppo" in variants:
+                model = variants["sb3_ppo"].model
+                row["sb3"] = _phases(_timed(model.train, model.n_epochs * (PPO_ROLLOUT // model.batch_size)))
+        else:
+            row["ours"] = _phases(_timed(functools.partial(learner.run_updates, PROFILE_STEPS), PROFILE_STEPS))
+            if f"sb3_{algo}" in variants:
+                model = variants[f"sb3_{algo}"].model
+                sb3_train = functools.partial(model.train, gradient_steps=PROFILE_STEPS, batch_size=model.batch_size)
+                row["sb3"] = _phases(_timed(sb3_train, PROFILE_STEPS))
+        out[algo] = row
+    return out
+
+
 def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1, rounds: int = 3,
                         chunk: int = 2000, policies: tuple[str, ...] = ("ant=random", "spider=random"),
                         seed: int = 0, learning_starts: int = 1000, sb3: bool = True,
-                        algo_steps: int | None = 2048) -> dict[str, Any]:
+                        algo_steps: int | None = 2048, update_steps: bool = True) -> dict[str, Any]:
     """Measure env-only, paper-preset training and (optionally) SB3 DDPG, then (unless
     ``algo_steps`` is None) TD3, SAC, PPO and three learners at once against SB3's same
-    algorithms; returns a JSON-able dict."""
+    algorithms, then (``update_steps``) the cost of one gradient step of each, split by phase
+    (:func:`update_profile`); returns a JSON-able dict."""
     torch.set_num_threads(1)
     base = TrainConfig(name="bench", policies=policies, n_envs=n_envs, n_threads=n_threads, seed=seed,
                        progress=False, tensorboard=False, save_replay=False, epochs=10**9)
@@ -225,21 +336,28 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     per_round: dict[str, list[float]] = {name: [] for name in variants}
     update_rounds: dict[str, list[float]] = {name: [] for name in variants}
     load_before = os.getloadavg()
+    cpu_rounds: dict[str, list[float]] = {name: [] for name in variants}
     for _ in range(rounds):
         done = dict.fromkeys(variants, 0)
         spent = dict.fromkeys(variants, 0.0)
+        cpu = dict.fromkeys(variants, 0.0)
         grads = {name: v.gradient_steps() for name, v in variants.items()}
         while any(done[name] < budget[name] for name in variants):
             for name, variant in variants.items():
                 if done[name] < budget[name]:
+                    cpu0 = time.process_time()  # every thread of the process: the update thread's too
                     n, seconds = variant.run(min(chunk, budget[name] - done[name]))
+                    cpu[name] += time.process_time() - cpu0
                     done[name] += n
                     spent[name] += seconds
         for name, variant in variants.items():
             per_round[name].append(done[name] / spent[name])
             update_rounds[name].append((variant.gradient_steps() - grads[name]) / spent[name])
+            cpu_rounds[name].append(done[name] / max(cpu[name], 1e-9))
     rates = {name: float(np.median(r)) for name, r in per_round.items()}
     update_rates = {name: float(np.median(r)) for name, r in update_rounds.items()}
+    cpu_rates = {name: float(np.median(r)) for name, r in cpu_rounds.items()}
+    profile = update_profile(variants, seed) if update_steps else {}
     spent = {k: trainer.timers[k] - timers0[k] for k in timers0}
     wall = spent["env"] + spent["act"] + spent["wait"]
     epochs = trainer.epochs_done - epochs0
@@ -255,6 +373,10 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
             ratios[f"{algo}_vs_env"] = rates[f"train_{algo}"] / rates["env_only"]
     if "train_3_learners" in rates:
         ratios["3_learners_vs_env"] = rates["train_3_learners"] / rates["env_only"]
+    cpu_ratios = {f"{ours.removeprefix('train_').replace('paper', 'ddpg')}_vs_sb3": cpu_rates[ours] / cpu_rates[theirs]
+                  for ours, theirs in (("train_paper", "sb3_ddpg"), ("train_td3", "sb3_td3"),
+                                       ("train_sac", "sb3_sac"), ("train_ppo", "sb3_ppo"))
+                  if ours in cpu_rates and theirs in cpu_rates}
     result = {
         "setup": {"steps": steps, "rounds": rounds, "chunk": chunk, "n_envs": n_envs, "n_threads": n_threads,
                   "policies": list(policies), "seed": seed, "learning_starts": learning_starts,
@@ -268,6 +390,9 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
         "rates": rates,
         "updates_per_s": update_rates,
         "ratios": ratios,
+        "cpu_rates": cpu_rates,
+        "cpu_ratios": cpu_ratios,
+        "update_profile_ms": profile,
         "time_split": {"env": spent["env"] / wall, "act": spent["act"] / wall,
                        "wait_for_learning": spent["wait"] / wall},
         "learning_busy": spent["learn"] / wall,
@@ -399,6 +524,20 @@ def format_table(result: dict[str, Any]) -> str:
         if f"{algo}_vs_sb3" in ratios:
             lines.append(f"train {algo.upper()} / SB3 {algo.upper()}: {ratios[f'{algo}_vs_sb3']:.2f} "
                          f"(target >= 2: {'met' if ratios[f'{algo}_vs_sb3'] >= 2 else 'NOT met'})")
+    cpu_rates, cpu_ratios = result.get("cpu_rates", {}), result.get("cpu_ratios", {})
+    if cpu_ratios:
+        lines.append("per CPU-second of the process (all its threads; barely moved by other load on the machine): "
+                     + ", ".join(f"{k.split('_')[0].upper()} {v:.2f}x SB3" for k, v in cpu_ratios.items())
+                     + f"; env alone {cpu_rates['env_only']:.0f} steps/CPU-s")
+    profile = result.get("update_profile_ms", {})
+    if profile:
+        lines += ["", "one gradient step (PPO: one minibatch step), thread CPU ms: forward and rest / backward / "
+                  "Adam = total"]
+        for algo, row in profile.items():
+            cells = [f"{side} {t['forward_and_rest']:.2f} / {t['backward']:.2f} / {t['optimizer']:.2f} = "
+                     f"{t['total']:.2f}" for side, t in row.items()]
+            lines.append(f"  {algo.upper():5s} " + ";  ".join(cells)
+                         + (f";  SB3/ours {row['sb3']['total'] / row['ours']['total']:.2f}" if "sb3" in row else ""))
     p = result["projected_hours_20000_epochs"]
     if p["at_measured_epoch_length"] is not None:
         lines.append(f"projected wall time of 20,000 epochs at the measured {result['mean_epoch_steps']:.0f} "
@@ -428,6 +567,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--algo-steps", type=int, default=2048,
                         help="env steps per round of the TD3/SAC/PPO/3-learner rows and their SB3 rows (default: 2048)")
     parser.add_argument("--no-algos", action="store_true", help="skip the TD3, SAC, PPO and 3-learner rows")
+    parser.add_argument("--no-update-profile", action="store_true",
+                        help="skip the per-phase cost of one gradient step, ours against SB3's")
     parser.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
@@ -456,6 +597,7 @@ def main(argv: list[str] | None = None) -> int:
     result = run_train_benchmark(steps=args.steps, n_envs=args.envs, n_threads=args.threads, rounds=args.rounds,
                                  chunk=args.chunk, policies=tuple(args.policies), seed=args.seed,
                                  learning_starts=learning_starts, sb3=not args.no_sb3,
-                                 algo_steps=None if args.no_algos else args.algo_steps)
+                                 algo_steps=None if args.no_algos else args.algo_steps,
+                                 update_steps=not args.no_update_profile)
     report(format_table(result), result, args.json)
     return 0

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from triplesumo.algos.base import Algorithm, DivergedError
+from triplesumo.algos.base import Algorithm, DivergedError, not_finite
 from triplesumo.algos.ddpg import DDPG
 from triplesumo.algos.noise import ActionNoise, make_noise
 from triplesumo.algos.offpolicy import OffPolicyAlgorithm
@@ -138,7 +138,7 @@ class Learner:
         return means
 
     def check_parameters(self) -> str | None:
-        bad = [name for name, p in self.parameters if not bool(torch.isfinite(p).all())]
+        bad = not_finite(self.parameters)
         return f"its parameters are not finite: {bad[:4]}" if bad else None
 
     # ------------------------------------------------------------------ checkpoints
