@@ -580,5 +580,10 @@ def test_max_env_steps_stops_at_the_first_epoch_end_past_the_budget(tmp_path: Pa
     saved = checkpoint.checkpoints(result.run_dir)
     assert saved and saved[-1][0] == result.epochs  # the stop left a checkpoint
     assert training_done(cfg) and not training_done(dataclasses.replace(cfg, max_env_steps=0))
+    shutil.rmtree(result.run_dir / "checkpoints")  # a finished run kept small: its policy file says it is done
+    assert training_done(cfg) and not training_done(dataclasses.replace(cfg, max_env_steps=0))
+    assert training_done(dataclasses.replace(cfg, epochs=result.epochs, max_env_steps=0))
+    (result.run_dir / "policy.json").unlink()
+    assert not training_done(cfg)
     with pytest.raises(ValueError, match="TrainConfig.max_env_steps must be an int >= 0"):
         TrainConfig(max_env_steps=-1)

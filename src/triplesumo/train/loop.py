@@ -176,15 +176,23 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
 
 
 def training_done(cfg: TrainConfig, run_dir: Path | None = None) -> bool:
-    """Whether the run of ``cfg`` (in ``run_dir``, default ``OUT/NAME``) has a checkpoint at its budget:
-    ``epochs`` reached, or ``max_env_steps`` collected."""
-    saved = checkpoint.checkpoints(Path(run_dir) if run_dir is not None else Path(cfg.out) / cfg.name)
-    if not saved:
-        return False
-    epoch, folder = saved[-1]
-    if epoch >= cfg.epochs:
+    """Whether the run of ``cfg`` (in ``run_dir``, default ``OUT/NAME``) has reached its budget (``epochs``,
+    or ``max_env_steps`` collected): its newest checkpoint says so, or, in a finished run whose
+    checkpoints were deleted to keep it small (a run folder committed to a repository), its policy
+    files do (each is written after the checkpoint it comes from, with that checkpoint's epochs and env steps)."""
+    run_dir = Path(run_dir) if run_dir is not None else Path(cfg.out) / cfg.name
+    saved = checkpoint.checkpoints(run_dir)
+    if saved:
+        epoch, folder = saved[-1]
+        done: dict[str, Any] = {"epochs": epoch, "env_steps": load_json(folder / "state.json").get("env_steps", 0)}
+    else:
+        manifests = [load_json(p) for p in sorted(run_dir.glob("policy*.json"))] if run_dir.is_dir() else []
+        if not manifests:
+            return False
+        done = {k: min(int(m.get(k, 0)) for m in manifests) for k in ("epochs", "env_steps")}
+    if int(done["epochs"]) >= cfg.epochs:
         return True
-    return cfg.max_env_steps > 0 and int(load_json(folder / "state.json").get("env_steps", 0)) >= cfg.max_env_steps
+    return cfg.max_env_steps > 0 and int(done["env_steps"]) >= cfg.max_env_steps
 
 
 def command_for(cfg: TrainConfig) -> str:
