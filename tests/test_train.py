@@ -183,6 +183,7 @@ def test_tiny_run_policy_file_acts_deterministically(uninterrupted: Trained) -> 
                                    expect_obs_dim=bug.obs_dim)
     assert manifest["agent"] == "bug" and manifest["obs_mode"] == "paper" and manifest["algo"] == "ddpg"
     assert manifest["epochs"] == uninterrupted.result.epochs and manifest["hidden"] == [16, 16]
+    assert "physics" not in manifest  # the default simulation is not spelled out
     obs = np.random.default_rng(1).normal(size=(3, bug.obs_dim)).astype(np.float32)
     first = policy(obs)
     assert first.shape == (3, 8) and np.abs(first).max() <= 1.0
@@ -447,6 +448,7 @@ def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_def
         model = rim.batch.matches[0].model
         border = [g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("border")]
         assert border and all(model.geom_contype[g] or model.geom_conaffinity[g] for g in border)  # solid rim
+        assert rim.manifest(rim.learners[0])["physics"]["border_rim"] is True  # the policy file says which ring
     finally:
         rim.batch.close()
     saved = config_to_json(tiny(tmp_path))

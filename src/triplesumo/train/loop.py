@@ -880,6 +880,8 @@ class Trainer:
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
             "updates": learner.algo.num_updates, "command": self.command, "trained_against": list(self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
+            # the simulation, where it is not the default (e.g. the paper's solid rim)
+            **({"physics": dataclasses.asdict(self.cfg.physics)} if self.cfg.physics != PhysicsConfig() else {}),
         }
 
     def save(self) -> Path:
