@@ -164,22 +164,9 @@ class ReplayBuffer:
             KeyError: A key is missing.
             ValueError: Capacity, sizes or array shapes do not match this buffer.
         """
-        for key in (*FIELDS, "pos", "size", "capacity"):
-            if key not in state:
-                raise KeyError(f"replay state is missing {key!r}")
-        capacity = int(np.asarray(state["capacity"]))
-        size = int(np.asarray(state["size"]))
-        pos = int(np.asarray(state["pos"]))
-        if capacity != self._capacity:
-            raise ValueError(f"capacity: saved {capacity}, this buffer has {self._capacity}")
-        if not 0 <= size <= capacity:
-            raise ValueError(f"size must be in [0, {capacity}], got {size}")
-        if not 0 <= pos < capacity or (size < capacity and pos != size):
-            raise ValueError(f"pos {pos} is inconsistent with size {size} and capacity {capacity}")
-        for name, row_shape in self._row_shapes().items():  # one array at a time: never two copies at once
-            arr = np.asarray(state[name])
-            if arr.shape != (size, *row_shape):
-                raise ValueError(f"{name} must have shape {(size, *row_shape)}, got {arr.shape}")
+        size, pos = self._checked_extent(state)
+        for name in self._row_shapes():  # one array at a time: never two copies at once
+            arr = self._checked_rows(state, name, size)
             target = getattr(self, name)
             target[:size] = arr
             del arr
@@ -187,6 +174,29 @@ class ReplayBuffer:
                 target[size:self._size] = 0.0  # pages are still the allocation's zeros: never touch them)
         self._pos = pos
         self._size = size
+
+    def _checked_extent(self, state: Mapping[str, np.ndarray]) -> tuple[int, int]:
+        """``(size, pos)`` of a saved state, once its keys, capacity, size and position fit this buffer."""
+        for key in (*FIELDS, "pos", "size", "capacity"):
+            if key not in state:
+                raise KeyError(f"replay state is missing {key!r}")
+        capacity, size, pos = (int(np.asarray(state[k])) for k in ("capacity", "size", "pos"))
+        if capacity != self._capacity:
+            raise ValueError(f"capacity: saved {capacity}, this buffer has {self._capacity}")
+        if not 0 <= size <= capacity:
+            raise ValueError(f"size must be in [0, {capacity}], got {size}")
+        if not 0 <= pos < capacity or (size < capacity and pos != size):
+            raise ValueError(f"pos {pos} is inconsistent with size {size} and capacity {capacity}")
+        return size, pos
+
+    def _checked_rows(self, state: Mapping[str, np.ndarray], name: str, size: int,
+                      dtype: type | None = None) -> np.ndarray:
+        """The saved rows of field ``name``, once their shape is ``(size, *row shape)``."""
+        arr = np.asarray(state[name], dtype=dtype)
+        want = (size, *self._row_shapes()[name])
+        if arr.shape != want:
+            raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+        return arr
 
 
 class TorchReplayBuffer(ReplayBuffer):
@@ -247,20 +257,9 @@ class TorchReplayBuffer(ReplayBuffer):
 
     def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
         """Restore :meth:`state_dict` output (or a numpy buffer's); errors as :meth:`ReplayBuffer.load_state_dict`."""
-        for key in (*FIELDS, "pos", "size", "capacity"):
-            if key not in state:
-                raise KeyError(f"replay state is missing {key!r}")
-        capacity, size, pos = (int(np.asarray(state[k])) for k in ("capacity", "size", "pos"))
-        if capacity != self._capacity:
-            raise ValueError(f"capacity: saved {capacity}, this buffer has {self._capacity}")
-        if not 0 <= size <= capacity:
-            raise ValueError(f"size must be in [0, {capacity}], got {size}")
-        if not 0 <= pos < capacity or (size < capacity and pos != size):
-            raise ValueError(f"pos {pos} is inconsistent with size {size} and capacity {capacity}")
-        for name, row_shape in self._row_shapes().items():
-            arr = np.asarray(state[name], dtype=np.float32)
-            if arr.shape != (size, *row_shape):
-                raise ValueError(f"{name} must have shape {(size, *row_shape)}, got {arr.shape}")
+        size, pos = self._checked_extent(state)
+        for name in self._row_shapes():
+            arr = self._checked_rows(state, name, size, np.float32)
             target = getattr(self, name)
             target[:size] = torch.as_tensor(arr, device=self.device)
             target[size:] = 0.0

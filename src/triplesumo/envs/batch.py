@@ -204,13 +204,7 @@ class MatchBatch:
         ``PhysicsError`` is raised, naming its match.
         """
         self._check_open()
-        actions = np.asarray(actions, dtype=np.float64)
-        expected = (self.n_matches, self.n_agents, self.action_width)
-        if actions.shape != expected:
-            raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
-        finished = [k for k, m in enumerate(self.matches) if m.over]
-        if finished:
-            raise RuntimeError(f"matches {finished} are over (or were never started): call reset_one(k) first")
+        actions = self._checked_shape(actions)
         ctrls = []
         for k, (match, action) in enumerate(zip(self.matches, actions, strict=True)):
             try:
@@ -279,8 +273,9 @@ class MatchBatch:
             else:
                 self._forces[k] = sim.contact_forces()
 
-    def _controls(self, actions: np.ndarray) -> np.ndarray:
-        """:meth:`Match.prepare` of every match at once (first-out rules: every agent in play)."""
+    def _checked_shape(self, actions: np.ndarray) -> np.ndarray:
+        """``actions`` as float64 ``(n_matches, n_agents, action_width)``; ``ValueError`` for another shape,
+        ``RuntimeError`` if a match is over."""
         actions = np.asarray(actions, dtype=np.float64)
         expected = (self.n_matches, self.n_agents, self.action_width)
         if actions.shape != expected:
@@ -288,6 +283,11 @@ class MatchBatch:
         finished = [k for k, m in enumerate(self.matches) if m.over]
         if finished:
             raise RuntimeError(f"matches {finished} are over (or were never started): call reset_one(k) first")
+        return actions
+
+    def _controls(self, actions: np.ndarray) -> np.ndarray:
+        """:meth:`Match.prepare` of every match at once (first-out rules: every agent in play)."""
+        actions = self._checked_shape(actions)
         if self._pad is not None:  # columns past an agent's motors are ignored, whatever they hold
             actions = np.where(self._pad, actions, 0.0)
         if not math.isfinite(actions.sum()):  # NaN or inf somewhere (or an overflowing sum: look closer)
