@@ -360,9 +360,10 @@ def _batch_variants(n_threads: int) -> list[tuple[str, int]]:
     return list(dict.fromkeys(variants))
 
 
-def _versions() -> dict[str, str]:
+def _versions(*extra: str) -> dict[str, str]:
+    """Versions of what a benchmark's figures depend on (``extra``: further installed packages)."""
     versions = {"python": platform.python_version(), "mujoco": mujoco.__version__, "numpy": np.__version__}
-    for package in ("triplesumo", "gymnasium", "pettingzoo"):
+    for package in ("triplesumo", "gymnasium", "pettingzoo", *extra):
         try:
             versions[package] = metadata.version(package)
         except metadata.PackageNotFoundError:

@@ -25,11 +25,11 @@ from __future__ import annotations
 
 import platform
 import time
-from importlib import metadata
 from typing import Any
 
 import numpy as np
 
+from triplesumo.benchmarks.env import _versions
 from triplesumo.rules import MatchConfig
 
 DEFAULT_SIZES = (1, 16, 256, 1024, 4096, 16384)
@@ -53,7 +53,8 @@ def run_warp_benchmark(sizes: tuple[int, ...] = DEFAULT_SIZES, steps: int = 200,
         "setup": {"backend": "warp", "device": device, "device_name": _device_name(device), "sizes": list(sizes),
                   "steps": steps, "rounds": rounds, "warmup": warmup, "seed": seed, "integrator": integrator,
                   "obs_mode": obs_mode, "timestep": config.physics.timestep,
-                  "frame_skip": config.physics.frame_skip, "versions": _versions(), "platform": platform.platform()},
+                  "frame_skip": config.physics.frame_skip, "versions": _versions("mujoco-warp", "warp-lang", "torch"),
+                  "platform": platform.platform()},
         "rows": rows,
         "target": {"env_steps_per_s": TARGET_ENV_STEPS_PER_S, "env_vs_raw": TARGET_ENV_VS_RAW,
                    "best_num_envs": best["num_envs"],
@@ -133,16 +134,6 @@ def _device_name(device: str) -> str:
     if device.startswith("cuda") and torch.cuda.is_available():
         return torch.cuda.get_device_name(torch.device(device))
     return platform.processor() or platform.machine()
-
-
-def _versions() -> dict[str, str]:
-    versions = {"python": platform.python_version(), "numpy": np.__version__}
-    for package in ("mujoco", "mujoco-warp", "warp-lang", "torch", "triplesumo"):
-        try:
-            versions[package] = metadata.version(package)
-        except metadata.PackageNotFoundError:
-            versions[package] = "not installed"
-    return versions
 
 
 def format_table(result: dict[str, Any]) -> str:
