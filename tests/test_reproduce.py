@@ -134,6 +134,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     ({"seeds": ()}, "ReproduceConfig.seeds must be non-empty"),
     ({"seeds": (0, 0)}, "without repeats"),
     ({"bug_epochs": 0}, "ReproduceConfig.bug_epochs must be an int >= 1"),
+    ({"bug_learn_every": -1}, "ReproduceConfig.bug_learn_every must be an int >= 0"),
     ({"ablations": ("noise=brownian",)}, r"ReproduceConfig.ablations: 'noise=brownian': .*DDPGConfig.noise"),
     ({"ablations": ("still=2",)}, "RewardConfig.still is a punishment"),
     ({"ablations": ("seed=3",)}, "seed is set by the protocol"),
@@ -155,3 +156,19 @@ def test_a_record_written_before_an_option_existed_resumes_with_its_default(tmp_
     check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, progress=False))
     with pytest.raises(ValueError, match="other options"):
         check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ablations=("still=-1",)))
+
+
+def test_bug_trials_give_td3_and_sac_the_shared_schedule_and_keep_ddpg_at_the_paper_preset(tmp_path: Path) -> None:
+    from triplesumo.reproduce import Protocol
+    from triplesumo.train.loop import command_for
+
+    by_algo = {t.config.learn[0].split("=")[1]: t.config
+               for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,))).bug_trials()}
+    assert sorted(by_algo) == ["ddpg", "ppo", "sac", "td3"]
+    assert by_algo["td3"].td3.learn_every == 16 and by_algo["sac"].sac.learn_every == 16
+    assert by_algo["ddpg"].ddpg.learn_every == 30  # the paper preset, untouched
+    assert by_algo["td3"].max_env_steps == 1_000_000
+    assert "--td3.learn-every 16" in command_for(by_algo["td3"])  # the recorded command says so
+    default = {t.config.learn[0].split("=")[1]: t.config
+               for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,), bug_learn_every=0)).bug_trials()}
+    assert default["td3"].td3.learn_every == 1 and default["sac"].sac.learn_every == 1
