@@ -157,11 +157,10 @@ class ReproduceConfig:
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
             raise ValueError(f"ReproduceConfig.algos must be among {ALGOS}, got {bad}")
-        if (not isinstance(self.bug_env_steps, int) or isinstance(self.bug_env_steps, bool)
-                or self.bug_env_steps < 0):
-            raise ValueError(f"ReproduceConfig.bug_env_steps must be an int >= 0, got {self.bug_env_steps!r}")
-        if not isinstance(self.bug_learn_every, int) or isinstance(self.bug_learn_every, bool) or self.bug_learn_every < 0:
-            raise ValueError(f"ReproduceConfig.bug_learn_every must be an int >= 0, got {self.bug_learn_every!r}")
+        for name in ("bug_env_steps", "bug_learn_every"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise ValueError(f"ReproduceConfig.{name} must be an int >= 0, got {value!r}")
         for name in ("ant_epochs", "spider_epochs", "bug_epochs", "contest_epochs", "eval_epochs", "n_envs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
