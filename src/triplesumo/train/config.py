@@ -100,6 +100,17 @@ class TrainConfig:
     max_env_steps: int = 0
     """Stop (after a checkpoint, at the next epoch end) once this many env steps were collected, a
     budget that compares algorithms whose matches last differently; 0 = no limit."""
+    eval_every: int = 0
+    """Every this many env steps (at the step that crosses a multiple of it) play each learner's current
+    policy, frozen (no exploration), on eval_epochs seeded test matches against the run's other policies
+    (other learners: their current policies, frozen) and append its test MWR to eval.csv (eval-NAME.csv
+    with several learners) and TensorBoard; 0: never. The test matches run on the CPU and draw on none of
+    the training's generators: a run trains the same with or without them. Not with self_play (its
+    league rates the learners)."""
+    eval_epochs: int = 200
+    """Test matches per evaluation (eval_every); test match i resets with eval_seed + i."""
+    eval_seed: int = 10_000
+    """Seed of the evaluations' test matches (and of the random policies playing in them)."""
     scenario: str = "paper"
     """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
     for every other agent. Under elimination rules the learner's epoch ends when it is out."""
@@ -145,8 +156,15 @@ class TrainConfig:
                 raise ValueError(f"TrainConfig.{name} must be an int >= 1, got {value!r}")
         if self.obs_mode not in OBS_MODES:
             raise ValueError(f"TrainConfig.obs_mode must be one of {OBS_MODES}, got {self.obs_mode!r}")
-        if not isinstance(self.max_env_steps, int) or isinstance(self.max_env_steps, bool) or self.max_env_steps < 0:
-            raise ValueError(f"TrainConfig.max_env_steps must be an int >= 0, got {self.max_env_steps!r}")
+        for name in ("max_env_steps", "eval_every", "eval_seed"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise ValueError(f"TrainConfig.{name} must be an int >= 0, got {value!r}")
+        if not isinstance(self.eval_epochs, int) or isinstance(self.eval_epochs, bool) or self.eval_epochs < 1:
+            raise ValueError(f"TrainConfig.eval_epochs must be an int >= 1, got {self.eval_epochs!r}")
+        if self.eval_every and self.self_play:
+            raise ValueError("TrainConfig.eval_every: a self-play run is rated by its league (league.csv, "
+                             "plots/league.png), not evaluated against fixed policies; leave eval_every at 0")
         if not (math.isfinite(self.max_minutes) and self.max_minutes >= 0):
             raise ValueError(f"TrainConfig.max_minutes must be >= 0, got {self.max_minutes!r}")
         if not self.self_play and self.league != LeagueConfig():

@@ -117,6 +117,27 @@ def _learning_row_problem(row: list[str], epoch: int) -> str | None:
     return None
 
 
+EVAL_COLUMNS = ("evaluation", "env_steps", "epochs", "train_seconds", "eval_seconds", "test_matches", "test_mwr",
+                "test_mwr_lo", "test_mwr_hi", "n_win", "n_loss", "n_draw")
+"""Evaluation CSV schema (``TrainConfig.eval_every``): one row per evaluation of a learner, numbered from 1:
+the env steps and epochs trained, the training's wall time so far (evaluations excluded, checkpoints
+included) and the evaluations' own, and the test MWR with its 95 % interval over the test matches."""
+
+
+def _eval_row_problem(row: list[str], number: int) -> str | None:
+    """Why ``row`` is not the finished row of evaluation ``number`` (None if it is)."""
+    if len(row) != len(EVAL_COLUMNS):
+        return f"{len(row)} fields, expected {len(EVAL_COLUMNS)}"
+    if row[0] != str(number):
+        return f"evaluation {row[0]!r}, expected {number}"
+    for name, value in zip(EVAL_COLUMNS[1:], row[1:], strict=True):
+        try:
+            float(value)  # (an interval of a single test match is nan)
+        except ValueError:
+            return f"{name} {value!r} is not a number"
+    return None
+
+
 class _Table:
     """One row-appended CSV of a run, cut back to the resumed epoch on resume."""
 
@@ -187,7 +208,8 @@ class MetricsLog:
     """
 
     def __init__(self, run_dir: Path, agents: list[str], learners: list[str], resume_epoch: int | None,
-                 tensorboard: bool, resume_rows: Mapping[str, int] | None = None) -> None:
+                 tensorboard: bool, resume_rows: Mapping[str, int] | None = None,
+                 evaluations: int | None = None) -> None:
         self.several = len(agents) > 1 or len(learners) > 1 or agents != learners
         self.metrics = {a: _Table(Path(run_dir) / run_file("metrics", a, self.several, ".csv"), COLUMNS,
                                   _row_problem, resume_epoch if resume_rows is None else resume_rows[a],
@@ -195,6 +217,11 @@ class MetricsLog:
         self.learning = {n: _Table(Path(run_dir) / run_file("learning", n, self.several, ".csv"), LEARNING_COLUMNS,
                                    _learning_row_problem, resume_epoch, "learning CSV", backfill=True)
                          for n in learners}
+        self.evals = {} if evaluations is None else {
+            n: _Table(Path(run_dir) / run_file("eval", n, self.several, ".csv"), EVAL_COLUMNS, _eval_row_problem,
+                      None if resume_epoch is None else evaluations, "evaluation CSV") for n in learners}
+        """Per learner its evaluations (``TrainConfig.eval_every``; none when off), cut back to the
+        ``evaluations`` of the checkpoint resumed from."""
         self.path = self.metrics[agents[0]].path
         self._tb: Any = None
         if tensorboard:
@@ -225,6 +252,13 @@ class MetricsLog:
             for key, value in known.items():
                 self._tb.add_scalar(self._tag(learner, f"losses/{key}"), value, epoch)
 
+    def evaluated(self, learner: str, row: dict[str, Any]) -> None:
+        """An evaluation row of ``learner`` (:data:`EVAL_COLUMNS`); TensorBoard's ``eval/test_mwr`` at its epoch
+        (the step of every other chart, which a resume purges past its checkpoint)."""
+        self.evals[learner].write(row)
+        if self._tb is not None:
+            self._tb.add_scalar(self._tag(learner, "eval/test_mwr"), row["test_mwr"], row["epochs"])
+
     def scalars(self, values: dict[str, float], epoch: int) -> None:
         """Other per-epoch scalars (e.g. the league's ``league/SIDE/...``) to TensorBoard."""
         if self._tb is not None:
@@ -233,13 +267,13 @@ class MetricsLog:
 
     def flush(self) -> None:
         """Flush and fsync the CSVs (before a checkpoint: no checkpoint counts rows the disk lacks)."""
-        for table in (*self.metrics.values(), *self.learning.values()):
+        for table in (*self.metrics.values(), *self.learning.values(), *self.evals.values()):
             table.flush()
         if self._tb is not None:
             self._tb.flush()
 
     def close(self) -> None:
-        for table in (*self.metrics.values(), *self.learning.values()):
+        for table in (*self.metrics.values(), *self.learning.values(), *self.evals.values()):
             table.close()
         if self._tb is not None:
             self._tb.close()

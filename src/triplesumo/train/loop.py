@@ -345,6 +345,8 @@ class Trainer:
         self.run_dir = prepare_run_dir(run_dir)
         self.command = command or command_for(cfg)
         torch.set_num_threads(cfg.torch_threads)
+        self.pairs = pairs
+        """AGENT=POLICY of every agent that does not learn (the evaluations build their own from them)."""
         try:
             self.policies = policies_from_pairs(
                 pairs, cfg.seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
@@ -375,6 +377,13 @@ class Trainer:
         """Per match, per learning agent: still in play (``final`` is None)."""
         self.obs: Any = None
         """Every match's current observations ``(n_envs, n_agents, obs_dim)`` (numpy, or a device tensor)."""
+        self.train_seconds = 0.0
+        """Wall time of training so far, over every session of the run: collection, learning and checkpoints,
+        the evaluations excluded (as of the last evaluation or checkpoint)."""
+        self.evaluations = 0
+        """Evaluations made so far (``eval_every``): the rows of each learner's eval CSV."""
+        self._eval_seconds = 0.0
+        """Wall time of the evaluations, over every session of the run."""
         self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0, "wait": 0.0}
         """Seconds collecting (physics and rules), acting, learning (off-policy updates run in a
         thread: they overlap "env" when overlap_learning is on; PPO's run inline) and waiting
@@ -403,7 +412,8 @@ class Trainer:
                                    (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
         self.log = MetricsLog(self.run_dir, self.agents, [s.name for s in self.specs],
                               self.epochs_done if resume else None, cfg.tensorboard,
-                              {a: len(self.lwr[a]) for a in self.agents} if resume else None)
+                              {a: len(self.lwr[a]) for a in self.agents} if resume else None,
+                              self.evaluations if cfg.eval_every else None)
 
     # ------------------------------------------------------------------ self-play
     def _setup_league(self, pairs: tuple[str, ...]) -> None:
@@ -829,6 +839,11 @@ class Trainer:
         cfg = self.cfg
         start = time.perf_counter()
         start_steps = self.env_steps
+        trained_before, evals_before = self.train_seconds, self._eval_seconds
+
+        def clock() -> None:  # the training's own wall time so far (the evaluations apart)
+            self.train_seconds = trained_before + time.perf_counter() - start - (self._eval_seconds - evals_before)
+
         bar = None
         if cfg.progress:
             from tqdm import tqdm
@@ -837,8 +852,11 @@ class Trainer:
                        desc=f"train {' '.join(s.name for s in self.specs)}", dynamic_ncols=True)
         try:
             while self.epochs_done < cfg.epochs:
-                before = self.epochs_done
+                before, steps_before = self.epochs_done, self.env_steps
                 finished = self.collect_step()
+                if cfg.eval_every and self.env_steps // cfg.eval_every > steps_before // cfg.eval_every:
+                    clock()
+                    self.evaluate()
                 if finished and bar is not None:
                     bar.update(min(self.epochs_done, cfg.epochs) - min(before, cfg.epochs))
                     rate = (self.env_steps - start_steps) / max(time.perf_counter() - start, 1e-9)
@@ -848,6 +866,7 @@ class Trainer:
                 timed_out = ((cfg.max_minutes > 0 and (time.perf_counter() - start) > cfg.max_minutes * 60)
                              or 0 < cfg.max_env_steps <= self.env_steps)
                 if crossed or (timed_out and finished) or self.epochs_done >= cfg.epochs:
+                    clock()
                     self.save()
                 if timed_out and finished:
                     break
@@ -862,6 +881,46 @@ class Trainer:
         self.finish_outputs()
         return TrainResult(self.run_dir, self.epochs_done, self.env_steps, self.updates, self.mwr(),
                            time.perf_counter() - start, dict(self.timers), {a: self.mwr(a) for a in self.agents})
+
+    def evaluate(self) -> None:
+        """Each learner's current policy, frozen (no exploration), on the run's seeded test matches
+        (``eval_epochs`` from ``eval_seed``, on the CPU): a row of its eval CSV.
+
+        The other agents play the run's fixed policies, built afresh from ``eval_seed`` (so every
+        evaluation meets the same matches), and the other learners their current policies, frozen;
+        a learner that plays several agents (``share="team"``) is rated in its first agent's seat.
+        Nothing of the training is touched: it trains the same with or without evaluations."""
+        from triplesumo.evaluation.evaluate import play_test_epochs
+        from triplesumo.evaluation.metrics import summarize
+
+        cfg, probe = self.cfg, self.probe
+        t0 = time.perf_counter()
+        fixed = policies_from_pairs(self.pairs, cfg.eval_seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
+                                    action_sizes=dict(zip(probe.agents, probe.action_sizes, strict=True)))
+        frozen: dict[str, FrozenPolicy] = {}
+        for learner in self.learners:
+            policy = frozen_copy(learner)
+            frozen |= {agent: policy for agent in learner.spec.agents}
+        self.evaluations += 1
+        done: list[tuple[str, Any]] = []
+        for learner in self.learners:
+            agent = learner.spec.agents[0]
+            others = {**fixed, **{a: p for a, p in frozen.items() if a != agent}}
+            rows = play_test_epochs(frozen[agent], others, agent, cfg.eval_epochs, cfg.eval_seed, self.match_cfg,
+                                    cfg.n_envs, cfg.n_threads)
+            done.append((learner.name, summarize([r["outcome"] for r in rows], [r["steps"] for r in rows])))
+        self._eval_seconds += time.perf_counter() - t0
+        for name, stats in done:
+            self.log.evaluated(name, {
+                "evaluation": self.evaluations, "env_steps": self.env_steps, "epochs": self.epochs_done,
+                "train_seconds": round(self.train_seconds, 3), "eval_seconds": round(self._eval_seconds, 3),
+                "test_matches": cfg.eval_epochs, "test_mwr": float(stats["mean_lwr"]),
+                "test_mwr_lo": float(stats["mean_lwr_lo"]), "test_mwr_hi": float(stats["mean_lwr_hi"]),
+                "n_win": stats["n_win"], "n_loss": stats["n_loss"], "n_draw": stats["n_draw"]})
+            if cfg.progress:
+                print(f"  evaluation {self.evaluations} at {self.env_steps:,} env steps: {name} test MWR "
+                      f"{float(stats['mean_lwr']):+.3f} [{float(stats['mean_lwr_lo']):+.3f}, "
+                      f"{float(stats['mean_lwr_hi']):+.3f}] over {cfg.eval_epochs} matches")
 
     # ---------------------------------------------------------- checkpoints
     def policy_stem(self, learner: Learner) -> Path:
@@ -911,7 +970,8 @@ class Trainer:
                         for s in snaps],  # steps, generator, who is still in play (elimination rules)
             "acc": {agent: [dict(zip(ACC_KEYS, per_match[j], strict=True)) for per_match in acc]
                     for j, agent in enumerate(self.agents)},
-            "final": self.final, "timers": self.timers,
+            "final": self.final, "timers": self.timers, "train_seconds": self.train_seconds,
+            "evaluations": self.evaluations, "eval_seconds": self._eval_seconds,
             "policy_rngs": {a: p.rng.bit_generator.state for a, p in self.policies.items() if hasattr(p, "rng")},
         }
         if self.league is not None:
@@ -1037,6 +1097,10 @@ class Trainer:
         self.env_steps = int(state["env_steps"])
         self.lwr = {a: [float(x) for x in arrays[f"lwr.{a}"]] for a in self.agents}
         self.timers = {**self.timers, **state.get("timers", {})}
+        # (0 in a checkpoint written before the trainer counted them)
+        self.train_seconds = float(state.get("train_seconds", 0.0))
+        self.evaluations = int(state.get("evaluations", 0))
+        self._eval_seconds = float(state.get("eval_seconds", 0.0))
         if self.league is not None:
             self.league.load_state_dict(state["league"])
             self.league.truncate_log(self.epochs_done)
@@ -1050,6 +1114,16 @@ class Trainer:
     def finish_outputs(self) -> None:
         """Plots from the metrics CSVs (skipped for an agent without a finished epoch)."""
         plot_metrics(self.run_dir, self.cfg.window)
+
+
+def frozen_copy(learner: Learner) -> FrozenPolicy:
+    """The learner's current deterministic policy as a numpy :class:`FrozenPolicy` (with its observation
+    normaliser, frozen), what its policy file would hold now."""
+    tensors = {f"actor.{k}": v.detach().cpu().numpy() for k, v in learner.algo.export_actor().state_dict().items()}
+    norm = learner.algo.obs_norm
+    if norm is not None:
+        tensors |= {f"obs_norm.{k}": v.detach().cpu().numpy() for k, v in norm.state_dict().items()}
+    return FrozenPolicy.from_tensors(tensors, prefix="actor.", obs_norm_prefix=None if norm is None else "obs_norm.")
 
 
 class _Prefixed(Mapping[str, np.ndarray]):

@@ -1,0 +1,116 @@
+"""``TrainConfig.eval_every``: the learner's current policy evaluated on seeded test matches during training.
+
+Each evaluation plays the policy a policy file written at that moment would hold, frozen, on the
+same test matches as ``triplesumo evaluate``; the training itself is the same with or without
+evaluations, a resumed run writes the evaluations an uninterrupted one writes, and a run with
+several learners evaluates each against the others' current policies.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import TINY_DDPG, E, tiny
+from triplesumo.agents.zoo import make_policy, policies_from_pairs
+from triplesumo.evaluation.evaluate import play_test_epochs
+from triplesumo.evaluation.metrics import summarize
+from triplesumo.rules.scenarios import scenario_config
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.logger import EVAL_COLUMNS
+from triplesumo.train.loop import train
+
+EVERY = 40
+"""Env steps between evaluations: 2 matches of 30 steps make 60 env steps per match length."""
+TESTS = 4
+
+
+def _evals(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _metrics(run: Path) -> list[dict[str, str]]:
+    with (run / "metrics.csv").open(newline="") as fh:
+        return [{k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader(fh)]
+
+
+def test_evaluations_leave_the_training_unchanged(tmp_path: Path) -> None:
+    with_eval = train(tiny(tmp_path, "with", eval_every=EVERY, eval_epochs=TESTS))
+    without = train(tiny(tmp_path, "without"))
+    assert (with_eval.run_dir / "policy.safetensors").read_bytes() == (
+        without.run_dir / "policy.safetensors").read_bytes()
+    assert _metrics(with_eval.run_dir) == _metrics(without.run_dir)
+    assert not (without.run_dir / "eval.csv").exists()
+
+    rows = _evals(with_eval.run_dir / "eval.csv")
+    assert tuple(rows[0]) == EVAL_COLUMNS
+    assert len(rows) == with_eval.env_steps // EVERY >= 3  # one per multiple of EVERY crossed
+    for k, row in enumerate(rows, 1):
+        steps = int(row["env_steps"])
+        assert row["evaluation"] == str(k)
+        assert k * EVERY <= steps < k * EVERY + 2  # the step (of 2 matches) that crossed it
+        assert int(row["n_win"]) + int(row["n_loss"]) + int(row["n_draw"]) == int(row["test_matches"]) == TESTS
+        assert -1.0 <= float(row["test_mwr"]) <= 1.0
+    seconds = [float(r["train_seconds"]) for r in rows]
+    assert seconds == sorted(seconds) and seconds[0] > 0
+
+
+def test_an_evaluation_plays_the_policy_file_on_the_evaluate_matches(tmp_path: Path) -> None:
+    """With learning that never starts the policy stays what the policy file holds: every evaluation
+    then equals ``play_test_epochs`` of that file on the same seeded matches."""
+    cfg = tiny(tmp_path, "frozen", eval_every=EVERY, eval_epochs=TESTS, eval_seed=77,
+               ddpg=dataclasses.replace(TINY_DDPG, learning_starts=10**6))
+    result = train(cfg)
+    rows = _evals(result.run_dir / "eval.csv")
+    match_cfg = scenario_config("paper", max_steps=cfg.steps_per_epoch)
+    others = policies_from_pairs(("spider=random", "ant=zero"), 77, "paper")
+    played = play_test_epochs(make_policy(str(result.run_dir / "policy")), others, "bug", TESTS, 77, match_cfg, 2, 1)
+    stats = summarize([r["outcome"] for r in played], [r["steps"] for r in played])
+    assert len(rows) >= 2
+    for row in rows:
+        assert float(row["test_mwr"]) == pytest.approx(float(stats["mean_lwr"]), abs=1e-12)
+        assert (int(row["n_win"]), int(row["n_loss"]), int(row["n_draw"])) == (
+            stats["n_win"], stats["n_loss"], stats["n_draw"])
+
+
+def test_a_resumed_run_writes_the_evaluations_of_an_uninterrupted_one(tmp_path: Path) -> None:
+    whole = train(tiny(tmp_path, "whole", epochs=4 * E, eval_every=EVERY, eval_epochs=TESTS))
+    cut = tiny(tmp_path, "cut", epochs=4 * E, eval_every=EVERY, eval_epochs=TESTS)
+    first = train(dataclasses.replace(cut, epochs=2 * E))
+    made = _evals(first.run_dir / "eval.csv")
+    with (first.run_dir / "eval.csv").open("a") as fh:  # a row past the checkpoint (a kill after an evaluation)
+        fh.write(",".join([str(len(made) + 1), *list(made[-1].values())[1:]]) + "\n")
+    resumed = train(TrainConfig(), resume_dir=Path(cut.out) / cut.name, overrides={"epochs": 4 * E})
+    measured = ("train_seconds", "eval_seconds")
+    same = [{k: v for k, v in r.items() if k not in measured} for r in _evals(whole.run_dir / "eval.csv")]
+    assert [{k: v for k, v in r.items() if k not in measured}
+            for r in _evals(resumed.run_dir / "eval.csv")] == same
+    seconds = [float(r["train_seconds"]) for r in _evals(resumed.run_dir / "eval.csv")]
+    assert seconds == sorted(seconds)  # the training time goes on across the resume
+
+
+def test_each_of_several_learners_is_evaluated_against_the_others(tmp_path: Path) -> None:
+    result = train(tiny(tmp_path, "two", learn=("ant=ddpg", "bug=ddpg"), policies=("spider=random",),
+                        eval_every=EVERY, eval_epochs=TESTS))
+    ant, bug = (_evals(result.run_dir / f"eval-{name}.csv") for name in ("ant", "bug"))
+    assert len(ant) == len(bug) >= 3
+    for a, b in zip(ant, bug, strict=True):
+        assert a["env_steps"] == b["env_steps"]
+        # Ant and Bug are one team on the same matches: the same outcomes
+        assert (a["n_win"], a["n_loss"], a["n_draw"]) == (b["n_win"], b["n_loss"], b["n_draw"])
+        assert np.isclose(float(a["test_mwr"]), float(b["test_mwr"]))
+
+
+@pytest.mark.parametrize(("fields", "message"), [
+    ({"eval_every": -1}, "TrainConfig.eval_every must be an int >= 0"),
+    ({"eval_epochs": 0}, "TrainConfig.eval_epochs must be an int >= 1"),
+    ({"eval_every": 100, "self_play": True}, "a self-play run is rated by its league"),
+])
+def test_bad_evaluation_settings_name_the_field(tmp_path: Path, fields: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        tiny(tmp_path, **fields)
