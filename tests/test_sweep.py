@@ -138,6 +138,11 @@ def test_the_command_line_takes_repeated_grids_and_fixed_train_options(capsys: p
     base = _dcargs.build(TrainConfig, argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "out"}))
     assert scfg.grid == ("seed=0,1", "ddpg.actor_lr=1e-4,1e-3", "scenario=paper") and scfg.address == "auto"
     assert (base.epochs, base.ddpg.batch_size, base.out) == (7, 8, TrainConfig().out)
+    # one --eval-seed for the sweep's evaluation after training and its trials' evaluations during it
+    args = _parser().parse_args(["sweep", "--grid", "seed=0,1", "--eval-seed", "123", "--eval-every", "5000"])
+    scfg = _dcargs.build(SweepConfig, args)
+    base = _dcargs.build(TrainConfig, argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "out"}))
+    assert (scfg.eval_seed, base.eval_seed, base.eval_every) == (123, 123, 5000)
     assert main(["sweep", "--grid", "ddpg.actr_lr=1"]) == 2
     assert "ddpg has no field 'actr_lr'" in capsys.readouterr().err
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -106,10 +107,21 @@ def test_each_of_several_learners_is_evaluated_against_the_others(tmp_path: Path
         assert np.isclose(float(a["test_mwr"]), float(b["test_mwr"]))
 
 
+def test_a_run_stops_at_the_first_evaluation_at_its_target(tmp_path: Path) -> None:
+    result = train(tiny(tmp_path, "target", epochs=100, eval_every=EVERY, eval_epochs=TESTS, eval_target=-1.0))
+    rows = _evals(result.run_dir / "eval.csv")
+    assert len(rows) == 1 and EVERY <= result.env_steps == int(rows[0]["env_steps"]) < EVERY + 2
+    assert result.epochs < 100
+    state = (result.run_dir / "checkpoints").glob("epoch-*/state.json")
+    assert max(json.loads(p.read_text())["env_steps"] for p in state) == result.env_steps
+
+
 @pytest.mark.parametrize(("fields", "message"), [
     ({"eval_every": -1}, "TrainConfig.eval_every must be an int >= 0"),
     ({"eval_epochs": 0}, "TrainConfig.eval_epochs must be an int >= 1"),
     ({"eval_every": 100, "self_play": True}, "a self-play run is rated by its league"),
+    ({"eval_target": 0.2}, "eval_target stops at an evaluation: set eval_every too"),
+    ({"eval_every": 100, "eval_target": 1.5}, r"TrainConfig.eval_target must be a test MWR in \[-1, 1\]"),
 ])
 def test_bad_evaluation_settings_name_the_field(tmp_path: Path, fields: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):

@@ -60,7 +60,9 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--grid", action="extend", nargs="+", default=argparse.SUPPRESS, metavar="FIELD=V1,V2",
                        help=_dcargs.field_docs(SweepConfig)["grid"] + " (repeat --grid for more fields)")
     _dcargs.add_arguments(sweep, SweepConfig, skip=("grid",))
-    _dcargs.add_arguments(sweep, TrainConfig, skip=("out", "name"))
+    # --eval-seed is the sweep's and its trials' (TrainConfig.eval_seed, read from the same option): one set of
+    # seeded test matches for the evaluations during training and after it
+    _dcargs.add_arguments(sweep, TrainConfig, skip=("out", "name", "eval_seed"))
     from triplesumo.reproduce import ReproduceConfig
 
     reproduce = sub.add_parser("reproduce", help="the whole reproduction protocol (Ant, Spider, contest check, Bug per "

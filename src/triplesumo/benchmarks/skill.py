@@ -3,25 +3,23 @@ reaches a test MWR of ``target`` (the issue's +0.2), per algorithm.
 
 For each algorithm Bug is trained with the project's own ``triplesumo train`` (``--learn
 bug=ALGO``, the match of ``--train.*``: by default the paper's ongoing match of ``zoo:ant``
-and ``zoo:spider``) in the run folder ``OUT/ALGO``. Every ``eval_every`` env steps the run
-stops at the next epoch end after a checkpoint (``train --max-env-steps``), and the Bug policy
-it wrote there is evaluated, frozen (no exploration), on the same ``eval_epochs`` seeded test
-matches (:func:`~triplesumo.evaluation.evaluate.play_test_epochs`; test match ``i`` resets
-with ``eval_seed + i``, as ``triplesumo evaluate``). Training resumes from that checkpoint
-(an exact resume: the chunks train what one uninterrupted run trains) until the first
-evaluation whose test MWR is ``>= target`` (*reached*) or until ``max_env_steps``
-(*not reached*: reported as such, with the best test MWR seen).
+and ``zoo:spider``) in the run folder ``OUT/ALGO``, with the trainer's own evaluations
+(``train --eval-every``): every ``eval_every`` env steps, at the step that crosses a multiple
+of it, Bug's current policy plays frozen (no exploration) the same ``eval_epochs`` seeded
+test matches (test match ``i`` resets with ``eval_seed + i``, as ``triplesumo evaluate``),
+into ``OUT/ALGO/eval.csv``. The run stops at the first evaluation whose test MWR is
+``>= target`` (*reached*, ``train --eval-target``) or at ``max_env_steps`` (*not reached*:
+reported as such, with the best test MWR seen).
 
-Times: ``train_seconds`` is the training loop's own wall time (collection, learning and the
-checkpoints at the evaluation points), ``wall_seconds`` adds the evaluations and the
-reloading of each chunk's checkpoint (what running the bench took). Both are measured on
-the machine at hand, never projected.
+Times: ``train_seconds`` is the training's own wall time up to the evaluation (collection,
+learning and checkpoints; the trainer's clock, carried across resumes), ``eval_seconds`` the
+evaluations' and ``wall_seconds`` both. Measured on the machine at hand, never projected.
 
-Resumable: ``OUT/skill.json`` is rewritten after each evaluation; a killed bench, run again
-with the same options, goes on from the last checkpoint of each run (an evaluation lost with
-the kill is played again on the same policy). The test-MWR curve depends only on ``train``,
-``eval_every``, ``eval_epochs`` and ``eval_seed``; ``target`` and ``max_env_steps`` may
-change between runs (the stop rule is applied to the recorded curve first, so a lower target
+Resumable: ``OUT/skill.json`` is rebuilt from each run's ``eval.csv``; a killed bench, run again
+with the same options, resumes each run from its last checkpoint (exactly: the checkpoints hold
+the replay, and the evaluations past the checkpoint are played again). The test-MWR curve
+depends only on ``train``, ``eval_every``, ``eval_epochs`` and ``eval_seed``; ``target`` and
+``max_env_steps`` may change between runs (the stop rule is applied to the recorded curve first, so a lower target
 needs no training). Writes ``OUT/skill.json`` (and ``--json F``), ``OUT/skill.png`` (test
 MWR against env steps and against training wall time, one line per algorithm) and prints a
 table.
@@ -30,22 +28,17 @@ table.
 from __future__ import annotations
 
 import argparse
+import csv
 import dataclasses
 import json
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from triplesumo import _dcargs
-from triplesumo.agents.policy_file import atomic_write_bytes, load_json
-from triplesumo.agents.zoo import expand_pairs, make_policy, policies_from_pairs
+from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.benchmarks import report
-from triplesumo.envs.match import Match
-from triplesumo.evaluation.evaluate import play_test_epochs
-from triplesumo.evaluation.metrics import summarize
-from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import holds_run, train
@@ -95,16 +88,18 @@ class SkillConfig:
         if self.max_env_steps < self.eval_every:
             raise ValueError(f"SkillConfig.max_env_steps ({self.max_env_steps}) must be >= eval_every "
                              f"({self.eval_every}): no evaluation would be made")
-        set_here = [f"train.{name}" for name in ("out", "name", "learner", "learn", "epochs", "max_env_steps")
+        set_here = [f"train.{name}" for name in ("out", "name", "learner", "learn", "epochs", "max_env_steps",
+                                                 "eval_every", "eval_epochs", "eval_seed", "eval_target")
                     if getattr(self.train, name) != getattr(TrainConfig(), name)]
         if set_here:
             raise ValueError(f"SkillConfig.{set_here[0]} is set by the bench (Bug learns each of algos in OUT/ALGO "
                              "up to max_env_steps, evaluated every eval_every): leave it out")
 
     def run_config(self, algo: str) -> TrainConfig:
-        """The train config of ``algo``'s run (its first chunk: the first evaluation's budget)."""
+        """The train config of ``algo``'s run: evaluated every eval_every, stopped at the target or the budget."""
         return dataclasses.replace(self.train, out=str(Path(self.out).resolve()), name=algo, learn=(f"bug={algo}",),
-                                   epochs=10**9, max_env_steps=self.eval_every)
+                                   epochs=10**9, max_env_steps=self.max_env_steps, eval_every=self.eval_every,
+                                   eval_epochs=self.eval_epochs, eval_seed=self.eval_seed, eval_target=self.target)
 
 
 def _depends(cfg: SkillConfig) -> dict[str, Any]:
@@ -114,50 +109,36 @@ def _depends(cfg: SkillConfig) -> dict[str, Any]:
     return values
 
 
-def _latest(run_dir: Path) -> int:
-    """Env steps at the run's latest checkpoint (0 when none)."""
-    saved = checkpoint.checkpoints(run_dir)
-    return int(load_json(saved[-1][1] / "state.json").get("env_steps", 0)) if saved else 0
+def _curve(cfg: SkillConfig, run_dir: Path) -> list[dict[str, Any]]:
+    """The evaluations of a run, from its ``eval.csv`` (none yet: empty), with the multiple of eval_every each
+    crossed (``budget``)."""
+    path = run_dir / "eval.csv"
+    if not path.exists():
+        return []
+    with path.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
 
+    def number(x: str) -> float | None:
+        return float(x) if math.isfinite(float(x)) else None
 
-def _evaluate(cfg: SkillConfig, run_dir: Path) -> dict[str, Any]:
-    """The run's current Bug policy, frozen, on the bench's seeded test matches."""
-    t = cfg.train
-    match_cfg = scenario_config(t.scenario, max_steps=t.steps_per_epoch, obs_mode=t.obs_mode, physics=t.physics)
-    probe = Match(match_cfg)
-    sizes = probe.observer.sizes
-    motors = dict(zip(probe.agents, probe.action_sizes, strict=True))
-    pairs = expand_pairs(t.policies, [a for a in match_cfg.agent_names if a != "bug"])
-    others = policies_from_pairs(pairs, cfg.eval_seed, t.obs_mode, action_sizes=motors, obs_dims=sizes)
-    policy = make_policy(str(run_dir / "policy"), expect_obs_mode=t.obs_mode, action_size=motors["bug"],
-                         expect_obs_dim=sizes["bug"])
-    rows = play_test_epochs(policy, others, "bug", cfg.eval_epochs, cfg.eval_seed, match_cfg, t.n_envs,
-                            t.n_threads)
-    stats = summarize([r["outcome"] for r in rows], [r["steps"] for r in rows])
-
-    def clean(x: float) -> float | None:
-        return float(x) if math.isfinite(x) else None
-
-    return {"test_mwr": float(stats["mean_lwr"]), "test_mwr_lo": clean(stats["mean_lwr_lo"]),
-            "test_mwr_hi": clean(stats["mean_lwr_hi"]), "n_win": stats["n_win"], "n_loss": stats["n_loss"],
-            "n_draw": stats["n_draw"]}
-
-
-def _budget(cfg: SkillConfig, done: int) -> int:
-    """The env-step budget of the chunk after ``done`` env steps: the next multiple of ``eval_every``."""
-    return (done // cfg.eval_every + 1) * cfg.eval_every
+    return [{"env_steps": int(r["env_steps"]), "budget": int(r["env_steps"]) // cfg.eval_every * cfg.eval_every,
+             "test_mwr": float(r["test_mwr"]), "test_mwr_lo": number(r["test_mwr_lo"]),
+             "test_mwr_hi": number(r["test_mwr_hi"]), "n_win": int(r["n_win"]), "n_loss": int(r["n_loss"]),
+             "n_draw": int(r["n_draw"]), "train_seconds": float(r["train_seconds"]),
+             "eval_seconds": float(r["eval_seconds"]),
+             "wall_seconds": round(float(r["train_seconds"]) + float(r["eval_seconds"]), 3)} for r in rows]
 
 
 def outcome(cfg: SkillConfig, evaluations: list[dict[str, Any]]) -> dict[str, Any]:
     """The stop rule on a curve: the first evaluation with test MWR >= target (reached), else whether the
-    budget is spent (not reached) or training goes on. Evaluations of chunks beyond max_env_steps (a
-    raised budget, later lowered) do not count."""
+    budget is spent (not reached) or training goes on. Evaluations past max_env_steps (a raised budget,
+    later lowered) do not count."""
     within = [e for e in evaluations if e["budget"] <= cfg.max_env_steps]  # a prefix: budgets grow
     for k, e in enumerate(within):
         if e["test_mwr"] >= cfg.target:
             return {"status": "reached", "reached": True, "at": k, "env_steps": e["env_steps"],
                     "train_seconds": e["train_seconds"], "wall_seconds": e["wall_seconds"]}
-    spent = bool(within) and _budget(cfg, within[-1]["env_steps"]) > cfg.max_env_steps
+    spent = bool(within) and within[-1]["budget"] + cfg.eval_every > cfg.max_env_steps  # no evaluation left
     best = max(within, key=lambda e: e["test_mwr"]) if within else None
     return {"status": "not reached" if spent else "running", "reached": False, "at": None, "env_steps": None,
             "train_seconds": None, "wall_seconds": None,
@@ -165,35 +146,17 @@ def outcome(cfg: SkillConfig, evaluations: list[dict[str, Any]]) -> dict[str, An
             "best_at_env_steps": None if best is None else best["env_steps"]}
 
 
-def _bench_algo(cfg: SkillConfig, algo: str, entry: dict[str, Any], save: Any) -> None:
-    """Train and evaluate ``algo``'s run until the stop rule decides (``entry`` updated in place, saved after
-    every evaluation)."""
+def _bench_algo(cfg: SkillConfig, algo: str) -> list[dict[str, Any]]:
+    """Train (or resume) ``algo``'s run until the stop rule decides on its curve; returns the curve."""
     run_cfg = cfg.run_config(algo)
     run_dir = Path(run_cfg.out) / run_cfg.name
-    evaluations: list[dict[str, Any]] = entry["evaluations"]
-    while outcome(cfg, evaluations)["status"] == "running":
-        budget = _budget(cfg, evaluations[-1]["env_steps"] if evaluations else 0)
-        start = time.perf_counter()
-        train_seconds = 0.0
-        at = _latest(run_dir)
-        if at < budget:  # the chunk to the first epoch end past budget (from the last checkpoint, if any)
-            if at == 0:
-                result = train(dataclasses.replace(run_cfg, max_env_steps=budget), start_over=holds_run(run_dir))
-            else:
-                result = train(run_cfg, resume_dir=run_dir, overrides={"max_env_steps": budget})
-            train_seconds, at = result.seconds, result.env_steps
-        # else: killed after the chunk's last checkpoint, before its evaluation: that policy file is evaluated now
-        e0 = time.perf_counter()
-        facts = _evaluate(cfg, run_dir)
-        now = time.perf_counter()
-        before = evaluations[-1] if evaluations else {"train_seconds": 0.0, "wall_seconds": 0.0, "eval_seconds": 0.0}
-        evaluations.append({"env_steps": at, "budget": budget, **facts,
-                            "train_seconds": round(before["train_seconds"] + train_seconds, 3),
-                            "eval_seconds": round(before["eval_seconds"] + now - e0, 3),
-                            "wall_seconds": round(before["wall_seconds"] + now - start, 3)})
-        print(f"  {algo}: {at:,} env steps, test MWR {facts['test_mwr']:+.3f} "
-              f"(training {evaluations[-1]['train_seconds']:.0f} s)")
-        save()
+    if outcome(cfg, _curve(cfg, run_dir))["status"] == "running":
+        if checkpoint.checkpoints(run_dir):  # goes on from the last checkpoint, to this bench's budget and target
+            train(run_cfg, resume_dir=run_dir, overrides={"max_env_steps": cfg.max_env_steps,
+                                                           "eval_target": cfg.target})
+        else:
+            train(run_cfg, start_over=holds_run(run_dir))
+    return _curve(cfg, run_dir)
 
 
 def run_skill(cfg: SkillConfig) -> dict[str, Any]:
@@ -211,19 +174,12 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
         "command": " ".join(["triplesumo", "bench", "skill", *_dcargs.to_argv(cfg)]),
         "target": cfg.target, "eval_every": cfg.eval_every, "eval_epochs": cfg.eval_epochs,
         "max_env_steps": cfg.max_env_steps, "algos": {}}
-    kept = {} if old is None else old["algos"]
-
-    def save() -> None:
-        for name, entry in result["algos"].items():
-            entry.update(outcome(cfg, entry["evaluations"]))
-            entry["run_dir"] = str(out / name)
-        atomic_write_bytes(path, (json.dumps(result, indent=2) + "\n").encode())
 
     for algo in cfg.algos:
-        result["algos"][algo] = {"evaluations": list(kept.get(algo, {}).get("evaluations", []))}
         print(f"bench skill: Bug with {algo}, target test MWR {cfg.target:+.2f}")
-        _bench_algo(cfg, algo, result["algos"][algo], save)
-    save()
+        evaluations = _bench_algo(cfg, algo)
+        result["algos"][algo] = {"evaluations": evaluations, **outcome(cfg, evaluations), "run_dir": str(out / algo)}
+        atomic_write_bytes(path, (json.dumps(result, indent=2) + "\n").encode())
     plot_skill(result, out / PLOT)
     report(format_skill(result), result, cfg.json or None)
     return result

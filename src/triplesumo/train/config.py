@@ -111,6 +111,9 @@ class TrainConfig:
     """Test matches per evaluation (eval_every); test match i resets with eval_seed + i."""
     eval_seed: int = 10_000
     """Seed of the evaluations' test matches (and of the random policies playing in them)."""
+    eval_target: float | None = None
+    """Stop (after a checkpoint) at the first evaluation in which every learner's test MWR is >= this: a
+    skill reached (``triplesumo bench skill``); None: train on."""
     scenario: str = "paper"
     """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
     for every other agent. Under elimination rules the learner's epoch ends when it is out."""
@@ -162,6 +165,12 @@ class TrainConfig:
                 raise ValueError(f"TrainConfig.{name} must be an int >= 0, got {value!r}")
         if not isinstance(self.eval_epochs, int) or isinstance(self.eval_epochs, bool) or self.eval_epochs < 1:
             raise ValueError(f"TrainConfig.eval_epochs must be an int >= 1, got {self.eval_epochs!r}")
+        if self.eval_target is not None:
+            if isinstance(self.eval_target, bool) or not isinstance(self.eval_target, int | float) or not (
+                    -1 <= self.eval_target <= 1):
+                raise ValueError(f"TrainConfig.eval_target must be a test MWR in [-1, 1], got {self.eval_target!r}")
+            if not self.eval_every:
+                raise ValueError("TrainConfig.eval_target stops at an evaluation: set eval_every too")
         if self.eval_every and self.self_play:
             raise ValueError("TrainConfig.eval_every: a self-play run is rated by its league (league.csv, "
                              "plots/league.png), not evaluated against fixed policies; leave eval_every at 0")

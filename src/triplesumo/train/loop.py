@@ -308,7 +308,8 @@ class _Updates(threading.Thread):
 
 
 class Trainer:
-    """Trains the learners of ``cfg``; :meth:`run` until ``cfg.epochs``, ``max_env_steps`` or ``max_minutes``.
+    """Trains the learners of ``cfg``; :meth:`run` until ``cfg.epochs``, ``max_env_steps``, ``max_minutes`` or
+    an evaluation at ``eval_target``.
 
     One *epoch* is one match: it ends when the match is over or when every learning agent in
     it is out (elimination rules); each learning agent then gets one row in its metrics CSV
@@ -854,9 +855,10 @@ class Trainer:
             while self.epochs_done < cfg.epochs:
                 before, steps_before = self.epochs_done, self.env_steps
                 finished = self.collect_step()
+                reached = False
                 if cfg.eval_every and self.env_steps // cfg.eval_every > steps_before // cfg.eval_every:
                     clock()
-                    self.evaluate()
+                    reached = self.evaluate()
                 if finished and bar is not None:
                     bar.update(min(self.epochs_done, cfg.epochs) - min(before, cfg.epochs))
                     rate = (self.env_steps - start_steps) / max(time.perf_counter() - start, 1e-9)
@@ -865,10 +867,10 @@ class Trainer:
                 crossed = finished and (self.epochs_done // cfg.checkpoint_every > before // cfg.checkpoint_every)
                 timed_out = ((cfg.max_minutes > 0 and (time.perf_counter() - start) > cfg.max_minutes * 60)
                              or 0 < cfg.max_env_steps <= self.env_steps)
-                if crossed or (timed_out and finished) or self.epochs_done >= cfg.epochs:
+                if crossed or (timed_out and finished) or reached or self.epochs_done >= cfg.epochs:
                     clock()
                     self.save()
-                if timed_out and finished:
+                if (timed_out and finished) or reached:
                     break
         except checkpoint.CheckpointWriteError as exc:
             if "last good checkpoint" in str(exc) or "no earlier checkpoint" in str(exc):
@@ -882,9 +884,10 @@ class Trainer:
         return TrainResult(self.run_dir, self.epochs_done, self.env_steps, self.updates, self.mwr(),
                            time.perf_counter() - start, dict(self.timers), {a: self.mwr(a) for a in self.agents})
 
-    def evaluate(self) -> None:
+    def evaluate(self) -> bool:
         """Each learner's current policy, frozen (no exploration), on the run's seeded test matches
-        (``eval_epochs`` from ``eval_seed``, on the CPU): a row of its eval CSV.
+        (``eval_epochs`` from ``eval_seed``, on the CPU): a row of its eval CSV. True when every
+        learner's test MWR reached ``eval_target``.
 
         The other agents play the run's fixed policies, built afresh from ``eval_seed`` (so every
         evaluation meets the same matches), and the other learners their current policies, frozen;
@@ -921,6 +924,7 @@ class Trainer:
                 print(f"  evaluation {self.evaluations} at {self.env_steps:,} env steps: {name} test MWR "
                       f"{float(stats['mean_lwr']):+.3f} [{float(stats['mean_lwr_lo']):+.3f}, "
                       f"{float(stats['mean_lwr_hi']):+.3f}] over {cfg.eval_epochs} matches")
+        return cfg.eval_target is not None and all(float(stats["mean_lwr"]) >= cfg.eval_target for _, stats in done)
 
     # ---------------------------------------------------------- checkpoints
     def policy_stem(self, learner: Learner) -> Path:
