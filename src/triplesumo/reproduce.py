@@ -18,8 +18,13 @@ Six stages, in order, each a function with declared outputs under ``out``:
 
 ``--publish`` then ships the stage-1 Ant and stage-2 Spider, the paper-preset DDPG Bug of the
 best seed as ``zoo:bug`` and the best Bug of any algorithm as ``zoo:bug-<algo>``, each manifest
-with its command, seed, env steps, the code version and its test MWR with 95 % interval. A
-``triplesumo bench skill --out OUT/skill`` run (time to skill) is reported when present.
+with its command, seed, env steps, the code version and its test MWR with 95 % interval.
+
+Time to skill comes from stage 4 itself: every Bug run evaluates its current policy every
+``bug_eval_every`` env steps on the first ``bug_eval_epochs`` test matches of stage 5
+(``train --eval-every``, ``eval.csv``), and the report gives, per algorithm and seed, the
+env steps and training wall time until its test MWR first reached +0.2, with the curves
+(``bug/test_mwr.png``).
 
 A stage whose outputs exist and are complete is skipped; a killed one goes on where it
 stopped (train runs resume from their last checkpoint, evaluations with ``resume``).
@@ -64,8 +69,8 @@ ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
 """TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
-SKILL_RECORD = Path("skill") / "skill.json"
-"""Where a time-to-skill bench (``triplesumo bench skill --out OUT/skill``) is looked for."""
+SKILL = 0.2
+"""Time to skill: the test MWR Bug's team first reaches (the issue's +0.2)."""
 
 
 def ablation(item: str) -> tuple[str, str, Any]:
@@ -111,6 +116,12 @@ class ReproduceConfig:
     of the 16 matches, the algorithm schedule of ``bench train``. Their library default, 1 (the papers' one update
     per transition), costs 11-16 ms of CPU per update on a 2-core machine: 3-4 h per 1 M env steps and run.
     0 keeps the algorithm's default. DDPG keeps the paper preset (30) and PPO its rollouts."""
+    bug_eval_every: int = 100_000
+    """Stage 4 (and the ablations): every this many env steps each Bug run evaluates its current policy on the
+    first bug_eval_epochs test matches of stage 5 (``train --eval-every``): the test-MWR curves and time to skill.
+    0: none."""
+    bug_eval_epochs: int = 200
+    """Test matches of each evaluation during stage 4."""
     contest_epochs: int = 400
     """Stage 3: test matches of the new Ant-Spider pair with Bug passive."""
     eval_epochs: int = 2000
@@ -157,11 +168,12 @@ class ReproduceConfig:
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
             raise ValueError(f"ReproduceConfig.algos must be among {ALGOS}, got {bad}")
-        for name in ("bug_env_steps", "bug_learn_every"):
+        for name in ("bug_env_steps", "bug_learn_every", "bug_eval_every"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 0, got {value!r}")
-        for name in ("ant_epochs", "spider_epochs", "bug_epochs", "contest_epochs", "eval_epochs", "n_envs"):
+        for name in ("ant_epochs", "spider_epochs", "bug_epochs", "bug_eval_epochs", "contest_epochs", "eval_epochs",
+                     "n_envs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 1, got {value!r}")
@@ -258,6 +270,10 @@ class Protocol:
                           epochs=self.epochs["bug"],
                           **({} if self.cfg.tiny else {"checkpoint_every": 500,
                                                        "max_env_steps": self.cfg.bug_env_steps}))
+        if self.cfg.bug_eval_every:  # tiny: an evaluation of 2 matches every 20 env steps
+            base = dataclasses.replace(base, eval_every=20 if self.cfg.tiny else self.cfg.bug_eval_every,
+                                       eval_epochs=2 if self.cfg.tiny else self.cfg.bug_eval_epochs,
+                                       eval_seed=self.cfg.eval_seed)
         k = self.cfg.bug_learn_every
         if self.cfg.tiny or not k:
             return base
@@ -556,7 +572,7 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
         lines += ["", "Plots: `compare/compare.png` (IQM by group), `evaluation/compare_mwr.png` (test curves), "
                   "`*/plots/` (training curves).", ""]
         lines += _ablation_section(table, ablated, pct)
-    lines += _skill_section(out, cfg.border_rim)
+    lines += _skill_section(protocol)
     if record.get("published"):
         lines += ["## Published into the zoo", "", "| zoo name | algorithm | train seed | test MWR [95% CI] | file |",
                   "| --- | --- | ---: | ---: | --- |"]
@@ -599,31 +615,75 @@ def _ablation_section(table: dict[str, Any], ablated: dict[str, str], pct: int) 
     return [*lines, ""]
 
 
-def _skill_section(out: Path, border_rim: bool) -> list[str]:
-    """Time to skill, from a ``triplesumo bench skill --out OUT/skill`` run when there is one."""
-    path = out / SKILL_RECORD
-    if not path.exists():
-        command = (f"triplesumo bench skill --out {shlex.quote(str(out / 'skill'))} --train.policies "
-                   f"ant={shlex.quote(str(out / 'ant' / 'policy'))} "
-                   f"spider={shlex.quote(str(out / 'spider' / 'policy'))}"
-                   + (" --train.physics.border-rim" if border_rim else ""))
-        return ["## Time to skill", "", f"Not measured in this folder. In this match: `{command}`, then run "
-                "`triplesumo reproduce` again to add it here.", ""]
-    result = json.loads(path.read_text())
-    lines = ["## Time to skill (`triplesumo bench skill`)", "",
-             f"Wall time and env steps until Bug's team first reaches a test MWR of {result['target']:+.2f} "
-             f"({result['eval_epochs']} seeded test matches every {result['eval_every']:,} env steps, at most "
-             f"{result['max_env_steps']:,}), measured on the machine that ran it. Made by `{result['command']}`.", "",
-             "| algorithm | reached | env steps | training wall time (s) | with evaluations (s) | test MWR curve |",
-             "| --- | --- | ---: | ---: | ---: | --- |"]
-    for algo, e in result["algos"].items():
-        curve = " ".join(f"{x['test_mwr']:+.2f}" for x in e["evaluations"])
-        if e["reached"]:
-            lines.append(f"| {algo} | yes | {e['env_steps']:,} | {e['train_seconds']:.0f} | {e['wall_seconds']:.0f} | "
-                         f"{curve} |")
+def _evals(run: Path) -> list[dict[str, str]]:
+    return _read_csv(run / "eval.csv")
+
+
+def _skill_section(protocol: Protocol) -> list[str]:
+    """Time to skill per algorithm and seed, from the evaluations the stage-4 runs made while training."""
+    cfg, out = protocol.cfg, protocol.out
+    if not cfg.bug_eval_every:
+        return []
+    runs = [(t, Path(t.config.out) / t.name) for t in protocol.bug_trials()]
+    if not any(_evals(run) for _, run in runs):
+        return []
+    first = runs[0][0].config
+    lines = ["## Time to skill", "",
+             f"Env steps and training wall time (collection, learning, checkpoints; the evaluations apart) until "
+             f"Bug's test MWR first reached {SKILL:+.2f}, from the evaluations stage 4 made while training: every "
+             f"{first.eval_every:,} env steps, the current policy frozen on the first {first.eval_epochs} test "
+             "matches of stage 5. Measured on the machine that ran each run, never projected; a run resumed "
+             "across sessions adds its sessions' training times, and restarts with an empty replay buffer.", "",
+             "| run | reached | env steps | training wall time | evaluations | best test MWR (at env steps) |",
+             "| --- | --- | ---: | ---: | ---: | ---: |"]
+    for trial, run in runs:
+        rows = _evals(run)
+        if not rows:
+            lines.append(f"| {trial.name} | not yet | - | - | 0 | - |")
+            continue
+        hit = next((r for r in rows if float(r["test_mwr"]) >= SKILL), None)
+        best = max(rows, key=lambda r: float(r["test_mwr"]))
+        top = f"{float(best['test_mwr']):+.3f} ({int(best['env_steps']):,})"
+        if hit is None:
+            lines.append(f"| {trial.name} | no | - | - | {len(rows)} | {top} |")
         else:
-            lines.append(f"| {algo} | {e['status']} | - | - | - | {curve} |")
-    return [*lines, "", "![time to skill](skill/skill.png)", ""]
+            lines.append(f"| {trial.name} | yes | {int(hit['env_steps']):,} | "
+                         f"{_duration(float(hit['train_seconds']))} | {len(rows)} | {top} |")
+    plot = _plot_curves(runs, out / "bug" / "test_mwr.png")
+    return [*lines, "", f"![test MWR while training]({plot.relative_to(out)})", ""]
+
+
+def _duration(seconds: float) -> str:
+    minutes = round(seconds / 60)
+    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{seconds / 60:.1f} min"
+
+
+def _plot_curves(runs: list[tuple[Trial, Path]], path: Path) -> Path:
+    """Test MWR against env steps of every stage-4 run, one colour per algorithm, the +0.2 line dashed."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.5, 4.2))
+    ax = fig.subplots()
+    colours: dict[str, Any] = {}
+    for trial, run in runs:
+        rows = _evals(run)
+        if not rows:
+            continue
+        algo = trial.config.learners()["bug"]
+        first = algo not in colours
+        colours.setdefault(algo, f"C{len(colours)}")
+        ax.plot([int(r["env_steps"]) for r in rows], [float(r["test_mwr"]) for r in rows], marker=".",
+                color=colours[algo], alpha=0.8, label=algo if first else None)
+    ax.axhline(SKILL, linestyle="--", color="grey", label=f"{SKILL:+.1f}")
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("test MWR (seeded test matches)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Bug's test MWR while training, one line per seed")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
 
 
 def _argv(cfg: ReproduceConfig) -> list[str]:
