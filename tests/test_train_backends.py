@@ -100,7 +100,8 @@ def warp_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Trainer]:
     runs = {}
     for name, fields in (("ddpg", {}), ("ppo", {"learn": ("bug=ppo",), "policies": ("ant=zoo:ant", "spider=zoo:spider"),
                                                  "ppo": PPOConfig(hidden=(16, 16), n_steps=10, n_minibatches=2,
-                                                                  n_epochs=2)})):
+                                                                  n_epochs=2),
+                                                 "eval_every": 30, "eval_epochs": 2})):
         cfg = tiny(out, name, backend="warp", device="cpu", n_envs=3, steps_per_epoch=20, epochs=6,
                    checkpoint_every=3, **fields)
         trainer = Trainer(cfg)
@@ -136,6 +137,10 @@ def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
         assert len(replay) == trainer.env_steps  # every Bug step was stored (no physics errors)
     else:
         assert all(v.device == torch.device("cpu") for v in learner.algo.rollout.values())  # type: ignore[attr-defined]
+        # evaluations while training: the device policy, copied to the host, on CPU test matches
+        evals = list(csv.DictReader((run / "eval.csv").open()))
+        assert len(evals) == trainer.env_steps // 30 >= 2
+        assert all(int(e["n_win"]) + int(e["n_loss"]) + int(e["n_draw"]) == 2 for e in evals)
 
 
 def test_a_killed_warp_run_resumes_exactly(warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
