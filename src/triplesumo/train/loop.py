@@ -135,9 +135,10 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
 
 
 ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics", "backend",
-               "device")
+               "device", "eval_every", "eval_epochs", "eval_seed", "eval_target")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
-budget): a config.json without them gets their defaults; any other missing key is an error."""
+budget, evaluations while training): a config.json without them gets their defaults; any other
+missing key is an error."""
 LEAGUE_ADDED_LATER = ("live_share", "draw_score")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
