@@ -6,6 +6,7 @@ import csv
 import json
 import shutil
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -139,6 +140,8 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     ({"ablations": ("ddpg.colour=red",)}, "has no field 'colour'"),
     ({"ablations": ("noise=gaussian", "ddpg.noise=gaussian")}, "a change given twice"),
     ({"ablations": ("noise=gaussian",), "algos": ("sac",)}, "algos must include ddpg"),
+    ({"cpus_per_trial": 0}, "ReproduceConfig.cpus_per_trial must be an int >= 1"),
+    ({"num_cpus": 2}, "options of ray"),
 ])
 def test_bad_options_name_the_field(kw: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
@@ -151,6 +154,7 @@ def test_a_record_written_before_an_option_existed_resumes_with_its_default(tmp_
     recorded = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig(tiny=True))))
     del recorded["ablations"]  # a record of a version without --ablations
     check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, progress=False))
+    check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ray=True, cpus_per_trial=2))  # how, not what
     with pytest.raises(ValueError, match="other options"):
         check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ablations=("still=-1",)))
 
@@ -169,3 +173,36 @@ def test_bug_trials_give_td3_and_sac_the_shared_schedule_and_keep_ddpg_at_the_pa
     default = {t.config.learn[0].split("=")[1]: t.config
                for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,), bug_learn_every=0)).bug_trials()}
     assert default["td3"].td3.learn_every == 1 and default["sac"].sac.learn_every == 1
+
+
+def test_with_ray_the_bug_runs_train_as_ray_tasks_and_give_the_outputs_of_a_local_reproduction(
+        ray_session: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--ray``: the stage-4 Bug runs train as Ray tasks (two at once here) and the test matches play as Ray tasks;
+    every run's rows, the contest and the per-seed test MWRs are those of the same reproduction without Ray, and
+    the folder resumes with or without ``--ray``."""
+    argv = ["reproduce", "--tiny", "--algos", "ddpg", "ppo", "--seeds", "0", "1", "--no-progress"]
+    assert main([*argv, "--out", str(tmp_path / "local")]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "ray"), "--ray", "--cpus-per-trial", "1"]) == 0
+    assert "4 Bug trials as Ray tasks" in capsys.readouterr().out
+    names = sorted(p.name for p in (tmp_path / "local" / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
+    assert names == sorted(p.name for p in (tmp_path / "ray" / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
+    assert len(names) == 4
+    for name in names:
+        local, on_ray = (tmp_path / where / "bug" / name / "metrics.csv" for where in ("local", "ray"))
+        assert [r[:-1] for r in _csv_rows(on_ray)] == [r[:-1] for r in _csv_rows(local)]  # all but the wall time
+    for rel in ("contest/contest.json",):
+        assert (tmp_path / "ray" / rel).read_text() == (tmp_path / "local" / rel).read_text()
+
+    def scores(where: str) -> dict[str, str]:
+        rows = _csv_rows(tmp_path / where / "evaluation" / "per_seed.csv", header=True)
+        return {Path(r["policy"]).parent.name or r["policy"]: r["test_mwr"] for r in rows}
+
+    assert scores("ray") == scores("local") and len(scores("ray")) == 6
+    assert main([*argv, "--out", str(tmp_path / "ray")]) == 0  # the same protocol: resumes (all skipped) without Ray
+    assert _record(tmp_path / "ray")["runs"][-1]["ran"] == []
+
+
+def _csv_rows(path: Path, header: bool = False) -> list[Any]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh)) if header else list(csv.reader(fh))[1:]

@@ -54,7 +54,7 @@ from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare, trial_group
-from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+from triplesumo.evaluation.evaluate import EvaluateConfig, check_ray, evaluate
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train import sweep
 from triplesumo.train.config import ALGOS, TrainConfig
@@ -67,6 +67,8 @@ CONTEST_LIMIT = 0.7
 """Neither side of the ongoing match may win more than this share of its test matches."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
+RUN_OPTIONS = ("progress", "ray", "ray_address", "num_cpus", "cpus_per_trial")
+"""ReproduceConfig fields that say how the stages run, not what they make: a folder resumes with other values."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
 """TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
 SKILL = 0.2
@@ -150,6 +152,16 @@ class ReproduceConfig:
     ablations: tuple[str, ...] = ()
     """FIELD=VALUE changes of the paper-preset DDPG Bug, each trained over the same seeds and env-step budget and
     compared as its own group (noise=gaussian, still=-1, or any TrainConfig field: ddpg.noise_sigma=0.1)."""
+    ray: bool = False
+    """Train the Bug runs of stage 4 and the ablations as Ray tasks, several at once (as ``triplesumo sweep``: a
+    task whose worker dies runs again and resumes its run), and play the test matches of stages 3 and 5 as Ray
+    tasks. The outputs are those of a run without Ray. Needs pip install "triplesumo[ray]"."""
+    ray_address: str = ""
+    """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray on this machine."""
+    num_cpus: int = 0
+    """With ray, local Ray only: the CPUs it may use (0: all)."""
+    cpus_per_trial: int = 1
+    """With ray: the CPUs Ray reserves for each Bug run (so at most num_cpus / cpus_per_trial train at once)."""
 
     def __post_init__(self) -> None:
         if isinstance(self.ablations, list):
@@ -179,6 +191,13 @@ class ReproduceConfig:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 1, got {value!r}")
         if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in self.seeds):
             raise ValueError(f"ReproduceConfig.seeds must be ints >= 0, got {self.seeds!r}")
+        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise ValueError(f"ReproduceConfig.{name} must be an int >= {low}, got {value!r}")
+        if (self.ray_address or self.num_cpus) and not self.ray:
+            raise ValueError("ReproduceConfig.ray_address and num_cpus are options of ray (--ray)")
+        check_ray("ReproduceConfig", self.ray, self.ray_address)
 
 
 @dataclass(frozen=True)
@@ -294,19 +313,40 @@ class Protocol:
         return made
 
     def _train_trials(self, todo: list[Trial]) -> list[str]:
-        commands = []
-        for t in todo:
-            if not finished(t):
-                print(f"  Bug trial {t.name}")
-                run_trial(t.config)
-            commands.append(command_for(t.config))
-        return commands
+        left = [t for t in todo if not finished(t)]
+        if self.cfg.ray and left:
+            self._train_on_ray(left)
+        for t in left if not self.cfg.ray else []:
+            print(f"  Bug trial {t.name}")
+            run_trial(t.config)
+        return [command_for(t.config) for t in todo]
+
+    def _train_on_ray(self, left: list[Trial]) -> None:
+        """The trials as Ray tasks, as many at once as Ray has CPUs for; ``RuntimeError`` naming any that failed
+        (the others finish first, and a re-run resumes the failed ones)."""
+        from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
+
+        print(f"  {len(left)} Bug trials as Ray tasks, {self.cfg.cpus_per_trial} CPU each: "
+              + ", ".join(t.name for t in left))
+
+        def done(k: int, result: dict[str, Any]) -> None:
+            state = f"error: {result['error']}" if "error" in result else f"{result['seconds']:.0f} s"
+            print(f"  Bug trial {left[k].name}: {state}")
+
+        with ray_tasks.session(self.cfg.ray_address, self.cfg.num_cpus or None):
+            results = ray_tasks.run_trials_on_ray([t.config for t in left], done, self.cfg.cpus_per_trial)
+        failed = [f"{t.name} ({r['error']})" for t, r in zip(left, results, strict=True) if "error" in r]
+        if failed:
+            raise RuntimeError("Bug trials failed on Ray: " + "; ".join(failed) + "; run the same command again "
+                               "to resume them")
 
     # ------------------------------------------------------------ evaluations
     def _evaluate(self, ecfg: EvaluateConfig) -> list[str]:
         from triplesumo import _dcargs
 
         resume = (Path(ecfg.out) / "evaluation.json").exists()
+        if self.cfg.ray:  # the same rows, played as Ray tasks
+            ecfg = dataclasses.replace(ecfg, ray=True, ray_address=self.cfg.ray_address)
         evaluate(dataclasses.replace(ecfg, resume=resume))
         return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]
 
@@ -406,12 +446,14 @@ def code_version() -> str:
 
 
 def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:
-    """``ValueError`` unless the reproduction recorded in ``out`` was made with ``cfg``'s options (progress aside);
+    """``ValueError`` unless the reproduction recorded in ``out`` was made with ``cfg``'s options (:data:`RUN_OPTIONS`
+    aside);
     an option added since the record was written counts as its default, what that run used."""
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
     defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
     recorded = {**{k: v for k, v in defaults.items() if k not in recorded}, **recorded}
-    if {k: v for k, v in recorded.items() if k != "progress"} != {k: v for k, v in config.items() if k != "progress"}:
+    if {k: v for k, v in recorded.items() if k not in RUN_OPTIONS} != {
+            k: v for k, v in config.items() if k not in RUN_OPTIONS}:
         raise ValueError(f"{out} holds a reproduction with other options ({recorded}); re-running resumes "
                          "it and needs the same options: choose another --out")
 
