@@ -206,3 +206,33 @@ def test_with_ray_the_bug_runs_train_as_ray_tasks_and_give_the_outputs_of_a_loca
 def _csv_rows(path: Path, header: bool = False) -> list[Any]:
     with path.open(newline="") as fh:
         return list(csv.DictReader(fh)) if header else list(csv.reader(fh))[1:]
+
+
+def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "rep"
+    argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "--seeds", "0", "1", "--no-progress"]
+    assert main([*argv, "--status"]) == 0
+    table = capsys.readouterr().out
+    assert "learn=bug=ddpg,seed=1" in table and "complete" not in table and not (out / "bug").exists()
+    assert main(argv) == 0
+    record = _record(out)
+    # one Bug run loses its checkpoints and policy (as a run stopped part way): it is not done, the rest is
+    run = out / "bug" / "learn=bug=ddpg,seed=1"
+    shutil.rmtree(run / "checkpoints")
+    for f in run.glob("policy.*"):
+        f.unlink()
+    (out / "REPRODUCTION.md").unlink()
+    capsys.readouterr()
+    assert main([*argv, "--status"]) == 0
+    rows = {line.split()[1]: line.split()[2:] for line in capsys.readouterr().out.splitlines()[1:-1]}
+    assert rows["learn=bug=ddpg,seed=0"][:2] == ["complete", _rows_env_steps(out / "bug" / "learn=bug=ddpg,seed=0")]
+    assert rows["learn=bug=ddpg,seed=1"][:3] == ["running", "or", "stopped"]
+    assert rows["ant"][0] == rows["compare"][0] == "complete"
+    assert _record(out) == record  # nothing ran, nothing recorded
+    skill = (out / "REPRODUCTION.md").read_text().split("## Time to skill")[1]
+    assert "| learn=bug=ddpg,seed=1 | not yet |" in skill and "| learn=bug=ddpg,seed=0 | not yet |" not in skill
+
+
+def _rows_env_steps(run: Path) -> str:
+    return f"{int(_csv_rows(run / 'metrics.csv', header=True)[-1]['env_steps']):,}"

@@ -67,7 +67,7 @@ CONTEST_LIMIT = 0.7
 """Neither side of the ongoing match may win more than this share of its test matches."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
-RUN_OPTIONS = ("progress", "ray", "ray_address", "num_cpus", "cpus_per_trial")
+RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial")
 """ReproduceConfig fields that say how the stages run, not what they make: a folder resumes with other values."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
 """TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
@@ -152,6 +152,9 @@ class ReproduceConfig:
     ablations: tuple[str, ...] = ()
     """FIELD=VALUE changes of the paper-preset DDPG Bug, each trained over the same seeds and env-step budget and
     compared as its own group (noise=gaussian, still=-1, or any TrainConfig field: ddpg.noise_sigma=0.1)."""
+    status: bool = False
+    """Run nothing: print where each stage and Bug run stands (env steps, the newest test MWR while training) and
+    regenerate REPRODUCTION.md from the outputs there are so far (a long reproduction, between sessions)."""
     ray: bool = False
     """Train the Bug runs of stage 4 and the ablations as Ray tasks, several at once (as ``triplesumo sweep``: a
     task whose worker dies runs again and resumes its run), and play the test matches of stages 3 and 5 as Ray
@@ -390,7 +393,7 @@ class Protocol:
         return ({r["policy"] for r in rows} == want and all(int(r["epochs"]) == self.epochs["eval"] for r in rows)
                 and all(_rows_in(self.out / "evaluation" / r["candidate"] / "metrics.csv") == self.epochs["eval"]
                         for r in rows)  # a killed evaluation's rows: per_seed.csv may predate them
-                and all(r["sha256"] == policy_fingerprint(r["policy"]) for r in rows))  # not a retrained Bug's
+                and all(r["sha256"] == _fingerprint(r["policy"]) for r in rows))  # not a retrained or removed Bug's
 
     def _evaluation(self) -> list[str]:
         return self._evaluate(self.evaluation_config())
@@ -419,6 +422,14 @@ def _read_csv(path: Path) -> list[dict[str, str]]:
         return []
     with path.open(newline="", encoding="utf-8") as fh:
         return list(csv.DictReader(fh))
+
+
+def _fingerprint(policy: str) -> str | None:
+    """:func:`policy_fingerprint`, None when the policy's files are gone."""
+    try:
+        return policy_fingerprint(policy)
+    except FileNotFoundError:
+        return None
 
 
 def _rows_in(path: Path) -> int:
@@ -470,6 +481,11 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
         check_same_options(out, record["config"], cfg)
     record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", [])}
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
+    if cfg.status:
+        print(format_status(protocol))
+        atomic_write_bytes(out / REPORT_FILE, report(protocol, {**record, "runs": [*record["runs"], run_now]}).encode())
+        print(f"report (so far): {out / REPORT_FILE}")
+        return record
     record["runs"].append(run_now)
     n = len(protocol.stages)
     for k, stage in enumerate(protocol.stages, 1):
@@ -493,6 +509,36 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     atomic_write_bytes(out / REPORT_FILE, report(protocol, record).encode())
     print(f"report: {out / REPORT_FILE}; record: {path}")
     return record
+
+
+def status(protocol: Protocol) -> list[dict[str, Any]]:
+    """Where each stage and each Bug run of the folder stands: rows of stage, run, state (``complete``, ``running
+    or stopped``, ``not started``), env steps and the newest test MWR of the run's evaluations while training."""
+    rows: list[dict[str, Any]] = []
+    runs = {"ant": [("ant", protocol.out / "ant", protocol._trained(protocol._ant()))],
+            "spider": [("spider", protocol.out / "spider", protocol._trained(protocol._spider()))],
+            "bug": [(t.name, Path(t.config.out) / t.name, finished(t)) for t in protocol.bug_trials()],
+            "ablations": [(t.name, Path(t.config.out) / t.name, finished(t)) for t in protocol.ablation_trials()]}
+    for stage in protocol.stages:
+        complete = stage.complete()
+        for name, folder, done in runs.get(stage.name, [(stage.name, None, complete)]):
+            started = folder is not None and (folder / "metrics.csv").exists()
+            evals = _evals(folder) if folder is not None else []
+            rows.append({"stage": stage.name, "run": name,
+                         "state": "complete" if done else "running or stopped" if started else "not started",
+                         "env_steps": run_facts(folder, 200)["env_steps"] if started else None,
+                         "test_mwr": float(evals[-1]["test_mwr"]) if evals else None})
+    return rows
+
+
+def format_status(protocol: Protocol) -> str:
+    """:func:`status` as a table."""
+    lines = [f"{'stage':<11} {'run':<44} {'state':<19} {'env steps':>11} {'test MWR':>9}"]
+    for r in status(protocol):
+        steps = "-" if r["env_steps"] is None else f"{r['env_steps']:,}"
+        mwr = "-" if r["test_mwr"] is None else f"{r['test_mwr']:+.3f}"
+        lines.append(f"{r['stage']:<11} {r['run']:<44} {r['state']:<19} {steps:>11} {mwr:>9}")
+    return "\n".join(lines)
 
 
 def _now() -> str:
@@ -687,7 +733,7 @@ def _skill_section(protocol: Protocol) -> list[str]:
         best = max(rows, key=lambda r: float(r["test_mwr"]))
         top = f"{float(best['test_mwr']):+.3f} ({int(best['env_steps']):,})"
         if hit is None:
-            lines.append(f"| {trial.name} | no | - | - | {len(rows)} | {top} |")
+            lines.append(f"| {trial.name} | {'no' if finished(trial) else 'not yet'} | - | - | {len(rows)} | {top} |")
         else:
             lines.append(f"| {trial.name} | yes | {int(hit['env_steps']):,} | "
                          f"{_duration(float(hit['train_seconds']))} | {len(rows)} | {top} |")
