@@ -526,7 +526,7 @@ def status(protocol: Protocol) -> list[dict[str, Any]]:
             evals = _evals(folder) if folder is not None else []
             rows.append({"stage": stage.name, "run": name,
                          "state": "complete" if done else "running or stopped" if started else "not started",
-                         "env_steps": run_facts(folder, 200)["env_steps"] if started else None,
+                         "env_steps": run_facts(folder, 200)["env_steps"] if folder and started else None,
                          "test_mwr": float(evals[-1]["test_mwr"]) if evals else None})
     return rows
 
