@@ -317,16 +317,19 @@ class Protocol:
 
     def _train_trials(self, todo: list[Trial]) -> list[str]:
         left = [t for t in todo if not finished(t)]
-        if self.cfg.ray and left:
+        if self.cfg.ray:
             self._train_on_ray(left)
-        for t in left if not self.cfg.ray else []:
-            print(f"  Bug trial {t.name}")
-            run_trial(t.config)
+        else:
+            for t in left:
+                print(f"  Bug trial {t.name}")
+                run_trial(t.config)
         return [command_for(t.config) for t in todo]
 
     def _train_on_ray(self, left: list[Trial]) -> None:
         """The trials as Ray tasks, as many at once as Ray has CPUs for; ``RuntimeError`` naming any that failed
         (the others finish first, and a re-run resumes the failed ones)."""
+        if not left:
+            return
         from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
 
         print(f"  {len(left)} Bug trials as Ray tasks, {self.cfg.cpus_per_trial} CPU each: "
@@ -514,19 +517,19 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
 def status(protocol: Protocol) -> list[dict[str, Any]]:
     """Where each stage and each Bug run of the folder stands: rows of stage, run, state (``complete``, ``running
     or stopped``, ``not started``), env steps and the newest test MWR of the run's evaluations while training."""
+    trials = {"bug": protocol.bug_trials(), "ablations": protocol.ablation_trials()}
     rows: list[dict[str, Any]] = []
-    runs = {"ant": [("ant", protocol.out / "ant", protocol._trained(protocol._ant()))],
-            "spider": [("spider", protocol.out / "spider", protocol._trained(protocol._spider()))],
-            "bug": [(t.name, Path(t.config.out) / t.name, finished(t)) for t in protocol.bug_trials()],
-            "ablations": [(t.name, Path(t.config.out) / t.name, finished(t)) for t in protocol.ablation_trials()]}
     for stage in protocol.stages:
-        complete = stage.complete()
-        for name, folder, done in runs.get(stage.name, [(stage.name, None, complete)]):
-            started = folder is not None and (folder / "metrics.csv").exists()
-            evals = _evals(folder) if folder is not None else []
+        if stage.name in trials:  # one row per Bug run
+            runs = [(t.name, Path(t.config.out) / t.name, finished(t)) for t in trials[stage.name]]
+        else:  # one row for the stage; a training stage's run folder is named after it
+            runs = [(stage.name, protocol.out / stage.name, stage.complete())]
+        for name, folder, done in runs:
+            started = (folder / "metrics.csv").exists()
+            evals = _evals(folder)
             rows.append({"stage": stage.name, "run": name,
                          "state": "complete" if done else "running or stopped" if started else "not started",
-                         "env_steps": run_facts(folder, 200)["env_steps"] if folder and started else None,
+                         "env_steps": run_facts(folder, 200)["env_steps"] if started else None,
                          "test_mwr": float(evals[-1]["test_mwr"]) if evals else None})
     return rows
 
