@@ -155,6 +155,7 @@ def test_a_record_written_before_an_option_existed_resumes_with_its_default(tmp_
     del recorded["ablations"]  # a record of a version without --ablations
     check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, progress=False))
     check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ray=True, cpus_per_trial=2))  # how, not what
+    check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, publish=True))  # publishing comes after
     with pytest.raises(ValueError, match="other options"):
         check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ablations=("still=-1",)))
 

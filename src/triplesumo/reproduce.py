@@ -67,8 +67,9 @@ CONTEST_LIMIT = 0.7
 """Neither side of the ongoing match may win more than this share of its test matches."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
-RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial")
-"""ReproduceConfig fields that say how the stages run, not what they make: a folder resumes with other values."""
+RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish")
+"""ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
+make: a folder resumes with other values."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
 """TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
 SKILL = 0.2
