@@ -176,7 +176,7 @@ def test_play_with_an_unknown_policy_fails_with_exit_code_2(capsys: pytest.Captu
 
 # ---------------------------------------------------------------- the Gymnasium id
 def test_paper_env_drives_ant_and_spider_with_the_zoo_and_passes_check_env(zoo: TinyZoo) -> None:
-    env = gym.make("TripleSumo-Paper-v0")
+    env = gym.make("TripleSumo-Paper-v1")
     try:
         base = env.unwrapped
         match = base.match

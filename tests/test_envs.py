@@ -49,7 +49,7 @@ def test_pettingzoo_aec_api_test() -> None:
 
 
 def test_gymnasium_check_env_on_registered_id() -> None:
-    env = gymnasium.make("TripleSumo-v0")
+    env = gymnasium.make("TripleSumo-v1")
     assert isinstance(env.unwrapped, TripleSumoEnv)
     gym_check_env(env.unwrapped, skip_render_check=True)
     env.close()
@@ -289,7 +289,7 @@ def test_gymnasium_view_rejects_bad_setup() -> None:
         TripleSumoEnv(max_step=10)
 
 
-@pytest.mark.parametrize("make", [lambda: parallel_env(), lambda: gymnasium.make("TripleSumo-v0")],
+@pytest.mark.parametrize("make", [lambda: parallel_env(), lambda: gymnasium.make("TripleSumo-v1")],
                          ids=["pettingzoo", "gymnasium"])
 def test_unwrapped_exposes_mujoco_model_and_data(make) -> None:
     env = make()
@@ -496,9 +496,23 @@ def test_arena_stack_overflow_is_a_physics_error() -> None:
     assert "arena_overflow" in (match.physics_error or "")
 
 
-def test_registered_ids() -> None:
-    assert "TripleSumo-v0" in gymnasium.registry
-    assert triplesumo.ENV_VERSION == "v0"
+def test_registered_ids_are_v1_and_v0_names_its_successor() -> None:
+    from triplesumo.registration import ENV_IDS
+
+    assert triplesumo.ENV_VERSION == "v1"
+    assert "TripleSumo-v1" in gymnasium.registry and "TripleSumo-Paper-v1" in gymnasium.registry
+    assert all(i.endswith("-v1") and i in gymnasium.registry for i in ENV_IDS)
+    assert triplesumo.parallel_env().metadata["name"] == "triplesumo_v1"
+    # v0's ids are gone: Gymnasium's own error names the current one
+    with pytest.raises(gymnasium.error.DeprecatedEnv, match="TripleSumo-Paper-v1"):
+        gymnasium.make("TripleSumo-Paper-v0")
+
+
+def test_v1_plays_on_the_paper_rim_and_v0_physics_is_the_visual_ring() -> None:
+    from triplesumo.model import V0_PHYSICS, PhysicsConfig
+
+    assert PhysicsConfig().border_rim and not V0_PHYSICS.border_rim
+    assert gymnasium.make("TripleSumo-v1").unwrapped.match.config.physics.border_rim
 
 
 def test_paper_observations_are_separate_arrays_per_agent() -> None:

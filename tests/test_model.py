@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from triplesumo.envs.match import Match
-from triplesumo.model import PAPER_AGENTS, AgentSpec, PhysicsConfig, build_model, ring_half_size
+from triplesumo.model import PAPER_AGENTS, V0_PHYSICS, AgentSpec, PhysicsConfig, build_model, ring_half_size
 from triplesumo.model import names as mjcf_names
 from triplesumo.model.specs import BLUE, GREEN, RED
 from triplesumo.rules.config import MatchConfig, ResetNoise, RewardConfig
@@ -203,7 +203,8 @@ def test_configs_are_frozen() -> None:
 
 # ----------------------------------------------------------------- start pose at rest
 def test_agents_at_rest_never_touch_and_stand_on_the_tatami(make_match, zeros) -> None:
-    match = make_match()
+    """On env v0's ring (visual border markers); on the paper's rim see the next test."""
+    match = make_match(physics=V0_PHYSICS)
     owner = np.full(match.model.ngeom, -1)
     for i, a in enumerate(match.sim.agents):
         owner[a.geoms] = i
@@ -224,6 +225,26 @@ def test_agents_at_rest_never_touch_and_stand_on_the_tatami(make_match, zeros) -
     for i, a in enumerate(match.sim.agents):
         weight = match.model.body_subtreemass[a.torso_body] * gravity
         np.testing.assert_allclose(forces[i * g:(i + 1) * g].sum(axis=0), [0.0, 0.0, weight], atol=1e-3 * weight)
+
+
+def test_on_the_rim_agents_at_rest_lean_on_it_and_slide_inward(make_match, zeros) -> None:
+    """The paper's ring (the default since env v1): from the default start (radius 1.4) legs land on
+    the 3 cm rim, which pushes every agent toward the centre; nobody leaves the ring."""
+    match = make_match()
+    start = match.sim.torso_positions().copy()
+    border = {match.model.geom(n).id for n in mjcf_names.BORDER_GEOMS}
+    touched = set()
+    for _ in range(50):
+        result = match.step_array(zeros(match))
+        assert not (result.terminated or result.truncated)
+        n = match.data.ncon
+        for g1, g2 in zip(match.data.contact.geom1[:n], match.data.contact.geom2[:n], strict=True):
+            pair = {int(g1), int(g2)}
+            if pair & border:
+                touched |= {i for i, a in enumerate(match.sim.agents) if pair & {int(g) for g in a.geoms}}
+    assert touched == {0, 1, 2}  # every agent's legs are on the rim
+    moved_in = np.linalg.norm(start[:, :2], axis=1) - np.linalg.norm(match.sim.torso_positions()[:, :2], axis=1)
+    assert (moved_in > 0.05).all(), moved_in
 
 
 # ------------------------------------------------------------------------ the border rim
@@ -257,10 +278,10 @@ def _push_ant_at_the_rim(border_rim: bool) -> tuple[set[str], float]:
     return touched, push_x
 
 
-def test_border_rim_is_solid_only_when_asked() -> None:
-    """RoboSumo's and the paper's rim: the four cylinders collide with agents (default flags) only
-    with ``border_rim``; the ring's half-size and every other geom stay the same."""
-    plain, solid = build_model(PAPER_AGENTS, PhysicsConfig()), build_model(PAPER_AGENTS, PhysicsConfig(border_rim=True))
+def test_border_rim_is_solid_by_default_and_visual_in_v0() -> None:
+    """RoboSumo's and the paper's rim: the four cylinders collide with agents (default flags) with
+    ``border_rim`` (the default since env v1); the ring's half-size and every other geom stay the same."""
+    plain, solid = build_model(PAPER_AGENTS, PhysicsConfig(border_rim=False)), build_model(PAPER_AGENTS, PhysicsConfig())
     rim = [plain.geom(n).id for n in mjcf_names.BORDER_GEOMS]
     assert (plain.geom_contype[rim] == 0).all() and (plain.geom_conaffinity[rim] == 0).all()
     assert (solid.geom_contype[rim] == 1).all() and (solid.geom_conaffinity[rim] == 1).all()

@@ -28,7 +28,7 @@ from conftest import TINY_DDPG, E, tiny
 from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.cli import main
-from triplesumo.model.specs import PhysicsConfig
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.rewards import DENSE_TERMS
 from triplesumo.train import checkpoint
 from triplesumo.train import loop as train_loop
@@ -441,8 +441,8 @@ def test_trainer_rejects_unknown_agents_and_policies(tmp_path: Path, fields: dic
         Trainer(tiny(tmp_path, **fields))
 
 
-def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_default_ring(tmp_path: Path) -> None:
-    rim = Trainer(tiny(tmp_path, physics=PhysicsConfig(border_rim=True)))
+def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_v0_ring(tmp_path: Path) -> None:
+    rim = Trainer(tiny(tmp_path))  # the default since env v1
     try:
         assert rim.match_cfg.physics.border_rim
         model = rim.batch.matches[0].model
@@ -452,8 +452,8 @@ def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_def
     finally:
         rim.batch.close()
     saved = config_to_json(tiny(tmp_path))
-    del saved["physics"]  # a run folder written before the field existed
-    assert config_from_json(saved).physics == PhysicsConfig()
+    del saved["physics"]  # a run folder written before the field existed: env v0's visual ring, as it ran
+    assert config_from_json(saved).physics == V0_PHYSICS == PhysicsConfig(border_rim=False)
     with pytest.raises(ValueError, match="PhysicsConfig.frame_skip"):
         config_from_json({**config_to_json(tiny(tmp_path)), "physics": {**asdict(PhysicsConfig()), "frame_skip": 0}})
 

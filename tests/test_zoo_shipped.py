@@ -10,6 +10,7 @@ import pytest
 import triplesumo
 from triplesumo.agents import zoo
 from triplesumo.envs.match import Match
+from triplesumo.model import V0_PHYSICS, PhysicsConfig
 
 SHIPPED = ("ant", "spider", "bug")
 
@@ -26,7 +27,12 @@ def test_shipped_policy_manifest_says_how_it_was_made(name: str) -> None:
     assert isinstance(manifest["seed"], int)
     assert manifest["epochs"] > 0
     assert manifest["obs_mode"] == "paper"
-    assert manifest["mujoco_version"] and manifest["env_version"] == triplesumo.ENV_VERSION
+    assert manifest["mujoco_version"] and manifest["env_version"] in ("v0", triplesumo.ENV_VERSION)
+    # the simulation it was trained on: that of its env version (a manifest without physics: v0's)
+    physics = PhysicsConfig(**manifest["physics"]) if "physics" in manifest else V0_PHYSICS
+    assert (physics == PhysicsConfig()) == (manifest["env_version"] == triplesumo.ENV_VERSION)
+    if name in SHIPPED:  # the paper roster that TripleSumo-Paper-v1 plays with is the current version's
+        assert manifest["env_version"] == triplesumo.ENV_VERSION
     assert "evaluation" in manifest
 
 
@@ -48,7 +54,7 @@ def test_shipped_policy_loads_by_name_and_acts_deterministically(name: str) -> N
 def test_paper_env_uses_the_shipped_ant_and_spider() -> None:
     import gymnasium as gym
 
-    env = gym.make("TripleSumo-Paper-v0")
+    env = gym.make("TripleSumo-Paper-v1")
     env.reset(seed=0)
     env.step(np.zeros(8, dtype=np.float32))
     data, match = env.unwrapped.data, env.unwrapped.match

@@ -139,7 +139,7 @@ class ReproduceConfig:
     """Matches collected or played at once."""
     border_rim: bool = True
     """Train and evaluate on the paper's ring, whose border cylinders form a solid rim (``PhysicsConfig.border_rim``);
-    False: the visual-only markers the first shipped zoo was trained on."""
+    False: the visual-only markers of env v0, the ring the first shipped zoo was trained on."""
     save_replay: bool = True
     """Checkpoints hold the replay buffer (an exact resume); False keeps them small enough to commit
     (a resume then starts with an empty buffer)."""

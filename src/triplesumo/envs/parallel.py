@@ -8,6 +8,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
+from triplesumo import ENV_VERSION
 from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
@@ -111,12 +112,16 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
       Policies trained on ``egocentric`` observations before this must be retrained.
       ``PhysicsConfig.border_rim`` added: ``border_rim=True`` is the paper's (and
       RoboSumo's) ring, whose four border cylinders form a solid 3 cm rim; the default
-      stays ``False`` (visual markers, the ring of every shipped policy and published
-      figure) and flips to ``True`` with the rebuilt zoo (Ant 3,000 and Spider 20,000
-      epochs) and the next env version, v1.
+      stayed ``False`` (visual markers) until v1.
+    - v1: the paper's ring by default (``PhysicsConfig.border_rim=True``: the border
+      cylinders collide, a solid 3 cm rim that agents hit), and a zoo rebuilt on it with the
+      paper's budgets (Ant 3,000 and Spider 20,000 epochs; ``triplesumo reproduce``). Ids and
+      names end in ``-v1`` / ``_v1``; making a ``-v0`` id raises Gymnasium's ``DeprecatedEnv``.
+      ``PhysicsConfig(border_rim=False)`` (``triplesumo.model.V0_PHYSICS``) is v0's
+      simulation; the v0 zoo policy ``zoo:spider-selfplay`` was trained on it.
     """
 
-    metadata = {"render_modes": list(RENDER_MODES), "name": "triplesumo_v0", "is_parallelizable": True,
+    metadata = {"render_modes": list(RENDER_MODES), "name": f"triplesumo_{ENV_VERSION}", "is_parallelizable": True,
                 "render_fps": 20}
 
     def __init__(self, config: MatchConfig | None = None, render_mode: str | None = None,

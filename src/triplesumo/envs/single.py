@@ -54,16 +54,17 @@ class TripleSumoEnv(MatchAccess, gym.Env):
     scenario's, ``"bug"`` for the paper), ``policies`` (``{agent: callable}`` for the others; an agent
     without a policy is passive: zero action), ``render_mode`` (``"rgb_array"`` or
     ``"human"``), ``width``, ``height``, and any :class:`MatchConfig` field as a keyword.
-    Registered ids: ``TripleSumo-v0`` (others passive unless given) and
-    ``TripleSumo-Paper-v0`` (Ant and Spider from the shipped policy zoo), and one per other
-    scenario with the others passive: ``TripleSumo-FFA-v0``, ``TripleSumo-Pursuit-v0``
-    (learner: the evader), ``TripleSumo-2v2-v0``.
+    Registered ids: ``TripleSumo-v1`` (others passive unless given) and
+    ``TripleSumo-Paper-v1`` (Ant and Spider from the shipped policy zoo), and one per other
+    scenario with the others passive: ``TripleSumo-FFA-v1``, ``TripleSumo-Pursuit-v1``
+    (learner: the evader), ``TripleSumo-2v2-v1``, ``TripleSumo-Bodies-v1``.
 
     ## Version History
     - v0: first release.
     - v0, fidelity fixes: ``egocentric`` observations changed and ``PhysicsConfig.border_rim``
       added (the paper's solid ring rim, off by default until v1); details in
       :class:`triplesumo.envs.parallel.TripleSumoParallelEnv`.
+    - v1: the paper's solid ring rim by default, and the zoo rebuilt on it (details there).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20}

@@ -41,7 +41,7 @@ from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.video import check_writable
-from triplesumo.model.specs import PhysicsConfig
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train.logger import COLUMNS, repair_metrics_csv
@@ -397,7 +397,7 @@ def _record(cfg: EvaluateConfig, candidates: dict[str, str]) -> dict[str, Any]:
     fields = json.loads(json.dumps({f: getattr(cfg, f) for f in ROW_FIELDS}))  # tuples as JSON lists
     if cfg.scenario != "paper":  # (records of the paper's matches stay as they were)
         fields["scenario"] = cfg.scenario
-    if cfg.physics != PhysicsConfig():  # (likewise records made on the default physics)
+    if cfg.physics != V0_PHYSICS:  # (likewise records made on env v0's simulation)
         fields["physics"] = asdict(cfg.physics)
     return {
         "rows_depend_on": fields,

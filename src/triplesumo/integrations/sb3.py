@@ -8,7 +8,7 @@ SB3 ``VecEnv``, so PPO, SAC, TD3 and DDPG train on many matches in one process::
     from stable_baselines3 import PPO
     from triplesumo.integrations.sb3 import make_vec_env
 
-    env = make_vec_env("TripleSumo-Paper-v0", n_envs=8)
+    env = make_vec_env("TripleSumo-Paper-v1", n_envs=8)
     PPO("MlpPolicy", env).learn(10_000)
 
 SB3's conventions: when match ``k`` ends, the returned observation is already its next
@@ -31,6 +31,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from triplesumo.envs.vector import TripleSumoVectorEnv
+from triplesumo.registration import PAPER_ID
 
 
 class TripleSumoVecEnv(VecEnv):
@@ -115,7 +116,7 @@ def _row(infos: dict[str, Any], k: int) -> dict[str, Any]:
             if not key.startswith("_") and key not in ("final_obs", "final_info") and infos[f"_{key}"][k]}
 
 
-def make_vec_env(env_id: str = "TripleSumo-Paper-v0", n_envs: int = 1, seed: int | None = None,
+def make_vec_env(env_id: str = PAPER_ID, n_envs: int = 1, seed: int | None = None,
                  **kwargs: Any) -> TripleSumoVecEnv:
     """``gym.make_vec(env_id, n_envs, **kwargs)`` as an SB3 ``VecEnv`` (``seed`` seeds the first reset)."""
     vector = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **kwargs)

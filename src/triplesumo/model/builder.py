@@ -6,7 +6,7 @@ PyMJCF models), then given the agent's colour and control range. Start poses
 (:mod:`triplesumo.model.layout`): agents evenly spaced on a circle of
 ``PhysicsConfig.start_radius``, the first at angle 0, each facing the centre, widened
 and turned only where bodies would touch; the compiled ``qpos0`` is that start pose.
-``PhysicsConfig.border_rim`` turns the border markers into the paper's solid rim.
+``PhysicsConfig.border_rim`` (the default) turns the border markers into the paper's solid rim.
 """
 
 from __future__ import annotations

@@ -20,8 +20,8 @@ TATAMI_GEOM = "tatami"
 RING_MARKER_GEOM = "border_right"
 """Border marker at x = +half-size; its position defines the ring's playable half-size."""
 BORDER_GEOMS = ("border_top", "border_right", "border_bottom", "border_left")
-"""The four cylinders (radius 3 cm, axis on the tatami's top) along the ring's edge: visual
-markers, or the paper's solid rim with ``PhysicsConfig.border_rim``."""
+"""The four cylinders (radius 3 cm, axis on the tatami's top) along the ring's edge: the paper's
+solid rim (``PhysicsConfig.border_rim``, the default), or visual markers only (env v0's ring)."""
 CAMERA_OVERVIEW = "overview"
 
 # A body (body.xml and the legs triplesumo.model.bodies grows on it), unprefixed

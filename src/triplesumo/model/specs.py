@@ -93,12 +93,11 @@ class PhysicsConfig:
     1.15 for two agents; with three, legs touch below 1.4 (measured), so 1.4."""
     start_height: float = 1.25
     """Start height of the torso centre; agents fall onto the tatami (top at z = 0.5)."""
-    border_rim: bool = False
+    border_rim: bool = True
     """The four border cylinders collide, as in RoboSumo's and the paper's ``tatami.xml``
     (MuJoCo's default collision flags there): a solid ridge 3 cm high along the ring's edge
-    that agents hit. False (default, for now): visual markers only, the ring every shipped
-    zoo policy and published figure was made on. True is the paper's ring; the default
-    flips to True with the rebuilt zoo and the next env version."""
+    that agents hit. True (default since env v1) is the paper's ring; False makes them visual
+    markers only, the ring of env v0 (:data:`V0_PHYSICS`)."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and self.timestep > 0):
@@ -117,3 +116,8 @@ class PhysicsConfig:
             raise ValueError(f"PhysicsConfig.border_rim must be a bool, got {self.border_rim!r}")
         if not self.start_height > 0.5:
             raise ValueError(f"PhysicsConfig.start_height must be > 0.5, got {self.start_height}")
+
+
+V0_PHYSICS = PhysicsConfig(border_rim=False)
+"""The simulation of env v0 (visual-only border markers): what a run folder, policy manifest or
+evaluation record without a ``physics`` entry was made on."""

@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from triplesumo import ENV_VERSION
 from triplesumo.model.specs import BLUE, BODIES_AGENTS, GREEN, RED, AgentSpec
 from triplesumo.rules.config import MatchConfig
 
@@ -97,8 +98,8 @@ class Scenario:
 
     @property
     def pettingzoo_name(self) -> str:
-        """PettingZoo-style name, e.g. ``triplesumo_ffa_v0`` (the paper's: ``triplesumo_v0``)."""
-        return "triplesumo_v0" if self.name == "paper" else f"triplesumo_{self.name}_v0"
+        """PettingZoo-style name, e.g. ``triplesumo_ffa_v1`` (the paper's: ``triplesumo_v1``)."""
+        return f"triplesumo_{ENV_VERSION}" if self.name == "paper" else f"triplesumo_{self.name}_{ENV_VERSION}"
 
     def config(self, **overrides: Any) -> MatchConfig:
         """The scenario's :class:`MatchConfig`; ``overrides`` are roster sizes or MatchConfig fields."""
@@ -220,13 +221,13 @@ def bodies_roster() -> tuple[AgentSpec, ...]:
 
 
 SCENARIOS: dict[str, Scenario] = {
-    "paper": Scenario("paper", "TripleSumo-Paper-v0", "bug", None, {}, {}, _PAPER_DOC),
-    "ffa": Scenario("ffa", "TripleSumo-FFA-v0", "bug", ffa_roster, {"n_agents": 3}, {"rules": "elimination"},
+    "paper": Scenario("paper", f"TripleSumo-Paper-{ENV_VERSION}", "bug", None, {}, {}, _PAPER_DOC),
+    "ffa": Scenario("ffa", f"TripleSumo-FFA-{ENV_VERSION}", "bug", ffa_roster, {"n_agents": 3}, {"rules": "elimination"},
                     _FFA_DOC),
-    "pursuit": Scenario("pursuit", "TripleSumo-Pursuit-v0", "evader", pursuit_roster, {"n_pursuers": 3},
+    "pursuit": Scenario("pursuit", f"TripleSumo-Pursuit-{ENV_VERSION}", "evader", pursuit_roster, {"n_pursuers": 3},
                         {"rules": "elimination", "evader": "evader"}, _PURSUIT_DOC),
-    "2v2": Scenario("2v2", "TripleSumo-2v2-v0", "ant", teams_roster, {"team_sizes": (2, 2)}, {}, _TEAMS_DOC),
-    "bodies": Scenario("bodies", "TripleSumo-Bodies-v0", "bug", bodies_roster, {}, {}, _BODIES_DOC),
+    "2v2": Scenario("2v2", f"TripleSumo-2v2-{ENV_VERSION}", "ant", teams_roster, {"team_sizes": (2, 2)}, {}, _TEAMS_DOC),
+    "bodies": Scenario("bodies", f"TripleSumo-Bodies-{ENV_VERSION}", "bug", bodies_roster, {}, {}, _BODIES_DOC),
 }
 """Every scenario by name."""
 

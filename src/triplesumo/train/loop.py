@@ -64,7 +64,7 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.envs.batch import MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
-from triplesumo.model.specs import PhysicsConfig
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.config import RewardConfig
 from triplesumo.rules.outcome import ERROR_CODE, PLAYING
 from triplesumo.rules.outcome import outcome_name as code_name
@@ -147,7 +147,7 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
     if isinstance(data, dict):  # written before a field existed: that field's default, what the run used
-        defaults = config_to_json(TrainConfig())
+        defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
     data = _check_keys(data, TrainConfig, "", source)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
@@ -944,8 +944,7 @@ class Trainer:
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
             "updates": learner.algo.num_updates, "command": self.command, "trained_against": list(self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
-            # the simulation, where it is not the default (e.g. the paper's solid rim)
-            **({"physics": dataclasses.asdict(self.cfg.physics)} if self.cfg.physics != PhysicsConfig() else {}),
+            "physics": dataclasses.asdict(self.cfg.physics),  # the simulation (e.g. the paper's solid rim)
         }
 
     def save(self) -> Path:
