@@ -138,6 +138,15 @@ def test_resume_refuses_what_changed(tmp_path: Path) -> None:
         run_tournament(duel_cfg(tmp_path / "empty", resume=True), DUEL)
 
 
+def test_the_ring_is_chosen_and_part_of_what_the_rows_depend_on(tmp_path: Path) -> None:
+    from triplesumo.model import V0_PHYSICS
+
+    assert TournamentConfig().match_config().physics.border_rim  # env v1: the paper's rim
+    v0 = TournamentConfig(physics=V0_PHYSICS, out=str(tmp_path))
+    assert v0.match_config().physics == V0_PHYSICS
+    assert Tournament(v0).record()["rows_depend_on"]["match"]["physics"]["border_rim"] is False
+
+
 def test_sampled_schedule_draws_lineups_from_the_seed(tmp_path: Path) -> None:
     cfg = duel_cfg(tmp_path, schedule="sampled", matches=40)
     t = Tournament(cfg, DUEL)

@@ -41,7 +41,7 @@ import itertools
 import json
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -58,7 +58,7 @@ from triplesumo.evaluation.ratings import MODELS, Elo, RatingTable
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import wilson_interval
 from triplesumo.evaluation.video import check_writable
-from triplesumo.model.specs import PAPER_AGENTS, AgentSpec
+from triplesumo.model.specs import PAPER_AGENTS, AgentSpec, PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.teams import Teams
 
@@ -91,6 +91,9 @@ class TournamentConfig:
     """Step limit of a match (a draw when reached)."""
     obs_mode: str = "paper"
     """Observation mode of the matches."""
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    """The simulation (``border_rim``: the paper's solid ring rim, the default since env v1;
+    ``--no-physics.border-rim`` for env v0's ring); as the policies were trained on."""
     rating_model: str = "PlackettLuce"
     """openskill model: PlackettLuce, BradleyTerryFull, BradleyTerryPart, ThurstoneMostellerFull or
     ThurstoneMostellerPart."""
@@ -142,7 +145,8 @@ class TournamentConfig:
 
     def match_config(self) -> MatchConfig:
         """The scenario's match."""
-        return MatchConfig(agents=SCENARIOS[self.scenario], max_steps=self.steps_per_epoch, obs_mode=self.obs_mode)
+        return MatchConfig(agents=SCENARIOS[self.scenario], max_steps=self.steps_per_epoch, obs_mode=self.obs_mode,
+                           physics=self.physics)
 
 
 def parse_entries(pairs: tuple[str, ...]) -> dict[str, str]:
