@@ -233,6 +233,8 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
     assert _record(out) == record  # nothing ran, nothing recorded
     skill = (out / "REPRODUCTION.md").read_text().split("## Time to skill")[1]
     assert "| learn=bug=ddpg,seed=1 | not yet |" in skill and "| learn=bug=ddpg,seed=0 | not yet |" not in skill
+    whole = next(line for line in skill.splitlines() if line.startswith("The whole protocol"))
+    assert "--tiny" in whole and "--status" not in whole  # what makes the outputs, not how this run went
 
 
 def _rows_env_steps(run: Path) -> str:

@@ -779,6 +779,7 @@ def _plot_curves(runs: list[tuple[Trial, Path]], path: Path) -> Path:
 
 
 def _argv(cfg: ReproduceConfig) -> list[str]:
+    """The command-line options that make ``cfg``'s outputs (how it ran, :data:`RUN_OPTIONS`, left out)."""
     from triplesumo import _dcargs
 
-    return [a for a in _dcargs.to_argv(cfg) if a != "--no-progress"]
+    return _dcargs.to_argv(dataclasses.replace(cfg, **{k: getattr(ReproduceConfig(), k) for k in RUN_OPTIONS}))
