@@ -642,7 +642,7 @@ def league_demo(run_dir: Path, epochs: int = 40, seed: int = 0, max_steps: int =
     from triplesumo.evaluation.runner import play_matches
     from triplesumo.rules.scenarios import scenario_config
 
-    config = config or LeagueConfig(threshold=0.5, window=10, snapshot_every=10, max_size=4,
+    config = config or LeagueConfig(threshold=0.5, window=10, snapshot_every=10, max_size=4, draw_score=0.5,
                                     zoo=("ant=random", "bug=random", "spider=random"))
     league = League(run_dir, config, {"team": ("ant", "bug"), "spider": ("spider",)}, seed=seed)
     match_cfg = dataclasses.replace(scenario_config("paper"), max_steps=max_steps)
