@@ -183,7 +183,7 @@ def test_tiny_run_policy_file_acts_deterministically(uninterrupted: Trained) -> 
                                    expect_obs_dim=bug.obs_dim)
     assert manifest["agent"] == "bug" and manifest["obs_mode"] == "paper" and manifest["algo"] == "ddpg"
     assert manifest["epochs"] == uninterrupted.result.epochs and manifest["hidden"] == [16, 16]
-    assert "physics" not in manifest  # the default simulation is not spelled out
+    assert manifest["physics"] == asdict(PhysicsConfig())  # the ring it learned on, spelled out
     obs = np.random.default_rng(1).normal(size=(3, bug.obs_dim)).astype(np.float32)
     first = policy(obs)
     assert first.shape == (3, 8) and np.abs(first).max() <= 1.0

@@ -29,7 +29,7 @@ from triplesumo.agents.builtin import act_batch
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
-from triplesumo.model.specs import PhysicsConfig
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
@@ -56,8 +56,8 @@ def test_a_checkpoint_of_the_previous_trainer_resumes_and_continues_its_run_exac
     # the old trainer's uninterrupted run to epoch 4, row for row and weight for weight
     assert _metrics(run / "metrics.csv") == _metrics(OLD_RUN / "ref" / "metrics.csv")
     assert _same_policy(run / "policy.safetensors", OLD_RUN / "ref" / "policy.safetensors")
-    # and the new trainer, started afresh, makes that same run
-    fresh = train(tiny(tmp_path, "fresh", epochs=4, checkpoint_every=2))
+    # and the new trainer, started afresh on that run's ring (env v0's), makes that same run
+    fresh = train(dataclasses.replace(tiny(tmp_path, "fresh", epochs=4, checkpoint_every=2), physics=V0_PHYSICS))
     assert _metrics(fresh.run_dir / "metrics.csv") == _metrics(OLD_RUN / "ref" / "metrics.csv")
     assert _same_policy(fresh.run_dir / "policy.safetensors", OLD_RUN / "ref" / "policy.safetensors")
 
