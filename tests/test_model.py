@@ -281,7 +281,8 @@ def _push_ant_at_the_rim(border_rim: bool) -> tuple[set[str], float]:
 def test_border_rim_is_solid_by_default_and_visual_in_v0() -> None:
     """RoboSumo's and the paper's rim: the four cylinders collide with agents (default flags) with
     ``border_rim`` (the default since env v1); the ring's half-size and every other geom stay the same."""
-    plain, solid = build_model(PAPER_AGENTS, PhysicsConfig(border_rim=False)), build_model(PAPER_AGENTS, PhysicsConfig())
+    plain = build_model(PAPER_AGENTS, PhysicsConfig(border_rim=False))
+    solid = build_model(PAPER_AGENTS, PhysicsConfig())
     rim = [plain.geom(n).id for n in mjcf_names.BORDER_GEOMS]
     assert (plain.geom_contype[rim] == 0).all() and (plain.geom_conaffinity[rim] == 0).all()
     assert (solid.geom_contype[rim] == 1).all() and (solid.geom_conaffinity[rim] == 1).all()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -11,10 +12,12 @@ from typing import Any
 import pytest
 
 import triplesumo.agents.zoo
+from triplesumo import ENV_VERSION
 from triplesumo.agents.zoo import make_policy, policies_from_pairs
 from triplesumo.cli import main
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.evaluation.tournament import _manifest as tournament_manifest
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce import ReproduceConfig, check_same_options
 
 
@@ -78,6 +81,8 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     shipped = json.loads((zoo / f"bug-{best['algo']}.json").read_text())
     assert shipped["algo"] == best["algo"] and shipped["code_version"] == _record(out)["runs"][-1]["version"]
     assert shipped["command"].startswith("triplesumo train") and shipped["seed"] == 0 and shipped["env_steps"] > 0
+    assert shipped["physics"] == dataclasses.asdict(PhysicsConfig()) and shipped["env_version"] == ENV_VERSION
+    assert json.loads((zoo / "ant.json").read_text())["physics"] == shipped["physics"]  # every stage's ring
     assert [shipped["evaluation"][k] for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")] == [
         float(best[k]) for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")]
     assert json.loads((zoo / "bug.json").read_text())["algo"] == "ddpg"

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from triplesumo import ENV_VERSION
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import policy_fingerprint
 from triplesumo.algos.ddpg import DDPGConfig
@@ -554,10 +555,12 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
     (``bug-<algo>``); each manifest with the code version and the Bug's test MWR with its 95 % interval."""
     from triplesumo.agents import zoo
 
-    cfg = protocol.cfg
     ours = {str(Path(t.config.out) / t.name / "policy") for t in protocol.bug_trials()}  # not the ablations
     rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["policy"] in ours]
-    extra = {"code_version": version, "reproduction": str(protocol.out), "border_rim": cfg.border_rim}
+    # the ring every stage trained on, and the env version whose default it is (the trainer wrote the one it ran under)
+    extra: dict[str, Any] = {"code_version": version, "reproduction": str(protocol.out),
+                             "physics": dataclasses.asdict(protocol.physics),
+                             **({"env_version": ENV_VERSION} if protocol.physics == PhysicsConfig() else {})}
 
     def evaluation(row: dict[str, str]) -> dict[str, Any]:
         return {"test_mwr": float(row["test_mwr"]), "test_mwr_lo": float(row["test_mwr_lo"]),

@@ -222,11 +222,12 @@ def bodies_roster() -> tuple[AgentSpec, ...]:
 
 SCENARIOS: dict[str, Scenario] = {
     "paper": Scenario("paper", f"TripleSumo-Paper-{ENV_VERSION}", "bug", None, {}, {}, _PAPER_DOC),
-    "ffa": Scenario("ffa", f"TripleSumo-FFA-{ENV_VERSION}", "bug", ffa_roster, {"n_agents": 3}, {"rules": "elimination"},
-                    _FFA_DOC),
+    "ffa": Scenario("ffa", f"TripleSumo-FFA-{ENV_VERSION}", "bug", ffa_roster, {"n_agents": 3},
+                    {"rules": "elimination"}, _FFA_DOC),
     "pursuit": Scenario("pursuit", f"TripleSumo-Pursuit-{ENV_VERSION}", "evader", pursuit_roster, {"n_pursuers": 3},
                         {"rules": "elimination", "evader": "evader"}, _PURSUIT_DOC),
-    "2v2": Scenario("2v2", f"TripleSumo-2v2-{ENV_VERSION}", "ant", teams_roster, {"team_sizes": (2, 2)}, {}, _TEAMS_DOC),
+    "2v2": Scenario("2v2", f"TripleSumo-2v2-{ENV_VERSION}", "ant", teams_roster, {"team_sizes": (2, 2)}, {},
+                    _TEAMS_DOC),
     "bodies": Scenario("bodies", f"TripleSumo-Bodies-{ENV_VERSION}", "bug", bodies_roster, {}, {}, _BODIES_DOC),
 }
 """Every scenario by name."""
