@@ -104,6 +104,10 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert "## Time to skill" in report
     assert _record(out)["runs"][-1]["ran"] == [] and _record(out)["runs"][-1]["skipped"] == stages
     assert (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.safetensors").stat().st_mtime_ns == policy
+    # what was published stays in the record and the report of later runs and of --status
+    assert main([a for a in argv if a != "--publish"] + ["--status"]) == 0
+    assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 |" in (out / "REPRODUCTION.md").read_text()
+    assert [p["name"] for p in _record(out)["published"]] == ["ant", "spider", "bug", f"bug-{best['algo']}"]
 
     shutil.rmtree(out / "contest")
     shutil.rmtree(out / "compare")

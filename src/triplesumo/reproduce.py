@@ -484,7 +484,8 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
     if record:
         check_same_options(out, record["config"], cfg)
-    record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", [])}
+    record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", []),
+              **{k: record[k] for k in ("published",) if k in record}}  # kept until a later --publish replaces it
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
     if cfg.status:
         print(format_status(protocol))
