@@ -82,7 +82,10 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert shipped["algo"] == best["algo"] and shipped["code_version"] == _record(out)["runs"][-1]["version"]
     assert shipped["command"].startswith("triplesumo train") and shipped["seed"] == 0 and shipped["env_steps"] > 0
     assert shipped["physics"] == dataclasses.asdict(PhysicsConfig()) and shipped["env_version"] == ENV_VERSION
-    assert json.loads((zoo / "ant.json").read_text())["physics"] == shipped["physics"]  # every stage's ring
+    for name in ("ant", "spider"):  # every stage's ring, and the contest check of the pair
+        pair = json.loads((zoo / f"{name}.json").read_text())
+        assert pair["physics"] == shipped["physics"] and pair["evaluation"]["contest"] == contest
+        assert pair["evaluation"]["n"] == contest["matches"] and 0 <= pair["evaluation"]["win_rate_lo"]
     assert [shipped["evaluation"][k] for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")] == [
         float(best[k]) for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")]
     assert json.loads((zoo / "bug.json").read_text())["algo"] == "ddpg"

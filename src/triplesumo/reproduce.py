@@ -573,7 +573,11 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
     def mwr(row: dict[str, str]) -> float:
         return float(row["test_mwr"])
 
-    ship: list[tuple[Path, str, dict[str, str] | None]] = [(Path(protocol.ant_policy), "ant", None),
+    # Ant and Spider: the stage-3 contest they were checked in (Bug passive; 95% intervals in the Spider's rows)
+    contest = {"contest": json.loads((protocol.out / "contest" / "contest.json").read_text()),
+               "opponents": [f"ant={protocol.ant_policy}", "bug=zero"],
+               **json.loads((protocol.out / "contest" / "summary.json").read_text())["candidates"]["trained"]}
+    ship: list[tuple[Path, str, dict[str, Any] | None]] = [(Path(protocol.ant_policy), "ant", None),
                                                            (Path(protocol.spider_policy), "spider", None)]
     preset = [r for r in rows if r["algo"] == "ddpg"]
     if preset:
@@ -585,7 +589,7 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
     ship.append((Path(best["policy"]), f"bug-{best['algo']}", best))
     made = []
     for stem, name, row in ship:
-        path = zoo.publish(stem, name, None if row is None else evaluation(row), extra=extra)
+        path = zoo.publish(stem, name, contest if row is None else evaluation(row), extra=extra)
         made.append({"name": name, "file": str(path), "policy": str(stem),
                      **({} if row is None else {"algo": row["algo"], "train_seed": row["train_seed"],
                                                 "test_mwr": mwr(row), "test_mwr_lo": float(row["test_mwr_lo"]),
