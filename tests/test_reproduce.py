@@ -168,8 +168,20 @@ def test_a_record_written_before_an_option_existed_resumes_with_its_default(tmp_
     check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, progress=False))
     check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ray=True, cpus_per_trial=2))  # how, not what
     check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, publish=True))  # publishing comes after
-    with pytest.raises(ValueError, match="other options"):
+    with pytest.raises(ValueError, match=r"other options \(ablations: \[\] there, \['still=-1'\] given\)"):
         check_same_options(tmp_path, recorded, ReproduceConfig(tiny=True, ablations=("still=-1",)))
+
+
+def test_the_folder_is_compared_by_its_place_and_status_may_read_a_moved_one(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import dataclasses
+
+    monkeypatch.chdir(tmp_path)
+    recorded = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig(tiny=True, out=str(tmp_path / "rep")))))
+    check_same_options(tmp_path / "rep", recorded, ReproduceConfig(tiny=True, out="rep"))  # relative, same place
+    check_same_options(tmp_path / "moved", recorded, ReproduceConfig(tiny=True, out="moved", status=True))
+    with pytest.raises(ValueError, match=r"\(out: "):  # a run (not --status) would write into another folder
+        check_same_options(tmp_path / "moved", recorded, ReproduceConfig(tiny=True, out="moved"))
 
 
 def test_bug_trials_give_td3_and_sac_the_shared_schedule_and_keep_ddpg_at_the_paper_preset(tmp_path: Path) -> None:
@@ -247,6 +259,22 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
     assert "| learn=bug=ddpg,seed=1 | not yet |" in skill and "| learn=bug=ddpg,seed=0 | not yet |" not in skill
     whole = next(line for line in skill.splitlines() if line.startswith("The whole protocol"))
     assert "--tiny" in whole and "--status" not in whole  # what makes the outputs, not how this run went
+
+    # --docs writes the same report into a page of the docs, between its markers, the rest kept
+    page = tmp_path / "docs" / "REPRODUCTION.md"
+    page.parent.mkdir()
+    page.write_text("# Ours\n\nintro\n\n<!-- reproduce:begin -->\nold\n<!-- reproduce:end -->\n\n## History\n")
+    assert main([*argv, "--status", "--docs", str(page)]) == 0
+    text, generated = page.read_text(), (out / "REPRODUCTION.md").read_text()
+    assert text.startswith("# Ours\n\nintro\n\n<!-- reproduce:begin -->\n") and text.endswith(
+        "<!-- reproduce:end -->\n\n## History\n") and "\nold\n" not in text
+    assert "\n### Time to skill\n" in text and "\n## Time to skill\n" in generated
+    assert "](../rep/bug/test_mwr.png)" in text and "](bug/test_mwr.png)" in generated
+    assert "\n# ant (" in text  # the commands block keeps its bash comments
+    page.write_text("# Ours, no markers\n")
+    capsys.readouterr()
+    assert main([*argv, "--status", "--docs", str(page)]) == 2
+    assert "<!-- reproduce:begin -->" in capsys.readouterr().err and page.read_text() == "# Ours, no markers\n"
 
 
 def _rows_env_steps(run: Path) -> str:

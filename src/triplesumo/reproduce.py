@@ -39,6 +39,8 @@ import csv
 import dataclasses
 import datetime
 import json
+import os
+import re
 import shlex
 import subprocess
 import time
@@ -68,7 +70,7 @@ CONTEST_LIMIT = 0.7
 """Neither side of the ongoing match may win more than this share of its test matches."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
-RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish")
+RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish", "docs")
 """ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
 make: a folder resumes with other values."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
@@ -154,6 +156,10 @@ class ReproduceConfig:
     ablations: tuple[str, ...] = ()
     """FIELD=VALUE changes of the paper-preset DDPG Bug, each trained over the same seeds and env-step budget and
     compared as its own group (noise=gaussian, still=-1, or any TrainConfig field: ddpg.noise_sigma=0.1)."""
+    docs: str = ""
+    """Also write the report into this Markdown file (e.g. docs/REPRODUCTION.md), between its lines
+    ``<!-- reproduce:begin -->`` and ``<!-- reproduce:end -->``: headings one level down, links to this folder's files
+    relative to that file; the rest of the file is kept."""
     status: bool = False
     """Run nothing: print where each stage and Bug run stands (env steps, the newest test MWR while training) and
     regenerate REPRODUCTION.md from the outputs there are so far (a long reproduction, between sessions)."""
@@ -468,16 +474,22 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
     defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
     recorded = {**{k: v for k, v in defaults.items() if k not in recorded}, **recorded}
-    if {k: v for k, v in recorded.items() if k not in RUN_OPTIONS} != {
-            k: v for k, v in config.items() if k not in RUN_OPTIONS}:
-        raise ValueError(f"{out} holds a reproduction with other options ({recorded}); re-running resumes "
-                         "it and needs the same options: choose another --out")
+    # the folder by its place, however it was written; --status only reads, so a moved folder may be read
+    config["out"], recorded["out"] = str(Path(config["out"]).resolve()), str(Path(recorded["out"]).resolve())
+    ignore = (*RUN_OPTIONS, "out") if cfg.status else RUN_OPTIONS
+    differ = sorted(k for k in config if k not in ignore and recorded.get(k) != config[k])
+    if differ:
+        raise ValueError(f"{out} holds a reproduction with other options ("
+                         + ", ".join(f"{k}: {recorded.get(k)!r} there, {config[k]!r} given" for k in differ)
+                         + "); re-running resumes it and needs the same options: choose another --out")
 
 
 def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     """Run (or finish) every stage in order, skipping complete ones; write reproduce.json and the report."""
     protocol = Protocol(cfg)
     out = protocol.out
+    if cfg.docs:  # before hours of training: the file and its markers are there
+        embed_report("", out, Path(cfg.docs).read_text(), Path(cfg.docs).parent)
     out.mkdir(parents=True, exist_ok=True)
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
@@ -489,7 +501,7 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
     if cfg.status:
         print(format_status(protocol))
-        atomic_write_bytes(out / REPORT_FILE, report(protocol, {**record, "runs": [*record["runs"], run_now]}).encode())
+        _write_report(protocol, {**record, "runs": [*record["runs"], run_now]})
         print(f"report (so far): {out / REPORT_FILE}")
         return record
     record["runs"].append(run_now)
@@ -512,9 +524,42 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     if cfg.publish:
         record["published"] = _publish(protocol, run_now["version"])
     atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
-    atomic_write_bytes(out / REPORT_FILE, report(protocol, record).encode())
+    _write_report(protocol, record)
     print(f"report: {out / REPORT_FILE}; record: {path}")
     return record
+
+
+DOCS_BEGIN, DOCS_END = "<!-- reproduce:begin -->", "<!-- reproduce:end -->"
+
+
+def _write_report(protocol: Protocol, record: dict[str, Any]) -> None:
+    """``OUT/REPRODUCTION.md``, and with ``--docs`` the same report inside that Markdown file."""
+    text = report(protocol, record)
+    atomic_write_bytes(protocol.out / REPORT_FILE, text.encode())
+    if protocol.cfg.docs:
+        docs = Path(protocol.cfg.docs)
+        atomic_write_bytes(docs, embed_report(text, protocol.out, docs.read_text(), docs.parent).encode())
+        print(f"report written into {docs}")
+
+
+def embed_report(text: str, out: Path, page: str, page_dir: Path) -> str:
+    """``page`` with the report ``text`` (of the folder ``out``) between its two marker lines: the report's title
+    left out, its headings one level down, its links to files of ``out`` made relative to ``page_dir``."""
+    lines = page.splitlines()
+    if DOCS_BEGIN not in lines or DOCS_END not in lines or lines.index(DOCS_BEGIN) > lines.index(DOCS_END):
+        raise ValueError(f"--docs file needs a line {DOCS_BEGIN} and, after it, a line {DOCS_END}: the report goes "
+                         "between them")
+    prefix = os.path.relpath(out.resolve(), page_dir.resolve())
+    body, fenced = [], False
+    for line in text.splitlines()[1:]:
+        fenced ^= line.startswith("```")
+        if not fenced and line.startswith("#"):
+            line = "#" + line
+        elif not fenced:
+            line = re.sub(r"\]\((?![a-z]+:|/|#)([^)]+)\)", lambda m: f"]({prefix}/{m.group(1)})", line)
+        body.append(line)
+    start, end = lines.index(DOCS_BEGIN), lines.index(DOCS_END)
+    return "\n".join([*lines[:start + 1], *body, *lines[end:]]) + "\n"
 
 
 def status(protocol: Protocol) -> list[dict[str, Any]]:
