@@ -666,8 +666,8 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
     ring = ("`border_rim=True`: the paper's ring, whose four border cylinders collide (a solid 3 cm rim)"
             if cfg.border_rim else "`border_rim=False`: visual-only border markers (the ring of the first shipped zoo)")
     lines = [f"# Reproduction report ({out.name})", "",
-             f"Written by `triplesumo reproduce` from the files in this folder; code version "
-             f"{record['runs'][-1]['version']}." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
+             f"Written by `triplesumo reproduce` (code version {record['runs'][-1]['version']}) from the files in "
+             f"`{out.name}/`." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
                                                     if cfg.tiny else ""), "",
              f"Ring: {ring}; every stage trained and was evaluated on it.", "",
              "## Stages 1-2: the ongoing match", "",
