@@ -66,6 +66,8 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     skill = report[report.index("## Time to skill"):]
     hit = next((r for r in evals if float(r["test_mwr"]) >= 0.2), None)
     assert f"| learn=bug=ddpg,seed=0 | {'no' if hit is None else 'yes'} |" in skill
+    if hit is None:  # not reached: within how many env steps and how much training time
+        assert f"| learn=bug=ddpg,seed=0 | no | > {int(evals[-1]['env_steps']):,} | > " in skill
     assert f"| {len(evals)} |" in skill and (out / "bug" / "test_mwr.png").stat().st_size > 0
     ddpg = next(r for r in rows if r["policy"].endswith("learn=bug=ddpg,seed=0/policy"))
     assert f"| ddpg | 1 | {float(ddpg['test_mwr']):+.3f} |" in report  # the number read from per_seed.csv

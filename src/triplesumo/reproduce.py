@@ -789,8 +789,10 @@ def _skill_section(protocol: Protocol) -> list[str]:
         hit = next((r for r in rows if float(r["test_mwr"]) >= SKILL), None)
         best = max(rows, key=lambda r: float(r["test_mwr"]))
         top = f"{float(best['test_mwr']):+.3f} ({int(best['env_steps']):,})"
-        if hit is None:
-            lines.append(f"| {trial.name} | {'no' if finished(trial) else 'not yet'} | - | - | {len(rows)} | {top} |")
+        if hit is None:  # not within the env steps and training time so far
+            last = rows[-1]
+            lines.append(f"| {trial.name} | {'no' if finished(trial) else 'not yet'} | > {int(last['env_steps']):,} | "
+                         f"> {_duration(float(last['train_seconds']))} | {len(rows)} | {top} |")
         else:
             lines.append(f"| {trial.name} | yes | {int(hit['env_steps']):,} | "
                          f"{_duration(float(hit['train_seconds']))} | {len(rows)} | {top} |")
