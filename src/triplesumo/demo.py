@@ -2,14 +2,13 @@
 
 1. Train Bug with DDPG (the paper's preset) in the shipped ongoing match: the zoo's
    trained Ant and Spider play, Bug learns to cooperate with Ant.
-2. Evaluate the Bug it trained, the shipped Bug (``zoo:bug``, the paper's 20,000 epochs)
+2. Evaluate the Bug it trained, the shipped Bug (``zoo:bug``, paper-preset DDPG, 1 M env steps)
    and the passive and random Bug baselines, all in the same seeded test matches, with
    no exploration noise.
 3. Record one match of the shipped Bug with Ant against Spider as mp4.
 
 Everything lands in one folder (default ``runs/demo``); the end of the output says
-where. The full reproduction is ``triplesumo train`` at its defaults (20,000 epochs)
-followed by ``triplesumo evaluate`` (see docs/REPRODUCTION.md).
+where. The full reproduction is ``triplesumo reproduce`` (see docs/REPRODUCTION.md).
 
 ``--scenario NAME`` runs the same three steps in another named game: its default learner
 (``ffa``: Bug, ``pursuit``: the evader, ``2v2``: Ant) trains against random others, is
