@@ -19,6 +19,7 @@ from triplesumo.evaluation.compare import (
     _iqm_rows,
     _poi_rows,
     compare,
+    format_compare,
     interval_estimates,
     iqm,
     probability_of_improvement,
@@ -182,3 +183,16 @@ def test_trial_group_is_the_run_folder_without_its_seed(policy: str, group: str,
     from triplesumo.evaluation.compare import trial_group
 
     assert trial_group({"policy": policy, "group": group, "algo": algo}) == expected
+
+
+def test_the_printed_table_keeps_long_group_names_whole() -> None:
+    long = "ddpg,ddpg.noise=gaussian,reward.still=-1"
+    groups = [{"group": g, "n_seeds": 3, "iqm": -0.6, "lo": -0.7, "hi": -0.5, "scores": [-0.7, -0.6, -0.5]}
+              for g in (long, "ppo")]
+    table = {"confidence": 0.95, "groups": groups,
+             "improvement": [{"x": long, "y": "ppo", "poi": 0.5, "lo": 0.0, "hi": 1.0},
+                             {"x": "ppo", "y": long, "poi": 0.5, "lo": 0.0, "hi": 1.0}]}
+    lines = format_compare(table).splitlines()
+    assert lines[1].startswith(long + " ") and lines[2].startswith("ppo ")
+    assert f"{long} > ppo" in lines[-2] and lines[-1].endswith(f"ppo > {long}  0.500 [0.000, 1.000]")
+    assert len({line.index(" > ") for line in lines[-2:]}) == 1  # the columns line up

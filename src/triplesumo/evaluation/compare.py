@@ -207,14 +207,14 @@ def compare(cfg: CompareConfig) -> dict[str, Any]:
 def format_compare(table: dict[str, Any]) -> str:
     """The table printed by ``triplesumo compare``."""
     pct = round(100 * table["confidence"])
-    lines = [f"{'group':24s} {'seeds':>5s} {f'IQM [{pct}% CI]':>26s}  per-seed test MWR"]
+    w = max([24, *(len(g["group"]) for g in table["groups"])])  # whole names: ablations are long
+    lines = [f"{'group':{w}s} {'seeds':>5s} {f'IQM [{pct}% CI]':>26s}  per-seed test MWR"]
     for g in table["groups"]:
         ci = f"{g['iqm']:+.3f} [{g['lo']:+.3f}, {g['hi']:+.3f}]"
-        lines.append(f"{g['group'][:24]:24s} {g['n_seeds']:5d} {ci:>26s}  "
-                     + " ".join(f"{s:+.3f}" for s in g["scores"]))
+        lines.append(f"{g['group']:{w}s} {g['n_seeds']:5d} {ci:>26s}  " + " ".join(f"{s:+.3f}" for s in g["scores"]))
     if table["improvement"]:
         lines.append("")
-        lines.append(f"{'P(X > Y)':48s} {f'[{pct}% CI]':>18s}")
+        lines.append(f"{'P(X > Y)':{2 * w + 3}s} {f'[{pct}% CI]':>18s}")
         for p in table["improvement"]:
-            lines.append(f"{p['x'][:22]:>22s} > {p['y'][:22]:22s}  {p['poi']:.3f} [{p['lo']:.3f}, {p['hi']:.3f}]")
+            lines.append(f"{p['x']:>{w}s} > {p['y']:{w}s}  {p['poi']:.3f} [{p['lo']:.3f}, {p['hi']:.3f}]")
     return "\n".join(lines)
