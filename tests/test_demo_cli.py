@@ -92,7 +92,7 @@ def test_zoo_list_prints_each_entry_with_its_command_and_seed(zoo: TinyZoo,
     for line, name in zip(lines, ("ant", "bug", "spider"), strict=True):
         meta = load_json(zoo.zoo_dir / f"{name}.json")
         assert f"agent={name}" in line
-        assert f"seed={meta['seed']}" in line
+        assert f"seed={meta['seed']}" in line and f" env={meta['env_version']} " in line
         assert line.endswith(f"made by: {meta['command']}")
 
 

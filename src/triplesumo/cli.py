@@ -175,10 +175,15 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.agents import zoo as zoo_module
 
             if args.action == "list":
+                width = max((len(n) for n in zoo_module.available()), default=8)
                 for name in zoo_module.available():
                     meta = json.loads((zoo_module.ZOO_DIR / f"{name}.json").read_text())
-                    print(f"{name:8s} agent={meta['agent']} obs_mode={meta['obs_mode']} epochs={meta.get('epochs')} "
-                          f"seed={meta.get('seed')}  made by: {meta.get('command')}")
+                    ev = meta.get("evaluation", {})
+                    mwr = (f" test_mwr={ev['test_mwr']:+.3f} [{ev['test_mwr_lo']:+.3f}, {ev['test_mwr_hi']:+.3f}]"
+                           if "test_mwr" in ev else "")
+                    print(f"{name:{width}s} agent={meta['agent']} env={meta.get('env_version', 'v0')} "
+                          f"obs_mode={meta['obs_mode']} epochs={meta.get('epochs')} seed={meta.get('seed')}{mwr}  "
+                          f"made by: {meta.get('command')}")
             else:
                 if not args.policy or not args.name:
                     raise ValueError("zoo publish needs POLICY and NAME")
