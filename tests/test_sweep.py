@@ -112,7 +112,8 @@ def test_a_trial_whose_worker_is_killed_resumes_from_its_checkpoint(ray_session:
     killed = None
     deadline = time.monotonic() + 120
     while killed is None and thread.is_alive() and time.monotonic() < deadline:
-        if list((run / "checkpoints").glob("epoch-*")) and (pids := _trial_workers()):
+        # latest.json is written (atomically) once a checkpoint is whole; a checkpoint folder alone may be half written
+        if (run / "checkpoints" / "latest.json").is_file() and (pids := _trial_workers()):
             killed = pids[0]
             os.kill(killed, signal.SIGKILL)
         time.sleep(0.05)
