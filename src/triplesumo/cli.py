@@ -175,8 +175,9 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.agents import zoo as zoo_module
 
             if args.action == "list":
-                width = max((len(n) for n in zoo_module.available()), default=8)
-                for name in zoo_module.available():
+                names = zoo_module.available()
+                width = max((len(n) for n in names), default=8)
+                for name in names:
                     meta = json.loads((zoo_module.ZOO_DIR / f"{name}.json").read_text())
                     ev = meta.get("evaluation", {})
                     mwr = (f" test_mwr={ev['test_mwr']:+.3f} [{ev['test_mwr_lo']:+.3f}, {ev['test_mwr_hi']:+.3f}]"

@@ -477,10 +477,10 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     # the folder by its place, however it was written; --status only reads, so a moved folder may be read
     config["out"], recorded["out"] = str(Path(config["out"]).resolve()), str(Path(recorded["out"]).resolve())
     ignore = (*RUN_OPTIONS, "out") if cfg.status else RUN_OPTIONS
-    differ = sorted(k for k in config if k not in ignore and recorded.get(k) != config[k])
+    differ = sorted(k for k in {*config, *recorded} if k not in ignore and recorded.get(k) != config.get(k))
     if differ:
         raise ValueError(f"{out} holds a reproduction with other options ("
-                         + ", ".join(f"{k}: {recorded.get(k)!r} there, {config[k]!r} given" for k in differ)
+                         + ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in differ)
                          + "); re-running resumes it and needs the same options: choose another --out")
 
 
@@ -489,7 +489,7 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     protocol = Protocol(cfg)
     out = protocol.out
     if cfg.docs:  # before hours of training: the file and its markers are there
-        embed_report("", out, Path(cfg.docs).read_text(), Path(cfg.docs).parent)
+        _docs_markers(Path(cfg.docs).read_text().splitlines())
     out.mkdir(parents=True, exist_ok=True)
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
@@ -542,13 +542,19 @@ def _write_report(protocol: Protocol, record: dict[str, Any]) -> None:
         print(f"report written into {docs}")
 
 
+def _docs_markers(lines: list[str]) -> tuple[int, int]:
+    """Where a docs page's two marker lines are; ``ValueError`` unless both are there, in order."""
+    if DOCS_BEGIN not in lines or DOCS_END not in lines or lines.index(DOCS_BEGIN) > lines.index(DOCS_END):
+        raise ValueError(f"--docs file needs a line {DOCS_BEGIN} and, after it, a line {DOCS_END}: the report goes "
+                         "between them")
+    return lines.index(DOCS_BEGIN), lines.index(DOCS_END)
+
+
 def embed_report(text: str, out: Path, page: str, page_dir: Path) -> str:
     """``page`` with the report ``text`` (of the folder ``out``) between its two marker lines: the report's title
     left out, its headings one level down, its links to files of ``out`` made relative to ``page_dir``."""
     lines = page.splitlines()
-    if DOCS_BEGIN not in lines or DOCS_END not in lines or lines.index(DOCS_BEGIN) > lines.index(DOCS_END):
-        raise ValueError(f"--docs file needs a line {DOCS_BEGIN} and, after it, a line {DOCS_END}: the report goes "
-                         "between them")
+    start, end = _docs_markers(lines)
     prefix = os.path.relpath(out.resolve(), page_dir.resolve())
     body, fenced = [], False
     for line in text.splitlines()[1:]:
@@ -558,7 +564,6 @@ def embed_report(text: str, out: Path, page: str, page_dir: Path) -> str:
         elif not fenced:
             line = re.sub(r"\]\((?![a-z]+:|/|#)([^)]+)\)", lambda m: f"]({prefix}/{m.group(1)})", line)
         body.append(line)
-    start, end = lines.index(DOCS_BEGIN), lines.index(DOCS_END)
     return "\n".join([*lines[:start + 1], *body, *lines[end:]]) + "\n"
 
 
