@@ -101,9 +101,17 @@ def _trial_workers() -> list[int]:
     return pids
 
 
+def _latest_epoch(latest: Path) -> int:
+    try:
+        return int(json.loads(latest.read_text())["epoch"])
+    except (OSError, ValueError, KeyError):  # replaced between the check and the read
+        return 0
+
+
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds Ray's worker processes through /proc")
 def test_a_trial_whose_worker_is_killed_resumes_from_its_checkpoint(ray_session: Any, tmp_path: Path) -> None:
-    base = TINY.__class__(**{**TINY.__dict__, "epochs": 40, "steps_per_epoch": 40})
+    # long enough that the kill lands mid-run: on the rim of env v1 a tiny match often ends in a few steps
+    base = TINY.__class__(**{**TINY.__dict__, "epochs": 120, "steps_per_epoch": 40})
     cfg = SweepConfig(grid=("seed=3",), out=str(tmp_path / "sweep"))
     run = tmp_path / "sweep" / "seed=3"
     result: dict[str, Any] = {}
@@ -113,7 +121,8 @@ def test_a_trial_whose_worker_is_killed_resumes_from_its_checkpoint(ray_session:
     deadline = time.monotonic() + 120
     while killed is None and thread.is_alive() and time.monotonic() < deadline:
         # latest.json is written (atomically) once a checkpoint is whole; a checkpoint folder alone may be half written
-        if (run / "checkpoints" / "latest.json").is_file() and (pids := _trial_workers()):
+        latest = run / "checkpoints" / "latest.json"
+        if latest.is_file() and _latest_epoch(latest) < 60 and (pids := _trial_workers()):
             killed = pids[0]
             os.kill(killed, signal.SIGKILL)
         time.sleep(0.05)
