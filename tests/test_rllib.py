@@ -101,7 +101,8 @@ def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any, tmp_pat
 
 @pytest.mark.usefixtures("local_ray")
 def test_self_play_team_module_against_spider_module_both_learn(rllib: Any) -> None:
-    config = _tiny(rllib.make_config("paper", share="team", max_steps=60)).training(train_batch_size_per_learner=128)
+    config = _tiny(rllib.make_config("paper", share="team", max_steps=60, obs_mode="egocentric"))
+    config = config.training(train_batch_size_per_learner=128)
     assert set(config.policies_to_train) == {"team", "spider"}
     algo = config.build_algo()
     try:
@@ -116,7 +117,8 @@ def test_self_play_team_module_against_spider_module_both_learn(rllib: Any) -> N
 
 def test_policy_mapping_per_agent_and_per_team(rllib: Any) -> None:
     per_agent = rllib.make_config("paper", policies_to_train=["bug"])
-    per_team = rllib.make_config("paper", share="team", policies_to_train=["team"], frozen={"spider": "zero"})
+    per_team = rllib.make_config("paper", share="team", policies_to_train=["team"], frozen={"spider": "zero"},
+                                 obs_mode="egocentric")
     assert [per_agent.policy_mapping_fn(a, None) for a in ("ant", "bug", "spider")] == ["ant", "bug", "spider"]
     assert [per_team.policy_mapping_fn(a, None) for a in ("ant", "bug", "spider")] == ["team", "team", "spider"]
     spec = per_agent.get_multi_rl_module_spec()
@@ -177,6 +179,8 @@ def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
     ({"frozen": {"ant": "zoo:beetle"}}, "no policy 'beetle' in the zoo"),
     ({"frozen": {"ant": "zoo:ant"}, "obs_mode": "egocentric"}, "trained with obs_mode 'paper'"),
     ({"share": "all"}, "share must be one of"),
+    ({"share": "team"},  # paper observations: one vector for both seats of the module
+     r"share='team' \(module 'team'\): one network for seats \['ant', 'bug'\] with obs_mode 'paper'"),
     ({"algo": "NoSuchAlgo"}, "algo: unknown RLlib algorithm 'NoSuchAlgo'"),
     ({"max_step": 5}, r"unknown option\(s\) \['max_step'\]"),
 ])

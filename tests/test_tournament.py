@@ -156,6 +156,79 @@ def test_sampled_schedule_draws_lineups_from_the_seed(tmp_path: Path) -> None:
     assert [t.seed_of(m) for m in range(3)] == [cfg.seed, cfg.seed + 1, cfg.seed + 2]
 
 
+# ------------------------------------------------------------------- free-for-all: places
+
+
+def ffa_cfg(out: Path, **fields: object) -> TournamentConfig:
+    base = TournamentConfig(scenario="ffa", policies=("passive=passive", "random=random", "random2=random"), rounds=4,
+                            steps_per_epoch=1000, physics=PhysicsConfig(integrator="Euler"), out=str(out), n_envs=8,
+                            n_threads=1, progress=False)
+    return dataclasses.replace(base, **fields)  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def ffa(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("ffa")
+    return out, run_tournament(ffa_cfg(out))
+
+
+def test_free_for_all_by_name_records_places_and_rates_the_passive_quadruped_first(ffa: tuple[Path, dict]) -> None:
+    out, results = ffa
+    assert results["scenario"] == "ffa" and results["seats"] == ["ant", "bug", "spider"]
+    table = rows(out / "matches.csv")
+    assert len(table) == 4 * 6 == results["n_matches"]  # 3 entries in 3 seats: 6 lineups a round
+    seats = ("ant", "bug", "spider")
+    left = 0
+    for r in table:
+        places = sorted(int(r[f"{a}_place"]) for a in seats)
+        for a in seats:  # place 1 is a win, or a draw shared by the quadrupeds still in at the limit
+            assert (int(r[f"{a}_place"]) == 1) == (r[f"{a}_outcome"] in ("win", "draw"))
+        if places == [1, 2, 3]:
+            left += 1  # one out, then another: the order they left in is kept
+        else:  # out on the same step: a shared place; in at the limit: place 1 shared
+            assert places in ([1, 2, 2], [1, 1, 3], [1, 1, 1]), places
+    assert left > 0
+    board = {e["policy"]: e for e in results["leaderboard"]}
+    assert results["leaderboard"][0]["policy"] == "passive"
+    assert board["passive"]["lo"] > max(board["random"]["hi"], board["random2"]["hi"])
+    assert board["passive"]["elo"] is None  # three teams: no 1-vs-1 Elo
+    # Cross-play in a free-for-all: the matches the row placed better than the column.
+    cross = {(c["row"], c["column"]): c for c in results["crossplay"]}
+    better = sum(int(r[f"{_seat(r, 'passive')}_place"]) < int(r[f"{_seat(r, 'random')}_place"]) for r in table)
+    assert cross[("passive", "random")]["wins"] == better and cross[("passive", "random")]["n"] == len(table)
+    assert (out / "leaderboard.png").read_bytes().startswith(PNG)
+
+
+def _seat(row: dict[str, str], name: str) -> str:
+    return next(a for a in ("ant", "bug", "spider") if row[a] == name)
+
+
+def test_free_for_all_rates_a_quadruped_out_second_above_one_out_first(tmp_path: Path) -> None:
+    """The same matches told by outcome alone (both out: a loss each) would rate ``second`` and ``first``
+    equal; the places say which one lasted longer."""
+    from triplesumo.evaluation.tournament import tabulate
+
+    cfg = ffa_cfg(tmp_path, policies=("last=passive", "second=random", "first=zero"))
+    t = Tournament(cfg)
+    table = []
+    for m in range(30):
+        seated = list(zip(t.agents, t.lineup_of(m), strict=True))
+        place = {"last": 1, "second": 2, "first": 3}
+        table.append({"match": str(m + 1), "seed": str(t.seed_of(m)), **dict(seated),
+                      **{f"{a}_outcome": "win" if n == "last" else "loss" for a, n in seated},
+                      **{f"{a}_place": str(place[n]) for a, n in seated}, "steps": "100"})
+    assert all(t.valid_row(r, int(r["match"])) for r in table)
+    board = [e["policy"] for e in tabulate(table, t, cfg)["leaderboard"]]
+    assert board == ["last", "second", "first"]
+
+
+def test_free_for_all_tournament_resumes_to_the_same_rows(ffa: tuple[Path, dict], tmp_path: Path) -> None:
+    part = tmp_path / "part"
+    run_tournament(ffa_cfg(part, rounds=2))
+    run_tournament(ffa_cfg(part, rounds=4, resume=True))
+    assert (part / "matches.csv").read_bytes() == (ffa[0] / "matches.csv").read_bytes()
+
+
 @pytest.fixture
 def tiny_zoo_dir(tiny_zoo: TinyZoo, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
@@ -195,9 +268,10 @@ def test_tournament_command_in_the_paper_scenario(tiny_zoo_dir: Path, tmp_path: 
     ({"policies": ("a=passive", "a=random")}, "entry 'a' given twice"),
     ({"policies": ("a=passive",)}, "at least 2 entries"),
     ({"policies": ("a b=passive", "c=random")}, "NAME may hold"),
-    ({"scenario": "chess"}, "scenario must be one of"),
+    ({"scenario": "chess"}, r"scenario must be one of \['paper', 'ffa', 'pursuit'"),
     ({"schedule": "swiss"}, "schedule must be one of"),
     ({"rounds": 0}, "rounds must be an int >= 1"),
+    ({"league_snapshots": 0}, "league_snapshots must be an int >= 1"),
     ({"rating_model": "Glicko"}, "rating_model must be one of"),
     ({"rate_by": "team"}, "rate_by must be one of"),
     ({"confidence": 1.5}, "confidence must be in"),
@@ -205,6 +279,22 @@ def test_tournament_command_in_the_paper_scenario(tiny_zoo_dir: Path, tmp_path: 
 def test_bad_configs_name_the_field(fields: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         TournamentConfig(**fields)
+
+
+def test_a_corrupt_or_empty_league_is_named(tmp_path: Path) -> None:
+    (tmp_path / "league").mkdir()
+    pool = tmp_path / "league" / "pool.json"
+    cfg = TournamentConfig(league=str(tmp_path), policies=("p=passive",))
+    pool.write_text('{"format": "triplesumo-league/1", "pools": {"ffa": {"members": [{"id": "ffa-0001"')
+    with pytest.raises(ValueError, match=r"league: .*pool.json is unreadable or corrupt"):
+        cfg.resolved()
+    pool.write_text('{"format": "other/2", "pools": {}}')
+    with pytest.raises(ValueError, match="format 'other/2', expected 'triplesumo-league/1'"):
+        cfg.resolved()
+    pool.write_text('{"format": "triplesumo-league/1", "pools": {"ffa": {"members": [{"id": "ffa-0001", "source": '
+                    '"zoo", "epoch": 0, "policies": {"ffa": "random"}}], "evicted": []}}}')
+    with pytest.raises(ValueError, match="holds no snapshot of the run's own yet"):
+        cfg.resolved()
 
 
 def test_unknown_policies_and_rosters_without_a_lineup_are_refused(tmp_path: Path) -> None:

@@ -236,7 +236,7 @@ def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
 
 
 def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_exactly(tmp_path: Path) -> None:
-    """``--self-play --backend warp`` (paper scenario, both sides learning, shared team network): live and pool
+    """``--self-play --backend warp`` (paper scenario, both sides learning, one network per seat): live and pool
     matches, snapshots admitted, the Spider pool's zoo member acting on the device, the team pool's random
     seed member from its own generators; resumed from its epoch-3 checkpoint, the same league,
     seats, rows and policies as the uninterrupted run. 2 matches of 20 steps, started 1.7 m out (ring-outs)."""
@@ -248,7 +248,7 @@ def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_ex
     def both(name: str, epochs: int) -> TrainConfig:
         return TrainConfig(name=name, out=str(tmp_path), epochs=epochs, steps_per_epoch=20, n_envs=2,
                            checkpoint_every=3, seed=3, ddpg=ddpg, progress=False, tensorboard=False, self_play=True,
-                           league=league, learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"), share="team",
+                           league=league, learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"),
                            physics=PhysicsConfig(start_radius=1.7), backend="warp", device="cpu")
 
     whole = Trainer(both("whole", 6))
@@ -280,7 +280,8 @@ def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_ex
     resumed = train(whole.cfg, resume_dir=killed, from_checkpoint="epoch-000003")
     assert (resumed.epochs, resumed.env_steps) == (whole.epochs_done, whole.env_steps)
     assert (run / "league" / "league.csv").read_text() == (killed / "league" / "league.csv").read_text()
-    for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
+    for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant.csv", "learning-bug.csv",
+                 "learning-spider.csv"):
         assert _metrics(run / name) == _metrics(killed / name), name
-    for learner in ("ant+bug", "spider"):
+    for learner in ("ant", "bug", "spider"):
         assert _same_policy(run / f"policy-{learner}.safetensors", killed / f"policy-{learner}.safetensors")

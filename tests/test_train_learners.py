@@ -174,7 +174,8 @@ def test_ppo_learns_and_resumes_mid_rollout_exactly(tmp_path: Path) -> None:
 
 
 def test_share_team_trains_one_network_for_both_team_mates(tmp_path: Path) -> None:
-    shared = run(tiny(tmp_path, "team", learn=("ant=ppo", "bug=ppo"), share="team", policies=("spider=random",)))
+    shared = run(tiny(tmp_path, "team", learn=("ant=ppo", "bug=ppo"), share="team", policies=("spider=random",),
+                      obs_mode="egocentric"))
     (learner,) = shared.trainer.learners
     assert learner.name == "ant+bug" and learner.n_rows == 2 * 2  # both team mates in both matches
     assert learner.algo.num_updates == shared.result.env_steps // (PPO.n_steps * 2)
@@ -248,6 +249,8 @@ def test_default_policies_leave_out_the_learning_agents() -> None:
 @pytest.mark.parametrize(("fields", "named"), [
     ({"learn": ("ant=sac", "dragon=ppo")}, r"TrainConfig.learn names unknown agents \['dragon'\]"),
     ({"learn": ("ant=sac", "bug=td3"), "share": "team"}, r"team .* different algorithms \(ant=sac, bug=td3\)"),
+    ({"learn": ("ant=sac", "bug=sac"), "share": "team"},  # paper observations: the same vector in both seats
+     r"share=team \(team 'team'\): one network for seats \['ant', 'bug'\].*use obs_mode 'egocentric'"),
 ])
 def test_trainer_rejects_bad_learners(tmp_path: Path, fields: dict[str, Any], named: str) -> None:
     with pytest.raises(ValueError, match=named):

@@ -22,6 +22,7 @@ from triplesumo.agents.policy_file import load_policy
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.cli import main
+from triplesumo.evaluation.tournament import TournamentConfig, league_entries, run_tournament
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
@@ -44,7 +45,8 @@ def tiny(out: Path, name: str, **fields: Any) -> TrainConfig:
 
 
 SPIDER = {"learn": ("spider=sac",), "policies": ("ant=random", "bug=random")}
-FFA = {"scenario": "ffa", "learn": ("ant=sac",), "policies": ("*=random",)}
+FFA = {"scenario": "ffa", "learn": ("ant=sac",), "policies": ("*=random",), "obs_mode": "egocentric"}
+"""One network takes every seat, so it reads each seat's own (egocentric) vector."""
 
 
 def rows(path: Path) -> list[dict[str, str]]:
@@ -92,6 +94,25 @@ def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) 
     for seats in trainer.seat_members:
         assert seats[0] is None and all(s is not None for s in seats[1:])
     assert league.ratings[League.learner("ffa")].mu != 25.0
+    # The run's snapshots in a free-for-all tournament of their own (--league RUN): the first and the
+    # last by epoch, named by member id, each in every seat, rated against the epochs they had trained.
+    own = sorted((m for m in (*pool.members, *pool.evicted) if m.source == "self"), key=lambda m: m.epoch)
+    cfg = TournamentConfig(scenario="ffa", obs_mode="egocentric", league=str(trainer.run_dir), league_snapshots=2,
+                           policies=("passive=passive", "random=random"), rounds=1, steps_per_epoch=60,
+                           out=str(tmp_path / "ladder"), n_envs=6, n_threads=1, progress=False)
+    entries = dict(p.split("=", 1) for p in cfg.resolved().policies)
+    expected = sorted({own[0].id, own[-1].id, "passive", "random"})
+    assert sorted(entries) == expected and entries[own[-1].id] == str(league.root / own[-1].policies["ffa"])
+    results = run_tournament(cfg)
+    assert results["n_matches"] == len(expected) * (len(expected) - 1) * (len(expected) - 2)  # every seat
+    board = {e["policy"]: e for e in results["leaderboard"]}
+    assert board[own[-1].id]["epochs"] == own[-1].epoch and board[own[-1].id]["trained"] == "ant"
+    assert board["passive"]["epochs"] is None
+    assert (tmp_path / "ladder" / "ladder.png").stat().st_size > 10_000
+    with pytest.raises(ValueError, match=rf"entries \['{own[0].id}'\] clash with the snapshots"):
+        dataclasses.replace(cfg, policies=(f"{own[0].id}=passive", "random=random")).resolved()
+    with pytest.raises(FileNotFoundError, match="no self-play league in"):
+        dataclasses.replace(cfg, league=str(tmp_path)).resolved()
 
 
 def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
@@ -155,6 +176,7 @@ def test_resume_through_train_and_config_round_trip(tmp_path: Path) -> None:
 @pytest.mark.parametrize(("fields", "message"), [
     ({"learn": ("bug=sac",)}, "side 'team' has learning agents ['bug'] and fixed ones ['ant']"),
     ({"scenario": "ffa", "learn": ("ant=sac", "bug=sac")}, "free-for-all"),
+    ({"scenario": "ffa", "learn": ("ant=sac",)}, "cannot tell which body it drives; use obs_mode 'egocentric'"),
     ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("ant=random",))}, "would start empty"),
     ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("beetle=random",))}, "TrainConfig.league"),
 ])
@@ -177,13 +199,14 @@ def test_cli_parses_self_play_options(tmp_path: Path, capsys: pytest.CaptureFixt
 # ------------------------------------------------------------- both sides learn in one run
 BOTH_LEAGUE = LeagueConfig(threshold=0.0, window=2, snapshot_every=2, max_size=3, live_share=0.5)
 DDPG = DDPGConfig(hidden=(16, 16), buffer_size=4000, learning_starts=40, batch_size=8, learn_every=8)
-BOTH_COMMAND = "triplesumo train --self-play --learn ant=ddpg bug=ddpg spider=ddpg --share team"
+BOTH_COMMAND = ("triplesumo train --self-play --learn ant=ddpg bug=ddpg spider=ddpg --share team "
+                "--obs-mode egocentric")
 
 
 def both(out: Path, epochs: int = 16) -> TrainConfig:
     return TrainConfig(name="both", out=str(out), epochs=epochs, steps_per_epoch=20, n_envs=2, checkpoint_every=8,
                        seed=3, ddpg=DDPG, progress=False, tensorboard=False, self_play=True, league=BOTH_LEAGUE,
-                       learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"), share="team",
+                       learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"), share="team", obs_mode="egocentric",
                        physics=PhysicsConfig(start_radius=1.7))
 
 
@@ -271,13 +294,34 @@ def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Tr
         assert (a / f"policy-{learner}.safetensors").read_bytes() == (b / f"policy-{learner}.safetensors").read_bytes()
 
 
-def test_tournament_seats_a_shared_team_network_and_its_snapshots_in_the_team_seats(both_run: Trainer) -> None:
+def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(both_run: Trainer) -> None:
+    """``--league RUN --league-snapshots 2``: each side's first and last own snapshot by epoch, a team
+    member as one entry per role."""
+    assert both_run.league is not None
+    expected: dict[str, str] = {}
+    for side, pool in both_run.league.pools.items():
+        own = sorted((m for m in (*pool.members, *pool.evicted) if m.source == "self"), key=lambda m: m.epoch)
+        assert own, side
+        for m in {m.id: m for m in (own[0], own[-1])}.values():  # one snapshot: itself
+            for role, stem in m.policies.items():
+                expected[m.id if side == "spider" else f"{m.id}.{role}"] = str(both_run.league.root / stem)
+    assert league_entries(both_run.run_dir, 2) == expected
+    assert league_entries(both_run.league.root, 2) == expected  # the league folder itself works too
+    assert any(n.endswith(".ant") for n in expected) and any(n.endswith(".bug") for n in expected)
+
+
+def test_tournament_seats_the_runs_egocentric_networks_and_snapshots_in_every_seat_they_fit(
+        both_run: Trainer) -> None:
+    """Egocentric vectors are the seat's own, so a network (the team's shared one, its snapshots, the
+    Spider's) fits every seat of the same observation and action sizes; with ``paper`` ones it would not."""
     from triplesumo.evaluation.tournament import _manifest, eligible_seats
 
     assert both_run.league is not None
     match = both_run.batch.matches[0]
     member = both_run.league.pools["team"].members[0]
-    for stem, seats in ((both_run.run_dir / "policy-ant+bug", ["ant", "bug"]),
-                        (both_run.league.root / member.policies["bug"], ["ant", "bug"]),
-                        (both_run.run_dir / "policy-spider", ["spider"])):
-        assert eligible_seats(str(stem), _manifest(str(stem), "paper"), match) == seats, stem
+    for stem in (both_run.run_dir / "policy-ant+bug", both_run.league.root / member.policies["bug"],
+                 both_run.run_dir / "policy-spider"):
+        manifest = _manifest(str(stem), "egocentric")
+        assert manifest is not None and manifest["obs_mode"] == "egocentric"
+        assert eligible_seats(str(stem), manifest, match) == ["ant", "bug", "spider"], stem
+        assert eligible_seats(str(stem), manifest | {"obs_mode": "paper"}, match) == [], stem  # another mode

@@ -35,6 +35,43 @@ def plot_leaderboard(results: dict[str, Any], path: Path, title: str = "") -> Pa
     return path
 
 
+def plot_ladder(results: dict[str, Any], path: Path, title: str = "") -> Path:
+    """Rating (with its interval) of every trained entry against the epochs it had trained, one line per
+    trained agent (per seat with ``rate_by="seat"``); entries without epochs (built-ins) as bands."""
+    board = results["leaderboard"]
+    fig = Figure(figsize=(7.0, 4.2))
+    ax = fig.add_subplot()
+    by_seat = results["rate_by"] == "seat"
+    lines: dict[str, list[dict[str, Any]]] = {}
+    for e in board:
+        if e["epochs"] is not None:
+            key = e["policy"].rsplit("@", 1)[1] if by_seat else str(e["trained"])
+            lines.setdefault(key, []).append(e)
+    for key, entries in sorted(lines.items()):
+        entries.sort(key=lambda e: e["epochs"])
+        epochs = np.array([e["epochs"] for e in entries], dtype=float)
+        mu = np.array([e["mu"] for e in entries])
+        err = np.array([[e["mu"] - e["lo"] for e in entries], [e["hi"] - e["mu"] for e in entries]])
+        ax.errorbar(epochs, mu, yerr=err, fmt="o-", capsize=4, label=f"trained as {key}" if not by_seat else
+                    f"in seat {key}")
+    colours = iter(["#888888", "#c05050", "#50a050", "#b08030", "#7050b0", "#309090"])
+    for e in board:
+        if e["epochs"] is None:
+            colour = next(colours, "#888888")
+            ax.axhspan(e["lo"], e["hi"], color=colour, alpha=0.15)
+            ax.axhline(e["mu"], color=colour, linestyle="--", linewidth=1, label=e["policy"])
+    pct = round(100 * results["confidence"])
+    ax.set_xlabel("training epochs of the entry")
+    ax.set_ylabel(f"rating mu ({pct}% interval)")
+    ax.set_title(f"{title}: rating against training ({results['rating_model']})".strip(": "), fontsize=9)
+    ax.legend(loc="best", fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=_DPI)
+    fig.clear()
+    return path
+
+
 def plot_crossplay(results: dict[str, Any], path: Path, title: str = "") -> Path:
     """Heat map of the win rate of each row policy against each column policy (with intervals)."""
     names = [e["policy"] for e in results["leaderboard"]]

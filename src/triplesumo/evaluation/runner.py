@@ -113,6 +113,9 @@ class SeatedResult:
     terms: dict[int, dict[str, float]]
     """For each seat asked for in ``terms_of``: the match's sums of ``dense_reward``,
     ``sparse_reward`` and every reward term."""
+    places: list[int] = field(default_factory=list)
+    """Each seat's place (1 = first; equal places share; under elimination rules the order agents
+    left in), roster order; 0 where the match ended in a physics error."""
 
 
 def play_matches(
@@ -243,7 +246,7 @@ def play_matches(
                     i = slot_match[k]
                     if i >= 0:
                         results[i] = SeatedResult(i, [outcome_name(int(c)) for c in codes], int(infos["step"][k]),
-                                                  acc[k])
+                                                  acc[k], [int(p) for p in infos["place"][k]])
                         if bar is not None:
                             bar.update(1)
                         while on_result is not None and next_result in results:

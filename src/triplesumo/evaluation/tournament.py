@@ -1,10 +1,10 @@
 """``triplesumo tournament``: seeded matches between named policies in every seat they can take.
 
 The *entries* are named policies (``NAME=SPEC``: ``ant=zoo:ant``, ``passive=passive``,
-``mine=runs/x/policy``). A scenario gives the roster (today ``"paper"``: Ant and Bug
-against Spider); a *lineup* puts one entry in every seat, each entry at most once per
-match (a policy is one player and cannot play on both sides). Which seats an entry can
-take:
+``mine=runs/x/policy``). A scenario (:func:`triplesumo.scenarios`: ``paper``, ``ffa``,
+``pursuit``, ``2v2``, ``bodies``) gives the roster, its default one; a *lineup* puts one
+entry in every seat, each entry at most once per match (a policy is one player and cannot
+play on both sides). Which seats an entry can take:
 
 * built-in policies (``passive``/``zero``, ``random``) take any seat;
 * a policy file takes a seat whose observation size is its ``obs_dim``, in the
@@ -20,6 +20,22 @@ starts (a paired comparison). ``sampled`` plays ``matches`` matches; match ``m``
 its lineup uniformly from ``SeedSequence([seed, m])`` and resets with ``seed + m``.
 Either way match ``m`` depends on ``m`` alone, so more rounds (or matches) extend a
 tournament without changing the matches already played.
+
+A self-play run's league joins with ``league=RUN`` (``--league RUN``): up to
+``league_snapshots`` of each side's own snapshots (``RUN/league/pool.json``: the members and
+the evicted ones, spread evenly over the epochs they joined at, the first and the last kept)
+become entries named by member id (one per role where a side has several: ``team-0003.ant``),
+beside ``policies``. Every entry that is a policy file whose manifest records its training
+epochs is also drawn on ``ladder.png``: its rating against those epochs, one line per trained
+agent, the built-ins as bands. Rated against one fixed field, not against a pool that moves
+with the learner, that is the honest "ratings rise" of a self-play run.
+
+Places: a team's place is its best member's (1 = first, equal places share). Under the
+paper's first-out rules they follow from the outcomes (winners 1, losers 2, a draw shares 1);
+under elimination rules (free-for-all, pursuit) ``matches.csv`` also holds every seat's place
+(``<seat>_place``: the order agents left the ring in), so a quadruped out second is rated above
+one out first, and the cross-play matrix counts, for each pair of opponents, the matches the
+row placed better than the column (a draw: the same place).
 
 Writes into ``out``: ``matches.csv`` (one row per match, appended as matches finish),
 ``tournament.json`` (what the rows depend on, with the sha256 of every policy's files),
@@ -37,6 +53,7 @@ the rest are played, exactly the rows of an uninterrupted run.
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import math
@@ -54,16 +71,15 @@ from triplesumo.agents.zoo import make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
-from triplesumo.evaluation.ratings import MODELS, Elo, RatingTable
+from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Elo, RatingTable
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import wilson_interval
 from triplesumo.evaluation.video import check_writable
-from triplesumo.model.specs import PAPER_AGENTS, AgentSpec, PhysicsConfig
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, MatchConfig
+from triplesumo.rules.scenarios import scenario_config, scenarios
 from triplesumo.rules.teams import Teams
 
-SCENARIOS: dict[str, tuple[AgentSpec, ...]] = {"paper": PAPER_AGENTS}
-"""Rosters by scenario name (the paper's 2-vs-1 today; other scenarios plug in here)."""
 SCHEDULES = ("round-robin", "sampled")
 RATE_BY = ("policy", "seat")
 RECORD_FILE = "tournament.json"
@@ -75,7 +91,8 @@ class TournamentConfig:
     """A tournament of seeded matches between named policies, rated with openskill."""
 
     scenario: str = "paper"
-    """Which game: its roster gives the seats (today: paper)."""
+    """Which game (paper, ffa, pursuit, 2v2, bodies: ``triplesumo.scenarios()``): its default roster
+    gives the seats."""
     policies: tuple[str, ...] = ("ant=zoo:ant", "bug=zoo:bug", "spider=zoo:spider", "passive=passive",
                                  "random=random")
     """NAME=SPEC entries; SPEC is zero, passive, random, zoo:NAME or a policy-file path."""
@@ -119,15 +136,19 @@ class TournamentConfig:
     """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray."""
     ray_chunk: int = 50
     """With ray: matches per Ray task."""
+    league: str = ""
+    """A self-play run folder: its own league snapshots join the entries (named by member id)."""
+    league_snapshots: int = 8
+    """With league: at most this many snapshots per side, spread evenly over their epochs."""
 
     def __post_init__(self) -> None:
-        for name in ("rounds", "matches", "steps_per_epoch", "n_envs", "n_threads", "ray_chunk"):
+        for name in ("rounds", "matches", "steps_per_epoch", "n_envs", "n_threads", "ray_chunk", "league_snapshots"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"TournamentConfig.{name} must be an int >= 1, got {value!r}")
         check_ray("TournamentConfig", self.ray, self.ray_address)
-        if self.scenario not in SCENARIOS:
-            raise ValueError(f"TournamentConfig.scenario must be one of {sorted(SCENARIOS)}, got {self.scenario!r}")
+        if self.scenario not in scenarios():
+            raise ValueError(f"TournamentConfig.scenario must be one of {list(scenarios())}, got {self.scenario!r}")
         if self.schedule not in SCHEDULES:
             raise ValueError(f"TournamentConfig.schedule must be one of {SCHEDULES}, got {self.schedule!r}")
         if self.obs_mode not in OBS_MODES:
@@ -140,13 +161,59 @@ class TournamentConfig:
         if not 0.0 < self.confidence < 1.0:
             raise ValueError(f"TournamentConfig.confidence must be in (0, 1), got {self.confidence!r}")
         entries = parse_entries(self.policies)
-        if len(entries) < 2:
+        if len(entries) < 2 and not self.league:
             raise ValueError(f"TournamentConfig.policies needs at least 2 entries, got {list(self.policies)}")
+
+    def resolved(self) -> TournamentConfig:
+        """This config with ``league`` turned into ``policies`` entries (:func:`league_entries`)."""
+        if not self.league:
+            return self
+        given = parse_entries(self.policies)
+        added = league_entries(Path(self.league), self.league_snapshots)
+        clash = sorted(set(given) & set(added))
+        if clash:
+            raise ValueError(f"TournamentConfig.policies: entries {clash} clash with the snapshots of {self.league}")
+        pairs = (*self.policies, *(f"{n}={s}" for n, s in added.items()))
+        if len(pairs) < 2:
+            raise ValueError(f"TournamentConfig: {self.league} adds {len(added)} snapshot(s) to {list(self.policies)}; "
+                             "a tournament needs at least 2 entries")
+        return dataclasses.replace(self, policies=pairs, league="")
 
     def match_config(self) -> MatchConfig:
         """The scenario's match."""
-        return MatchConfig(agents=SCENARIOS[self.scenario], max_steps=self.steps_per_epoch, obs_mode=self.obs_mode,
-                           physics=self.physics)
+        return scenario_config(self.scenario, max_steps=self.steps_per_epoch, obs_mode=self.obs_mode,
+                               physics=self.physics)
+
+
+LEAGUE_FORMAT = "triplesumo-league/1"
+
+
+def league_entries(run: Path, k: int) -> dict[str, str]:
+    """Entry name -> policy-file stem of up to ``k`` own snapshots per side of the self-play run ``run``
+    (or its ``league/`` folder), oldest first; errors name the file."""
+    root = run if (run / "pool.json").exists() else run / "league"
+    path = root / "pool.json"
+    if not path.exists():
+        raise FileNotFoundError(f"TournamentConfig.league: no self-play league in {run} ({path} not found; "
+                                "a run trained with --self-play has one)")
+    try:
+        pool = json.loads(path.read_text(encoding="utf-8"))
+        if pool.get("format") != LEAGUE_FORMAT:
+            raise ValueError(f"format {pool.get('format')!r}, expected {LEAGUE_FORMAT!r}")
+        entries: dict[str, str] = {}
+        for members in ((*p["members"], *p["evicted"]) for p in pool["pools"].values()):
+            own = sorted((m for m in members if m["source"] == "self"), key=lambda m: (int(m["epoch"]), m["id"]))
+            picks = sorted({round(x) for x in np.linspace(0, len(own) - 1, min(k, len(own)))}) if own else []
+            for m in (own[i] for i in picks):
+                roles = sorted(m["policies"])
+                for role in roles:
+                    name = m["id"] if len(roles) == 1 else f"{m['id']}.{role}"
+                    entries[name] = str(root / m["policies"][role])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"TournamentConfig.league: {path} is unreadable or corrupt ({exc})") from None
+    if not entries:
+        raise ValueError(f"TournamentConfig.league: {path} holds no snapshot of the run's own yet")
+    return entries
 
 
 def parse_entries(pairs: tuple[str, ...]) -> dict[str, str]:
@@ -201,23 +268,26 @@ def lineups(seats_of: dict[str, list[str]], agents: tuple[str, ...]) -> list[tup
     return [combo for combo in itertools.product(*options) if len(set(combo)) == len(combo)]
 
 
-def columns_of(agents: tuple[str, ...]) -> tuple[str, ...]:
-    """The columns of ``matches.csv`` for a roster."""
-    return ("match", "seed", *agents, *(f"{a}_outcome" for a in agents), "steps")
+def columns_of(agents: tuple[str, ...], places: bool = False) -> tuple[str, ...]:
+    """The columns of ``matches.csv`` for a roster (``places``: with each seat's place, under elimination rules)."""
+    return ("match", "seed", *agents, *(f"{a}_outcome" for a in agents), *(f"{a}_place" for a in agents if places),
+            "steps")
 
 
 class Tournament:
     """The schedule of a :class:`TournamentConfig`: entries, their seats, the lineups and the matches."""
 
     def __init__(self, cfg: TournamentConfig, match_cfg: MatchConfig | None = None) -> None:
+        cfg = cfg.resolved()
         self.cfg = cfg
         self.match_cfg = match_cfg or cfg.match_config()
         self.entries = parse_entries(cfg.policies)
         match = Match(self.match_cfg)
         self.agents = match.agents
         self.teams = Teams.from_agents(self.match_cfg.agents)
-        self.seats_of = {name: eligible_seats(spec, _manifest(spec, self.match_cfg.obs_mode), match)
-                         for name, spec in self.entries.items()}
+        self.manifests = {name: _manifest(spec, self.match_cfg.obs_mode) for name, spec in self.entries.items()}
+        """Each entry's policy manifest (``None`` for a built-in)."""
+        self.seats_of = {name: eligible_seats(spec, self.manifests[name], match) for name, spec in self.entries.items()}
         idle = [f"{n}={self.entries[n]}" for n, s in self.seats_of.items() if not s]
         if idle:
             raise ValueError(f"policies {idle} fit no seat of the {cfg.scenario!r} scenario (seats "
@@ -228,7 +298,9 @@ class Tournament:
             raise ValueError(f"no lineup fills every seat {list(self.agents)} with different policies; "
                              f"seats each policy can take: {self.seats_of}")
         self.n_matches = cfg.rounds * len(self.lineups) if cfg.schedule == "round-robin" else cfg.matches
-        self.columns = columns_of(self.agents)
+        self.places = self.match_cfg.rules == "elimination"
+        """Whether the rows hold each seat's place (elimination rules: the order agents left in)."""
+        self.columns = columns_of(self.agents, self.places)
 
     def lineup_of(self, m: int) -> tuple[str, ...]:
         """Entry names in each seat of match ``m``."""
@@ -245,6 +317,7 @@ class Tournament:
         m = result.index
         return {"match": m + 1, "seed": self.seed_of(m), **dict(zip(self.agents, self.lineup_of(m), strict=True)),
                 **{f"{a}_outcome": o for a, o in zip(self.agents, result.outcomes, strict=True)},
+                **({f"{a}_place": p for a, p in zip(self.agents, result.places, strict=True)} if self.places else {}),
                 "steps": result.steps}
 
     def play(self, policies: dict[str, Any], first: int, end: int, n_envs: int, n_threads: int,
@@ -262,7 +335,14 @@ class Tournament:
         m = number - 1
         return (values["match"] == str(number) and values["seed"] == str(self.seed_of(m))
                 and tuple(values[a] for a in self.agents) == self.lineup_of(m)
-                and all(values[f"{a}_outcome"] in OUTCOMES for a in self.agents) and values["steps"].isdigit())
+                and all(values[f"{a}_outcome"] in OUTCOMES for a in self.agents) and values["steps"].isdigit()
+                and all(values[f"{a}_place"].isdigit() for a in self.agents if self.places))
+
+    def seat_places(self, row: dict[str, str]) -> list[int]:
+        """Each seat's place in a row of ``matches.csv`` (see the module docstring)."""
+        if self.places:
+            return [int(row[f"{a}_place"]) for a in self.agents]
+        return [PLACE_OF_OUTCOME[row[f"{a}_outcome"]] for a in self.agents]
 
     def record(self) -> dict[str, Any]:
         """What the rows depend on (see the module docstring)."""
@@ -279,6 +359,7 @@ def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) 
     scenarios not yet named.
     """
     out = check_writable(Path(cfg.out), folder=True)
+    cfg = cfg.resolved()
     t = Tournament(cfg, match_cfg)
     policies = {n: make_policy(s, seed=cfg.seed, expect_obs_mode=t.match_cfg.obs_mode) for n, s in t.entries.items()}
     record = json.loads(json.dumps(t.record()))
@@ -374,24 +455,30 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
         if "error" in outcome:
             continue  # a physics error decides nothing: counted, not rated
         teams = [[seated[i] for i in members] for members in team_members]
-        table.record_outcomes(teams, [outcome[members[0]] for members in team_members])
+        seat_place = t.seat_places(row)
+        place = [min(seat_place[i] for i in members) for members in team_members]  # a team: its best member's
+        table.record(teams, place)
         if elo is not None:
-            elo.record(seated[0], seated[1], {"win": 1.0, "draw": 0.5, "loss": 0.0}[outcome[0]])
+            elo.record(seated[0], seated[1], 1.0 if place[0] < place[1] else 0.5 if place[0] == place[1] else 0.0)
+        team_place = [place[k] for k in t.teams.team_of]
         for i, j in itertools.permutations(range(len(seated)), 2):
             if t.teams.team_of[i] != t.teams.team_of[j]:
                 row_i, col_j = idx[seated[i]], idx[seated[j]]
                 games[row_i, col_j] += 1
-                wins[row_i, col_j] += outcome[i] == "win"
-                draws[row_i, col_j] += outcome[i] == "draw"
+                wins[row_i, col_j] += team_place[i] < team_place[j]
+                draws[row_i, col_j] += team_place[i] == team_place[j]
     board = []
     for name in table.ranking():
         r = table[name]
         lo, hi = r.interval(cfg.confidence)
         total = {o: sum(counts[name][a][o] for a in t.agents) for o in OUTCOMES}
         elo_rating = None if elo is None else elo.ratings.get(name, elo.initial)
+        manifest = t.manifests[policy_of[name]] or {}
         board.append({"policy": name, "spec": t.entries[policy_of[name]], "mu": r.mu, "sigma": r.sigma, "lo": lo,
                       "hi": hi, "ordinal": r.ordinal, "elo": elo_rating, "matches": sum(total.values()),
-                      **{f"n_{o}": total[o] for o in OUTCOMES}, "seats": counts[name]})
+                      **{f"n_{o}": total[o] for o in OUTCOMES}, "seats": counts[name],
+                      "trained": manifest.get("agent"), "epochs": manifest.get("epochs"),
+                      "env_steps": manifest.get("env_steps")})
     cross = []
     for a, b in itertools.permutations(names, 2):
         n, w = int(games[idx[a], idx[b]]), int(wins[idx[a], idx[b]])
@@ -409,7 +496,7 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
     import io
 
     from triplesumo.agents.policy_file import atomic_write_bytes
-    from triplesumo.evaluation.league_plots import plot_crossplay, plot_leaderboard
+    from triplesumo.evaluation.league_plots import plot_crossplay, plot_ladder, plot_leaderboard
 
     seats = results["seats"]
     tag = "" if cfg.rate_by == "policy" else "_by_seat"
@@ -434,6 +521,8 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
     title = f"{cfg.scenario}: {results['n_matches']} matches"
     plot_leaderboard(results, out / f"leaderboard{tag}.png", title=title)
     plot_crossplay(results, out / f"crossplay{tag}.png", title=title)
+    if sum(e["epochs"] is not None for e in results["leaderboard"]) >= 2:
+        plot_ladder(results, out / f"ladder{tag}.png", title=title)
 
 
 def format_leaderboard(results: dict[str, Any]) -> str:

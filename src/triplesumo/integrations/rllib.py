@@ -56,11 +56,11 @@ except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
 import torch
 
 from triplesumo import ENV_VERSION
-from triplesumo.agents.builtin import act_batch
+from triplesumo.agents.builtin import BUILTIN, act_batch
 from triplesumo.agents.networks import ActorPolicy
 from triplesumo.agents.zoo import make_policy
 from triplesumo.envs.parallel import TripleSumoParallelEnv
-from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.config import MatchConfig, check_shared_network
 from triplesumo.rules.outcome import PLAYING, outcome_name
 from triplesumo.rules.scenarios import scenario_config as named_scenario_config
 from triplesumo.rules.scenarios import scenarios
@@ -280,6 +280,10 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
             raise ValueError(f"policies_to_train: module(s) {both} are also frozen")
     if not train:
         raise ValueError("policies_to_train: nothing would learn; name at least one module id")
+    for module in module_ids:
+        if frozen.get(module) not in BUILTIN:  # a built-in acts the same in every seat
+            check_shared_network(match_config.obs_mode, [a for a, m in modules.items() if m == module],
+                                 f"share={share!r} (module {module!r})")
 
     env = TripleSumoParallelEnv(match_config)
     try:

@@ -13,6 +13,22 @@ from dataclasses import dataclass, field
 from triplesumo.model.specs import PAPER_AGENTS, AgentSpec, PhysicsConfig, validate_roster
 
 OBS_MODES = ("paper", "egocentric")
+SEAT_BLIND_MODES = ("paper",)
+"""Observation modes that give every agent the same vector: nothing in it says which seat reads it."""
+
+
+def check_shared_network(obs_mode: str, seats: list[str] | tuple[str, ...], where: str) -> None:
+    """Refuse one network driving several ``seats`` on seat-blind observations.
+
+    With ``paper`` observations every seat reads the same vector, so a network shared by
+    several seats (a team's shared network, a free-for-all snapshot taking any seat) gives
+    them all the actions of one seat, whichever body it drives. ``where`` names the option.
+    """
+    if obs_mode in SEAT_BLIND_MODES and len(seats) > 1:
+        raise ValueError(f"{where}: one network for seats {list(seats)} with obs_mode {obs_mode!r}: every seat "
+                         "reads the same vector there, so the network cannot tell which body it drives; use "
+                         "obs_mode 'egocentric' (--obs-mode egocentric), whose vector is the seat's own, or one "
+                         "network per seat")
 PHYSICS_ERROR_MODES = ("truncate", "raise")
 RULES = ("first_out", "elimination")
 """Rule sets (:mod:`triplesumo.rules.outcome`): the paper's first ring exit ends the match, or

@@ -36,6 +36,7 @@ from triplesumo.algos.ppo import PPO
 from triplesumo.algos.replay import FIELDS, ReplayBuffer, TorchReplayBuffer
 from triplesumo.algos.sac import SAC
 from triplesumo.algos.td3 import TD3
+from triplesumo.rules.config import check_shared_network
 from triplesumo.train.config import TrainConfig
 
 ALGORITHMS: dict[str, type[Algorithm]] = {"ddpg": DDPG, "td3": TD3, "sac": SAC, "ppo": PPO}
@@ -76,6 +77,7 @@ def learner_specs(cfg: TrainConfig, roster: tuple[str, ...] | list[str], teams: 
             raise ValueError(f"TrainConfig.share=team: the learning agents of team {team!r} use different algorithms "
                              f"({', '.join(f'{a}={learning[a]}' for a in members)}); a shared network needs one")
         ordered = tuple(a for a in roster if a in members)
+        check_shared_network(cfg.obs_mode, ordered, f"TrainConfig.share=team (team {team!r})")
         specs.append(LearnerSpec("+".join(ordered), algos[0], ordered))
     return specs
 

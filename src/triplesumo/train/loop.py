@@ -65,7 +65,7 @@ from triplesumo.envs.batch import MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
-from triplesumo.rules.config import RewardConfig
+from triplesumo.rules.config import RewardConfig, check_shared_network
 from triplesumo.rules.outcome import ERROR_CODE, PLAYING
 from triplesumo.rules.outcome import outcome_name as code_name
 from triplesumo.rules.rewards import TERMS
@@ -438,6 +438,8 @@ class Trainer:
             if len(set(probe.observer.sizes.values())) > 1 or len(set(probe.action_sizes)) > 1:
                 raise ValueError(f"TrainConfig.self_play (scenario {cfg.scenario!r}): the seats have different "
                                  "observation or action sizes, so one network cannot take them all")
+            check_shared_network(cfg.obs_mode, roster, f"TrainConfig.self_play in a free-for-all (scenario "
+                                 f"{cfg.scenario!r}: the learner's snapshots take every seat)")
             sides: dict[str, list[str]] = {"ffa": ["ffa"]}
             self.side_of = dict.fromkeys(roster, "ffa")
             self.role_of = dict.fromkeys(roster, "ffa")
