@@ -313,15 +313,18 @@ def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(bot
 def test_tournament_seats_the_runs_egocentric_networks_and_snapshots_in_every_seat_they_fit(
         both_run: Trainer) -> None:
     """Egocentric vectors are the seat's own, so a network (the team's shared one, its snapshots, the
-    Spider's) fits every seat of the same observation and action sizes; with ``paper`` ones it would not."""
+    Spider's) fits every seat of the same sizes and as many partners as it was trained with (their blocks
+    come first: a team network would read the Spider's first opponent as its partner); with ``paper``
+    ones it would not."""
     from triplesumo.evaluation.tournament import _manifest, eligible_seats
 
     assert both_run.league is not None
     match = both_run.batch.matches[0]
     member = both_run.league.pools["team"].members[0]
-    for stem in (both_run.run_dir / "policy-ant+bug", both_run.league.root / member.policies["bug"],
-                 both_run.run_dir / "policy-spider"):
+    for stem, seats in ((both_run.run_dir / "policy-ant+bug", ["ant", "bug"]),
+                        (both_run.league.root / member.policies["bug"], ["ant", "bug"]),
+                        (both_run.run_dir / "policy-spider", ["spider"])):
         manifest = _manifest(str(stem), "egocentric")
         assert manifest is not None and manifest["obs_mode"] == "egocentric"
-        assert eligible_seats(str(stem), manifest, match) == ["ant", "bug", "spider"], stem
+        assert eligible_seats(str(stem), manifest, match) == seats, stem
         assert eligible_seats(str(stem), manifest | {"obs_mode": "paper"}, match) == [], stem  # another mode

@@ -9,10 +9,12 @@ play on both sides). Which seats an entry can take:
 * built-in policies (``passive``/``zero``, ``random``) take any seat;
 * a policy file takes a seat whose observation size is its ``obs_dim``, in the
   observation mode it was trained with; with ``paper`` observations (one global vector,
-  the same for every agent, not relative to the seat) only the seat it was trained in
-  (a team's shared network, ``--share team``: the seats its manifest's ``plays`` names),
+  the same for every agent, not relative to the seat) only the seat it was trained in,
   in the roster it was trained in, since nothing in the vector tells it which quadruped
-  it drives. To seat a shared network in both team seats, enter it twice under two names.
+  it drives; with ``egocentric`` ones (the seat's own vector, partners' blocks before
+  opponents') any seat with as many partners as the one it was trained in (a team's
+  shared network, ``--share team``: either team seat, entered twice under two names to
+  fill both).
 
 Schedules: ``round-robin`` plays every lineup once per round for ``rounds`` rounds; in
 round ``r`` every match resets with seed ``seed + r``, so all lineups meet the same
@@ -259,7 +261,26 @@ def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> 
             return []
         plays = manifest.get("plays") or [manifest.get("agent")]  # a team's shared network: its team's seats
         seats = [a for a in seats if a in plays]
+    else:  # egocentric: partners' blocks come before opponents', so a seat needs as many partners as trained
+        trained = _trained_partners(manifest)
+        if trained is not None:
+            teams = Teams.from_agents(match.config.agents)
+            seats = [a for i, a in enumerate(match.agents) if a in seats and len(teams.partners[i]) == trained]
     return seats
+
+
+def _trained_partners(manifest: dict[str, Any]) -> int | None:
+    """How many partners the seat a policy was trained in had (``None`` where its manifest cannot say:
+    a roster other than its scenario's default)."""
+    try:
+        roster = scenario_config(str(manifest.get("scenario", "paper"))).agents
+    except ValueError:
+        return None
+    seat = (manifest.get("plays") or [manifest.get("agent")])[0]
+    names = [a.name for a in roster]
+    if list(manifest.get("agents") or names) != names or seat not in names:
+        return None
+    return len(Teams.from_agents(roster).partners[names.index(seat)])
 
 
 def lineups(seats_of: dict[str, list[str]], agents: tuple[str, ...]) -> list[tuple[str, ...]]:
