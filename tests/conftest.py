@@ -125,6 +125,32 @@ def tiny(out: Path, name: str = "run", **fields: Any) -> TrainConfig:
     return TrainConfig(**values)
 
 
+def own_ray_workers(task: str) -> list[int]:
+    """Pids of the Ray workers now running ``task`` (Ray titles them ``ray::TASK``) that belong to this
+    test process's own local Ray: descendants of it (driver -> raylet -> worker). Other pytest-xdist
+    workers run Ray sessions of their own on the same machine; a test that kills a worker must not
+    kill theirs."""
+    me, title = os.getpid(), b"ray::" + task.encode()
+
+    def parent(pid: int) -> int:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return int(stat[stat.rindex(")") + 2:].split()[1])  # the command may hold spaces and parentheses
+
+    pids = []
+    for proc in Path("/proc").iterdir():
+        try:
+            if not (proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(title)):
+                continue
+            pid = int(proc.name)
+            while pid > 1 and pid != me:
+                pid = parent(pid)
+            if pid == me:
+                pids.append(int(proc.name))
+        except (OSError, ValueError, IndexError):  # gone meanwhile
+            continue
+    return pids
+
+
 @pytest.fixture(scope="module")
 def ray_session() -> Iterator[Any]:
     """A real local Ray of 2 CPUs for the module's tests (skipped without the ``ray`` extra)."""

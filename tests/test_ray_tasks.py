@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 
+from conftest import own_ray_workers
 from triplesumo.agents.zoo import make_policy
 from triplesumo.evaluation.evaluate import play_test_epochs
 from triplesumo.rules.config import MatchConfig
@@ -43,18 +44,6 @@ def test_bad_arguments_are_named(ray_tasks: Any) -> None:
         ray_tasks.play_test_epochs_on_ray("zero", OTHERS, "bug", 4, 0, first=4)
 
 
-def _chunk_workers(task: bytes = b"_play_test_chunk") -> list[int]:
-    """Pids of Ray workers now running ``task`` (Ray titles them ``ray::TASK``)."""
-    pids = []
-    for proc in Path("/proc").iterdir():
-        try:
-            if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(b"ray::" + task):
-                pids.append(int(proc.name))
-        except OSError:
-            continue
-    return pids
-
-
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds Ray's worker processes through /proc")
 def test_a_killed_worker_is_retried_and_its_epochs_replay_exactly(ray_tasks: Any) -> None:
     cfg = MatchConfig(max_steps=150)
@@ -65,7 +54,7 @@ def test_a_killed_worker_is_retried_and_its_epochs_replay_exactly(ray_tasks: Any
     killed = None
     deadline = time.monotonic() + 60
     while killed is None and thread.is_alive() and time.monotonic() < deadline:
-        pids = _chunk_workers()
+        pids = own_ray_workers("_play_test_chunk")
         if pids:
             killed = pids[0]
             os.kill(killed, signal.SIGKILL)

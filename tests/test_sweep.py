@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from conftest import own_ray_workers
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.sweep import SweepConfig, parse_grid, run_sweep, trials
@@ -90,17 +91,6 @@ def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_
         run_sweep(cfg, TINY.__class__(**{**TINY.__dict__, "steps_per_epoch": 31}))
 
 
-def _trial_workers() -> list[int]:
-    pids = []
-    for proc in Path("/proc").iterdir():
-        try:
-            if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(b"ray::_run_trial"):
-                pids.append(int(proc.name))
-        except OSError:
-            continue
-    return pids
-
-
 def _latest_epoch(latest: Path) -> int:
     try:
         return int(json.loads(latest.read_text())["epoch"])
@@ -122,7 +112,7 @@ def test_a_trial_whose_worker_is_killed_resumes_from_its_checkpoint(ray_session:
     while killed is None and thread.is_alive() and time.monotonic() < deadline:
         # latest.json is written (atomically) once a checkpoint is whole; a checkpoint folder alone may be half written
         latest = run / "checkpoints" / "latest.json"
-        if latest.is_file() and _latest_epoch(latest) < 60 and (pids := _trial_workers()):
+        if latest.is_file() and _latest_epoch(latest) < 60 and (pids := own_ray_workers("_run_trial")):
             killed = pids[0]
             os.kill(killed, signal.SIGKILL)
         time.sleep(0.05)
