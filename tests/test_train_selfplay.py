@@ -107,7 +107,8 @@ def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) 
     assert results["n_matches"] == len(expected) * (len(expected) - 1) * (len(expected) - 2)  # every seat
     board = {e["policy"]: e for e in results["leaderboard"]}
     assert board[own[-1].id]["epochs"] == own[-1].epoch and board[own[-1].id]["trained"] == "ant"
-    assert board["passive"]["epochs"] is None
+    assert board["passive"]["epochs"] is None and board["passive"]["run"] is None
+    assert board[own[0].id]["run"] == board[own[-1].id]["run"] == str(league.root)  # one line on the ladder
     assert (tmp_path / "ladder" / "ladder.png").stat().st_size > 10_000
     with pytest.raises(ValueError, match=rf"entries \['{own[0].id}'\] clash with the snapshots"):
         dataclasses.replace(cfg, policies=(f"{own[0].id}=passive", "random=random")).resolved()

@@ -11,22 +11,28 @@ import triplesumo
 from triplesumo.agents import zoo
 from triplesumo.envs.match import Match
 from triplesumo.model import V0_PHYSICS, PhysicsConfig
+from triplesumo.rules.scenarios import scenario_config
 
 SHIPPED = ("ant", "spider", "bug")
 
 
-def test_the_zoo_ships_the_paper_roster_and_the_self_play_spider() -> None:
-    assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay"}
+def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
+    assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay", "ffa-selfplay"}
 
 
 @pytest.mark.parametrize("name", zoo.available())
 def test_shipped_policy_manifest_says_how_it_was_made(name: str) -> None:
     manifest = json.loads((zoo.ZOO_DIR / f"{name}.json").read_text())
-    assert manifest["agent"] == name.split("-")[0]  # spider-selfplay plays the Spider
+    scenario = manifest.get("scenario", "paper")
+    if scenario == "paper":
+        assert manifest["agent"] == name.split("-")[0]  # spider-selfplay plays the Spider
+        assert manifest["obs_mode"] == "paper"
+    else:  # e.g. ffa-selfplay: a free-for-all network, egocentric so that it takes any seat
+        assert name.split("-")[0] == scenario and manifest["obs_mode"] == "egocentric"
+        assert manifest["agent"] in scenario_config(scenario).agent_names
     assert manifest["command"].startswith("triplesumo train")
     assert isinstance(manifest["seed"], int)
     assert manifest["epochs"] > 0
-    assert manifest["obs_mode"] == "paper"
     assert manifest["mujoco_version"] and manifest["env_version"] in ("v0", triplesumo.ENV_VERSION)
     # the simulation it was trained on: that of its env version (a manifest without physics: v0's)
     physics = PhysicsConfig(**manifest["physics"]) if "physics" in manifest else V0_PHYSICS
@@ -39,7 +45,7 @@ def test_shipped_policy_manifest_says_how_it_was_made(name: str) -> None:
 @pytest.mark.parametrize("name", zoo.available())
 def test_shipped_policy_loads_by_name_and_acts_deterministically(name: str) -> None:
     policy, manifest = triplesumo.zoo.load(name)
-    match = Match()
+    match = Match(scenario_config(manifest.get("scenario", "paper"), obs_mode=manifest["obs_mode"]))
     obs, _ = match.reset(seed=3)
     i = match.agents.index(manifest["agent"])
     a1, a2 = policy(obs[i]), policy(obs[i].copy())

@@ -36,24 +36,33 @@ def plot_leaderboard(results: dict[str, Any], path: Path, title: str = "") -> Pa
 
 
 def plot_ladder(results: dict[str, Any], path: Path, title: str = "") -> Path:
-    """Rating (with its interval) of every trained entry against the epochs it had trained, one line per
-    trained agent (per seat with ``rate_by="seat"``); entries without epochs (built-ins) as bands."""
+    """Rating (with its interval) of every trained entry against the epochs it had trained: a line through
+    the entries of one run (``run``: a league folder or a training command) per trained agent (per seat with
+    ``rate_by="seat"``), a labelled point for a trained entry alone of its run (a zoo policy), a band for
+    each entry without epochs (built-ins)."""
     board = results["leaderboard"]
     fig = Figure(figsize=(7.0, 4.2))
     ax = fig.add_subplot()
     by_seat = results["rate_by"] == "seat"
-    lines: dict[str, list[dict[str, Any]]] = {}
+    lines: dict[tuple[str, str], list[dict[str, Any]]] = {}
     for e in board:
         if e["epochs"] is not None:
             key = e["policy"].rsplit("@", 1)[1] if by_seat else str(e["trained"])
-            lines.setdefault(key, []).append(e)
-    for key, entries in sorted(lines.items()):
+            lines.setdefault((key, str(e.get("run"))), []).append(e)
+    runs = sorted({command for (_, command), entries in lines.items() if len(entries) > 1})
+    for (key, command), entries in sorted(lines.items()):
         entries.sort(key=lambda e: e["epochs"])
         epochs = np.array([e["epochs"] for e in entries], dtype=float)
         mu = np.array([e["mu"] for e in entries])
         err = np.array([[e["mu"] - e["lo"] for e in entries], [e["hi"] - e["mu"] for e in entries]])
-        ax.errorbar(epochs, mu, yerr=err, fmt="o-", capsize=4, label=f"trained as {key}" if not by_seat else
-                    f"in seat {key}")
+        if len(entries) == 1:
+            ax.errorbar(epochs, mu, yerr=err, fmt="s", capsize=4, color="black", alpha=0.7)
+            ax.annotate(entries[0]["policy"], (epochs[0], mu[0]), textcoords="offset points", xytext=(5, 4),
+                        fontsize=7)
+            continue
+        run = f", run {runs.index(command) + 1}" if len(runs) > 1 else ""
+        ax.errorbar(epochs, mu, yerr=err, fmt="o-", capsize=4,
+                    label=(f"in seat {key}" if by_seat else f"trained as {key}") + run)
     colours = iter(["#888888", "#c05050", "#50a050", "#b08030", "#7050b0", "#309090"])
     for e in board:
         if e["epochs"] is None:

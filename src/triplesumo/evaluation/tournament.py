@@ -28,8 +28,9 @@ A self-play run's league joins with ``league=RUN`` (``--league RUN``): up to
 the evicted ones, spread evenly over the epochs they joined at, the first and the last kept)
 become entries named by member id (one per role where a side has several: ``team-0003.ant``),
 beside ``policies``. Every entry that is a policy file whose manifest records its training
-epochs is also drawn on ``ladder.png``: its rating against those epochs, one line per trained
-agent, the built-ins as bands. Rated against one fixed field, not against a pool that moves
+epochs is also drawn on ``ladder.png``: its rating against those epochs, a line through the
+entries of one run (a league's snapshots, or one training command) per trained agent, other trained entries (the zoo's)
+as labelled points, the built-ins as bands. Rated against one fixed field, not against a pool that moves
 with the learner, that is the honest "ratings rise" of a self-play run.
 
 Places: a team's place is its best member's (1 = first, equal places share). Under the
@@ -269,6 +270,15 @@ def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> 
     return seats
 
 
+def _run_of(spec: str, manifest: dict[str, Any]) -> str | None:
+    """Which training run a policy file comes from: a league snapshot's league folder
+    (``RUN/league/members/ID/ROLE``; a resumed run's snapshots record another command), else its
+    training command."""
+    if "league_member" in manifest and len(Path(spec).parents) > 2:
+        return str(Path(spec).parents[2])
+    return manifest.get("command")
+
+
 def _trained_partners(manifest: dict[str, Any]) -> int | None:
     """How many partners the seat a policy was trained in had (``None`` where its manifest cannot say:
     a roster other than its scenario's default)."""
@@ -499,7 +509,7 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
                       "hi": hi, "ordinal": r.ordinal, "elo": elo_rating, "matches": sum(total.values()),
                       **{f"n_{o}": total[o] for o in OUTCOMES}, "seats": counts[name],
                       "trained": manifest.get("agent"), "epochs": manifest.get("epochs"),
-                      "env_steps": manifest.get("env_steps")})
+                      "env_steps": manifest.get("env_steps"), "run": _run_of(t.entries[policy_of[name]], manifest)})
     cross = []
     for a, b in itertools.permutations(names, 2):
         n, w = int(games[idx[a], idx[b]]), int(wins[idx[a], idx[b]])
