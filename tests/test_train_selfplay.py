@@ -98,17 +98,19 @@ def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) 
     # last by epoch, named by member id, each in every seat, rated against the epochs they had trained.
     own = sorted((m for m in (*pool.members, *pool.evicted) if m.source == "self"), key=lambda m: m.epoch)
     cfg = TournamentConfig(scenario="ffa", obs_mode="egocentric", league=str(trainer.run_dir), league_snapshots=2,
-                           policies=("passive=passive", "random=random"), rounds=1, steps_per_epoch=60,
+                           policies=("passive=passive", "random=random", f"final={trainer.run_dir / 'policy'}"),
+                           rounds=1, steps_per_epoch=60,
                            out=str(tmp_path / "ladder"), n_envs=6, n_threads=1, progress=False)
     entries = dict(p.split("=", 1) for p in cfg.resolved().policies)
-    expected = sorted({own[0].id, own[-1].id, "passive", "random"})
+    expected = sorted({own[0].id, own[-1].id, "passive", "random", "final"})
     assert sorted(entries) == expected and entries[own[-1].id] == str(league.root / own[-1].policies["ffa"])
     results = run_tournament(cfg)
     assert results["n_matches"] == len(expected) * (len(expected) - 1) * (len(expected) - 2)  # every seat
     board = {e["policy"]: e for e in results["leaderboard"]}
     assert board[own[-1].id]["epochs"] == own[-1].epoch and board[own[-1].id]["trained"] == "ant"
     assert board["passive"]["epochs"] is None and board["passive"]["run"] is None
-    assert board[own[0].id]["run"] == board[own[-1].id]["run"] == str(league.root)  # one line on the ladder
+    # one line on the ladder: the snapshots and the run's own policy
+    assert board[own[0].id]["run"] == board[own[-1].id]["run"] == board["final"]["run"] == str(league.root)
     assert (tmp_path / "ladder" / "ladder.png").stat().st_size > 10_000
     with pytest.raises(ValueError, match=rf"entries \['{own[0].id}'\] clash with the snapshots"):
         dataclasses.replace(cfg, policies=(f"{own[0].id}=passive", "random=random")).resolved()

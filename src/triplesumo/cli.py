@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from triplesumo import _dcargs
 
@@ -143,8 +144,9 @@ def main(argv: list[str] | None = None) -> int:
             tcfg = _dcargs.build(TournamentConfig, args)
             print(format_leaderboard(run_tournament(tcfg)))
             tag = "" if tcfg.rate_by == "policy" else "_by_seat"
+            ladder = f", ladder{tag}.png" if (Path(tcfg.out) / f"ladder{tag}.png").exists() else ""
             print(f"tables: {tcfg.out}/leaderboard{tag}.csv, crossplay{tag}.csv, results{tag}.json; "
-                  f"plots: {tcfg.out}/leaderboard{tag}.png, crossplay{tag}.png")
+                  f"plots: {tcfg.out}/leaderboard{tag}.png, crossplay{tag}.png{ladder}")
         elif args.command == "compare":
             from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
 
@@ -170,7 +172,6 @@ def main(argv: list[str] | None = None) -> int:
             print("\n".join(str(p) for p in plot_metrics(args.run_dir, args.window)))
         elif args.command == "zoo":
             import json
-            from pathlib import Path
 
             from triplesumo.agents import zoo as zoo_module
 
@@ -191,7 +192,6 @@ def main(argv: list[str] | None = None) -> int:
                 evaluation = json.loads(Path(args.evaluation).read_text()) if args.evaluation else None
                 print(zoo_module.publish(Path(args.policy), args.name, evaluation))
         elif args.command == "replay":
-            from pathlib import Path
 
             from triplesumo.evaluation.recording import ReplayConfig, run_replay
 

@@ -272,10 +272,13 @@ def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> 
 
 def _run_of(spec: str, manifest: dict[str, Any]) -> str | None:
     """Which training run a policy file comes from: a league snapshot's league folder
-    (``RUN/league/members/ID/ROLE``; a resumed run's snapshots record another command), else its
-    training command."""
-    if "league_member" in manifest and len(Path(spec).parents) > 2:
-        return str(Path(spec).parents[2])
+    (``RUN/league/members/ID/ROLE``; a resumed run's snapshots record another command), that of a
+    self-play run's own policy (``RUN/policy``), else its training command."""
+    path = Path(spec)
+    if "league_member" in manifest and len(path.parents) > 2:
+        return str(path.parents[2])
+    if (path.parent / "league" / "pool.json").exists():  # a self-play run's own policy (RUN/policy)
+        return str(path.parent / "league")
     return manifest.get("command")
 
 
@@ -554,6 +557,8 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
     plot_crossplay(results, out / f"crossplay{tag}.png", title=title)
     if sum(e["epochs"] is not None for e in results["leaderboard"]) >= 2:
         plot_ladder(results, out / f"ladder{tag}.png", title=title)
+    else:  # no trained entries with epochs (now): no ladder left over from another tournament here
+        (out / f"ladder{tag}.png").unlink(missing_ok=True)
 
 
 def format_leaderboard(results: dict[str, Any]) -> str:
