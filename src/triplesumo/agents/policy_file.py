@@ -28,6 +28,9 @@ from triplesumo.agents.networks import Actor, ActorPolicy
 from triplesumo.agents.normalizer import ObsNormalizer
 
 FORMAT = "triplesumo-policy/1"
+LEAGUE_FORMAT = "triplesumo-league/1"
+"""Format of a self-play league's pool file (``RUN/league/pool.json``, written by
+:mod:`triplesumo.train.league`, read also by ``tournament --league``): members that are policy files."""
 REQUIRED = ("format", "agent", "obs_mode", "obs_dim", "act_dim", "hidden")
 
 

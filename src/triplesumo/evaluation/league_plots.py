@@ -49,8 +49,8 @@ def plot_ladder(results: dict[str, Any], path: Path, title: str = "") -> Path:
         if e["epochs"] is not None:
             key = e["policy"].rsplit("@", 1)[1] if by_seat else str(e["trained"])
             lines.setdefault((key, str(e.get("run"))), []).append(e)
-    runs = sorted({command for (_, command), entries in lines.items() if len(entries) > 1})
-    for (key, command), entries in sorted(lines.items()):
+    runs = sorted({run for (_, run), entries in lines.items() if len(entries) > 1})
+    for (key, run), entries in sorted(lines.items()):
         entries.sort(key=lambda e: e["epochs"])
         epochs = np.array([e["epochs"] for e in entries], dtype=float)
         mu = np.array([e["mu"] for e in entries])
@@ -60,9 +60,9 @@ def plot_ladder(results: dict[str, Any], path: Path, title: str = "") -> Path:
             ax.annotate(entries[0]["policy"], (epochs[0], mu[0]), textcoords="offset points", xytext=(5, 4),
                         fontsize=7)
             continue
-        run = f", run {runs.index(command) + 1}" if len(runs) > 1 else ""
+        which = f", run {runs.index(run) + 1}" if len(runs) > 1 else ""
         ax.errorbar(epochs, mu, yerr=err, fmt="o-", capsize=4,
-                    label=(f"in seat {key}" if by_seat else f"trained as {key}") + run)
+                    label=(f"in seat {key}" if by_seat else f"trained as {key}") + which)
     colours = iter(["#888888", "#c05050", "#50a050", "#b08030", "#7050b0", "#309090"])
     for e in board:
         if e["epochs"] is None:

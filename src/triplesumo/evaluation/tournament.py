@@ -29,9 +29,10 @@ the evicted ones, spread evenly over the epochs they joined at, the first and th
 become entries named by member id (one per role where a side has several: ``team-0003.ant``),
 beside ``policies``. Every entry that is a policy file whose manifest records its training
 epochs is also drawn on ``ladder.png``: its rating against those epochs, a line through the
-entries of one run (a league's snapshots, or one training command) per trained agent, other trained entries (the zoo's)
-as labelled points, the built-ins as bands. Rated against one fixed field, not against a pool that moves
-with the learner, that is the honest "ratings rise" of a self-play run.
+entries of one run (a league's snapshots and the run's own policy, or one training command)
+per trained agent, other trained entries (the zoo's) as labelled points, the built-ins as
+bands. Rated against one fixed field, not against a pool that moves with the learner, that is
+the honest "ratings rise" of a self-play run.
 
 Places: a team's place is its best member's (1 = first, equal places share). Under the
 paper's first-out rules they follow from the outcomes (winners 1, losers 2, a draw shares 1);
@@ -68,7 +69,7 @@ from typing import Any
 import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.policy_file import load_policy
+from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy
 from triplesumo.agents.zoo import load as zoo_load
 from triplesumo.agents.zoo import make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
@@ -186,9 +187,6 @@ class TournamentConfig:
         """The scenario's match."""
         return scenario_config(self.scenario, max_steps=self.steps_per_epoch, obs_mode=self.obs_mode,
                                physics=self.physics)
-
-
-LEAGUE_FORMAT = "triplesumo-league/1"
 
 
 def league_entries(run: Path, k: int) -> dict[str, str]:

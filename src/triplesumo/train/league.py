@@ -75,6 +75,7 @@ import numpy as np
 
 from triplesumo.agents.builtin import ACTION_SIZE, BUILTIN
 from triplesumo.agents.policy_file import (
+    LEAGUE_FORMAT,
     PolicyFileError,
     atomic_write_bytes,
     file_sha256,
@@ -88,7 +89,6 @@ SAMPLING = ("uniform", "latest", "pfsp")
 """Opponent sampling rules (see the module docstring)."""
 PFSP_WEIGHTINGS = ("hard", "variance")
 """AlphaStar's PFSP weightings: ``hard`` ``(1 - p) ** exponent``, ``variance`` ``p (1 - p)``."""
-POOL_FORMAT = "triplesumo-league/1"
 POOL_FILE = "pool.json"
 LOG_FILE = "league.csv"
 LOG_COLUMNS = ("epoch", "side", "pool_size", "learner_mu", "learner_sigma", "mean_opponent_mu", "admitted",
@@ -483,7 +483,7 @@ class League:
     def state_dict(self) -> dict[str, Any]:
         """The whole league as JSON-able data (the member files stay in ``RUN/league``)."""
         return {
-            "format": POOL_FORMAT,
+            "format": LEAGUE_FORMAT,
             "config": asdict(self.config),
             "epoch": self.epoch,
             "sides": {s: list(p.roles) for s, p in self.pools.items()},
@@ -496,8 +496,8 @@ class League:
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`state_dict` exactly, after checking every member file against its sha256."""
-        if state.get("format") != POOL_FORMAT:
-            raise PolicyFileError(f"league state: format {state.get('format')!r}, expected {POOL_FORMAT!r}")
+        if state.get("format") != LEAGUE_FORMAT:
+            raise PolicyFileError(f"league state: format {state.get('format')!r}, expected {LEAGUE_FORMAT!r}")
         if {s: list(r) for s, r in state["sides"].items()} != {s: list(p.roles) for s, p in self.pools.items()}:
             raise ValueError(f"league state has sides {state['sides']}, this league "
                              f"{ {s: list(p.roles) for s, p in self.pools.items()} }")
@@ -535,8 +535,8 @@ class League:
         are cut, so a resumed run logs every epoch once."""
         root = Path(run_dir) / "league"
         state = load_json(root / POOL_FILE)
-        if state.get("format") != POOL_FORMAT:
-            raise PolicyFileError(f"{root / POOL_FILE}: format {state.get('format')!r}, expected {POOL_FORMAT!r}")
+        if state.get("format") != LEAGUE_FORMAT:
+            raise PolicyFileError(f"{root / POOL_FILE}: format {state.get('format')!r}, expected {LEAGUE_FORMAT!r}")
         saved: dict[str, Any] = {k: tuple(v) if k == "zoo" else v for k, v in state["config"].items()}
         cfg = config or LeagueConfig(**saved)
         league = cls.__new__(cls)
