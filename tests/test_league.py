@@ -20,6 +20,7 @@ from triplesumo.train.league import League, LeagueConfig, league_demo, plot_leag
 SIDES = {"team": ("ant", "bug"), "spider": ("spider",)}
 SEEDED = ("ant=random", "bug=random", "spider=random")
 TEAM = League.learner("team")
+SPIDER = League.learner("spider")
 
 
 def league(tmp_path: Path, **kw: object) -> League:
@@ -87,6 +88,22 @@ def test_a_draw_counts_draw_score_in_the_window_so_a_league_of_draws_can_start(t
     again = league(tmp_path / "half", threshold=0.4, window=10, draw_score=0.5)
     again.load_state_dict(as_json(half.state_dict()))
     assert list(again.pools["team"].window) == list(half.pools["team"].window)
+
+
+def test_a_side_can_score_its_draws_apart_from_the_others(tmp_path: Path) -> None:
+    lg = league(tmp_path, threshold=0.4, window=10, draw_score=0.5, side_draw_score=("spider=0",))
+    assert lg.pools["team"].draw_score == 0.5 and lg.pools["spider"].draw_score == 0.0
+    for _ in range(8):  # live draws: the team scores them half, the Spider nothing
+        lg.record_outcomes([[TEAM], [SPIDER]], ["draw", "draw"])
+    for _ in range(2):
+        lg.record_outcomes([[TEAM], [SPIDER]], ["loss", "win"])
+    assert lg.pools["team"].win_rate == pytest.approx(0.4) and not lg.admit_due("team", 1)
+    assert lg.pools["spider"].win_rate == pytest.approx(0.2) and not lg.admit_due("spider", 1)
+    again = league(tmp_path, threshold=0.4, window=10, draw_score=0.5, side_draw_score=("team=1",))
+    again.record_outcomes([[TEAM], [SPIDER]], ["draw", "draw"])
+    assert list(again.pools["team"].window) == [1.0] and list(again.pools["spider"].window) == [0.5]
+    with pytest.raises(ValueError, match="side_draw_score names sides this run has not"):
+        League(tmp_path / "x", LeagueConfig(side_draw_score=("ffa=0",)), SIDES)
 
 
 def test_admission_is_checked_only_every_snapshot_every_epochs(tmp_path: Path) -> None:
@@ -231,7 +248,9 @@ def test_rating_table_round_trips_exactly() -> None:
     ({"snapshot_every": 0}, "snapshot_every"), ({"zoo": ("spider",)}, "zoo"),
     ({"zoo": ("spider=zoo:nobody",)}, "zoo"), ({"zoo": ("spider=random", "spider=passive")}, "zoo"),
     ({"rating_model": "Glicko"}, "rating_model"), ({"draw_score": 1.5}, "draw_score"),
-    ({"draw_score": True}, "draw_score"),
+    ({"draw_score": True}, "draw_score"), ({"side_draw_score": ("spider",)}, "side_draw_score"),
+    ({"side_draw_score": ("spider=2",)}, "side_draw_score"), ({"side_draw_score": ("spider=half",)}, "side_draw_score"),
+    ({"side_draw_score": ("spider=0", "spider=1")}, "side_draw_score"),
 ])
 def test_bad_config_names_the_field(kw: dict[str, object], field: str) -> None:
     with pytest.raises(ValueError, match=f"LeagueConfig.{field}"):

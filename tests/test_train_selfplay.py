@@ -197,6 +197,13 @@ def test_league_options_without_self_play_are_refused(tmp_path: Path) -> None:
 def test_cli_parses_self_play_options(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["train", "--self-play", "--league.threshold", "2", "--out", str(tmp_path)]) != 0
     assert "LeagueConfig.threshold" in capsys.readouterr().err
+    assert main(["train", "--self-play", "--league.side-draw-score", "spider=2", "--out", str(tmp_path)]) != 0
+    assert "LeagueConfig.side_draw_score" in capsys.readouterr().err
+    cfg = tiny(tmp_path, "sides", league=LeagueConfig(draw_score=0.5, side_draw_score=("spider=0",)), **SPIDER)
+    assert config_from_json(config_to_json(cfg)).league.side_draw_score == ("spider=0",)
+    saved = config_to_json(cfg)
+    del saved["league"]["side_draw_score"]  # a config.json written before the option existed
+    assert config_from_json(saved).league.side_draw_score == ()
 
 
 # ------------------------------------------------------------- both sides learn in one run

@@ -17,7 +17,8 @@ The rules, after AlphaStar's league and RLlib's league example:
   teams); a player seated twice in one match is rated once, at its first seat
   (:meth:`League.record_seats` takes one player per seat, as
   :func:`~triplesumo.evaluation.runner.play_matches` reports them). Each learner
-  in the match appends 1 (it finished first, alone), ``draw_score`` (first, tied: a draw) or 0 to its
+  in the match appends 1 (it finished first, alone), its side's draw score (first, tied: a draw;
+  :attr:`LeagueConfig.draw_score`, or :attr:`LeagueConfig.side_draw_score` for that side) or 0 to its
   side's win-rate window of
   the last :attr:`LeagueConfig.window` matches, and each member it met counts the
   learner's result against it (win: better place, draw: same place, loss: worse).
@@ -121,6 +122,10 @@ class LeagueConfig:
     """What a match a learner finishes first but not alone (a draw: the time limit, or tied places) adds to
     its win-rate window: 0 (only a win counts, the default) or e.g. 0.5 (half a win, as chess scores it),
     which lets a league started from scratch, where most matches are draws, admit its first snapshots."""
+    side_draw_score: tuple[str, ...] = ()
+    """SIDE=SCORE entries that give one side another draw score than ``draw_score``: in the paper's 2-vs-1
+    ``spider=0`` (with ``draw_score`` 0.5) admits a Spider snapshot only for pushing the team out, while a
+    team that keeps both quadrupeds in still scores its draws."""
     live_share: float = 0.35
     """With several learning sides (both sides of the 2-vs-1 learn): the probability that a match is between
     the live learners; otherwise one learning side (uniform) plays members of the others' pools."""
@@ -153,6 +158,19 @@ class LeagueConfig:
         if self.rating_model not in MODELS:
             raise ValueError(f"LeagueConfig.rating_model must be one of {sorted(MODELS)}, "
                              f"got {self.rating_model!r}")
+        sides: set[str] = set()
+        for entry in self.side_draw_score:
+            side, sep, score = entry.partition("=")
+            try:
+                value = float(score)
+            except ValueError:
+                value = math.nan
+            if not sep or not side or not 0.0 <= value <= 1.0:
+                raise ValueError(f"LeagueConfig.side_draw_score: expected SIDE=SCORE with SCORE in [0, 1], "
+                                 f"got {entry!r}")
+            if side in sides:
+                raise ValueError(f"LeagueConfig.side_draw_score: side {side!r} named twice")
+            sides.add(side)
         roles: set[str] = set()
         for entry in self.zoo:
             role, sep, spec = entry.partition("=")
@@ -211,6 +229,9 @@ class OpponentPool:
 
     def __init__(self, side: str, roles: tuple[str, ...], config: LeagueConfig) -> None:
         self.side, self.roles, self.config = side, roles, config
+        own = dict(e.split("=", 1) for e in config.side_draw_score)
+        self.draw_score = float(own.get(side, config.draw_score))
+        """What a draw adds to this side's window (:attr:`LeagueConfig.side_draw_score`, else ``draw_score``)."""
         self.members: list[Snapshot] = []
         self.evicted: list[Snapshot] = []
         self.window: deque[float] = deque(maxlen=config.window)
@@ -279,6 +300,10 @@ class League:
         unknown = [e for e in config.zoo if e.partition("=")[0] not in all_roles]
         if unknown:
             raise ValueError(f"LeagueConfig.zoo names roles no side has: {unknown}; roles are {sorted(all_roles)}")
+        unknown = [e for e in config.side_draw_score if e.partition("=")[0] not in sides]
+        if unknown:
+            raise ValueError(f"LeagueConfig.side_draw_score names sides this run has not: {unknown}; "
+                             f"sides are {sorted(sides)}")
         self.root = Path(run_dir) / "league"
         self.config = config
         self.pools = {side: OpponentPool(side, tuple(roles), config) for side, roles in sides.items()}
@@ -363,8 +388,7 @@ class League:
                     continue
                 pool = self.pools[name.split(":")[0]]
                 first, alone = place == best, list(places).count(best) == 1
-                pool.window.append(1 if first and alone else self.config.draw_score if first and
-                                   self.config.draw_score else 0)
+                pool.window.append(1 if first and alone else pool.draw_score if first else 0)
                 for u, (other, other_place) in enumerate(zip(teams, places, strict=True)):
                     for opp in other if u != t else ():  # teammates are not opponents
                         if not self._is_learner(opp):

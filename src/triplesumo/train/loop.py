@@ -139,7 +139,7 @@ ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "ma
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget, evaluations while training): a config.json without them gets their defaults; any other
 missing key is an error."""
-LEAGUE_ADDED_LATER = ("live_share", "draw_score")
+LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
 
@@ -167,7 +167,8 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         data["league"] = {**{k: league_defaults[k] for k in LEAGUE_ADDED_LATER}, **data["league"]}
     try:
         league: dict[str, Any] = _check_keys(data["league"], LeagueConfig, "league.", source)
-        data["league"] = LeagueConfig(**(league | {"zoo": tuple(league["zoo"])}))
+        league = league | {k: tuple(league[k]) for k in ("zoo", "side_draw_score")}
+        data["league"] = LeagueConfig(**league)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{source}: {exc}") from exc
     try:
