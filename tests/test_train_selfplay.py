@@ -337,4 +337,8 @@ def test_tournament_seats_the_runs_egocentric_networks_and_snapshots_in_every_se
         manifest = _manifest(str(stem), "egocentric")
         assert manifest is not None and manifest["obs_mode"] == "egocentric"
         assert eligible_seats(str(stem), manifest, match) == seats, stem
+        assert manifest["partners"] == len(seats) - 1  # the trained seat's partners, recorded at training
+        other_roster = manifest | {"agents": ["a", "b", "c"]}  # the default roster no longer says; the key does
+        assert eligible_seats(str(stem), other_roster, match) == seats, stem
+        assert eligible_seats(str(stem), manifest | {"partners": 2}, match) == [], stem
         assert eligible_seats(str(stem), manifest | {"obs_mode": "paper"}, match) == [], stem  # another mode

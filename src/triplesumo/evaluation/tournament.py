@@ -281,8 +281,10 @@ def _run_of(spec: str, manifest: dict[str, Any]) -> str | None:
 
 
 def _trained_partners(manifest: dict[str, Any]) -> int | None:
-    """How many partners the seat a policy was trained in had (``None`` where its manifest cannot say:
-    a roster other than its scenario's default)."""
+    """How many partners the seat a policy was trained in had: its manifest's ``partners``, or for
+    files written before that key, its scenario's default roster (``None`` where neither can say)."""
+    if isinstance(manifest.get("partners"), int):
+        return int(manifest["partners"])
     try:
         roster = scenario_config(str(manifest.get("scenario", "paper"))).agents
     except ValueError:
