@@ -104,6 +104,8 @@ def test_a_side_can_score_its_draws_apart_from_the_others(tmp_path: Path) -> Non
     assert list(again.pools["team"].window) == [1.0] and list(again.pools["spider"].window) == [0.5]
     with pytest.raises(ValueError, match="side_draw_score names sides this run has not"):
         League(tmp_path / "x", LeagueConfig(side_draw_score=("ffa=0",)), SIDES)
+    lg.save()  # pool.json holds JSON lists; the config read back is the one saved
+    assert League.load(tmp_path).config == lg.config and lg.config.draw_score_of("spider") == 0.0
 
 
 def test_admission_is_checked_only_every_snapshot_every_epochs(tmp_path: Path) -> None:

@@ -134,6 +134,9 @@ class LeagueConfig:
     ThurstoneMostellerFull or ThurstoneMostellerPart."""
 
     def __post_init__(self) -> None:
+        for name in ("zoo", "side_draw_score"):  # JSON (config.json, pool.json) gives lists
+            if isinstance(getattr(self, name), list):
+                object.__setattr__(self, name, tuple(getattr(self, name)))
         if not (isinstance(self.threshold, int | float) and not isinstance(self.threshold, bool)
                 and 0.0 <= self.threshold < 1.0):
             raise ValueError(f"LeagueConfig.threshold must be a number in [0, 1), got {self.threshold!r}")
@@ -180,6 +183,12 @@ class LeagueConfig:
                 raise ValueError(f"LeagueConfig.zoo: role {role!r} named twice")
             roles.add(role)
             _check_spec(spec, "LeagueConfig.zoo")
+
+    def draw_score_of(self, side: str) -> float:
+        """What a draw adds to ``side``'s win-rate window: its :attr:`side_draw_score` entry, else
+        :attr:`draw_score`."""
+        own = dict(e.split("=", 1) for e in self.side_draw_score)
+        return float(own.get(side, self.draw_score))
 
 
 def _check_spec(spec: str, where: str) -> None:
@@ -229,9 +238,8 @@ class OpponentPool:
 
     def __init__(self, side: str, roles: tuple[str, ...], config: LeagueConfig) -> None:
         self.side, self.roles, self.config = side, roles, config
-        own = dict(e.split("=", 1) for e in config.side_draw_score)
-        self.draw_score = float(own.get(side, config.draw_score))
-        """What a draw adds to this side's window (:attr:`LeagueConfig.side_draw_score`, else ``draw_score``)."""
+        self.draw_score = config.draw_score_of(side)
+        """What a draw adds to this side's window."""
         self.members: list[Snapshot] = []
         self.evicted: list[Snapshot] = []
         self.window: deque[float] = deque(maxlen=config.window)
@@ -561,8 +569,7 @@ class League:
         state = load_json(root / POOL_FILE)
         if state.get("format") != LEAGUE_FORMAT:
             raise PolicyFileError(f"{root / POOL_FILE}: format {state.get('format')!r}, expected {LEAGUE_FORMAT!r}")
-        saved: dict[str, Any] = {k: tuple(v) if k == "zoo" else v for k, v in state["config"].items()}
-        cfg = config or LeagueConfig(**saved)
+        cfg = config or LeagueConfig(**state["config"])
         league = cls.__new__(cls)
         league.root, league.config = root, cfg
         league.pools = {s: OpponentPool(s, tuple(r), cfg) for s, r in state["sides"].items()}

@@ -70,7 +70,6 @@ from triplesumo.rules.outcome import ERROR_CODE, PLAYING
 from triplesumo.rules.outcome import outcome_name as code_name
 from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
-from triplesumo.rules.teams import Teams
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.league import League, LeagueConfig, plot_league
@@ -168,7 +167,6 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         data["league"] = {**{k: league_defaults[k] for k in LEAGUE_ADDED_LATER}, **data["league"]}
     try:
         league: dict[str, Any] = _check_keys(data["league"], LeagueConfig, "league.", source)
-        league = league | {k: tuple(league[k]) for k in ("zoo", "side_draw_score")}
         data["league"] = LeagueConfig(**league)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{source}: {exc}") from exc
@@ -948,7 +946,7 @@ class Trainer:
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
             "updates": learner.algo.num_updates, "command": self.command, "trained_against": list(self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
-            "partners": len(Teams.from_agents(self.match_cfg.agents).partners[list(probe.agents).index(spec.name)]),
+            "partners": len(probe.teams.partners[probe.agents.index(spec.name)]),
             "physics": dataclasses.asdict(self.cfg.physics),  # the simulation (e.g. the paper's solid rim)
         }
 
