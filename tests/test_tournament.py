@@ -272,6 +272,8 @@ def test_tournament_command_in_the_paper_scenario(tiny_zoo_dir: Path, tmp_path: 
     ({"schedule": "swiss"}, "schedule must be one of"),
     ({"rounds": 0}, "rounds must be an int >= 1"),
     ({"league_snapshots": 0}, "league_snapshots must be an int >= 1"),
+    ({"league_until": -1, "league": "runs/x"}, "league_until must be an int >= 0"),
+    ({"league_until": 100}, "league_until needs league"),
     ({"rating_model": "Glicko"}, "rating_model must be one of"),
     ({"rate_by": "team"}, "rate_by must be one of"),
     ({"confidence": 1.5}, "confidence must be in"),

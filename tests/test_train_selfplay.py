@@ -22,7 +22,7 @@ from triplesumo.agents.policy_file import load_policy
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.cli import main
-from triplesumo.evaluation.tournament import TournamentConfig, league_entries, run_tournament
+from triplesumo.evaluation.tournament import TournamentConfig, league_entries, parse_entries, run_tournament
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
@@ -318,6 +318,27 @@ def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(bot
     assert league_entries(both_run.run_dir, 2) == expected
     assert league_entries(both_run.league.root, 2) == expected  # the league folder itself works too
     assert any(n.endswith(".ant") for n in expected) and any(n.endswith(".bug") for n in expected)
+
+
+def test_league_until_picks_only_the_snapshots_that_joined_by_then(both_run: Trainer) -> None:
+    """``--league-until EPOCH``: the picks of the run as it stood at EPOCH, so a table made before the run
+    was resumed names the same snapshots after it; an epoch before the first snapshot is an error."""
+    assert both_run.league is not None
+    firsts = {}
+    for side, pool in both_run.league.pools.items():
+        own = sorted((m for m in (*pool.members, *pool.evicted) if m.source == "self"), key=lambda m: m.epoch)
+        firsts[side] = own[0]
+    until = min(m.epoch for m in firsts.values())
+    picked = league_entries(both_run.run_dir, 8, until)
+    assert picked and all(n.split(".")[0] in {m.id for m in firsts.values() if m.epoch <= until} for n in picked)
+    assert league_entries(both_run.run_dir, 8, 10**9) == league_entries(both_run.run_dir, 8)
+    assert len(league_entries(both_run.run_dir, 8)) > len(picked)
+    assert until > 1
+    with pytest.raises(ValueError, match=f"own yet that joined at or before epoch {until - 1}$"):
+        league_entries(both_run.run_dir, 8, until - 1)
+    cfg = TournamentConfig(league=str(both_run.run_dir), league_until=until, policies=("p=passive",)).resolved()
+    assert cfg.league == "" and cfg.league_until == 0
+    assert sorted(parse_entries(cfg.policies)) == sorted(["p", *picked])
 
 
 def test_tournament_seats_the_runs_egocentric_networks_and_snapshots_in_every_seat_they_fit(

@@ -25,7 +25,8 @@ tournament without changing the matches already played.
 
 A self-play run's league joins with ``league=RUN`` (``--league RUN``): up to
 ``league_snapshots`` of each side's own snapshots (``RUN/league/pool.json``: the members and
-the evicted ones, spread evenly over the epochs they joined at, the first and the last kept)
+the evicted ones, spread evenly over the epochs they joined at, the first and the last kept;
+with ``league_until`` only those that joined by that epoch, so a run resumed since picks the same)
 become entries named by member id (one per role where a side has several: ``team-0003.ant``),
 beside ``policies``. Every entry that is a policy file whose manifest records its training
 epochs is also drawn on ``ladder.png``: its rating against those epochs, a line through the
@@ -144,12 +145,20 @@ class TournamentConfig:
     """A self-play run folder: its own league snapshots join the entries (named by member id)."""
     league_snapshots: int = 8
     """With league: at most this many snapshots per side, spread evenly over their epochs."""
+    league_until: int = 0
+    """With league: only snapshots that joined at or before this epoch (0: all). The same picks however
+    far the run has been resumed since, so a published table stays regenerable."""
 
     def __post_init__(self) -> None:
         for name in ("rounds", "matches", "steps_per_epoch", "n_envs", "n_threads", "ray_chunk", "league_snapshots"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"TournamentConfig.{name} must be an int >= 1, got {value!r}")
+        if not isinstance(self.league_until, int) or isinstance(self.league_until, bool) or self.league_until < 0:
+            raise ValueError(f"TournamentConfig.league_until must be an int >= 0 (0: every snapshot), "
+                             f"got {self.league_until!r}")
+        if self.league_until and not self.league:
+            raise ValueError("TournamentConfig.league_until needs league (a self-play run folder)")
         check_ray("TournamentConfig", self.ray, self.ray_address)
         if self.scenario not in scenarios():
             raise ValueError(f"TournamentConfig.scenario must be one of {list(scenarios())}, got {self.scenario!r}")
@@ -173,7 +182,7 @@ class TournamentConfig:
         if not self.league:
             return self
         given = parse_entries(self.policies)
-        added = league_entries(Path(self.league), self.league_snapshots)
+        added = league_entries(Path(self.league), self.league_snapshots, self.league_until)
         clash = sorted(set(given) & set(added))
         if clash:
             raise ValueError(f"TournamentConfig.policies: entries {clash} clash with the snapshots of {self.league}")
@@ -181,7 +190,7 @@ class TournamentConfig:
         if len(pairs) < 2:
             raise ValueError(f"TournamentConfig: {self.league} adds {len(added)} snapshot(s) to {list(self.policies)}; "
                              "a tournament needs at least 2 entries")
-        return dataclasses.replace(self, policies=pairs, league="")
+        return dataclasses.replace(self, policies=pairs, league="", league_until=0)
 
     def match_config(self) -> MatchConfig:
         """The scenario's match."""
@@ -189,9 +198,10 @@ class TournamentConfig:
                                physics=self.physics)
 
 
-def league_entries(run: Path, k: int) -> dict[str, str]:
+def league_entries(run: Path, k: int, until: int = 0) -> dict[str, str]:
     """Entry name -> policy-file stem of up to ``k`` own snapshots per side of the self-play run ``run``
-    (or its ``league/`` folder), oldest first; errors name the file."""
+    (or its ``league/`` folder), oldest first, only those that joined at or before epoch ``until`` when
+    it is not 0; errors name the file."""
     root = run if (run / "pool.json").exists() else run / "league"
     path = root / "pool.json"
     if not path.exists():
@@ -203,7 +213,8 @@ def league_entries(run: Path, k: int) -> dict[str, str]:
             raise ValueError(f"format {pool.get('format')!r}, expected {LEAGUE_FORMAT!r}")
         entries: dict[str, str] = {}
         for members in ((*p["members"], *p["evicted"]) for p in pool["pools"].values()):
-            own = sorted((m for m in members if m["source"] == "self"), key=lambda m: (int(m["epoch"]), m["id"]))
+            own = sorted((m for m in members if m["source"] == "self" and (not until or int(m["epoch"]) <= until)),
+                         key=lambda m: (int(m["epoch"]), m["id"]))
             picks = sorted({round(x) for x in np.linspace(0, len(own) - 1, min(k, len(own)))}) if own else []
             for m in (own[i] for i in picks):
                 roles = sorted(m["policies"])
@@ -213,7 +224,8 @@ def league_entries(run: Path, k: int) -> dict[str, str]:
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"TournamentConfig.league: {path} is unreadable or corrupt ({exc})") from None
     if not entries:
-        raise ValueError(f"TournamentConfig.league: {path} holds no snapshot of the run's own yet")
+        raise ValueError(f"TournamentConfig.league: {path} holds no snapshot of the run's own yet"
+                         + (f" that joined at or before epoch {until}" if until else ""))
     return entries
 
 
