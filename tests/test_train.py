@@ -314,6 +314,30 @@ def test_a_run_killed_before_latest_json_was_written_resumes_from_its_newest_che
     assert rows == list(range(1, len(rows) + 1))
 
 
+def test_a_resumed_run_keeps_the_run_id_its_checkpoint_records(uninterrupted: Trained, run_copy: Path) -> None:
+    """Policy manifests name the run (``run_id``) by the id its checkpoint holds, not by a hash of the config
+    as this version reads it (which options added since would move); a checkpoint written before ids takes
+    the config's."""
+    assert load_policy(uninterrupted.run / "policy")[1]["run_id"] == uninterrupted.trainer.run_id
+    state_path = _latest_file(run_copy, "state.json")
+    state = json.loads(state_path.read_text())
+    assert state["run_id"] == uninterrupted.trainer.run_id == train_loop.run_id_of(uninterrupted.cfg)
+    state["run_id"] = "started-under-an-older-version"
+    state_path.write_text(json.dumps(state))
+    _reseal(state_path.parent)
+    epochs = recorded_epoch(checkpoint.latest(run_copy)) + 2
+    train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": epochs})
+    assert load_policy(run_copy / "policy")[1]["run_id"] == "started-under-an-older-version"
+    state_path = _latest_file(run_copy, "state.json")
+    state = json.loads(state_path.read_text())
+    assert state["run_id"] == "started-under-an-older-version"  # and the next checkpoint keeps it
+    del state["run_id"]
+    state_path.write_text(json.dumps(state))
+    _reseal(state_path.parent)
+    train(TrainConfig(), resume_dir=run_copy, overrides={"epochs": epochs + 2})
+    assert load_policy(run_copy / "policy")[1]["run_id"] == uninterrupted.trainer.run_id
+
+
 def test_corrupt_npz_members_are_checkpoint_errors(run_copy: Path) -> None:
     _truncate(_latest_file(run_copy, "arrays.npz"))
     with pytest.raises(CheckpointError, match="arrays.npz"):

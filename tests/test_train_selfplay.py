@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +28,7 @@ from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.league import League, LeagueConfig
-from triplesumo.train.loop import Trainer, config_from_json, config_to_json, train
+from triplesumo.train.loop import Trainer, config_from_json, config_to_json, run_id_of, train
 
 SAC = SACConfig(hidden=(16, 16), buffer_size=4000, learning_starts=600, batch_size=16, learn_every=16)
 LEAGUE = LeagueConfig(threshold=0.0, window=2, snapshot_every=2, max_size=3)
@@ -110,7 +111,14 @@ def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) 
     assert board[own[-1].id]["epochs"] == own[-1].epoch and board[own[-1].id]["trained"] == "ant"
     assert board["passive"]["epochs"] is None and board["passive"]["run"] is None
     # one line on the ladder: the snapshots and the run's own policy
-    assert board[own[0].id]["run"] == board[own[-1].id]["run"] == board["final"]["run"] == str(league.root)
+    assert board[own[0].id]["run"] == board[own[-1].id]["run"] == board["final"]["run"] == trainer.run_id
+    # a copy of the run's policy outside the run folder still names the run (the run_id of its manifest)
+    from triplesumo.evaluation.tournament import _run_of
+    (tmp_path / "copied").mkdir()
+    for suffix in (".json", ".safetensors"):
+        shutil.copyfile(trainer.run_dir / f"policy{suffix}", tmp_path / "copied" / f"policy{suffix}")
+    assert _run_of(str(tmp_path / "copied" / "policy"), load_policy(tmp_path / "copied" / "policy")[1]) \
+        == trainer.run_id
     assert (tmp_path / "ladder" / "ladder.png").stat().st_size > 10_000
     with pytest.raises(ValueError, match=rf"entries \['{own[0].id}'\] clash with the snapshots"):
         dataclasses.replace(cfg, policies=(f"{own[0].id}=passive", "random=random")).resolved()
@@ -302,6 +310,16 @@ def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Tr
             assert np.array_equal(x[key], y[key]), key
     for learner in ("ant+bug", "spider"):
         assert (a / f"policy-{learner}.safetensors").read_bytes() == (b / f"policy-{learner}.safetensors").read_bytes()
+    # one run id: its policies and every league snapshot (admitted before the checkpoint or after the
+    # resume) name the id the run started with, the uninterrupted run's (the same experiment); another seed
+    # is another run
+    ids = {load_policy(b / f"policy-{learner}")[1]["run_id"] for learner in ("ant+bug", "spider")}
+    ids |= {load_policy(resumed.league.root / stem)[1]["run_id"]
+            for pool in resumed.league.pools.values() for m in (*pool.members, *pool.evicted)
+            for stem in m.policies.values()}
+    assert ids == {half.run_id} == {resumed.run_id} == {both_run.run_id}
+    assert run_id_of(dataclasses.replace(both_run.cfg, seed=1)) != both_run.run_id
+    assert run_id_of(dataclasses.replace(both_run.cfg, epochs=99, out="elsewhere")) == both_run.run_id
 
 
 def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(both_run: Trainer) -> None:

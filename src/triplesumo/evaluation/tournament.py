@@ -30,8 +30,8 @@ with ``league_until`` only those that joined by that epoch, so a run resumed sin
 become entries named by member id (one per role where a side has several: ``team-0003.ant``),
 beside ``policies``. Every entry that is a policy file whose manifest records its training
 epochs is also drawn on ``ladder.png``: its rating against those epochs, a line through the
-entries of one run (a league's snapshots and the run's own policy, or one training command)
-per trained agent, other trained entries (the zoo's) as labelled points, the built-ins as
+entries of one run (the ``run_id`` their manifests record: a league's snapshots and the run's
+own policies, across resumes and wherever the files were copied to) per trained agent, other trained entries (the zoo's) as labelled points, the built-ins as
 bands. Rated against one fixed field, not against a pool that moves with the learner, that is
 the honest "ratings rise" of a self-play run.
 
@@ -281,9 +281,12 @@ def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> 
 
 
 def _run_of(spec: str, manifest: dict[str, Any]) -> str | None:
-    """Which training run a policy file comes from: a league snapshot's league folder
+    """Which training run a policy file comes from: the ``run_id`` its manifest records (wherever the file
+    was copied to), else for files written before that key a league snapshot's league folder
     (``RUN/league/members/ID/ROLE``; a resumed run's snapshots record another command), that of a
     self-play run's own policy (``RUN/policy``), else its training command."""
+    if isinstance(manifest.get("run_id"), str):
+        return str(manifest["run_id"])
     path = Path(spec)
     if "league_member" in manifest and len(path.parents) > 2:
         return str(path.parents[2])

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import json
 import os
 import shlex
@@ -120,6 +121,17 @@ class DivergenceError(FloatingPointError):
 
 def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+def run_id_of(cfg: TrainConfig) -> str:
+    """``NAME-HASH``: the run's name and a hash of its config less what a resume may change (``epochs``,
+    ``max_minutes``, ``progress``, ``save_replay``) or what only says where it is written (``out``). So a
+    resumed run writes what the uninterrupted one would, and two runs share an id only if they are the same
+    experiment. Taken when a run starts; its checkpoints keep it, whatever options later versions add."""
+    kept = {k: v for k, v in config_to_json(cfg).items()
+            if k not in ("out", "epochs", "max_minutes", "progress", "save_replay")}
+    digest = hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()
+    return f"{cfg.name}-{digest[:12]}"
 
 
 def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]:
@@ -346,6 +358,9 @@ class Trainer:
         """Where a ``warp`` run keeps observations, actions, replay and rollouts (None: numpy on the host)."""
         self.run_dir = prepare_run_dir(run_dir)
         self.command = command or command_for(cfg)
+        self.run_id = run_id_of(cfg)
+        """This run's id (:func:`run_id_of`), kept by its checkpoints: every policy file it writes (its own and
+        its league snapshots, across resumes) names it, so copies of them still group by run."""
         torch.set_num_threads(cfg.torch_threads)
         self.pairs = pairs
         """AGENT=POLICY of every agent that does not learn (the evaluations build their own from them)."""
@@ -944,7 +959,8 @@ class Trainer:
             "ctrl_range": spec.ctrl_range, "env_version": ENV_VERSION, "triplesumo_version": __version__,
             "mujoco_version": mujoco.__version__, "torch_version": torch.__version__,
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
-            "updates": learner.algo.num_updates, "command": self.command, "trained_against": list(self.cfg.policies),
+            "updates": learner.algo.num_updates, "command": self.command, "run_id": self.run_id,
+            "trained_against": list(self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
             "partners": len(probe.teams.partners[probe.agents.index(spec.name)]),
             "physics": dataclasses.asdict(self.cfg.physics),  # the simulation (e.g. the paper's solid rim)
@@ -972,7 +988,7 @@ class Trainer:
         state = {
             "config": config_to_json(self.cfg), "manifests": {lr.name: self.manifest(lr) for lr in self.learners},
             "epochs_done": self.epochs_done, "env_steps": self.env_steps, "rng": self.rng.bit_generator.state,
-            "learners": {lr.name: lr.state() for lr in self.learners},
+            "run_id": self.run_id, "learners": {lr.name: lr.state() for lr in self.learners},
             "matches": [{key: v for key, v in s.items() if not isinstance(v, np.ndarray)}
                         for s in snaps],  # steps, generator, who is still in play (elimination rules)
             "acc": {agent: [dict(zip(ACC_KEYS, per_match[j], strict=True)) for per_match in acc]
@@ -1102,6 +1118,7 @@ class Trainer:
             self.policies[agent].rng.bit_generator.state = rng_state
         self.epochs_done = int(state["epochs_done"])
         self.env_steps = int(state["env_steps"])
+        self.run_id = str(state.get("run_id") or self.run_id)  # (a new one for a checkpoint written before ids)
         self.lwr = {a: [float(x) for x in arrays[f"lwr.{a}"]] for a in self.agents}
         self.timers = {**self.timers, **state.get("timers", {})}
         # (0 in a checkpoint written before the trainer counted them)
