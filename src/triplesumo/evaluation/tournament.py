@@ -31,8 +31,10 @@ become entries named by member id (one per role where a side has several: ``team
 beside ``policies``. Every entry that is a policy file whose manifest records its training
 epochs is also drawn on ``ladder.png``: its rating against those epochs, a line through the
 entries of one run (the ``run_id`` their manifests record: a league's snapshots and the run's
-own policies, across resumes and wherever the files were copied to) per trained agent, other trained entries (the zoo's) as labelled points, the built-ins as
-bands. Rated against one fixed field, not against a pool that moves with the learner, that is
+own policies, across resumes and wherever the files were copied to; for files written before
+ids, a league's folder or one training command) per trained agent, other trained entries (the
+zoo's) as labelled points, the built-ins as bands. Rated against one fixed field, not against
+a pool that moves with the learner, that is
 the honest "ratings rise" of a self-play run.
 
 Places: a team's place is its best member's (1 = first, equal places share). Under the

@@ -358,9 +358,10 @@ class Trainer:
         """Where a ``warp`` run keeps observations, actions, replay and rollouts (None: numpy on the host)."""
         self.run_dir = prepare_run_dir(run_dir)
         self.command = command or command_for(cfg)
-        self.run_id = run_id_of(cfg)
+        self.run_id: str | None = run_id_of(cfg)
         """This run's id (:func:`run_id_of`), kept by its checkpoints: every policy file it writes (its own and
-        its league snapshots, across resumes) names it, so copies of them still group by run."""
+        its league snapshots, across resumes) names it, so copies of them still group by run. None for a run
+        started before ids (its checkpoint has none): its files go on without one, as its first ones did."""
         torch.set_num_threads(cfg.torch_threads)
         self.pairs = pairs
         """AGENT=POLICY of every agent that does not learn (the evaluations build their own from them)."""
@@ -959,8 +960,8 @@ class Trainer:
             "ctrl_range": spec.ctrl_range, "env_version": ENV_VERSION, "triplesumo_version": __version__,
             "mujoco_version": mujoco.__version__, "torch_version": torch.__version__,
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
-            "updates": learner.algo.num_updates, "command": self.command, "run_id": self.run_id,
-            "trained_against": list(self.cfg.policies),
+            "updates": learner.algo.num_updates, "command": self.command,
+            **({"run_id": self.run_id} if self.run_id else {}), "trained_against": list(self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
             "partners": len(probe.teams.partners[probe.agents.index(spec.name)]),
             "physics": dataclasses.asdict(self.cfg.physics),  # the simulation (e.g. the paper's solid rim)
@@ -1118,7 +1119,7 @@ class Trainer:
             self.policies[agent].rng.bit_generator.state = rng_state
         self.epochs_done = int(state["epochs_done"])
         self.env_steps = int(state["env_steps"])
-        self.run_id = str(state.get("run_id") or self.run_id)  # (a new one for a checkpoint written before ids)
+        self.run_id = state.get("run_id")
         self.lwr = {a: [float(x) for x in arrays[f"lwr.{a}"]] for a in self.agents}
         self.timers = {**self.timers, **state.get("timers", {})}
         # (0 in a checkpoint written before the trainer counted them)
