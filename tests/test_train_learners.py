@@ -275,6 +275,71 @@ def test_cli_learn_trains_two_learners_and_plots_each(tmp_path: Path, capsys: py
     assert "TrainConfig.learn" in capsys.readouterr().err
 
 
+def test_learner_config_gives_one_learner_its_own_values(tmp_path: Path) -> None:
+    """``--learner-config bug.learn_every=1 bug.hidden="8 8"``: the Bug's TD3 learns on every step with
+    8-unit networks while the Ant's TD3 keeps the shared --td3.* values (every 2nd step, 16 units)."""
+    cfg = tiny(tmp_path, "own", learn=("ant=td3", "bug=td3"), policies=("spider=random",),
+               learner_config=("bug.learn_every=1", "bug.hidden=8 8"))
+    assert cfg.algo_config("bug") == TD3.__class__(**{**TD3.__dict__, "learn_every": 1, "hidden": (8, 8)})
+    assert cfg.algo_config("ant") == TD3
+    trainer = Trainer(cfg)
+    trainer.run()
+    ant, bug = trainer.learners
+    assert (ant.config.learn_every, ant.config.hidden) == (2, (16, 16))
+    assert (bug.config.learn_every, bug.config.hidden) == (1, (8, 8))
+    assert ant.collected == bug.collected  # the same steps collected, twice the updates
+    assert bug.algo.num_updates == 2 * ant.algo.num_updates > 0
+    shapes = {name: {k: tuple(v.shape) for k, v in load_file(str(tmp_path / "own" / f"policy-{name}.safetensors"))
+                     .items()} for name in ("ant", "bug")}
+    assert 16 in shapes["ant"]["actor.net.0.weight"] and 8 in shapes["bug"]["actor.net.0.weight"]
+    saved = json.loads((tmp_path / "own" / "config.json").read_text())
+    assert saved["learner_config"] == ["bug.learn_every=1", "bug.hidden=8 8"]
+
+
+@pytest.mark.parametrize(("entries", "named"), [
+    (("bug.learn_every",), r"learner_config 'bug.learn_every': expected LEARNER.FIELD=VALUE"),
+    (("learn_every=1",), r"expected LEARNER.FIELD=VALUE"),
+    (("spider.learn_every=1",), r"'spider' is not a learner; the learning agents are \['ant', 'bug'\]"),
+    (("bug.nope=1",), r"TD3Config \(the td3 config\) has no field 'nope' \(its fields: .*learn_every"),
+    (("bug.learn_every=x",), r"'bug.learn_every=x': 'x' is not a int"),
+    (("bug.learn_every=0",), r"learner_config \(learner bug\): .*learn_every"),
+    (("bug.learn_every=1", "bug.learn_every=2"), r"bug.learn_every given twice"),
+    (("ant+bug.learn_every=1",), r"'ant\+bug' names a team's shared learner, which needs share=team"),
+])
+def test_bad_learner_config_names_the_entry(tmp_path: Path, entries: tuple[str, ...], named: str) -> None:
+    with pytest.raises(ValueError, match=named):
+        tiny(tmp_path, "bad", learn=("ant=td3", "bug=td3"), policies=("spider=random",), learner_config=entries)
+
+
+def test_learner_config_names_a_shared_team_learner_by_its_name(tmp_path: Path) -> None:
+    """With share=team the Ant and Bug are one learner, ``ant+bug``: its name takes values, a member's
+    name is refused before anything is made."""
+    fields = {"learn": ("ant=td3", "bug=td3"), "share": "team", "obs_mode": "egocentric",
+              "policies": ("spider=random",)}
+    cfg = tiny(tmp_path, "team", learner_config=("ant+bug.learn_every=1",), **fields)
+    trainer = Trainer(cfg)
+    assert [(lr.name, lr.config.learn_every) for lr in trainer.learners] == [("ant+bug", 1)]
+    with pytest.raises(ValueError, match=r"learner_config names \['ant'\], not learners of this run; "
+                                         r"its learners are \['ant\+bug'\]"):
+        Trainer(tiny(tmp_path, "member", learner_config=("ant.learn_every=1",), **fields))
+    assert not (tmp_path / "member").exists()
+
+
+def test_cli_learner_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    base = ["train", "--out", str(tmp_path), "--epochs", "2", "--learn", "ant=ddpg", "bug=ddpg",
+            "--policies", "spider=random", "--ddpg.hidden", "8", "8", "--ddpg.learning-starts", "20",
+            "--ddpg.batch-size", "8", "--ddpg.buffer-size", "500", "--n-envs", "2", "--steps-per-epoch", "20",
+            "--no-progress", "--no-tensorboard"]
+    assert main([*base, "--name", "cli", "--learner-config", "spider=1"]) == 2
+    assert "TrainConfig.learner_config 'spider=1': expected LEARNER.FIELD=VALUE" in capsys.readouterr().err
+    assert main([*base, "--name", "cli", "--learner-config", "ant.learn_every=1", "ant.noise=gaussian"]) == 0
+    saved = json.loads((tmp_path / "cli" / "config.json").read_text())
+    assert saved["learner_config"] == ["ant.learn_every=1", "ant.noise=gaussian"]
+    ant, bug = (load_policy(tmp_path / "cli" / f"policy-{n}")[1] for n in ("ant", "bug"))
+    assert ant["updates"] > bug["updates"] > 0  # every step against every 30th (--ddpg.learn-every)
+    assert "--learner-config ant.learn_every=1 ant.noise=gaussian" in ant["command"]
+
+
 def test_a_checkpoint_keeps_who_is_still_in_play(tmp_path: Path) -> None:
     """Under elimination rules a checkpoint taken mid-match holds who left, their places and
     outcomes: the resumed match plays on with the same agents, not with the eliminated one back."""

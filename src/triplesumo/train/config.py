@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
+import types
+import typing
 from dataclasses import dataclass, field
+from typing import Any
 
 from triplesumo.agents.zoo import check_policy_pairs
 from triplesumo.algos.ddpg import DDPGConfig
@@ -23,6 +27,26 @@ BACKENDS = ("cpu", "warp")
 DEVICES = (None, "cpu", "cuda")
 DEFAULT_POLICIES = ("ant=zoo:ant", "spider=zoo:spider")
 """The other agents of the paper's third stage: the ongoing match of the trained Ant and Spider."""
+
+
+def typed_value(tp: Any, text: str, where: str) -> Any:
+    """``text`` read as type ``tp`` (int, float, bool, str, ``X | None`` with ``none``, a tuple of
+    space-separated items); ``ValueError`` starting with ``where`` otherwise."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is tuple:
+        return tuple(typed_value(args[0], item, where) for item in text.split())
+    if origin in (typing.Union, types.UnionType):
+        if text.lower() == "none" and type(None) in args:
+            return None
+        return typed_value(next(a for a in args if a is not type(None)), text, where)
+    if tp is bool:
+        if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+            raise ValueError(f"{where}: {text!r} is not a bool (true or false)")
+        return text.lower() in ("true", "1", "yes")
+    try:
+        return tp(text)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: {text!r} is not a {getattr(tp, '__name__', tp)}") from None
 
 
 @dataclass(frozen=True)
@@ -129,9 +153,13 @@ class TrainConfig:
     device: str | None = None
     """Torch/Warp device of backend warp: cuda, or cpu (Warp's CPU device: tests, no speed);
     default cuda when Warp sees a GPU. backend cpu runs on the CPU (None or cpu)."""
+    learner_config: tuple[str, ...] = ()
+    """LEARNER.FIELD=VALUE: one learner's own value of a field of its algorithm's config, over the
+    --ALGO.FIELD all learners of that algorithm share, e.g. spider.learn_every=5 (LEARNER: a learning
+    agent, or with share=team its team's learner, ant+bug; a tuple value's items space-separated)."""
 
     def __post_init__(self) -> None:
-        for name in ("policies", "learn"):
+        for name in ("policies", "learn", "learner_config"):
             if isinstance(getattr(self, name), list):
                 object.__setattr__(self, name, tuple(getattr(self, name)))
         if not self.name or self.name in (".", "..") or any(sep in self.name for sep in ("/", "\\", os.sep)):
@@ -187,6 +215,44 @@ class TrainConfig:
                              "steps MuJoCo on the CPU")
         if self.scenario not in scenarios():
             raise ValueError(f"TrainConfig.scenario must be one of {scenarios()}, got {self.scenario!r}")
+        for learner in self.learner_configs():
+            self.algo_config(learner)  # every value read and checked by its algorithm's config
+
+    def learner_configs(self) -> dict[str, dict[str, Any]]:
+        """``learner_config`` as learner -> {field: typed value}; ``ValueError`` names the entry."""
+        learning = self.learners()
+        out: dict[str, dict[str, Any]] = {}
+        for entry in self.learner_config:
+            key, sep, raw = entry.partition("=")
+            learner, dot, name = key.partition(".")
+            where = f"TrainConfig.learner_config {entry!r}"
+            if not sep or not dot or not learner or not name or not raw:
+                raise ValueError(f"{where}: expected LEARNER.FIELD=VALUE, e.g. spider.learn_every=5")
+            agents = learner.split("+")
+            if any(a not in learning for a in agents) or len(set(agents)) < len(agents):
+                raise ValueError(f"{where}: {learner!r} is not a learner; the learning agents are {list(learning)}"
+                                 + (" (a team's shared learner is named AGENT+AGENT)" if self.share == "team" else ""))
+            if len(agents) > 1 and self.share != "team":
+                raise ValueError(f"{where}: {learner!r} names a team's shared learner, which needs share=team")
+            cls = type(getattr(self, learning[agents[0]]))
+            hints = typing.get_type_hints(cls)
+            if name not in hints:
+                raise ValueError(f"{where}: {cls.__name__} (the {learning[agents[0]]} config) has no field {name!r} "
+                                 f"(its fields: {', '.join(hints)})")
+            if name in out.get(learner, {}):
+                raise ValueError(f"{where}: {learner}.{name} given twice")
+            out.setdefault(learner, {})[name] = typed_value(hints[name], raw, where)
+        return out
+
+    def algo_config(self, learner: str) -> Any:
+        """The algorithm config of ``learner`` (an agent, or a shared team learner ``ant+bug``): its
+        algorithm's (``self.<algo>``) with that learner's ``learner_config`` values."""
+        algo = self.learners()[learner.split("+")[0]]
+        fields = self.learner_configs().get(learner, {})
+        try:
+            return dataclasses.replace(getattr(self, algo), **fields)
+        except ValueError as err:
+            raise ValueError(f"TrainConfig.learner_config (learner {learner}): {err}") from None
 
     def learners(self) -> dict[str, str]:
         """Learning agent -> algorithm, in the order given (``{learner: "ddpg"}`` when learn is empty)."""

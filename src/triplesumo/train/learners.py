@@ -65,7 +65,7 @@ def learner_specs(cfg: TrainConfig, roster: tuple[str, ...] | list[str], teams: 
     if unknown:
         raise ValueError(f"{field} names unknown agents {unknown}; agents are {list(roster)} "
                          f"(scenario {cfg.scenario!r})")
-    if cfg.share == "none":
+    if cfg.share == "none":  # (learner_config names only agents that learn here: checked by the config)
         return [LearnerSpec(agent, algo, (agent,)) for agent, algo in learning.items()]
     groups: dict[str, list[str]] = {}
     for agent in learning:
@@ -79,6 +79,10 @@ def learner_specs(cfg: TrainConfig, roster: tuple[str, ...] | list[str], teams: 
         ordered = tuple(a for a in roster if a in members)
         check_shared_network(cfg.obs_mode, ordered, f"TrainConfig.share=team (team {team!r})")
         specs.append(LearnerSpec("+".join(ordered), algos[0], ordered))
+    named = sorted(set(cfg.learner_configs()) - {spec.name for spec in specs})
+    if named:
+        raise ValueError(f"TrainConfig.learner_config names {named}, not learners of this run; its learners are "
+                         f"{[spec.name for spec in specs]}")
     return specs
 
 
@@ -90,7 +94,7 @@ class Learner:
     def __init__(self, spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig,
                  obs_dim: int, act_dim: int, device: torch.device | None = None) -> None:
         self.spec, self.name, self.index = spec, spec.name, index
-        self.config: Any = getattr(cfg, spec.algo)
+        self.config: Any = cfg.algo_config(spec.name)
         self.device = device
         """Torch device of a device-resident collection (its inputs are tensors there); None: numpy."""
         self.algo = ALGORITHMS[spec.algo](obs_dim, act_dim, self.config, seed=cfg.seed + position,

@@ -147,7 +147,7 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
 
 
 ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics", "backend",
-               "device", "eval_every", "eval_epochs", "eval_seed", "eval_target")
+               "device", "eval_every", "eval_epochs", "eval_seed", "eval_target", "learner_config")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget, evaluations while training): a config.json without them gets their defaults; any other
 missing key is an error."""
@@ -262,13 +262,16 @@ def machine_memory() -> int:
             return 0
 
 
-def check_replay_memory(cfg: TrainConfig, learners: list[tuple[str, int, int]]) -> None:
-    """``ValueError`` naming ``TrainConfig.<algo>.buffer_size`` if the learners' full replay
-    buffers (``(algo, obs_dim, act_dim)`` each; PPO has none) cannot fit this machine."""
-    sized = [(algo, getattr(cfg, algo).buffer_size, obs, act) for algo, obs, act in learners if algo != "ppo"]
+def check_replay_memory(cfg: TrainConfig, learners: list[tuple[str, str, int, int]]) -> None:
+    """``ValueError`` naming the ``buffer_size`` fields if the learners' full replay buffers
+    (``(learner, algo, obs_dim, act_dim)`` each; PPO has none) cannot fit this machine."""
+    own = cfg.learner_configs()
+    sized = [(f"TrainConfig.learner_config {name}.buffer_size" if "buffer_size" in own.get(name, {})
+              else f"TrainConfig.{algo}.buffer_size", cfg.algo_config(name).buffer_size, obs, act)
+             for name, algo, obs, act in learners if algo != "ppo"]
     need, have = sum(replay_bytes(size, obs, act) for _, size, obs, act in sized), machine_memory()
     if have and need > have:
-        fields = ", ".join(sorted({f"TrainConfig.{algo}.buffer_size={size}" for algo, size, _, _ in sized}))
+        fields = ", ".join(sorted({f"{field}={size}" for field, size, _, _ in sized}))
         raise ValueError(f"{fields} needs {need / 2**30:.1f} GiB for {len(sized)} full replay buffer(s) "
                          f"({sized[0][2]}-value observations), more than this machine's "
                          f"{have / 2**30:.1f} GiB of memory and swap; nothing was made")
@@ -347,7 +350,7 @@ class Trainer:
         dims = {spec.name: self._dims(sizing, spec) for spec in self.specs}
         if not resume:
             refuse_existing_run(run_dir, start_over)
-        check_replay_memory(cfg, [(spec.algo, *dims[spec.name]) for spec in self.specs])
+        check_replay_memory(cfg, [(spec.name, spec.algo, *dims[spec.name]) for spec in self.specs])
         self.probe = probe = sizing
         """A match of the run's config (never stepped): roster, observation and action sizes."""
         self.elimination = probe.elimination

@@ -32,7 +32,6 @@ import io
 import itertools
 import json
 import math
-import types
 import typing
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,7 +42,7 @@ import numpy as np
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.metrics import moving_winning_rate
 from triplesumo.train import checkpoint
-from triplesumo.train.config import TrainConfig
+from triplesumo.train.config import TrainConfig, typed_value
 from triplesumo.train.loop import config_to_json, holds_run, train, training_done
 
 RECORD_FILE = "sweep.json"
@@ -100,27 +99,9 @@ def _field_type(dotted: str) -> Any:
     return cls
 
 
-def _convert(tp: Any, text: str, where: str) -> Any:
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if origin is tuple:
-        return tuple(_convert(args[0], item, where) for item in text.split())
-    if origin in (typing.Union, types.UnionType):
-        if text.lower() == "none" and type(None) in args:
-            return None
-        return _convert(next(a for a in args if a is not type(None)), text, where)
-    if tp is bool:
-        if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
-            raise ValueError(f"--grid {where}: {text!r} is not a bool (true or false)")
-        return text.lower() in ("true", "1", "yes")
-    try:
-        return tp(text)
-    except (TypeError, ValueError):
-        raise ValueError(f"--grid {where}: {text!r} is not a {getattr(tp, '__name__', tp)}") from None
-
-
 def field_value(dotted: str, raw: str) -> Any:
     """The value ``raw`` typed for TrainConfig field ``dotted`` (``reward.still``, ``"-1"`` -> ``-1.0``)."""
-    return _convert(_field_type(dotted), raw, f"{dotted}={raw}")
+    return typed_value(_field_type(dotted), raw, f"--grid {dotted}={raw}")
 
 
 def parse_grid(grid: tuple[str, ...]) -> list[tuple[str, list[tuple[str, Any]]]]:
@@ -139,7 +120,7 @@ def parse_grid(grid: tuple[str, ...]) -> list[tuple[str, list[tuple[str, Any]]]]
         raws = [v.strip() for v in values.split(",")]
         if "" in raws or len(set(raws)) < len(raws):
             raise ValueError(f"--grid {key}: values must be non-empty and different, got {values!r}")
-        out.append((key, [(raw, _convert(tp, raw, f"{key}={raw}")) for raw in raws]))
+        out.append((key, [(raw, typed_value(tp, raw, f"--grid {key}={raw}")) for raw in raws]))
     return out
 
 
