@@ -15,7 +15,7 @@ from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.networks import Actor
 from triplesumo.agents.policy_file import PolicyFileError, save_policy
 from triplesumo.evaluation.ratings import Rating, RatingTable
-from triplesumo.train.league import League, LeagueConfig, league_demo, plot_league
+from triplesumo.train.league import League, LeagueConfig, league_demo, member_ticks, plot_league
 
 SIDES = {"team": ("ant", "bug"), "spider": ("spider",)}
 SEEDED = ("ant=random", "bug=random", "spider=random")
@@ -257,6 +257,13 @@ def test_rating_table_round_trips_exactly() -> None:
 def test_bad_config_names_the_field(kw: dict[str, object], field: str) -> None:
     with pytest.raises(ValueError, match=f"LeagueConfig.{field}"):
         LeagueConfig(**kw)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("n", [1, 5, 24, 25, 126, 1000])
+def test_the_league_plot_labels_at_most_24_member_rows_first_and_last_included(n: int) -> None:
+    shown = member_ticks(n)
+    assert shown == sorted(set(shown)) and shown[0] == 0 and shown[-1] == n - 1
+    assert len(shown) == n if n <= 24 else 2 <= len(shown) <= 24
 
 
 def test_bad_league_use_is_a_clear_error(tmp_path: Path) -> None:

@@ -608,9 +608,18 @@ def _copy_specs(specs: Mapping[str, str], stems: Mapping[str, Path]) -> None:
             shutil.copyfile(src.with_name(src.name + suffix), stem.with_name(stem.name + suffix))
 
 
+def member_ticks(n: int, most: int = 24) -> list[int]:
+    """Which of ``n`` member rows of the league plot get a label: all up to ``most``, else every k-th
+    (the first and last always), so a league of a hundred snapshots stays readable."""
+    if n <= most:
+        return list(range(n))
+    step = -(-(n - 1) // (most - 1))
+    return sorted({*range(0, n, step), n - 1})
+
+
 def plot_league(run_dir: Path, path: Path | None = None) -> Path:
     """Plot ``RUN/league/league.csv``: each learner's rating mu over epochs with its +- 1.96 sigma band
-    (top) and its pool's size and the members it held (bottom). Writes ``RUN/plots/league.png``
+    (top) and the members its pool held (bottom; at most 24 labelled). Writes ``RUN/plots/league.png``
     unless ``path`` is given; returns the path."""
     from matplotlib.figure import Figure
 
@@ -623,6 +632,7 @@ def plot_league(run_dir: Path, path: Path | None = None) -> Path:
         raise ValueError(f"{log}: no rows yet")
     fig = Figure(figsize=(7.5, 6.0))
     ax, bx = fig.subplots(2, 1, sharex=True)
+    rows_of_members: list[str] = []  # the members' rows on the lower axis, side by side, oldest first
     for side in dict.fromkeys(r["side"] for r in rows):
         mine = [r for r in rows if r["side"] == side]
         epoch = np.array([int(r["epoch"]) for r in mine])
@@ -633,9 +643,13 @@ def plot_league(run_dir: Path, path: Path | None = None) -> Path:
         opp = np.array([float(r["mean_opponent_mu"]) for r in mine])
         ax.plot(epoch, opp, linestyle="--", color=line.get_color(), alpha=0.7, label=f"{side} pool mean")
         ids = sorted({m for r in mine for m in r["members"].split()}, key=lambda m: int(m.rsplit("-", 1)[1]))
+        held_by = [set(r["members"].split()) for r in mine]
         for m in ids:
-            held = epoch[[m in r["members"].split() for r in mine]]
-            bx.scatter(held, np.full(len(held), f"{m}"), s=6, color=line.get_color())
+            held = epoch[[m in members for members in held_by]]
+            bx.scatter(held, np.full(len(held), len(rows_of_members)), s=6, color=line.get_color())
+            rows_of_members.append(m)
+    shown = member_ticks(len(rows_of_members))
+    bx.set_yticks(shown, [rows_of_members[i] for i in shown])
     ax.set_ylabel("rating mu (95% band)")
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)
