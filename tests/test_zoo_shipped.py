@@ -17,7 +17,8 @@ SHIPPED = ("ant", "spider", "bug")
 
 
 def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
-    assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay", "spider-selfplay-v1", "spider-selfplay-v2", "ffa-selfplay"}
+    assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay", "spider-selfplay-v1", "spider-selfplay-v2",
+                                     "ffa-selfplay"}
 
 
 @pytest.mark.parametrize("name", zoo.available())
