@@ -394,6 +394,7 @@ def test_checkpoint_lacking_a_key_names_the_file(run_copy: Path, damage: Any, na
     ("learner", {"learner": "spider", "policies": ["ant=zero", "bug=random"]}),
     ("obs_mode", {"obs_mode": "egocentric"}),
     ("ddpg", {"ddpg": {**json.loads(json.dumps(TINY_DDPG.__dict__)), "hidden": [8, 8]}}),
+    ("learner_config", {"learner_config": ["bug.hidden=8 8"]}),
 ])
 def test_incompatible_checkpoint_names_the_field(run_copy: Path, field: str, changes: dict[str, Any]) -> None:
     config = run_copy / "config.json"

@@ -106,10 +106,10 @@ def main(argv: list[str] | None = None) -> int:
             run_play(_dcargs.build(PlayConfig, args))
         elif args.command == "train":
             from triplesumo.train.config import TrainConfig
-            from triplesumo.train.loop import train
+            from triplesumo.train.loop import RESUME_OVERRIDES, train
 
             if args.resume:
-                allowed = ("epochs", "max_minutes", "progress", "save_replay")
+                allowed = RESUME_OVERRIDES
                 if args.start_over:
                     raise ValueError("--start-over starts a new run; it cannot be given with --resume")
                 given = {k for k in vars(args) if k not in ("command", "resume", "from_checkpoint", "start_over")}

@@ -123,13 +123,16 @@ def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
+RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay")
+"""The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``)."""
+
+
 def run_id_of(cfg: TrainConfig) -> str:
-    """``NAME-HASH``: the run's name and a hash of its config less what a resume may change (``epochs``,
-    ``max_minutes``, ``progress``, ``save_replay``) or what only says where it is written (``out``). So a
-    resumed run writes what the uninterrupted one would, and two runs share an id only if they are the same
-    experiment. Taken when a run starts; its checkpoints keep it, whatever options later versions add."""
-    kept = {k: v for k, v in config_to_json(cfg).items()
-            if k not in ("out", "epochs", "max_minutes", "progress", "save_replay")}
+    """``NAME-HASH``: the run's name and a hash of its config less what a resume may change
+    (:data:`RESUME_OVERRIDES`) or what only says where it is written (``out``). So a resumed run writes what
+    the uninterrupted one would, and two runs share an id only if they are the same experiment. Taken when a
+    run starts; its checkpoints keep it, whatever options later versions add."""
+    kept = {k: v for k, v in config_to_json(cfg).items() if k not in ("out", *RESUME_OVERRIDES)}
     digest = hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()
     return f"{cfg.name}-{digest[:12]}"
 
@@ -1051,7 +1054,7 @@ class Trainer:
         except ValueError as exc:
             raise checkpoint.CheckpointError(str(exc)) from exc
         for name in ("learner", "learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
-                     "reward", "ddpg", "td3", "sac", "ppo", "seed", "self_play", "league", "backend"):
+                     "reward", "ddpg", "td3", "sac", "ppo", "learner_config", "seed", "self_play", "league", "backend"):
             # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
             if getattr(saved, name) != getattr(self.cfg, name):
                 raise checkpoint.CheckpointError(
