@@ -63,6 +63,7 @@ returns the scalars to log and appends them to ``RUN/league/league.csv``, which
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 import shutil
@@ -116,8 +117,10 @@ class LeagueConfig:
     snapshot_every: int = 50
     """Check the learners for admission every this many epochs."""
     zoo: tuple[str, ...] = ()
-    """ROLE=POLICY entries seeding each pool with one member (zero, passive, random, zoo:NAME or a policy
-    file); a pool is seeded when every one of its roles is named."""
+    """ROLE=POLICY entries seeding the pools (POLICY: zero, passive, random, zoo:NAME or a policy file,
+    e.g. another run's league/members/spider-0094/spider); a pool is seeded when every one of its roles is
+    named, with one member per entry of a role: naming a role k times seeds k members (a side's roles
+    named equally often, the i-th entries of its roles making its i-th member)."""
     draw_score: float = 0.0
     """What a match a learner finishes first but not alone (a draw: the time limit, or tied places) adds to
     its win-rate window: 0 (only a win counts, the default) or e.g. 0.5 (half a win, as chess scores it),
@@ -174,14 +177,10 @@ class LeagueConfig:
             if side in sides:
                 raise ValueError(f"LeagueConfig.side_draw_score: side {side!r} named twice")
             sides.add(side)
-        roles: set[str] = set()
         for entry in self.zoo:
             role, sep, spec = entry.partition("=")
             if not sep or not role or not spec:
                 raise ValueError(f"LeagueConfig.zoo: expected ROLE=POLICY, got {entry!r}")
-            if role in roles:
-                raise ValueError(f"LeagueConfig.zoo: role {role!r} named twice")
-            roles.add(role)
             _check_spec(spec, "LeagueConfig.zoo")
 
     def draw_score_of(self, side: str) -> float:
@@ -318,10 +317,20 @@ class League:
         self.ratings = RatingTable(config.rating_model, [self.learner(s) for s in sides])
         self.rng = np.random.default_rng(seed)
         self.epoch = epoch
-        zoo = dict(e.split("=", 1) for e in config.zoo)
+        seeds: dict[str, list[str]] = {}
+        for entry in config.zoo:
+            role, _, spec = entry.partition("=")
+            seeds.setdefault(role, []).append(spec)
         for side, pool in self.pools.items():
-            if all(r in zoo for r in pool.roles):
-                self._add(side, "zoo", epoch, lambda stems: _copy_specs(zoo, stems), {r: zoo[r] for r in pool.roles})
+            if not all(r in seeds for r in pool.roles):
+                continue
+            counts = {r: len(seeds[r]) for r in pool.roles}
+            if len(set(counts.values())) > 1:
+                raise ValueError(f"LeagueConfig.zoo names the roles of side {side!r} unequally often {counts}: the "
+                                 f"i-th entries of its roles make its i-th member")
+            for i in range(counts[pool.roles[0]]):
+                specs = {r: seeds[r][i] for r in pool.roles}
+                self._add(side, "zoo", epoch, functools.partial(_copy_specs, specs), specs)
 
     @staticmethod
     def learner(side: str) -> str:
