@@ -138,6 +138,9 @@ def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
         {"pursuer_0": "passive", "pursuer_1": "random", "pursuer_2": "passive"}]
     assert {tuple(s) for s in trainer.seat_members} == {("pursuers-0001",) * 3 + (None,)}
     assert league.pools["pursuers"].members[0].games == 4
+    # the manifest names the pool's seeds, not the --policies they replaced
+    assert load_policy(trainer.run_dir / "policy")[1]["trained_against"] == [
+        "pursuer_0=passive", "pursuer_1=random", "pursuer_2=passive"]
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     events = EventAccumulator(str(trainer.run_dir / "tensorboard"))
