@@ -330,6 +330,17 @@ def test_a_role_named_k_times_seeds_k_members_in_order_and_a_side_pairs_its_role
         League(tmp_path / "bad", LeagueConfig(zoo=("ant=random", "bug=zero", "ant=passive")), SIDES)
 
 
+def test_a_side_whose_learner_never_plays_logs_no_rating_and_the_plot_draws_none_for_it(tmp_path: Path) -> None:
+    lg = league(tmp_path)  # only the team learns: it meets spider-0001, the Spider learner never plays
+    play(lg, ["win", "loss", "draw"])
+    scalars = lg.epoch_end(1)
+    assert np.isfinite(scalars["league/team/learner_mu"]) and scalars["league/team/learner_sigma"] < 25.0 / 3.0
+    assert np.isnan(scalars["league/spider/learner_mu"]) and np.isnan(scalars["league/spider/learner_sigma"])
+    row = (tmp_path / "league" / "league.csv").read_text().splitlines()[-1].split(",")
+    assert row[1] == "spider" and row[3] == row[4] == "nan"
+    assert plot_league(tmp_path).stat().st_size > 10_000
+
+
 def test_league_config_generates_cli_flags_and_back() -> None:
     import argparse
 

@@ -497,12 +497,14 @@ class League:
     # -- logging ----------------------------------------------------------------------------
     def epoch_end(self, epoch: int) -> dict[str, float]:
         """Scalars to log for ``epoch`` (``league/SIDE/...``: pool size, learner mu and sigma, mean
-        opponent mu, snapshots admitted since the last call), also appended to ``league.csv``."""
+        opponent mu, snapshots admitted since the last call), also appended to ``league.csv``. A side's
+        learner that has played no match yet (a side that does not learn in this run) logs nan."""
         self.epoch = epoch
         out: dict[str, float] = {}
         rows = []
         for side, pool in self.pools.items():
-            me = self.ratings[self.learner(side)]
+            name = self.learner(side)
+            me = self.ratings[name] if self.ratings.matches.get(name) else Rating(math.nan, math.nan)
             opp = float(np.mean([self.ratings[m.id].mu for m in pool.members])) if pool.members else math.nan
             values = {"pool_size": float(len(pool)), "learner_mu": me.mu, "learner_sigma": me.sigma,
                       "mean_opponent_mu": opp, "admitted": float(pool.admitted_since_log)}
@@ -647,10 +649,15 @@ def plot_league(run_dir: Path, path: Path | None = None) -> Path:
         epoch = np.array([int(r["epoch"]) for r in mine])
         mu = np.array([float(r["learner_mu"]) for r in mine])
         sigma = np.array([float(r["learner_sigma"]) for r in mine])
-        line = ax.plot(epoch, mu, label=f"{side} learner")[0]
-        ax.fill_between(epoch, mu - 1.96 * sigma, mu + 1.96 * sigma, color=line.get_color(), alpha=0.2)
+        # a learner never rated (its side does not learn): nan, or in logs before nan its prior throughout
+        rated = np.isfinite(mu).any() and not (np.ptp(mu) == 0 and np.ptp(sigma) == 0 and len(mine) > 1)
+        line = ax.plot(epoch, mu if rated else np.full(len(mine), np.nan), label=f"{side} learner" if rated
+                       else "_")[0]
+        if rated:
+            ax.fill_between(epoch, mu - 1.96 * sigma, mu + 1.96 * sigma, color=line.get_color(), alpha=0.2)
         opp = np.array([float(r["mean_opponent_mu"]) for r in mine])
-        ax.plot(epoch, opp, linestyle="--", color=line.get_color(), alpha=0.7, label=f"{side} pool mean")
+        if np.isfinite(opp).any():
+            ax.plot(epoch, opp, linestyle="--", color=line.get_color(), alpha=0.7, label=f"{side} pool mean")
         ids = sorted({m for r in mine for m in r["members"].split()}, key=lambda m: int(m.rsplit("-", 1)[1]))
         held_by = [set(r["members"].split()) for r in mine]
         for m in ids:
