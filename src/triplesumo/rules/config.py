@@ -46,7 +46,9 @@ class RewardConfig:
     partner_velocity: float = 5.0
     """C3: weight of the partner-velocity term (paper's code: 5)."""
     still: float = -4.0
-    """Still punishment added every step (paper's code: -4); must be <= 0."""
+    """Still punishment added every step (paper's code: -4); must be <= 0. A constant, so over a match a
+    time penalty: a 500-step draw costs 500 x still (-2000 at -4), more than a loss, and a side that
+    cannot win earns most by losing fast (docs/LEAGUE.md (i)); 0 removes it."""
     win: float = 500.0
     """Sparse reward to every agent of the winning side (elimination rules: place 1, the last
     team standing)."""
