@@ -492,9 +492,6 @@ class Trainer:
                 extra += [f"{r}={spec_of.get(a, 'passive')}" for r, a in
                           zip(roles, [a for a in fixed if self.side_of[a] == side], strict=False)]
         lcfg = dataclasses.replace(cfg.league, zoo=(*cfg.league.zoo, *extra))
-        self.league_seeds = lcfg.zoo
-        """The ROLE=POLICY entries that seeded the opponent pools (league.zoo, else the seats' policies): what
-        the learners' manifests name as trained_against, since policies no longer fill those seats."""
         try:
             self.league = League(self.run_dir, lcfg, sides, seed=int(self.rng.integers(2**31 - 1)))
         except ValueError as err:
@@ -970,8 +967,9 @@ class Trainer:
             "mujoco_version": mujoco.__version__, "torch_version": torch.__version__,
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
             "updates": learner.algo.num_updates, "command": self.command,
-            **({"run_id": self.run_id} if self.run_id else {}), "trained_against": list(
-                self.league_seeds if self.league is not None else self.cfg.policies),
+            **({"run_id": self.run_id} if self.run_id else {}),
+            # self-play: the seeds of the opponent pools (league.zoo, else the seats' policies)
+            "trained_against": list(self.league.config.zoo if self.league is not None else self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
             "partners": len(probe.teams.partners[probe.agents.index(spec.name)]),
             "physics": dataclasses.asdict(self.cfg.physics),  # the simulation (e.g. the paper's solid rim)
