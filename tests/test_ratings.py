@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from triplesumo.evaluation.ratings import Elo, Rating, RatingTable
@@ -86,6 +87,42 @@ def test_same_results_in_the_same_order_give_the_same_ratings() -> None:
         return [t[n] for n in "abc"]
 
     assert run() == run()
+
+
+def frozen_duel(tau: float | None, matches: int, seed: int = 0) -> list[Rating]:
+    """``a`` beats ``b`` with probability 0.6, whatever it has played: frozen policies. Returns a's
+    rating after every 750 matches."""
+    table, rng, seen = RatingTable(players=["a", "b"], tau=tau), np.random.default_rng(seed), []
+    for m in range(1, matches + 1):
+        table.record([["a"], ["b"]], [1, 2] if rng.random() < 0.6 else [2, 1])
+        if m % 750 == 0:
+            seen.append(table["a"])
+    return seen
+
+
+def test_without_drift_intervals_keep_narrowing_with_openskills_default_they_floor() -> None:
+    default, frozen = frozen_duel(None, 3000), frozen_duel(0.0, 3000)
+    # openskill's default tau (25/300) adds back what a match takes away: sigma stops at about 1.5.
+    assert RatingTable().model.tau == 25.0 / 300.0 and RatingTable(tau=0.0).model.tau == 0.0
+    assert default[-1].sigma > 0.95 * default[0].sigma > 1.3
+    # tau = 0: 4 x the matches, about half the sigma (0.61 x here), and narrower than the default's.
+    assert frozen[-1].sigma < 0.7 * frozen[0].sigma
+    assert all(f.sigma < d.sigma for f, d in zip(frozen, default, strict=True))
+    assert frozen[-1].mu > 25.0  # the better player stays on top
+
+
+def test_tau_round_trips_through_the_state_dict_and_bad_values_are_named() -> None:
+    table = RatingTable(tau=0.0)
+    table.record([["a"], ["b"]], [1, 2])
+    state = table.state_dict()
+    assert state["tau"] == 0.0
+    again = RatingTable.from_state_dict(state)
+    assert again.tau == 0.0 and again.model.tau == 0.0 and again["a"] == table["a"]
+    assert "tau" not in RatingTable().state_dict()  # openskill's default: older states read the same
+    assert RatingTable.from_state_dict(RatingTable().state_dict()).tau is None
+    for bad in (-0.1, float("nan"), float("inf"), True):
+        with pytest.raises(ValueError, match="rating tau must be a finite number >= 0"):
+            RatingTable(tau=bad)  # type: ignore[arg-type]
 
 
 def test_bad_input_gives_clear_errors() -> None:

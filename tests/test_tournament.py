@@ -92,6 +92,21 @@ def test_rating_by_seat_re_rates_a_finished_tournament_without_playing(duel: tup
     assert [r["policy"] for r in rows(out / "leaderboard.csv")] == ["passive", "random"]  # kept
 
 
+def test_frozen_policies_rated_without_drift_re_rate_with_narrower_intervals(duel: tuple[Path, dict]) -> None:
+    out, default = duel
+    before = (out / "matches.csv").read_bytes()
+    frozen = run_tournament(duel_cfg(out, rating_tau=0.0, resume=True), DUEL)
+    assert (out / "matches.csv").read_bytes() == before  # the same matches, only re-rated
+    assert default["rating_tau"] == 25.0 / 300.0 and frozen["rating_tau"] == 0.0
+    was = {e["policy"]: e for e in default["leaderboard"]}
+    for e in frozen["leaderboard"]:
+        assert e["sigma"] < was[e["policy"]]["sigma"]
+        assert e["n_win"] == was[e["policy"]]["n_win"]
+    assert [e["policy"] for e in frozen["leaderboard"]] == ["passive", "random"]
+    run_tournament(duel_cfg(out, resume=True), DUEL)  # back to the default's table, for the other tests
+    assert float(rows(out / "leaderboard.csv")[0]["sigma"]) == pytest.approx(was["passive"]["sigma"], abs=1e-4)
+
+
 def test_same_seed_same_rows_whatever_the_batch(duel: tuple[Path, dict], tmp_path: Path) -> None:
     """The first 2 rounds again, one match at a time: the very same rows as 8 at once."""
     out, _ = duel
@@ -277,6 +292,7 @@ def test_tournament_command_in_the_paper_scenario(tiny_zoo_dir: Path, tmp_path: 
     ({"rating_model": "Glicko"}, "rating_model must be one of"),
     ({"rate_by": "team"}, "rate_by must be one of"),
     ({"confidence": 1.5}, "confidence must be in"),
+    ({"rating_tau": -0.01}, "rating_tau must be a finite number >= 0"),
 ])
 def test_bad_configs_name_the_field(fields: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):

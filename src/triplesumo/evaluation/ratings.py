@@ -10,6 +10,13 @@ player's ``mu`` and shrinks its ``sigma``. A rating is reported with an interval
 (``mu - 3 sigma``). Updates are applied in the order matches are recorded, so the
 same results in the same order give the same table.
 
+Before every match openskill adds ``tau**2`` to each player's ``sigma**2``: the skill may
+have drifted since it was last seen. Its default, ``25/300``, suits players who change (a
+league's learners), and it keeps ``sigma`` from falling below a floor set by how much one
+match tells (about 1.5 after a few hundred matches a policy in the paper's tournaments).
+Frozen policies do not drift: ``tau=0`` lets their intervals keep narrowing as matches are
+added, about as ``1/sqrt(matches)``.
+
 :class:`Elo` is the plain Elo rating of two-player games, for users who expect it in
 1-vs-1 matches; it has no uncertainty and no notion of teams.
 """
@@ -65,19 +72,31 @@ class Rating:
         return (self.mu - z * self.sigma, self.mu + z * self.sigma)
 
 
+def check_tau(what: str, tau: float | None) -> None:
+    """Refuse a ``tau`` that is not ``None`` or a finite number ``>= 0``, naming ``what``."""
+    if tau is None:
+        return
+    if isinstance(tau, bool) or not isinstance(tau, int | float) or not math.isfinite(tau) or tau < 0:
+        raise ValueError(f"{what} must be a finite number >= 0 (or None: openskill's default), got {tau!r}")
+
+
 class RatingTable:
     """openskill ratings of named players, updated match by match.
 
     Args:
         model: One of :data:`MODELS` (default ``"PlackettLuce"``, openskill's default).
         players: Names to start with (others are added when they first play).
+        tau: Skill drift added before every match (``None``: openskill's default, ``25/300``;
+            ``0`` for frozen policies, see the module docstring).
     """
 
-    def __init__(self, model: str = "PlackettLuce", players: Sequence[str] = ()) -> None:
+    def __init__(self, model: str = "PlackettLuce", players: Sequence[str] = (), tau: float | None = None) -> None:
         if model not in MODELS:
             raise ValueError(f"rating model must be one of {sorted(MODELS)}, got {model!r}")
+        check_tau("rating tau", tau)
         self.model_name = model
-        self.model = MODELS[model]()
+        self.tau = tau
+        self.model = MODELS[model]() if tau is None else MODELS[model](tau=float(tau))
         self._ratings: dict[str, Any] = {}
         self.matches: dict[str, int] = {}
         for name in players:
@@ -145,14 +164,19 @@ class RatingTable:
         self.matches[name] = int(matches)
 
     def state_dict(self) -> dict[str, Any]:
-        """The table as JSON-able data (model, and per player mu, sigma, matches, in order)."""
-        return {"model": self.model_name,
-                "players": [[n, float(r.mu), float(r.sigma), self.matches[n]] for n, r in self._ratings.items()]}
+        """The table as JSON-able data (model, tau where one was given, and per player mu, sigma,
+        matches, in order)."""
+        state: dict[str, Any] = {"model": self.model_name}
+        if self.tau is not None:
+            state["tau"] = float(self.tau)
+        state["players"] = [[n, float(r.mu), float(r.sigma), self.matches[n]] for n, r in self._ratings.items()]
+        return state
 
     @classmethod
     def from_state_dict(cls, state: dict[str, Any]) -> RatingTable:
         """The table :meth:`state_dict` described, exactly (floats round-trip through JSON)."""
-        table = cls(str(state["model"]))
+        tau = state.get("tau")
+        table = cls(str(state["model"]), tau=None if tau is None else float(tau))
         for name, mu, sigma, matches in state["players"]:
             table.set(str(name), Rating(float(mu), float(sigma)), int(matches))
         return table

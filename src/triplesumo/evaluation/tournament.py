@@ -49,7 +49,9 @@ Writes into ``out``: ``matches.csv`` (one row per match, appended as matches fin
 ``leaderboard.csv``, ``crossplay.csv``, ``results.json`` and ``leaderboard.png``,
 ``crossplay.png``. In 1-vs-1 rosters the leaderboard also gives plain Elo (K = 32, from
 1500). Ratings are openskill's (:mod:`~triplesumo.evaluation.ratings`),
-computed from the rows in match order: the same rows give the same table. A policy's
+computed from the rows in match order: the same rows give the same table. ``rating_tau=0``
+rates the entries as frozen policies (no skill drift between matches, so their intervals keep
+narrowing); unset keeps openskill's default drift, as every table published before it. A policy's
 rating pools its seats, so where seats are unequal (the paper's Spider seat wins more
 often than either team seat, whoever sits in it) ``rate_by="seat"`` rates each policy in
 each seat apart (``passive@spider``) and writes the tables as ``*_by_seat.*``; it changes
@@ -78,7 +80,7 @@ from triplesumo.agents.zoo import make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
-from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Elo, RatingTable
+from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Elo, RatingTable, check_tau
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import wilson_interval
 from triplesumo.evaluation.video import check_writable
@@ -121,6 +123,10 @@ class TournamentConfig:
     rating_model: str = "PlackettLuce"
     """openskill model: PlackettLuce, BradleyTerryFull, BradleyTerryPart, ThurstoneMostellerFull or
     ThurstoneMostellerPart."""
+    rating_tau: float | None = None
+    """openskill's tau, the skill drift added to every sigma before each match: unset keeps openskill's
+    default (25/300), which floors sigma at about 1.5; 0 suits frozen policies, whose intervals then keep
+    narrowing with more matches. Only the rating changes: --resume re-rates a finished tournament."""
     rate_by: str = "policy"
     """Who is rated: "policy" (one rating per policy, whatever its seat) or "seat" (one per policy and
     seat, e.g. passive@spider: fairer where seats are unequal, as in the paper's 2-vs-1)."""
@@ -171,6 +177,7 @@ class TournamentConfig:
         if self.rating_model not in MODELS:
             raise ValueError(f"TournamentConfig.rating_model must be one of {sorted(MODELS)}, "
                              f"got {self.rating_model!r}")
+        check_tau("TournamentConfig.rating_tau", self.rating_tau)
         if self.rate_by not in RATE_BY:
             raise ValueError(f"TournamentConfig.rate_by must be one of {RATE_BY}, got {self.rate_by!r}")
         if not 0.0 < self.confidence < 1.0:
@@ -488,7 +495,7 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
 
     names = [player(n, seat) for n in t.entries for seat in
              ([t.agents[0]] if cfg.rate_by == "policy" else [a for a in t.agents if a in t.seats_of[n]])]
-    table = RatingTable(cfg.rating_model, names)
+    table = RatingTable(cfg.rating_model, names, tau=cfg.rating_tau)
     counts = {n: {a: dict.fromkeys(OUTCOMES, 0) for a in t.agents} for n in names}
     policy_of = {player(n, seat): n for n in t.entries for seat in t.agents}
     wins = np.zeros((len(names), len(names)), dtype=np.int64)
@@ -538,7 +545,8 @@ def tabulate(rows: list[dict[str, str]], t: Tournament, cfg: TournamentConfig) -
                       "win_rate": w / n if n else None, "lo": None if math.isnan(lo) else lo,
                       "hi": None if math.isnan(hi) else hi})
     return {"scenario": cfg.scenario, "seats": list(t.agents), "n_matches": len(rows), "rate_by": cfg.rate_by,
-            "rating_model": cfg.rating_model, "confidence": cfg.confidence, "leaderboard": board,
+            "rating_model": cfg.rating_model, "rating_tau": float(table.model.tau), "confidence": cfg.confidence,
+            "leaderboard": board,
             "crossplay": cross}
 
 
