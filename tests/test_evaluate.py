@@ -26,12 +26,13 @@ from triplesumo.agents.policy_file import load_policy
 from triplesumo.evaluation.evaluate import (
     EvaluateConfig,
     RowAppender,
+    add_paired,
     evaluate,
     finished_rows,
     format_summary,
     play_test_epochs,
 )
-from triplesumo.evaluation.metrics import OUTCOMES
+from triplesumo.evaluation.metrics import OUTCOMES, summarize
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import DENSE_TERMS
@@ -320,6 +321,41 @@ def test_finished_rows_rejects_files_that_are_not_evaluation_csvs(tmp_path: Path
     with pytest.raises(ValueError, match="not a metrics CSV"):
         finished_rows(path, 5)
     assert finished_rows(tmp_path / "missing.csv", 5) == 0
+
+
+def test_every_later_candidate_gets_its_paired_difference_from_the_first(report: tuple[EvaluateConfig, dict]) -> None:
+    cfg, summary = report
+    lwr = {}
+    for label in summary["candidates"]:
+        with (Path(cfg.out) / label / "metrics.csv").open(newline="") as fh:
+            lwr[label] = np.array([LWR[r["outcome"]] for r in csv.DictReader(fh)])
+    assert "paired" not in summary["candidates"]["trained"]
+    for label in ("passive", "random"):
+        paired = summary["candidates"][label]["paired"]
+        assert paired["vs"] == "trained"
+        assert paired["diff"] == pytest.approx(float(np.mean(lwr[label] - lwr["trained"])))
+        assert paired["diff"] == pytest.approx(summary["candidates"][label]["mean_lwr"]
+                                               - summary["candidates"]["trained"]["mean_lwr"])
+        if paired["lo"] is not None:
+            assert paired["lo"] <= paired["diff"] <= paired["hi"]
+    assert "paired, minus trained" in format_summary(summary).splitlines()[0]
+
+
+def test_pairing_separates_what_two_unpaired_intervals_leave_overlapping() -> None:
+    """The same starts decide most of both candidates' results; one wins 10 of them more."""
+    rng = np.random.default_rng(0)
+    reference = rng.choice([-1.0, 0.0, 1.0], size=200)
+    better = reference.copy()
+    better[np.flatnonzero(reference < 1.0)[:30]] += 1.0
+    summary: dict[str, Any] = {"candidates": {
+        label: dict(summarize(["win" if v > 0 else "loss" if v < 0 else "draw" for v in x], np.full(200, 10.0)))
+        for label, x in (("trained", reference), ("better", better))}}
+    add_paired(summary, {"trained": reference, "better": better})
+    c, r = summary["candidates"]["better"], summary["candidates"]["trained"]
+    assert c["mean_lwr_lo"] < r["mean_lwr_hi"]  # unpaired: overlapping
+    assert c["paired"]["diff"] == pytest.approx(0.15) and c["paired"]["lo"] > 0.0  # paired: separated
+    with pytest.raises(ValueError, match="needs the same starts"):
+        add_paired(summary, {"trained": reference, "better": better[:100]})
 
 
 def test_format_summary_has_a_header_and_one_line_per_candidate(report: tuple[EvaluateConfig, dict]) -> None:

@@ -11,7 +11,11 @@ candidate and the baselines, not assumed.
 Writes, into ``out``: ``<label>/metrics.csv`` (the training CSV schema) and its plots
 per candidate, ``compare_mwr.png`` and ``compare_rewards.png``, and ``summary.json``
 with win/loss/draw counts and 95% Wilson intervals, the mean local winning rate (the
-test MWR over the whole run) with its 95% interval, and mean steps to win.
+test MWR over the whole run) with its 95% interval, and mean steps to win. Every candidate
+after the first also gets ``paired``: its test MWR minus the first candidate's over the same
+starts, the mean of the per-epoch differences with a 95% interval. Pairing cancels what the
+start decides for both, so it separates candidates that the two intervals of their own leave
+overlapping.
 
 Resuming: each candidate's rows are appended to its ``metrics.csv`` as the epochs finish
 (in epoch order), and ``evaluation.json`` records what the rows depend on (learner,
@@ -40,6 +44,7 @@ from triplesumo.agents.zoo import check_policy_pairs, expand_pairs, make_policy,
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.runner import SeatedResult, play_matches
+from triplesumo.evaluation.stats import mean_interval
 from triplesumo.evaluation.video import check_writable
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, MatchConfig
@@ -257,7 +262,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
                                      cfg.n_envs, cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress,
                                      first=done, on_row=append, record=cfg.record,
                                      record_dir=out / label / "matches", policy_names=seat_names)
-    curves = {}
+    curves, lwr = {}, {}
     for label, spec in candidates.items():
         path = out / label / "metrics.csv"
         metrics = read_metrics_csv(path)
@@ -265,6 +270,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             metrics, out / label / "plots", window=cfg.window, title=f"test: {cfg.learner}={spec}", label=cfg.learner
         )
         curves[f"{cfg.learner} {label} ({spec})"] = metrics
+        lwr[label] = local_winning_rate(metrics["outcome"].tolist())
         stats = summarize(metrics["outcome"].tolist(), metrics["steps"])
         summary["candidates"][label] = {
             "policy": spec,
@@ -273,6 +279,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             **{f"mean_{name}": float(np.mean(metrics[name].astype(np.float64)))
                for name in ("total_reward", "dense_reward", "sparse_reward")},
         }
+    add_paired(summary, lwr)
     plot_comparison(curves, out, window=cfg.window)
     _write_json(out / "summary.json", summary)
     _write_per_seed(out / PER_SEED_FILE, summary, record)
@@ -283,6 +290,18 @@ PER_SEED_FILE = "per_seed.csv"
 """One row per candidate policy of an evaluation (each training seed its own row): what ``compare`` reads."""
 PER_SEED_COLUMNS = ("group", "candidate", "policy", "sha256", "algo", "train_seed", "learner", "eval_seed",
                     "epochs", "n_win", "n_loss", "n_draw", "test_mwr", "test_mwr_lo", "test_mwr_hi")
+
+
+def add_paired(summary: dict[str, Any], lwr: dict[str, np.ndarray]) -> None:
+    """Give every candidate after the first its paired difference from the first (see the module docstring)."""
+    reference, *others = lwr
+    for label in others:
+        if len(lwr[label]) != len(lwr[reference]):
+            raise ValueError(f"candidates {reference!r} and {label!r} played {len(lwr[reference])} and "
+                             f"{len(lwr[label])} test epochs; a paired comparison needs the same starts")
+        diff, lo, hi = mean_interval(lwr[label] - lwr[reference])
+        summary["candidates"][label]["paired"] = {"vs": reference, "diff": _clean(diff), "lo": _clean(lo),
+                                                  "hi": _clean(hi)}
 
 
 def expand_policies(specs: tuple[str, ...]) -> list[str]:
@@ -440,14 +459,21 @@ def _write_json(path: Path, value: dict[str, Any]) -> None:
 
 def format_summary(summary: dict[str, Any]) -> str:
     """A readable table of a summary."""
+    def interval(mean: float | None, lo: float | None, hi: float | None) -> str:
+        if mean is None:
+            return "[n/a]"
+        return f"{mean:+.3f} " + ("[n/a]" if lo is None or hi is None else f"[{lo:+.3f}, {hi:+.3f}]")
+
+    first = next(iter(summary["candidates"]), "")
     lines = [
         f"{'candidate':10s} {'policy':28s} {'n':>6s} {'win':>6s} {'loss':>6s} {'draw':>6s} "
-        f"{'test MWR [95% CI]':>26s} {'steps to win':>12s}"
+        f"{'test MWR [95% CI]':>26s} {'steps to win':>12s} {('paired, minus ' + first)[:26]:>26s}"
     ]
     for label, c in summary["candidates"].items():
-        lo, hi = c["mean_lwr_lo"], c["mean_lwr_hi"]
-        ci = f"{c['mean_lwr']:+.3f} " + ("[n/a]" if lo is None or hi is None else f"[{lo:+.3f}, {hi:+.3f}]")
+        ci = interval(c["mean_lwr"], c["mean_lwr_lo"], c["mean_lwr_hi"])
         stw = "-" if c["mean_steps_to_win"] is None else f"{c['mean_steps_to_win']:.0f}"
         counts = f"{c['n']:6d} {c['n_win']:6d} {c['n_loss']:6d} {c['n_draw']:6d}"
-        lines.append(f"{label:10s} {c['policy'][:28]:28s} {counts} {ci:>26s} {stw:>12s}")
+        paired = c.get("paired")
+        diff = "-" if paired is None else interval(paired["diff"], paired["lo"], paired["hi"])
+        lines.append(f"{label:10s} {c['policy'][:28]:28s} {counts} {ci:>26s} {stw:>12s} {diff:>26s}")
     return "\n".join(lines)
