@@ -465,8 +465,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         return f"{mean:+.3f} " + ("[n/a]" if lo is None or hi is None else f"[{lo:+.3f}, {hi:+.3f}]")
 
     first = next(iter(summary["candidates"]), "")
+    w = max([10, *(len(label) for label in summary["candidates"])])  # long labels (compared files) stay aligned
     lines = [
-        f"{'candidate':10s} {'policy':28s} {'n':>6s} {'win':>6s} {'loss':>6s} {'draw':>6s} "
+        f"{'candidate':{w}s} {'policy':28s} {'n':>6s} {'win':>6s} {'loss':>6s} {'draw':>6s} "
         f"{'test MWR [95% CI]':>26s} {'steps to win':>12s} {('paired, minus ' + first)[:26]:>26s}"
     ]
     for label, c in summary["candidates"].items():
@@ -475,5 +476,5 @@ def format_summary(summary: dict[str, Any]) -> str:
         counts = f"{c['n']:6d} {c['n_win']:6d} {c['n_loss']:6d} {c['n_draw']:6d}"
         paired = c.get("paired")
         diff = "-" if paired is None else interval(paired["diff"], paired["lo"], paired["hi"])
-        lines.append(f"{label:10s} {c['policy'][:28]:28s} {counts} {ci:>26s} {stw:>12s} {diff:>26s}")
+        lines.append(f"{label:{w}s} {c['policy'][:28]:28s} {counts} {ci:>26s} {stw:>12s} {diff:>26s}")
     return "\n".join(lines)
