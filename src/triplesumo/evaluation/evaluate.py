@@ -270,8 +270,9 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             metrics, out / label / "plots", window=cfg.window, title=f"test: {cfg.learner}={spec}", label=cfg.learner
         )
         curves[f"{cfg.learner} {label} ({spec})"] = metrics
-        lwr[label] = local_winning_rate(metrics["outcome"].tolist())
-        stats = summarize(metrics["outcome"].tolist(), metrics["steps"])
+        outcomes = metrics["outcome"].tolist()
+        lwr[label] = local_winning_rate(outcomes)
+        stats = summarize(outcomes, metrics["steps"])
         summary["candidates"][label] = {
             "policy": spec,
             "group": "trained" if label in seeds else label,
