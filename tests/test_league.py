@@ -108,6 +108,32 @@ def test_a_side_can_score_its_draws_apart_from_the_others(tmp_path: Path) -> Non
     assert League.load(tmp_path).config == lg.config and lg.config.draw_score_of("spider") == 0.0
 
 
+def test_a_side_can_have_its_own_admission_threshold(tmp_path: Path) -> None:
+    lg = league(tmp_path, threshold=0.5, window=10, side_threshold=("team=0.25",))
+    assert lg.pools["team"].threshold == 0.25 and lg.pools["spider"].threshold == 0.5
+    assert lg.config.threshold_of("team") == 0.25 and lg.config.threshold_of("spider") == 0.5
+    play(lg, ["win"] * 3 + ["loss"] * 7)  # the team scores 0.3: above its own 0.25, below the others' 0.5
+    assert lg.pools["team"].win_rate == pytest.approx(0.3) and lg.admit_due("team", 1)
+    plain = league(tmp_path / "plain", threshold=0.5, window=10)
+    play(plain, ["win"] * 3 + ["loss"] * 7)
+    assert not plain.admit_due("team", 1)
+    at = league(tmp_path / "at", threshold=0.5, window=10, side_threshold=("team=0.3",))
+    play(at, ["win"] * 3 + ["loss"] * 7)
+    assert not at.admit_due("team", 1)  # exactly at its threshold is not above it
+    for _ in range(10):  # the Spider's window (its wins) is held to the run's threshold
+        lg.record_outcomes([[TEAM], [SPIDER]], ["win", "loss"])
+    assert lg.pools["spider"].win_rate == 0.0 and not lg.admit_due("spider", 1)
+    with pytest.raises(ValueError, match="side_threshold names sides this run has not"):
+        League(tmp_path / "x", LeagueConfig(side_threshold=("ffa=0.3",)), SIDES)
+    lg.save()  # pool.json holds JSON lists; the config read back is the one saved
+    back = League.load(tmp_path)
+    assert back.config == lg.config and back.pools["team"].threshold == 0.25 and back.admit_due("team", 1)
+    old = json.loads((tmp_path / "league" / "pool.json").read_text())
+    del old["config"]["side_threshold"]  # a pool.json written before the option existed
+    (tmp_path / "league" / "pool.json").write_text(json.dumps(old))
+    assert League.load(tmp_path).config.side_threshold == ()
+
+
 def test_admission_is_checked_only_every_snapshot_every_epochs(tmp_path: Path) -> None:
     lg = league(tmp_path, threshold=0.5, window=4, snapshot_every=5)
     play(lg, ["win"] * 4)
@@ -253,6 +279,10 @@ def test_rating_table_round_trips_exactly() -> None:
     ({"draw_score": True}, "draw_score"), ({"side_draw_score": ("spider",)}, "side_draw_score"),
     ({"side_draw_score": ("spider=2",)}, "side_draw_score"), ({"side_draw_score": ("spider=half",)}, "side_draw_score"),
     ({"side_draw_score": ("spider=0", "spider=1")}, "side_draw_score"),
+    ({"side_threshold": ("team",)}, "side_threshold"), ({"side_threshold": ("team=1",)}, "side_threshold"),
+    ({"side_threshold": ("team=-0.1",)}, "side_threshold"), ({"side_threshold": ("=0.3",)}, "side_threshold"),
+    ({"side_threshold": ("team=0.3", "team=0.2")}, "side_threshold"),
+    ({"side_threshold": ("team=nan",)}, "side_threshold"),
 ])
 def test_bad_config_names_the_field(kw: dict[str, object], field: str) -> None:
     with pytest.raises(ValueError, match=f"LeagueConfig.{field}"):

@@ -215,6 +215,13 @@ def test_cli_parses_self_play_options(tmp_path: Path, capsys: pytest.CaptureFixt
     saved = config_to_json(cfg)
     del saved["league"]["side_draw_score"]  # a config.json written before the option existed
     assert config_from_json(saved).league.side_draw_score == ()
+    assert main(["train", "--self-play", "--league.side-threshold", "team=1", "--out", str(tmp_path)]) != 0
+    assert "LeagueConfig.side_threshold" in capsys.readouterr().err
+    cfg = tiny(tmp_path, "own", league=LeagueConfig(side_threshold=("team=0.3",)), **SPIDER)
+    assert config_from_json(config_to_json(cfg)).league.side_threshold == ("team=0.3",)
+    saved = config_to_json(cfg)
+    del saved["league"]["side_threshold"]
+    assert config_from_json(saved).league.side_threshold == ()
 
 
 # ------------------------------------------------------------- both sides learn in one run

@@ -29,10 +29,14 @@ def _parser() -> argparse.ArgumentParser:
                        help="continue the killed or finished run in RUN_DIR (its saved config; "
                             "--epochs and --max-minutes may be raised; --no-save-replay resumes from a checkpoint "
                             "whose replay buffer was not kept, with an empty buffer: not bit-exact)")
+    train.add_argument("--fork", metavar="RUN_DIR", default=None,
+                       help="a new run (--name NEW; --out defaults to RUN_DIR's folder) that continues RUN_DIR's "
+                            "latest checkpoint (or --from epoch-N) under changed --league.* rules or budgets "
+                            "(--epochs, --max-minutes, ...); RUN_DIR is not changed. Writes NEW/fork.json")
     train.add_argument("--from", dest="from_checkpoint", metavar="epoch-N", default=None,
                        help="with --resume: continue from this checkpoint of the run instead of the latest (e.g. "
                             "when the latest is damaged: the error names the newest intact one); later epochs are "
-                            "trained again")
+                            "trained again. With --fork: the checkpoint the fork starts from")
     train.add_argument("--start-over", action="store_true",
                        help="train afresh although OUT/NAME already holds a run: that run is first moved aside to "
                             "OUT/NAME.old-K (without this, training refuses such a folder and changes nothing)")
@@ -108,11 +112,31 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.train.config import TrainConfig
             from triplesumo.train.loop import RESUME_OVERRIDES, train
 
-            if args.resume:
+            plain = ("command", "resume", "fork", "from_checkpoint", "start_over")
+            given = {k for k in vars(args) if k not in plain}
+            if args.fork:
+                import dataclasses
+
+                from triplesumo.agents.policy_file import load_json
+                from triplesumo.train.fork import fork_run
+                from triplesumo.train.loop import config_from_json
+
+                if args.resume or args.start_over:
+                    raise ValueError("--fork makes a new run; it cannot be given with --resume or --start-over")
+                if "name" not in given:
+                    raise ValueError("--fork needs --name NEW: the fork's own run folder (OUT/NEW)")
+                parent = Path(args.fork)
+                if not (parent / "config.json").is_file():
+                    raise FileNotFoundError(f"{parent / 'config.json'}: no run to fork (file not found)")
+                saved = config_from_json(load_json(parent / "config.json"), str(parent / "config.json"))
+                base = saved if "out" in given else dataclasses.replace(saved, out=str(parent.parent))
+                run_dir = fork_run(parent, _dcargs.build(TrainConfig, args, base=base), args.from_checkpoint)
+                print(f"forked {parent} into {run_dir} (fork.json says from where and what changed)")
+                result = train(TrainConfig(), resume_dir=run_dir)
+            elif args.resume:
                 allowed = RESUME_OVERRIDES
                 if args.start_over:
                     raise ValueError("--start-over starts a new run; it cannot be given with --resume")
-                given = {k for k in vars(args) if k not in ("command", "resume", "from_checkpoint", "start_over")}
                 if given - set(allowed):
                     extra = given - set(allowed)
                     flags = ", ".join(sorted("--" + k.replace("__", ".").replace("_", "-") for k in extra))
@@ -123,7 +147,8 @@ def main(argv: list[str] | None = None) -> int:
                                from_checkpoint=args.from_checkpoint)
             else:
                 if args.from_checkpoint:
-                    raise ValueError("--from needs --resume RUN_DIR (it names a checkpoint of that run)")
+                    raise ValueError("--from needs --resume RUN_DIR or --fork RUN_DIR (it names a checkpoint of "
+                                     "that run)")
                 cfg = _dcargs.build(TrainConfig, args)
                 result = train(cfg, start_over=args.start_over)
             print(f"trained {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates "

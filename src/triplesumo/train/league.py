@@ -23,8 +23,9 @@ The rules, after AlphaStar's league and RLlib's league example:
   the last :attr:`LeagueConfig.window` matches, and each member it met counts the
   learner's result against it (win: better place, draw: same place, loss: worse).
 * **Admission.** At epochs that are multiples of :attr:`LeagueConfig.snapshot_every`, a
-  side whose window is full and whose win rate is strictly greater than
-  :attr:`LeagueConfig.threshold` is due (:meth:`League.admit_due`); :meth:`League.admit`
+  side whose window is full and whose win rate is strictly greater than its threshold
+  (:attr:`LeagueConfig.threshold`, or :attr:`LeagueConfig.side_threshold` for that side) is due
+  (:meth:`League.admit_due`); :meth:`League.admit`
   then has the trainer write the learner's policy files, adds the snapshot (rated as the
   learner is at that moment) and empties the window, so the next snapshot must beat the
   grown pool.
@@ -129,6 +130,10 @@ class LeagueConfig:
     """SIDE=SCORE entries that give one side another draw score than ``draw_score``: in the paper's 2-vs-1
     ``spider=0`` (with ``draw_score`` 0.5) admits a Spider snapshot only for pushing the team out, while a
     team that keeps both quadrupeds in still scores its draws."""
+    side_threshold: tuple[str, ...] = ()
+    """SIDE=T entries that give one side its own admission threshold (T in [0, 1)) instead of ``threshold``:
+    in the paper's 2-vs-1 ``team=0.3`` lets a team that loses most of its matches to a pushing Spider still
+    add snapshots when it improves, so the Spider meets a growing pool of teams rather than one early one."""
     live_share: float = 0.35
     """With several learning sides (both sides of the 2-vs-1 learn): the probability that a match is between
     the live learners; otherwise one learning side (uniform) plays members of the others' pools."""
@@ -137,7 +142,7 @@ class LeagueConfig:
     ThurstoneMostellerFull or ThurstoneMostellerPart."""
 
     def __post_init__(self) -> None:
-        for name in ("zoo", "side_draw_score"):  # JSON (config.json, pool.json) gives lists
+        for name in ("zoo", "side_draw_score", "side_threshold"):  # JSON (config.json, pool.json) gives lists
             if isinstance(getattr(self, name), list):
                 object.__setattr__(self, name, tuple(getattr(self, name)))
         if not (isinstance(self.threshold, int | float) and not isinstance(self.threshold, bool)
@@ -164,19 +169,8 @@ class LeagueConfig:
         if self.rating_model not in MODELS:
             raise ValueError(f"LeagueConfig.rating_model must be one of {sorted(MODELS)}, "
                              f"got {self.rating_model!r}")
-        sides: set[str] = set()
-        for entry in self.side_draw_score:
-            side, sep, score = entry.partition("=")
-            try:
-                value = float(score)
-            except ValueError:
-                value = math.nan
-            if not sep or not side or not 0.0 <= value <= 1.0:
-                raise ValueError(f"LeagueConfig.side_draw_score: expected SIDE=SCORE with SCORE in [0, 1], "
-                                 f"got {entry!r}")
-            if side in sides:
-                raise ValueError(f"LeagueConfig.side_draw_score: side {side!r} named twice")
-            sides.add(side)
+        _side_values(self.side_draw_score, "side_draw_score", "SCORE", "[0, 1]", lambda v: 0.0 <= v <= 1.0)
+        _side_values(self.side_threshold, "side_threshold", "T", "[0, 1)", lambda v: 0.0 <= v < 1.0)
         for entry in self.zoo:
             role, sep, spec = entry.partition("=")
             if not sep or not role or not spec:
@@ -186,8 +180,35 @@ class LeagueConfig:
     def draw_score_of(self, side: str) -> float:
         """What a draw adds to ``side``'s win-rate window: its :attr:`side_draw_score` entry, else
         :attr:`draw_score`."""
-        own = dict(e.split("=", 1) for e in self.side_draw_score)
-        return float(own.get(side, self.draw_score))
+        return _side_values(self.side_draw_score).get(side, float(self.draw_score))
+
+    def threshold_of(self, side: str) -> float:
+        """The win rate ``side``'s window must pass for its learner to be admitted: its
+        :attr:`side_threshold` entry, else :attr:`threshold`."""
+        return _side_values(self.side_threshold).get(side, float(self.threshold))
+
+    def sides_named(self) -> dict[str, list[str]]:
+        """Field -> the sides its SIDE=VALUE entries name (checked against a run's sides by :class:`League`)."""
+        return {name: list(_side_values(getattr(self, name))) for name in ("side_draw_score", "side_threshold")}
+
+
+def _side_values(entries: Sequence[str], name: str = "", value: str = "", bounds: str = "",
+                 ok: Callable[[float], bool] = lambda v: True) -> dict[str, float]:
+    """SIDE=VALUE ``entries`` as side -> value; ``ValueError`` naming ``LeagueConfig.<name>`` for an entry
+    without a side, a value that is not a number or fails ``ok``, or a side named twice."""
+    out: dict[str, float] = {}
+    for entry in entries:
+        side, sep, text = entry.partition("=")
+        try:
+            number = float(text)
+        except ValueError:
+            number = math.nan
+        if not sep or not side or not ok(number):
+            raise ValueError(f"LeagueConfig.{name}: expected SIDE={value} with {value} in {bounds}, got {entry!r}")
+        if side in out:
+            raise ValueError(f"LeagueConfig.{name}: side {side!r} named twice")
+        out[side] = number
+    return out
 
 
 def _check_spec(spec: str, where: str) -> None:
@@ -239,6 +260,8 @@ class OpponentPool:
         self.side, self.roles, self.config = side, roles, config
         self.draw_score = config.draw_score_of(side)
         """What a draw adds to this side's window."""
+        self.threshold = config.threshold_of(side)
+        """The win rate this side's window must pass for admission."""
         self.members: list[Snapshot] = []
         self.evicted: list[Snapshot] = []
         self.window: deque[float] = deque(maxlen=config.window)
@@ -307,10 +330,11 @@ class League:
         unknown = [e for e in config.zoo if e.partition("=")[0] not in all_roles]
         if unknown:
             raise ValueError(f"LeagueConfig.zoo names roles no side has: {unknown}; roles are {sorted(all_roles)}")
-        unknown = [e for e in config.side_draw_score if e.partition("=")[0] not in sides]
-        if unknown:
-            raise ValueError(f"LeagueConfig.side_draw_score names sides this run has not: {unknown}; "
-                             f"sides are {sorted(sides)}")
+        for name, named in config.sides_named().items():
+            unknown = [s for s in named if s not in sides]
+            if unknown:
+                raise ValueError(f"LeagueConfig.{name} names sides this run has not: {unknown}; "
+                                 f"sides are {sorted(sides)}")
         self.root = Path(run_dir) / "league"
         self.config = config
         self.pools = {side: OpponentPool(side, tuple(roles), config) for side, roles in sides.items()}
@@ -441,10 +465,10 @@ class League:
     # -- admission --------------------------------------------------------------------------
     def admit_due(self, side: str, epoch: int) -> bool:
         """Whether ``side``'s learner joins its pool now: at a multiple of ``snapshot_every``, with a
-        full window whose win rate is greater than ``threshold``."""
+        full window whose win rate is greater than the side's threshold (:meth:`LeagueConfig.threshold_of`)."""
         pool = self._pool(side)
         return (epoch % self.config.snapshot_every == 0 and len(pool.window) == self.config.window
-                and pool.win_rate > self.config.threshold)
+                and pool.win_rate > pool.threshold)
 
     def admit(self, side: str, epoch: int, write: Callable[[Mapping[str, Path]], None] | None = None,
               builtin: Mapping[str, str] | None = None) -> Snapshot:

@@ -123,6 +123,8 @@ def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
+FORK_FILE = "fork.json"
+"""In a run folder made by ``train --fork`` (:mod:`triplesumo.train.fork`): where it came from."""
 RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay")
 """The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``)."""
 
@@ -154,7 +156,7 @@ ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "ma
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget, evaluations while training): a config.json without them gets their defaults; any other
 missing key is an error."""
-LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score")
+LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_threshold")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
 
@@ -363,7 +365,12 @@ class Trainer:
         self.device: torch.device | None = getattr(self.env, "device", None) if cfg.backend == "warp" else None
         """Where a ``warp`` run keeps observations, actions, replay and rollouts (None: numpy on the host)."""
         self.run_dir = prepare_run_dir(run_dir)
-        self.command = command or command_for(cfg)
+        fork = load_json(self.run_dir / FORK_FILE) if resume and (self.run_dir / FORK_FILE).is_file() else None
+        self.forked_from: dict[str, Any] | None = None if fork is None else {
+            "run": fork["parent"], "run_id": fork["parent_run_id"], "checkpoint": fork["checkpoint"],
+            "epoch": fork["epoch"], "command": fork["parent_command"], "changes": fork["changes"]}
+        """A fork's parent (``fork.json``), named in every policy manifest it writes; None for other runs."""
+        self.command = command or (fork["command"] if fork is not None else command_for(cfg))
         self.run_id: str | None = run_id_of(cfg)
         """This run's id (:func:`run_id_of`), kept by its checkpoints: every policy file it writes (its own and
         its league snapshots, across resumes) names it, so copies of them still group by run. None for a run
@@ -968,6 +975,7 @@ class Trainer:
             "seed": self.cfg.seed, "epochs": self.epochs_done, "env_steps": self.env_steps,
             "updates": learner.algo.num_updates, "command": self.command,
             **({"run_id": self.run_id} if self.run_id else {}),
+            **({"forked_from": self.forked_from} if self.forked_from else {}),
             # self-play: the seeds of the opponent pools (league.zoo, else the seats' policies)
             "trained_against": list(self.league.config.zoo if self.league is not None else self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,

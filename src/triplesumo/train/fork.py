@@ -1,0 +1,186 @@
+"""Forks: a new run that continues another run's checkpoint under changed league rules.
+
+``train --resume`` continues a run exactly as it was configured; a fork is how a researcher
+asks "what if this run had gone on with another admission threshold?" without training from
+scratch again. :func:`fork_run` makes ``OUT/NAME`` from checkpoint ``epoch-N`` of a parent
+run (its latest by default):
+
+* the parent's checkpoint folder (networks, optimizers, every generator, the in-flight
+  matches, the league's state; the replay buffer where one was kept and the fork keeps
+  replay), with its ``state.json`` carrying the fork's config and run id;
+* the league members the checkpoint needs: every member of every pool, and those evicted
+  members still seated in an in-flight match (the other evicted members stay in the parent,
+  listed in ``fork.json``), ``league/pool.json`` and ``league/league.csv``;
+* the parent's metrics, learning and evaluation CSVs (cut back to the fork's epoch when
+  training starts), so the fork's curves begin where the parent's stood;
+* ``config.json`` (the fork's config) and ``fork.json``: the parent folder, its run id and
+  command, the checkpoint and its epoch and env steps, each changed field as ``[parent,
+  fork]``, the fork's command, and the evicted members left behind.
+
+Training then resumes the new folder (:func:`~triplesumo.train.loop.train` with
+``resume_dir``); the fork's policy files name the fork's command and carry ``forked_from``
+(the parent's command, run id and checkpoint) in their manifests. A fork may change only
+what leaves the checkpoint meaningful (:data:`FORK_FIELDS`: the league's rules but its zoo
+seeds and rating model, and the budget and bookkeeping fields); anything else (networks,
+algorithms, rewards, roster, seed) is refused naming the field, since the networks and
+matches being continued were made under it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shlex
+import shutil
+from pathlib import Path
+from typing import Any
+
+from triplesumo.agents.policy_file import atomic_write_bytes, file_sha256, load_json
+from triplesumo.train import checkpoint
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.league import LOG_FILE, POOL_FILE
+from triplesumo.train.loop import (
+    FORK_FILE,
+    RESUME_OVERRIDES,
+    config_from_json,
+    config_to_json,
+    holds_run,
+    prepare_run_dir,
+    run_id_of,
+)
+
+FORK_FORMAT = "triplesumo-fork/1"
+FORK_FIELDS = ("name", "out", "checkpoint_every", "tensorboard", "max_env_steps", *RESUME_OVERRIDES, "league")
+"""The TrainConfig fields a fork may change (``league`` but its ``zoo`` and ``rating_model``)."""
+LEAGUE_FIXED = ("zoo", "rating_model")
+"""League fields a fork keeps: the pools were seeded and rated under them."""
+
+
+def _changes(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
+    """Dotted field -> ``[parent value, fork value]`` for every field that differs (league fields one by one)."""
+    old, new = config_to_json(parent), config_to_json(cfg)
+    out: dict[str, list[Any]] = {}
+    for key in new:
+        if key == "league" and isinstance(new[key], dict):
+            out |= {f"league.{k}": [old[key][k], v] for k, v in new[key].items() if old[key][k] != v}
+        elif old[key] != new[key]:
+            out[key] = [old[key], new[key]]
+    return out
+
+
+def fork_command(parent_dir: Path, cfg: TrainConfig, changes: dict[str, list[Any]],
+                 from_checkpoint: str | None) -> str:
+    """The ``triplesumo train --fork`` command line that makes this fork."""
+    argv = ["triplesumo", "train", "--fork", str(parent_dir)]
+    argv += ["--from", from_checkpoint] if from_checkpoint else []
+    argv += ["--name", cfg.name, "--out", cfg.out]
+    for key, (_, value) in changes.items():
+        if key in ("name", "out"):
+            continue
+        flag = "--" + key.replace("_", "-")
+        if isinstance(value, bool):
+            argv.append(flag if value else "--no-" + flag[2:])
+        elif isinstance(value, list):
+            argv += [flag, *map(str, value)]
+        else:
+            argv += [flag, str(value)]
+    return " ".join(shlex.quote(a) for a in argv)
+
+
+def check_fork(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
+    """The fork's changes (:func:`_changes`); ``ValueError`` naming a field a fork may not change."""
+    changes = _changes(parent, cfg)
+    bad = [k for k in changes if k.split(".")[0] not in FORK_FIELDS or k.removeprefix("league.") in LEAGUE_FIXED]
+    if bad:
+        flags = ", ".join("--" + k.replace("_", "-") for k in bad)
+        raise ValueError(f"a fork continues the parent's networks, matches and pools, so it keeps their config; "
+                         f"it may change --league.* (not --league.zoo or --league.rating-model), --epochs, "
+                         f"--max-minutes, --max-env-steps, --checkpoint-every, --progress, --tensorboard and "
+                         f"--save-replay, not {flags}")
+    return changes
+
+
+def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | None = None) -> Path:
+    """Make the fork ``cfg.out/cfg.name`` of the run in ``parent_dir`` at its checkpoint ``from_checkpoint``
+    (``epoch-N``; default its latest) and return its folder (module docstring). ``cfg`` is the parent's
+    config with the fork's changes (:func:`check_fork`); nothing is written when a check fails."""
+    parent_dir = Path(parent_dir)
+    if not (parent_dir / "config.json").is_file():
+        raise FileNotFoundError(f"{parent_dir / 'config.json'}: no run to fork (file not found)")
+    parent = config_from_json(load_json(parent_dir / "config.json"), str(parent_dir / "config.json"))
+    changes = check_fork(parent, cfg)
+    run_dir = Path(cfg.out) / cfg.name
+    if run_dir.resolve() == parent_dir.resolve():
+        raise ValueError(f"a fork needs its own folder: --name/--out give {run_dir}, the parent's folder")
+    if holds_run(run_dir):
+        raise ValueError(f"run folder {run_dir} already holds a run; a fork writes a new folder (choose another "
+                         f"--name, or continue that run with `triplesumo train --resume {run_dir}`)")
+    folder = checkpoint.find(parent_dir, from_checkpoint) if from_checkpoint else checkpoint.latest(parent_dir)
+    need_replay = cfg.save_replay and (folder / "replay.npz").is_file()
+    checkpoint.verify(folder, need_replay=need_replay)
+    state = load_json(folder / "state.json")
+    epoch = int(state["epochs_done"])
+
+    league_files: list[str] = []
+    left_behind: list[str] = []
+    if "league" in state:
+        seated = {m for seats in state.get("seats", []) for m in seats if m}
+        league_state = state["league"]
+        for pool in league_state["pools"].values():
+            kept = [m for m in pool["evicted"] if m["id"] in seated]
+            left_behind += [m["id"] for m in pool["evicted"] if m["id"] not in seated]
+            pool["evicted"] = kept
+            league_files += [rel for m in (*pool["members"], *kept) for rel in m["sha256"]]
+        league_state["config"] = dataclasses.asdict(cfg.league)
+    command = fork_command(parent_dir, cfg, changes, from_checkpoint)
+    manifests = state.get("manifests") or {}
+    record = {
+        "format": FORK_FORMAT, "parent": str(parent_dir), "parent_run_id": state.get("run_id"),
+        "parent_command": next((m.get("command") for m in manifests.values()), None),
+        "checkpoint": folder.name, "epoch": epoch, "env_steps": int(state["env_steps"]), "changes": changes,
+        "command": command, "evicted_left_behind": left_behind,
+    }
+    state["config"] = config_to_json(cfg)
+    state["run_id"] = run_id_of(cfg)
+
+    created = not run_dir.exists()
+    prepare_run_dir(run_dir)
+    written: list[Path] = []
+    try:
+        target = run_dir / "checkpoints" / folder.name
+        written += [run_dir / "checkpoints", run_dir / "league", run_dir / FORK_FILE, run_dir / "config.json",
+                    *(run_dir / f.name for f in parent_dir.glob("*.csv"))]
+        target.mkdir(parents=True)
+        files = ["weights.safetensors", "arrays.npz", *(["replay.npz"] if need_replay else [])]
+        for name in files:
+            shutil.copyfile(folder / name, target / name)
+        atomic_write_bytes(target / "state.json", _json_bytes(state))
+        manifest = {"format": checkpoint.CHECKPOINT_FORMAT, "epoch": epoch,
+                    "sha256": {name: file_sha256(target / name) for name in (*files, "state.json")}}
+        atomic_write_bytes(target / checkpoint.MANIFEST, _json_bytes(manifest))
+        atomic_write_bytes(run_dir / "checkpoints" / "latest.json",
+                           _json_bytes({"dir": folder.name, "epoch": epoch}))
+        if "league" in state:
+            for rel in league_files:
+                dest = run_dir / "league" / rel
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copyfile(parent_dir / "league" / rel, dest)
+            atomic_write_bytes(run_dir / "league" / POOL_FILE, (json.dumps(state["league"], indent=1) + "\n").encode())
+            if (parent_dir / "league" / LOG_FILE).is_file():
+                shutil.copyfile(parent_dir / "league" / LOG_FILE, run_dir / "league" / LOG_FILE)
+        for csv_file in sorted(parent_dir.glob("*.csv")):  # metrics*, learning*, eval*: cut back on resume
+            shutil.copyfile(csv_file, run_dir / csv_file.name)
+        atomic_write_bytes(run_dir / FORK_FILE, (json.dumps(record, indent=1) + "\n").encode())
+        atomic_write_bytes(run_dir / "config.json", (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
+    except BaseException:  # a half-made fork is no run: take back what was written
+        for path in [run_dir] if created else written:
+            if path.is_dir():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
+        raise
+    return run_dir
+
+
+def _json_bytes(value: dict[str, Any]) -> bytes:
+    return (json.dumps(value) + "\n").encode()

@@ -1,0 +1,139 @@
+"""``train --fork``: a new run continuing another run's checkpoint under changed league rules.
+
+The tiny two-sided self-play run of ``test_train_selfplay`` (both sides of the 2-vs-1 learning,
+16 matches of 20 steps): a fork that changes nothing but the budget continues exactly as the
+uninterrupted run; a fork that changes the admission threshold admits by the new rule from its
+first epoch; the parent is never touched; what a fork may not change is refused by name.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from test_train_selfplay import BOTH_COMMAND, both
+from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
+from triplesumo.cli import main
+from triplesumo.train.fork import fork_run
+from triplesumo.train.league import LeagueConfig
+from triplesumo.train.loop import Trainer, train
+
+
+def rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return [{k: v for k, v in r.items() if k != "wall_time"} for r in csv.DictReader(fh)]
+
+
+def digests(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): file_sha256(p) for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Trainer, Trainer]:
+    """The uninterrupted 16-epoch run and its first 8 epochs (the parent of the forks)."""
+    full = Trainer(both(tmp_path_factory.mktemp("full")), command=BOTH_COMMAND)
+    full.run()
+    half = Trainer(both(tmp_path_factory.mktemp("half"), epochs=8), command=BOTH_COMMAND)
+    half.run()
+    return full, half
+
+
+def test_a_fork_that_changes_only_the_budget_continues_as_the_uninterrupted_run(
+        runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
+    full, half = runs
+    before = digests(half.run_dir)
+    cfg = dataclasses.replace(half.cfg, name="more", out=str(tmp_path), epochs=16)
+    fork_dir = fork_run(half.run_dir, cfg)
+    assert digests(half.run_dir) == before  # the parent is untouched
+    record = json.loads((fork_dir / "fork.json").read_text())
+    assert record["epoch"] == 8 and record["checkpoint"] == "epoch-000008" and record["changes"] == {
+        "name": ["both", "more"], "out": [half.cfg.out, str(tmp_path)], "epochs": [8, 16]}
+    assert record["parent_command"] == BOTH_COMMAND and record["parent_run_id"] == half.run_id
+    result = train(dataclasses.replace(cfg, epochs=1), resume_dir=fork_dir)  # the saved config is used
+    assert result.epochs == 16
+    assert full.league is not None
+    a, b = full.run_dir, fork_dir
+    for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
+        assert rows(a / name) == rows(b / name), name
+    assert (a / "league/league.csv").read_text() == (b / "league/league.csv").read_text()
+    mine, theirs = (json.loads((r / "league/pool.json").read_text()) for r in (b, a))
+    def weights_only(members: list[dict[str, object]]) -> list[dict[str, object]]:
+        """A member less the digests of its manifests (they name the fork's command and run id)."""
+        return [m | {"sha256": {f: d for f, d in m["sha256"].items() if f.endswith(".safetensors")}}  # type: ignore
+                for m in members]
+
+    for side, pool in theirs["pools"].items():
+        assert weights_only(mine["pools"][side]["members"]) == weights_only(pool["members"])
+        assert mine["pools"][side]["window"] == pool["window"]
+        assert {m["id"] for m in mine["pools"][side]["evicted"]} <= {m["id"] for m in pool["evicted"]}
+    assert mine["ratings"] == theirs["ratings"] and mine["rng"] == theirs["rng"]
+    for learner in ("ant+bug", "spider"):
+        x, y = load_tensors(a / f"policy-{learner}.safetensors"), load_tensors(b / f"policy-{learner}.safetensors")
+        assert x.keys() == y.keys() and all((x[k] == y[k]).all() for k in x), learner
+        _, manifest = load_policy(b / f"policy-{learner}")
+        assert manifest["command"] == record["command"] and manifest["command"].startswith(
+            f"triplesumo train --fork {half.run_dir} --name more")
+        assert manifest["forked_from"]["run_id"] == half.run_id and manifest["forked_from"]["epoch"] == 8
+        assert manifest["run_id"] != half.run_id
+    # the fork resumes like any run
+    assert train(cfg, resume_dir=fork_dir, overrides={"epochs": 18}).epochs >= 18
+
+
+def test_a_fork_admits_by_its_own_league_rules_from_the_fork_epoch(
+        runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
+    full, half = runs
+    assert full.league is not None
+    admitted_after = [m for p in full.league.pools.values() for m in (*p.members, *p.evicted) if m.epoch > 8]
+    assert admitted_after  # uninterrupted, the threshold of 0 goes on admitting
+    strict = dataclasses.replace(half.cfg.league, snapshot_every=1000, side_threshold=("team=0.95",))
+    cfg = dataclasses.replace(half.cfg, name="strict", out=str(tmp_path), epochs=16, league=strict)
+    fork_dir = fork_run(half.run_dir, cfg)
+    record = json.loads((fork_dir / "fork.json").read_text())
+    assert record["changes"]["league.snapshot_every"] == [2, 1000]
+    assert record["changes"]["league.side_threshold"] == [[], ["team=0.95"]]
+    trainer = Trainer(cfg, run_dir=fork_dir, resume=True)
+    trainer.run()
+    assert trainer.league is not None and trainer.league.config == strict
+    assert trainer.league.pools["team"].threshold == 0.95 and trainer.league.pools["spider"].threshold == 0.0
+    assert not [m for p in trainer.league.pools.values() for m in (*p.members, *p.evicted) if m.epoch > 8]
+    assert "--league.snapshot-every 1000 --league.side-threshold team=0.95" in record["command"]
+
+
+def test_what_a_fork_may_not_change_is_refused_by_name_and_nothing_is_written(
+        runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
+    _, half = runs
+    base = dataclasses.replace(half.cfg, name="bad", out=str(tmp_path))
+    for change, flag in (({"seed": 4}, "--seed"), ({"ddpg": dataclasses.replace(half.cfg.ddpg, actor_lr=1.0)},
+                                                   "--ddpg"),
+                         ({"league": dataclasses.replace(half.cfg.league, zoo=("spider=passive",))}, "--league.zoo")):
+        with pytest.raises(ValueError, match=f"a fork continues .* not {flag}"):
+            fork_run(half.run_dir, dataclasses.replace(base, **change))
+        assert not (tmp_path / "bad").exists()
+    with pytest.raises(ValueError, match="the parent's folder"):
+        fork_run(half.run_dir, dataclasses.replace(half.cfg, epochs=9))
+    fork_run(half.run_dir, base)
+    with pytest.raises(ValueError, match="already holds a run"):
+        fork_run(half.run_dir, base)
+    with pytest.raises(FileNotFoundError, match="no run to fork"):
+        fork_run(tmp_path / "nothing", base)
+
+
+def test_cli_fork_writes_beside_the_parent_and_needs_a_name(
+        runs: tuple[Trainer, Trainer], capsys: pytest.CaptureFixture[str]) -> None:
+    _, half = runs
+    assert main(["train", "--fork", str(half.run_dir), "--epochs", "10"]) == 2
+    assert "--fork needs --name" in capsys.readouterr().err
+    assert main(["train", "--fork", str(half.run_dir), "--name", "cli", "--seed", "5"]) == 2
+    assert "not --seed" in capsys.readouterr().err
+    assert main(["train", "--fork", str(half.run_dir), "--name", "cli", "--epochs", "10",
+                 "--league.side-threshold", "team=0.5", "--from", "epoch-8"]) == 0
+    fork_dir = half.run_dir.parent / "cli"
+    saved = json.loads((fork_dir / "config.json").read_text())
+    assert saved["epochs"] == 10 and saved["league"]["side_threshold"] == ["team=0.5"] and saved["name"] == "cli"
+    assert json.loads((fork_dir / "checkpoints/latest.json").read_text())["epoch"] == 10
+    assert LeagueConfig(**json.loads((fork_dir / "league/pool.json").read_text())["config"]).threshold_of(
+        "team") == 0.5
