@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,7 +20,7 @@ SHIPPED = ("ant", "spider", "bug")
 
 def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
     assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay", "spider-selfplay-v1", "spider-selfplay-v2",
-                                     "ffa-selfplay"}
+                                     "ffa-selfplay", "ant-selfplay"}
 
 
 @pytest.mark.parametrize("name", zoo.available())
@@ -69,3 +71,45 @@ def test_paper_env_uses_the_shipped_ant_and_spider() -> None:
         ids = match.sim.actuator_ids[match.agents.index(agent)]
         assert np.abs(data.ctrl[ids]).sum() > 0, agent
     assert np.abs(data.ctrl[match.sim.actuator_ids[match.agents.index("bug")]]).sum() == 0
+
+
+ROOT = Path(__file__).resolve().parents[1]
+HEAD_TO_HEAD = [n for n in zoo.available()
+                if json.loads((zoo.ZOO_DIR / f"{n}.json").read_text())["evaluation"].get("kind") == "head_to_head"]
+
+
+def test_some_shipped_policy_is_published_with_head_to_head_claims() -> None:
+    assert "ant-selfplay" in HEAD_TO_HEAD
+
+
+@pytest.mark.parametrize("name", HEAD_TO_HEAD)
+def test_shipped_head_to_head_claims_match_the_published_matches(name: str) -> None:
+    """Every row a manifest claims is its evaluation folder's ``summary.json`` row, and every paired
+    difference is recomputed here from the per-start outcomes of the candidates' ``metrics.csv``
+    (win +1, loss -1, draw 0; mean of this minus other, normal 95% interval)."""
+    manifest = json.loads((zoo.ZOO_DIR / f"{name}.json").read_text())
+    evaluation = manifest["evaluation"]
+    assert evaluation["runs"] and evaluation["test_mwr"] == evaluation["runs"][0]["rows"][
+        evaluation["runs"][0]["this"]]["mean_lwr"]
+    for run in evaluation["runs"]:
+        folder = ROOT / run["folder"]
+        summary = json.loads((folder / "summary.json").read_text())
+        assert run["learner"] == manifest["agent"] == summary["config"]["learner"]
+        assert run["seed"] == summary["config"]["seed"] and run["epochs"] == summary["config"]["epochs"]
+        assert f"--out {run['folder']}" in run["command"] and f"--epochs {run['epochs']}" in run["command"]
+        for label, row in run["rows"].items():
+            assert row == {k: summary["candidates"][label][k] for k in row}, (run["folder"], label)
+            assert row["n"] == run["epochs"]
+
+        def lwr(label: str) -> np.ndarray:
+            with open(folder / label / "metrics.csv", newline="") as fh:
+                return np.array([{"win": 1.0, "loss": -1.0}.get(r["outcome"], 0.0) for r in csv.DictReader(fh)])
+
+        mine = lwr(run["this"])
+        assert mine.mean() == pytest.approx(run["rows"][run["this"]]["mean_lwr"], abs=1e-12)
+        assert set(run["paired"]) == set(run["rows"]) - {run["this"]}
+        for other, claim in run["paired"].items():
+            d = mine - lwr(other)
+            half = 1.959963984540054 * d.std(ddof=1) / np.sqrt(len(d))
+            assert (claim["diff"], claim["lo"], claim["hi"]) == pytest.approx(
+                (d.mean(), d.mean() - half, d.mean() + half), abs=1e-9), (run["folder"], other)

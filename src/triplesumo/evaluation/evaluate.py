@@ -305,6 +305,41 @@ def add_paired(summary: dict[str, Any], lwr: dict[str, np.ndarray]) -> None:
                                                   "hi": _clean(hi)}
 
 
+HEAD_TO_HEAD_ROW = ("n", "n_win", "n_loss", "n_draw", "mean_lwr", "mean_lwr_lo", "mean_lwr_hi", "mean_steps_to_win")
+"""The figures of a candidate that a published head-to-head claim (:func:`head_to_head`) copies."""
+
+
+def head_to_head(folder: Path | str, this: str, others: tuple[str, ...] | list[str],
+                 command: str) -> dict[str, Any]:
+    """A head-to-head claim for a policy manifest, from an evaluation folder: the rows
+    (:data:`HEAD_TO_HEAD_ROW`) of candidate ``this`` and of each of ``others`` (their labels in
+    ``summary.json``), and for each other ``this`` minus it, paired over the same starts (mean of the
+    per-start local winning rate differences, 95% interval), read from the candidates' ``metrics.csv``.
+    ``command`` is the ``triplesumo evaluate`` command that made the folder (it is recorded, not run)."""
+    from triplesumo.evaluation.plots import read_metrics_csv
+
+    folder = Path(folder)
+    summary = json.loads((folder / "summary.json").read_text())
+    labels = [this, *others]
+    missing = [label for label in labels if label not in summary["candidates"]]
+    if missing:
+        raise ValueError(f"{folder / 'summary.json'}: no candidates {missing}; it has {list(summary['candidates'])}")
+    lwr = {label: local_winning_rate(read_metrics_csv(folder / label / "metrics.csv")["outcome"].tolist())
+           for label in labels}
+    paired = {}
+    for other in others:
+        if len(lwr[other]) != len(lwr[this]):
+            raise ValueError(f"{folder}: {this!r} and {other!r} played {len(lwr[this])} and {len(lwr[other])} "
+                             "test epochs; a paired comparison needs the same starts")
+        diff, lo, hi = mean_interval(lwr[this] - lwr[other])
+        paired[other] = {"diff": _clean(diff), "lo": _clean(lo), "hi": _clean(hi)}
+    config = summary["config"]
+    return {"command": command, "folder": folder.as_posix(), "seed": config["seed"], "epochs": config["epochs"],
+            "learner": config["learner"], "opponents": list(config["policies"]), "this": this,
+            "rows": {label: {k: summary["candidates"][label][k] for k in HEAD_TO_HEAD_ROW} for label in labels},
+            "paired": paired}
+
+
 def expand_policies(specs: tuple[str, ...]) -> list[str]:
     """Policy specs with globs (``runs/s*/policy``) expanded to the policy files they match, sorted."""
     import glob
