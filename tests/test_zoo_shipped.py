@@ -82,6 +82,12 @@ def test_some_shipped_policy_is_published_with_head_to_head_claims() -> None:
     assert "ant-selfplay" in HEAD_TO_HEAD
 
 
+def _lwr(candidate: Path) -> np.ndarray:
+    """Per-start local winning rate of an evaluation candidate's ``metrics.csv``: win +1, loss -1, draw 0."""
+    with open(candidate / "metrics.csv", newline="") as fh:
+        return np.array([{"win": 1.0, "loss": -1.0}.get(r["outcome"], 0.0) for r in csv.DictReader(fh)])
+
+
 @pytest.mark.parametrize("name", HEAD_TO_HEAD)
 def test_shipped_head_to_head_claims_match_the_published_matches(name: str) -> None:
     """Every row a manifest claims is its evaluation folder's ``summary.json`` row, and every paired
@@ -101,15 +107,11 @@ def test_shipped_head_to_head_claims_match_the_published_matches(name: str) -> N
             assert row == {k: summary["candidates"][label][k] for k in row}, (run["folder"], label)
             assert row["n"] == run["epochs"]
 
-        def lwr(label: str) -> np.ndarray:
-            with open(folder / label / "metrics.csv", newline="") as fh:
-                return np.array([{"win": 1.0, "loss": -1.0}.get(r["outcome"], 0.0) for r in csv.DictReader(fh)])
-
-        mine = lwr(run["this"])
+        mine = _lwr(folder / run["this"])
         assert mine.mean() == pytest.approx(run["rows"][run["this"]]["mean_lwr"], abs=1e-12)
         assert set(run["paired"]) == set(run["rows"]) - {run["this"]}
         for other, claim in run["paired"].items():
-            d = mine - lwr(other)
+            d = mine - _lwr(folder / other)
             half = 1.959963984540054 * d.std(ddof=1) / np.sqrt(len(d))
             assert (claim["diff"], claim["lo"], claim["hi"]) == pytest.approx(
                 (d.mean(), d.mean() - half, d.mean() + half), abs=1e-9), (run["folder"], other)
