@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -137,3 +138,41 @@ def test_cli_fork_writes_beside_the_parent_and_needs_a_name(
     assert json.loads((fork_dir / "checkpoints/latest.json").read_text())["epoch"] == 10
     assert LeagueConfig(**json.loads((fork_dir / "league/pool.json").read_text())["config"]).threshold_of(
         "team") == 0.5
+
+
+def test_compact_keeps_what_resuming_needs_and_the_resumed_run_is_unchanged(
+        runs: tuple[Trainer, Trainer], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    long = Trainer(both(tmp_path / "long", epochs=32), command=BOTH_COMMAND)  # pools of 3, 16 admission checks
+    long.run()
+    run, plain = tmp_path / "compacted" / "both", tmp_path / "plain" / "both"
+    shutil.copytree(long.run_dir, run)
+    shutil.copytree(long.run_dir, plain)
+    pool = json.loads((run / "league/pool.json").read_text())
+    evicted = {m["id"] for p in pool["pools"].values() for m in p["evicted"]}
+    assert evicted  # something to compact
+    assert sorted(p.name for p in (run / "checkpoints").glob("epoch-*")) == ["epoch-000024", "epoch-000032"]
+    assert main(["compact", str(run)]) == 0
+    assert "evicted league member(s)" in capsys.readouterr().out
+    assert [p.name for p in (run / "checkpoints").glob("epoch-*")] == ["epoch-000032"]
+    pruned = json.loads((run / "league/pruned.json").read_text())["members"]
+    state = json.loads((run / "checkpoints/epoch-000032/state.json").read_text())
+    seated = {m for seats in state["seats"] for m in seats if m}
+    assert pruned and {m["id"] for m in pruned} == evicted - seated and all(m["sha256"] for m in pruned)
+    for m in pruned:
+        assert not (run / "league/members" / m["id"]).exists() and (plain / "league/members" / m["id"]).exists()
+    kept = json.loads((run / "league/pool.json").read_text())
+    assert kept["pools"] == state["league"]["pools"]
+    assert {m["id"] for p in kept["pools"].values() for m in p["evicted"]} == evicted & seated
+    # resumed after compaction, it trains exactly what the run resumed without compaction does
+    for folder in (run, plain):
+        assert train(long.cfg, resume_dir=folder, overrides={"epochs": 40}).epochs == 40
+    for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
+        assert rows(plain / name) == rows(run / name), name
+    assert (plain / "league/league.csv").read_text() == (run / "league/league.csv").read_text()
+    for learner in ("ant+bug", "spider"):
+        assert (plain / f"policy-{learner}.safetensors").read_bytes() == (
+            run / f"policy-{learner}.safetensors").read_bytes()
+    assert main(["compact", str(run)]) == 0  # again: the list of pruned members grows, nothing is lost from it
+    assert {m["id"] for m in pruned} <= {m["id"] for m in json.loads((run / "league/pruned.json").read_text())[
+        "members"]}
+    assert main(["compact", str(tmp_path / "nothing")]) == 2

@@ -74,6 +74,11 @@ def _parser() -> argparse.ArgumentParser:
                                                  "algorithm x seed, evaluation, compare, REPRODUCTION.md), "
                                                  "resumable; --tiny for a smoke run")
     _dcargs.add_arguments(reproduce, ReproduceConfig)
+    compact = sub.add_parser("compact", help="keep only what resuming a run needs (its newest checkpoint and the "
+                                             "league members its pools and in-flight matches hold), e.g. before "
+                                             "committing it; the evicted members deleted are listed in "
+                                             "league/pruned.json")
+    compact.add_argument("run_dir", help="run folder (holds checkpoints/)")
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv, or metrics-<agent>.csv per learning agent)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
@@ -191,6 +196,13 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.reproduce import ReproduceConfig, run_reproduce
 
             run_reproduce(_dcargs.build(ReproduceConfig, args))
+        elif args.command == "compact":
+            from triplesumo.train.fork import compact_run
+
+            removed = compact_run(Path(args.run_dir))
+            print(f"{args.run_dir}: removed {len(removed['checkpoints'])} older checkpoint(s) "
+                  f"{removed['checkpoints']} and {len(removed['members'])} evicted league member(s) "
+                  f"(listed in league/pruned.json); it resumes as before")
         elif args.command == "plot":
             from triplesumo.train.loop import plot_metrics
 

@@ -1,4 +1,5 @@
-"""Forks: a new run that continues another run's checkpoint under changed league rules.
+"""Forks and compaction: a new run that continues another run's checkpoint under changed league
+rules, and a run folder cut down to what resuming it needs.
 
 ``train --resume`` continues a run exactly as it was configured; a fork is how a researcher
 asks "what if this run had gone on with another admission threshold?" without training from
@@ -24,6 +25,12 @@ what leaves the checkpoint meaningful (:data:`FORK_FIELDS`: the league's rules b
 seeds and rating model, and the budget and bookkeeping fields); anything else (networks,
 algorithms, rewards, roster, seed) is refused naming the field, since the networks and
 matches being continued were made under it.
+
+:func:`compact_run` (``triplesumo compact RUN``) keeps, of a run folder, only what resuming it needs:
+its newest checkpoint and the league members that checkpoint's pools and in-flight matches hold. A
+self-play league keeps every member it ever admitted (evicted ones stay for tournaments' ladders), which
+for a long run is most of its folder; compacting deletes the evicted ones no match seats and lists them
+in ``league/pruned.json``.
 """
 
 from __future__ import annotations
@@ -100,6 +107,59 @@ def check_fork(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
     return changes
 
 
+def drop_unseated_evicted(state: dict[str, Any]) -> tuple[list[str], list[dict[str, Any]]]:
+    """Drop from a checkpoint ``state``'s league the evicted members no in-flight match seats (in place):
+    what remains is all that resuming it needs. Returns the files (relative to ``RUN/league``) of the
+    members kept, and the dropped members' records."""
+    seated = {m for seats in state.get("seats", []) for m in seats if m}
+    files: list[str] = []
+    dropped: list[dict[str, Any]] = []
+    for pool in state["league"]["pools"].values():
+        kept = [m for m in pool["evicted"] if m["id"] in seated]
+        dropped += [m for m in pool["evicted"] if m["id"] not in seated]
+        pool["evicted"] = kept
+        files += [rel for m in (*pool["members"], *kept) for rel in m["sha256"]]
+    return files, dropped
+
+
+PRUNED_FILE = "pruned.json"
+"""``RUN/league/pruned.json``: the evicted members :func:`compact_run` deleted (id, side, epoch, sha256)."""
+
+
+def compact_run(run_dir: Path | str) -> dict[str, Any]:
+    """Keep only what resuming the run in ``run_dir`` needs, for committing a long run's folder: its newest
+    checkpoint (older ones deleted) and the league members its pools and in-flight matches hold. The files of
+    the other evicted members are deleted and their records (id, side, epoch, sha256) appended to
+    ``league/pruned.json``; ``pool.json`` and the checkpoint's ``state.json`` (and its manifest's sha256) drop
+    them. Metrics, policies and ``league.csv`` are kept. Resuming afterwards trains exactly what it would have;
+    a tournament's ``--league RUN`` then picks among the kept snapshots. Returns what was removed."""
+    run_dir = Path(run_dir)
+    folder = checkpoint.latest(run_dir)
+    checkpoint.verify(folder, need_replay=(folder / "replay.npz").is_file())
+    state = load_json(folder / "state.json")
+    older = [f for e, f in checkpoint.checkpoints(run_dir) if f != folder]
+    removed: dict[str, Any] = {"checkpoints": [f.name for f in older], "members": []}
+    if "league" in state:
+        _, dropped = drop_unseated_evicted(state)
+        removed["members"] = [m["id"] for m in dropped]
+        root = run_dir / "league"
+        pruned_path = root / PRUNED_FILE
+        pruned = load_json(pruned_path)["members"] if pruned_path.is_file() else []
+        pruned += [{k: m[k] for k in ("id", "side", "source", "epoch", "sha256")} for m in dropped]
+        # the state first (a kill between steps leaves a checkpoint that names no missing file), then the files
+        atomic_write_bytes(folder / "state.json", _json_bytes(state))
+        manifest = load_json(folder / checkpoint.MANIFEST)
+        manifest["sha256"]["state.json"] = file_sha256(folder / "state.json")
+        atomic_write_bytes(folder / checkpoint.MANIFEST, _json_bytes(manifest))
+        atomic_write_bytes(root / POOL_FILE, (json.dumps(state["league"], indent=1) + "\n").encode())
+        atomic_write_bytes(pruned_path, (json.dumps({"members": pruned}, indent=1) + "\n").encode())
+        for m in dropped:
+            shutil.rmtree(root / "members" / m["id"], ignore_errors=True)
+    for old in older:
+        shutil.rmtree(old, ignore_errors=True)
+    return removed
+
+
 def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | None = None) -> Path:
     """Make the fork ``cfg.out/cfg.name`` of the run in ``parent_dir`` at its checkpoint ``from_checkpoint``
     (``epoch-N``; default its latest) and return its folder (module docstring). ``cfg`` is the parent's
@@ -124,14 +184,9 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
     league_files: list[str] = []
     left_behind: list[str] = []
     if "league" in state:
-        seated = {m for seats in state.get("seats", []) for m in seats if m}
-        league_state = state["league"]
-        for pool in league_state["pools"].values():
-            kept = [m for m in pool["evicted"] if m["id"] in seated]
-            left_behind += [m["id"] for m in pool["evicted"] if m["id"] not in seated]
-            pool["evicted"] = kept
-            league_files += [rel for m in (*pool["members"], *kept) for rel in m["sha256"]]
-        league_state["config"] = dataclasses.asdict(cfg.league)
+        league_files, dropped = drop_unseated_evicted(state)
+        left_behind = [m["id"] for m in dropped]
+        state["league"]["config"] = dataclasses.asdict(cfg.league)
     command = fork_command(parent_dir, cfg, changes, from_checkpoint)
     manifests = state.get("manifests") or {}
     record = {
