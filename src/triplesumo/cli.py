@@ -122,18 +122,14 @@ def main(argv: list[str] | None = None) -> int:
             if args.fork:
                 import dataclasses
 
-                from triplesumo.agents.policy_file import load_json
-                from triplesumo.train.fork import fork_run
-                from triplesumo.train.loop import config_from_json
+                from triplesumo.train.fork import fork_run, parent_config
 
                 if args.resume or args.start_over:
                     raise ValueError("--fork makes a new run; it cannot be given with --resume or --start-over")
                 if "name" not in given:
                     raise ValueError("--fork needs --name NEW: the fork's own run folder (OUT/NEW)")
                 parent = Path(args.fork)
-                if not (parent / "config.json").is_file():
-                    raise FileNotFoundError(f"{parent / 'config.json'}: no run to fork (file not found)")
-                saved = config_from_json(load_json(parent / "config.json"), str(parent / "config.json"))
+                saved = parent_config(parent)
                 base = saved if "out" in given else dataclasses.replace(saved, out=str(parent.parent))
                 run_dir = fork_run(parent, _dcargs.build(TrainConfig, args, base=base), args.from_checkpoint)
                 print(f"forked {parent} into {run_dir} (fork.json says from where and what changed)")

@@ -152,7 +152,7 @@ def save(run_dir: Path, epoch: int, tensors: dict[str, torch.Tensor], state: dic
             os.replace(tmp, final)
             _fsync_dir(root)
         with writing(root / "latest.json", previous):
-            atomic_write_bytes(root / "latest.json", _json_bytes({"dir": name, "epoch": epoch}))
+            point_latest(run_dir, final, epoch)
     except CheckpointWriteError:
         shutil.rmtree(tmp, ignore_errors=True)  # give the space back; the previous checkpoint stands
         raise
@@ -174,6 +174,22 @@ def prune(run_dir: Path, current: int) -> None:
 
 def _json_bytes(value: dict[str, Any]) -> bytes:
     return (json.dumps(value) + "\n").encode()
+
+
+def rewrite_state(folder: Path, state: dict[str, Any]) -> None:
+    """Replace checkpoint ``folder``'s ``state.json`` with ``state`` and record its new sha256 in the
+    manifest (forks and compaction change what a checkpoint's config or league names, not its tensors)."""
+    folder = Path(folder)
+    atomic_write_bytes(folder / "state.json", _json_bytes(state))
+    manifest = load_json(folder / MANIFEST)
+    manifest["sha256"]["state.json"] = file_sha256(folder / "state.json")
+    atomic_write_bytes(folder / MANIFEST, _json_bytes(manifest))
+
+
+def point_latest(run_dir: Path, folder: Path, epoch: int) -> None:
+    """Make ``latest.json`` of ``run_dir`` name checkpoint ``folder`` (recording ``epoch``)."""
+    atomic_write_bytes(Path(run_dir) / "checkpoints" / "latest.json", _json_bytes({"dir": Path(folder).name,
+                                                                                  "epoch": epoch}))
 
 
 def latest(run_dir: Path) -> Path:

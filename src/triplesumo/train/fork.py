@@ -42,7 +42,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from triplesumo.agents.policy_file import atomic_write_bytes, file_sha256, load_json
+from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.league import LOG_FILE, POOL_FILE
@@ -147,10 +147,7 @@ def compact_run(run_dir: Path | str) -> dict[str, Any]:
         pruned = load_json(pruned_path)["members"] if pruned_path.is_file() else []
         pruned += [{k: m[k] for k in ("id", "side", "source", "epoch", "sha256")} for m in dropped]
         # the state first (a kill between steps leaves a checkpoint that names no missing file), then the files
-        atomic_write_bytes(folder / "state.json", _json_bytes(state))
-        manifest = load_json(folder / checkpoint.MANIFEST)
-        manifest["sha256"]["state.json"] = file_sha256(folder / "state.json")
-        atomic_write_bytes(folder / checkpoint.MANIFEST, _json_bytes(manifest))
+        checkpoint.rewrite_state(folder, state)
         atomic_write_bytes(root / POOL_FILE, (json.dumps(state["league"], indent=1) + "\n").encode())
         atomic_write_bytes(pruned_path, (json.dumps({"members": pruned}, indent=1) + "\n").encode())
         for m in dropped:
@@ -160,15 +157,20 @@ def compact_run(run_dir: Path | str) -> dict[str, Any]:
     return removed
 
 
+def parent_config(parent_dir: Path | str) -> TrainConfig:
+    """The config of the run to fork (its ``config.json``); ``FileNotFoundError`` when there is none."""
+    path = Path(parent_dir) / "config.json"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no run to fork (file not found)")
+    return config_from_json(load_json(path), str(path))
+
+
 def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | None = None) -> Path:
     """Make the fork ``cfg.out/cfg.name`` of the run in ``parent_dir`` at its checkpoint ``from_checkpoint``
     (``epoch-N``; default its latest) and return its folder (module docstring). ``cfg`` is the parent's
     config with the fork's changes (:func:`check_fork`); nothing is written when a check fails."""
     parent_dir = Path(parent_dir)
-    if not (parent_dir / "config.json").is_file():
-        raise FileNotFoundError(f"{parent_dir / 'config.json'}: no run to fork (file not found)")
-    parent = config_from_json(load_json(parent_dir / "config.json"), str(parent_dir / "config.json"))
-    changes = check_fork(parent, cfg)
+    changes = check_fork(parent_config(parent_dir), cfg)
     run_dir = Path(cfg.out) / cfg.name
     if run_dir.resolve() == parent_dir.resolve():
         raise ValueError(f"a fork needs its own folder: --name/--out give {run_dir}, the parent's folder")
@@ -206,15 +208,15 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         written += [run_dir / "checkpoints", run_dir / "league", run_dir / FORK_FILE, run_dir / "config.json",
                     *(run_dir / f.name for f in parent_dir.glob("*.csv"))]
         target.mkdir(parents=True)
-        files = ["weights.safetensors", "arrays.npz", *(["replay.npz"] if need_replay else [])]
-        for name in files:
+        for name in ("weights.safetensors", "arrays.npz", checkpoint.MANIFEST,
+                     *(["replay.npz"] if need_replay else [])):
             shutil.copyfile(folder / name, target / name)
-        atomic_write_bytes(target / "state.json", _json_bytes(state))
-        manifest = {"format": checkpoint.CHECKPOINT_FORMAT, "epoch": epoch,
-                    "sha256": {name: file_sha256(target / name) for name in (*files, "state.json")}}
-        atomic_write_bytes(target / checkpoint.MANIFEST, _json_bytes(manifest))
-        atomic_write_bytes(run_dir / "checkpoints" / "latest.json",
-                           _json_bytes({"dir": folder.name, "epoch": epoch}))
+        if not need_replay:  # the fork keeps no replay buffer: its manifest names none
+            manifest = load_json(target / checkpoint.MANIFEST)
+            manifest["sha256"].pop("replay.npz", None)
+            atomic_write_bytes(target / checkpoint.MANIFEST, (json.dumps(manifest) + "\n").encode())
+        checkpoint.rewrite_state(target, state)
+        checkpoint.point_latest(run_dir, target, epoch)
         if "league" in state:
             for rel in league_files:
                 dest = run_dir / "league" / rel
@@ -236,6 +238,3 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         raise
     return run_dir
 
-
-def _json_bytes(value: dict[str, Any]) -> bytes:
-    return (json.dumps(value) + "\n").encode()
