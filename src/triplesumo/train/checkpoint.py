@@ -178,10 +178,12 @@ def _json_bytes(value: dict[str, Any]) -> bytes:
 
 def rewrite_state(folder: Path, state: dict[str, Any]) -> None:
     """Replace checkpoint ``folder``'s ``state.json`` with ``state`` and record its new sha256 in the
-    manifest (forks and compaction change what a checkpoint's config or league names, not its tensors)."""
+    manifest, which then names only the files the folder holds (a fork copies no replay buffer it does not
+    keep). Forks and compaction change what a checkpoint's config or league names, not its tensors."""
     folder = Path(folder)
     atomic_write_bytes(folder / "state.json", _json_bytes(state))
     manifest = load_json(folder / MANIFEST)
+    manifest["sha256"] = {f: d for f, d in manifest["sha256"].items() if (folder / f).is_file()}
     manifest["sha256"]["state.json"] = file_sha256(folder / "state.json")
     atomic_write_bytes(folder / MANIFEST, _json_bytes(manifest))
 

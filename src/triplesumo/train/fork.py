@@ -45,7 +45,7 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import LOG_FILE, POOL_FILE
+from triplesumo.train.league import LOG_FILE, write_pool
 from triplesumo.train.loop import (
     FORK_FILE,
     RESUME_OVERRIDES,
@@ -54,6 +54,7 @@ from triplesumo.train.loop import (
     holds_run,
     prepare_run_dir,
     run_id_of,
+    write_run_config,
 )
 
 FORK_FORMAT = "triplesumo-fork/1"
@@ -148,7 +149,7 @@ def compact_run(run_dir: Path | str) -> dict[str, Any]:
         pruned += [{k: m[k] for k in ("id", "side", "source", "epoch", "sha256")} for m in dropped]
         # the state first (a kill between steps leaves a checkpoint that names no missing file), then the files
         checkpoint.rewrite_state(folder, state)
-        atomic_write_bytes(root / POOL_FILE, (json.dumps(state["league"], indent=1) + "\n").encode())
+        write_pool(root, state["league"])
         atomic_write_bytes(pruned_path, (json.dumps({"members": pruned}, indent=1) + "\n").encode())
         for m in dropped:
             shutil.rmtree(root / "members" / m["id"], ignore_errors=True)
@@ -211,24 +212,20 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         for name in ("weights.safetensors", "arrays.npz", checkpoint.MANIFEST,
                      *(["replay.npz"] if need_replay else [])):
             shutil.copyfile(folder / name, target / name)
-        if not need_replay:  # the fork keeps no replay buffer: its manifest names none
-            manifest = load_json(target / checkpoint.MANIFEST)
-            manifest["sha256"].pop("replay.npz", None)
-            atomic_write_bytes(target / checkpoint.MANIFEST, (json.dumps(manifest) + "\n").encode())
-        checkpoint.rewrite_state(target, state)
+        checkpoint.rewrite_state(target, state)  # (its manifest then names no replay buffer it did not copy)
         checkpoint.point_latest(run_dir, target, epoch)
         if "league" in state:
             for rel in league_files:
                 dest = run_dir / "league" / rel
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(parent_dir / "league" / rel, dest)
-            atomic_write_bytes(run_dir / "league" / POOL_FILE, (json.dumps(state["league"], indent=1) + "\n").encode())
+            write_pool(run_dir / "league", state["league"])
             if (parent_dir / "league" / LOG_FILE).is_file():
                 shutil.copyfile(parent_dir / "league" / LOG_FILE, run_dir / "league" / LOG_FILE)
         for csv_file in sorted(parent_dir.glob("*.csv")):  # metrics*, learning*, eval*: cut back on resume
             shutil.copyfile(csv_file, run_dir / csv_file.name)
         atomic_write_bytes(run_dir / FORK_FILE, (json.dumps(record, indent=1) + "\n").encode())
-        atomic_write_bytes(run_dir / "config.json", (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
+        write_run_config(run_dir, cfg)
     except BaseException:  # a half-made fork is no run: take back what was written
         for path in [run_dir] if created else written:
             if path.is_dir():

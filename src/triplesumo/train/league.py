@@ -591,10 +591,7 @@ class League:
 
     def save(self) -> Path:
         """Write ``RUN/league/pool.json`` atomically; returns its path."""
-        self.root.mkdir(parents=True, exist_ok=True)
-        path = self.root / POOL_FILE
-        atomic_write_bytes(path, (json.dumps(self.state_dict(), indent=1) + "\n").encode())
-        return path
+        return write_pool(self.root, self.state_dict())
 
     @classmethod
     def load(cls, run_dir: Path, config: LeagueConfig | None = None) -> League:
@@ -631,6 +628,15 @@ class League:
     def _is_learner(self, name: str) -> bool:
         side, sep, rest = name.partition(":")
         return bool(sep) and rest == "learner" and side in self.pools
+
+
+def write_pool(root: Path, state: Mapping[str, Any]) -> Path:
+    """Write a league's :meth:`League.state_dict` as ``root/pool.json`` atomically (``root``: ``RUN/league``,
+    created if need be); returns its path. Forks and compaction write the states they edit with it too."""
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(root / POOL_FILE, (json.dumps(state, indent=1) + "\n").encode())
+    return root / POOL_FILE
 
 
 def _copy_specs(specs: Mapping[str, str], stems: Mapping[str, Path]) -> None:

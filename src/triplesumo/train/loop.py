@@ -123,6 +123,12 @@ def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
     return json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
+def write_run_config(run_dir: Path, cfg: TrainConfig) -> None:
+    """Write ``RUN/config.json`` (what ``--resume`` reads) atomically; a failed write names the file."""
+    with checkpoint.writing(Path(run_dir) / "config.json"):
+        atomic_write_bytes(Path(run_dir) / "config.json", (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
+
+
 FORK_FILE = "fork.json"
 """In a run folder made by ``train --fork`` (:mod:`triplesumo.train.fork`): where it came from."""
 RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay")
@@ -438,9 +444,7 @@ class Trainer:
             self.playing = np.array([[self.final[a][k] is None for a in self.agents] for k in range(cfg.n_envs)],
                                     dtype=bool)  # False: the agent sits the match out
             self.obs = self.env.reset(seed=[self._episode_seed() for _ in range(cfg.n_envs)])[0]
-            with checkpoint.writing(self.run_dir / "config.json"):
-                atomic_write_bytes(self.run_dir / "config.json",
-                                   (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
+            write_run_config(self.run_dir, cfg)
         self.log = MetricsLog(self.run_dir, self.agents, [s.name for s in self.specs],
                               self.epochs_done if resume else None, cfg.tensorboard,
                               {a: len(self.lwr[a]) for a in self.agents} if resume else None,
