@@ -19,7 +19,7 @@ import pytest
 from test_train_selfplay import BOTH_COMMAND, both
 from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
 from triplesumo.cli import main
-from triplesumo.train.fork import fork_run
+from triplesumo.train.fork import added_seeds, check_fork, fork_run
 from triplesumo.train.league import LeagueConfig
 from triplesumo.train.loop import Trainer, train
 
@@ -110,7 +110,8 @@ def test_what_a_fork_may_not_change_is_refused_by_name_and_nothing_is_written(
     base = dataclasses.replace(half.cfg, name="bad", out=str(tmp_path))
     for change, flag in (({"seed": 4}, "--seed"), ({"ddpg": dataclasses.replace(half.cfg.ddpg, actor_lr=1.0)},
                                                    "--ddpg"),
-                         ({"league": dataclasses.replace(half.cfg.league, zoo=("spider=passive",))}, "--league.zoo")):
+                         ({"league": dataclasses.replace(half.cfg.league, rating_model="BradleyTerryFull")},
+                          "--league.rating-model")):
         with pytest.raises(ValueError, match=f"a fork continues .* not {flag}"):
             fork_run(half.run_dir, dataclasses.replace(base, **change))
         assert not (tmp_path / "bad").exists()
@@ -176,3 +177,49 @@ def test_compact_keeps_what_resuming_needs_and_the_resumed_run_is_unchanged(
     assert {m["id"] for m in pruned} <= {m["id"] for m in json.loads((run / "league/pruned.json").read_text())[
         "members"]}
     assert main(["compact", str(tmp_path / "nothing")]) == 2
+
+
+def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_them(
+        runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
+    _, half = runs
+    spider_file = half.run_dir / "policy-spider"  # a seed from policy files (not the first member's)
+    seeds = ("ant=passive", "bug=passive", f"spider={spider_file}")
+    lcfg = dataclasses.replace(half.cfg.league, zoo=seeds, keep_zoo=True)
+    cfg = dataclasses.replace(half.cfg, name="seeded", out=str(tmp_path), epochs=16, league=lcfg)
+    before = digests(half.run_dir)
+    fork_dir = fork_run(half.run_dir, cfg)
+    assert digests(half.run_dir) == before
+    record = json.loads((fork_dir / "fork.json").read_text())
+    pool = json.loads((fork_dir / "league" / "pool.json").read_text())
+    seeded = {m["id"]: m for side in pool["pools"].values() for m in side["members"] if m["source"] == "zoo"}
+    assert sorted(record["seeded"]) == sorted(seeded) and len(seeded) == 2
+    assert {m["side"]: m["epoch"] for m in seeded.values()} == {"team": 8, "spider": 8}
+    team_seed = next(m for m in seeded.values() if m["side"] == "team")
+    assert team_seed["policies"] == {"ant": "passive", "bug": "passive"}
+    spider_seed = next(m for m in seeded.values() if m["side"] == "spider")
+    copied = fork_dir / "league" / spider_seed["policies"]["spider"]
+    assert file_sha256(copied.with_suffix(".safetensors")) == file_sha256(spider_file.with_suffix(".safetensors"))
+    state = json.loads(next((fork_dir / "checkpoints").glob("epoch-*/state.json")).read_text())
+    assert state["league"]["pools"] == pool["pools"]  # the checkpoint a resume reads holds the seeds too
+    trainer = Trainer(cfg, run_dir=fork_dir, resume=True)  # (resuming seeds nothing again: files unchanged)
+    trainer.run()
+    assert trainer.league is not None and trainer.epochs_done == 16
+    pools = trainer.league.pools
+    members = {m.id: m for p in pools.values() for m in p.members}
+    assert set(seeded) <= set(members)  # keep_zoo: never evicted, though snapshots were
+    assert any(m.epoch > 8 for p in pools.values() for m in (*p.members, *p.evicted))
+    assert sum(members[i].games for i in seeded) > 0  # the learners met the seeds
+    assert all(len(p.members) - sum(m.source == "zoo" for m in p.members) <= lcfg.max_size for p in pools.values())
+    assert "--league.zoo ant=passive bug=passive" in record["command"] and "--league.keep-zoo" in record["command"]
+
+
+def test_a_fork_may_only_append_to_the_parents_zoo(runs: tuple[Trainer, Trainer]) -> None:
+    _, half = runs
+    parent = dataclasses.replace(half.cfg, league=dataclasses.replace(half.cfg.league, zoo=("spider=passive",)))
+    fork = dataclasses.replace(parent, name="f")
+    assert added_seeds(parent, dataclasses.replace(
+        fork, league=dataclasses.replace(parent.league, zoo=("spider=passive", "ant=zero", "bug=zero")))) == (
+        "ant=zero", "bug=zero")
+    for zoo in ((), ("spider=random",), ("ant=zero", "bug=zero", "spider=passive")):
+        with pytest.raises(ValueError, match=r"must start with the parent's \['spider=passive'\]"):
+            check_fork(parent, dataclasses.replace(fork, league=dataclasses.replace(parent.league, zoo=zoo)))

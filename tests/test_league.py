@@ -194,6 +194,26 @@ def test_size_limit_evicts_fifo_but_keeps_the_first_and_the_best_rated(tmp_path:
     assert [m.id for m in lg.pools["team"].members] == ["team-0001", "team-0005", "team-0006"]
 
 
+def test_keep_zoo_keeps_the_seeded_members_out_of_eviction_and_out_of_the_count(tmp_path: Path) -> None:
+    for keep in (False, True):
+        lg = league(tmp_path / str(keep), max_size=3, keep_zoo=keep)  # team-0001: the random team (zoo)
+        added = lg.seed(("ant=passive", "bug=zero"), epoch=0)  # team-0002: a second seed, a still team
+        assert [m.id for m in added] == ["team-0002"] and added[0].source == "zoo"
+        for e in (1, 2, 3, 4):
+            lg.admit("team", e, write=write_actor(e))
+        ids = [m.id for m in lg.pools["team"].members]
+        if keep:  # both seeds stay, and three snapshots beside them (the first snapshot is no longer "first")
+            assert ids == ["team-0001", "team-0002", "team-0004", "team-0005", "team-0006"]
+            assert [m.id for m in lg.pools["team"].evicted] == ["team-0003"]
+        else:  # the still team is the oldest member but the first: it goes first
+            assert ids == ["team-0001", "team-0005", "team-0006"]
+            assert [m.id for m in lg.pools["team"].evicted] == ["team-0002", "team-0003", "team-0004"]
+    with pytest.raises(ValueError, match=r"names roles \['ant'\] of side 'team' but not \['bug'\]"):
+        lg.seed(("ant=passive",), epoch=5)
+    with pytest.raises(ValueError, match="roles no side has"):
+        lg.seed(("octopus=passive",), epoch=5)
+
+
 def test_ratings_move_with_results_for_teams_and_free_for_all(tmp_path: Path) -> None:
     lg = league(tmp_path)
     play(lg, ["win"] * 20)

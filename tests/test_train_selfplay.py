@@ -191,7 +191,8 @@ def test_resume_through_train_and_config_round_trip(tmp_path: Path) -> None:
     ({"learn": ("bug=sac",)}, "side 'team' has learning agents ['bug'] and fixed ones ['ant']"),
     ({"scenario": "ffa", "learn": ("ant=sac", "bug=sac")}, "free-for-all"),
     ({"scenario": "ffa", "learn": ("ant=sac",)}, "cannot tell which body it drives; use obs_mode 'egocentric'"),
-    ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("ant=random",))}, "would start empty"),
+    ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("ant=random",))},
+     "TrainConfig.league: LeagueConfig.zoo names roles ['ant'] of side 'team' but not ['bug']"),
     ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("beetle=random",))}, "TrainConfig.league"),
 ])
 def test_bad_self_play_configs_name_the_problem(tmp_path: Path, fields: dict[str, Any], message: str) -> None:

@@ -21,8 +21,11 @@ run (its latest by default):
 Training then resumes the new folder (:func:`~triplesumo.train.loop.train` with
 ``resume_dir``); the fork's policy files name the fork's command and carry ``forked_from``
 (the parent's command, run id and checkpoint) in their manifests. A fork may change only
-what leaves the checkpoint meaningful (:data:`FORK_FIELDS`: the league's rules but its zoo
-seeds and rating model, and the budget and bookkeeping fields); anything else (networks,
+what leaves the checkpoint meaningful (:data:`FORK_FIELDS`: the league's rules but its rating
+model, and the budget and bookkeeping fields); ``--league.zoo`` may only gain entries, which
+join their pools at the fork's epoch as seeded members (``fork.json`` lists them under
+``seeded``: e.g. a still team ``ant=passive bug=passive`` for a Spider whose league never
+showed it one); anything else (networks,
 algorithms, rewards, roster, seed) is refused naming the field, since the networks and
 matches being continued were made under it.
 
@@ -45,7 +48,7 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import LOG_FILE, write_pool
+from triplesumo.train.league import LOG_FILE, League, write_pool
 from triplesumo.train.loop import (
     FORK_FILE,
     RESUME_OVERRIDES,
@@ -59,9 +62,21 @@ from triplesumo.train.loop import (
 
 FORK_FORMAT = "triplesumo-fork/1"
 FORK_FIELDS = ("name", "out", "checkpoint_every", "tensorboard", "max_env_steps", *RESUME_OVERRIDES, "league")
-"""The TrainConfig fields a fork may change (``league`` but its ``zoo`` and ``rating_model``)."""
-LEAGUE_FIXED = ("zoo", "rating_model")
-"""League fields a fork keeps: the pools were seeded and rated under them."""
+"""The TrainConfig fields a fork may change (``league`` but its ``rating_model``, and its ``zoo`` only by
+appending entries)."""
+LEAGUE_FIXED = ("rating_model",)
+"""League fields a fork keeps: the pools were rated under it."""
+
+
+def added_seeds(parent: TrainConfig, cfg: TrainConfig) -> tuple[str, ...]:
+    """The ``--league.zoo`` entries a fork appends to its parent's (they join the pools at the fork's epoch);
+    ``ValueError`` when the fork's zoo does not start with the parent's: the members the parent seeded are
+    in its pools and cannot be taken back."""
+    old, new = tuple(parent.league.zoo), tuple(cfg.league.zoo)
+    if new[:len(old)] != old:
+        raise ValueError(f"a fork may add --league.zoo entries, not change or drop the parent's: the fork's "
+                         f"{list(new)} must start with the parent's {list(old)}")
+    return new[len(old):]
 
 
 def _changes(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
@@ -102,9 +117,11 @@ def check_fork(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
     if bad:
         flags = ", ".join("--" + k.replace("_", "-") for k in bad)
         raise ValueError(f"a fork continues the parent's networks, matches and pools, so it keeps their config; "
-                         f"it may change --league.* (not --league.zoo or --league.rating-model), --epochs, "
+                         f"it may change --league.* (not --league.rating-model; --league.zoo only by adding "
+                         f"entries), --epochs, "
                          f"--max-minutes, --max-env-steps, --checkpoint-every, --progress, --tensorboard and "
                          f"--save-replay, not {flags}")
+    added_seeds(parent, cfg)
     return changes
 
 
@@ -171,7 +188,9 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
     (``epoch-N``; default its latest) and return its folder (module docstring). ``cfg`` is the parent's
     config with the fork's changes (:func:`check_fork`); nothing is written when a check fails."""
     parent_dir = Path(parent_dir)
-    changes = check_fork(parent_config(parent_dir), cfg)
+    parent = parent_config(parent_dir)
+    changes = check_fork(parent, cfg)
+    seeds = added_seeds(parent, cfg)
     run_dir = Path(cfg.out) / cfg.name
     if run_dir.resolve() == parent_dir.resolve():
         raise ValueError(f"a fork needs its own folder: --name/--out give {run_dir}, the parent's folder")
@@ -196,7 +215,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         "format": FORK_FORMAT, "parent": str(parent_dir), "parent_run_id": state.get("run_id"),
         "parent_command": next((m.get("command") for m in manifests.values()), None),
         "checkpoint": folder.name, "epoch": epoch, "env_steps": int(state["env_steps"]), "changes": changes,
-        "command": command, "evicted_left_behind": left_behind,
+        "command": command, "evicted_left_behind": left_behind, "seeded": [],
     }
     state["config"] = config_to_json(cfg)
     state["run_id"] = run_id_of(cfg)
@@ -212,8 +231,6 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         for name in ("weights.safetensors", "arrays.npz", checkpoint.MANIFEST,
                      *(["replay.npz"] if need_replay else [])):
             shutil.copyfile(folder / name, target / name)
-        checkpoint.rewrite_state(target, state)  # (its manifest then names no replay buffer it did not copy)
-        checkpoint.point_latest(run_dir, target, epoch)
         if "league" in state:
             for rel in league_files:
                 dest = run_dir / "league" / rel
@@ -222,6 +239,13 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
             write_pool(run_dir / "league", state["league"])
             if (parent_dir / "league" / LOG_FILE).is_file():
                 shutil.copyfile(parent_dir / "league" / LOG_FILE, run_dir / "league" / LOG_FILE)
+            if seeds:  # the appended zoo entries join the pools now, as members seeded at the fork's epoch
+                league = League.load(run_dir, cfg.league)
+                record["seeded"] = [m.id for m in league.seed(seeds, epoch)]
+                state["league"] = league.state_dict()
+                league.save()
+        checkpoint.rewrite_state(target, state)  # (its manifest then names no replay buffer it did not copy)
+        checkpoint.point_latest(run_dir, target, epoch)
         for csv_file in sorted(parent_dir.glob("*.csv")):  # metrics*, learning*, eval*: cut back on resume
             shutil.copyfile(csv_file, run_dir / csv_file.name)
         atomic_write_bytes(run_dir / FORK_FILE, (json.dumps(record, indent=1) + "\n").encode())

@@ -46,7 +46,8 @@ The rules, after AlphaStar's league and RLlib's league example:
   no such side exists (both pools still empty in a run from scratch) every match is live. With
   one learning side nothing is drawn.
 * **Size limit.** Past :attr:`LeagueConfig.max_size` members the oldest is evicted
-  (FIFO), except the first member and the best-rated one (highest ``mu``). An evicted
+  (FIFO), except the first member and the best-rated one (highest ``mu``); with
+  :attr:`LeagueConfig.keep_zoo` the seeded members stay and do not count. An evicted
   member's files stay under ``members/`` (listed as ``evicted``), so any checkpoint
   that still names it resumes.
 
@@ -115,6 +116,10 @@ class LeagueConfig:
     """Exponent of the hard pfsp weighting (AlphaStar: 2)."""
     max_size: int = 20
     """Most members a pool holds; past it the oldest goes (FIFO), never the first nor the best-rated."""
+    keep_zoo: bool = False
+    """Never evict the members seeded from ``zoo`` (they do not count against ``max_size`` either): a fixed
+    opponent the learner must keep beating, such as a still team (``ant=passive bug=passive``), stays in
+    the pool however many snapshots join."""
     snapshot_every: int = 50
     """Check the learners for admission every this many epochs."""
     zoo: tuple[str, ...] = ()
@@ -296,11 +301,13 @@ class OpponentPool:
         return f"{self.side}-{self.created:04d}"
 
     def evict(self, ratings: RatingTable) -> list[Snapshot]:
-        """Drop the oldest members past ``max_size``, never the first nor the best-rated (highest mu)."""
+        """Drop the oldest members past ``max_size``, never the first nor the best-rated (highest mu); with
+        ``keep_zoo`` the seeded members are neither evicted nor counted."""
         gone: list[Snapshot] = []
-        while len(self.members) > self.config.max_size:
+        kept = [m for m in self.members if m.source == "zoo"] if self.config.keep_zoo else []
+        while len(self.members) - len(kept) > self.config.max_size:
             best = max(self.members, key=lambda m: ratings[m.id].mu)  # ties: the earliest
-            keep = {self.members[0].id, best.id}
+            keep = {self.members[0].id, best.id, *(m.id for m in kept)}
             victim = next(m for m in self.members if m.id not in keep)
             self.members.remove(victim)
             self.evicted.append(victim)
@@ -317,19 +324,17 @@ class League:
         sides: Side name -> its roles (``{"team": ("ant", "bug"), "spider": ("spider",)}``).
         seed: Seeds the sampling Generator.
         epoch: The epoch the zoo members join at.
+        seed_zoo: Seed the pools with ``config.zoo`` (False when a saved state is loaded next, as a resumed
+            run does: its members are in that state, and seeding again would write over their files).
     """
 
     def __init__(self, run_dir: Path, config: LeagueConfig, sides: Mapping[str, Sequence[str]],
-                 seed: int = 0, epoch: int = 0) -> None:
+                 seed: int = 0, epoch: int = 0, seed_zoo: bool = True) -> None:
         if not sides:
             raise ValueError("a league needs at least one side")
         for side, roles in sides.items():
             if not side or "-" in side or ":" in side or not roles or len(set(roles)) != len(roles):
                 raise ValueError(f"side {side!r}: a name without '-' or ':' and distinct roles, got {list(roles)}")
-        all_roles = {r for roles in sides.values() for r in roles}
-        unknown = [e for e in config.zoo if e.partition("=")[0] not in all_roles]
-        if unknown:
-            raise ValueError(f"LeagueConfig.zoo names roles no side has: {unknown}; roles are {sorted(all_roles)}")
         for name, named in config.sides_named().items():
             unknown = [s for s in named if s not in sides]
             if unknown:
@@ -341,20 +346,38 @@ class League:
         self.ratings = RatingTable(config.rating_model, [self.learner(s) for s in sides])
         self.rng = np.random.default_rng(seed)
         self.epoch = epoch
+        self.seed(config.zoo if seed_zoo else (), epoch)
+
+    def seed(self, entries: Sequence[str], epoch: int) -> list[Snapshot]:
+        """Add the ROLE=POLICY ``entries`` (:attr:`LeagueConfig.zoo`'s form) to the pools as ``zoo`` members
+        joining at ``epoch``, at the initial rating; a pool past its size limit then evicts as admission does.
+        A new league seeds its config's zoo; a fork that appends zoo entries seeds only those, at the fork's
+        epoch. Returns the members added."""
+        all_roles = {r for pool in self.pools.values() for r in pool.roles}
+        unknown = [e for e in entries if e.partition("=")[0] not in all_roles]
+        if unknown:
+            raise ValueError(f"LeagueConfig.zoo names roles no side has: {unknown}; roles are {sorted(all_roles)}")
         seeds: dict[str, list[str]] = {}
-        for entry in config.zoo:
+        for entry in entries:
             role, _, spec = entry.partition("=")
             seeds.setdefault(role, []).append(spec)
+        added: list[Snapshot] = []
         for side, pool in self.pools.items():
-            if not all(r in seeds for r in pool.roles):
+            named = [r for r in pool.roles if r in seeds]
+            if not named:
                 continue
+            if len(named) < len(pool.roles):
+                raise ValueError(f"LeagueConfig.zoo names roles {named} of side {side!r} but not "
+                                 f"{[r for r in pool.roles if r not in seeds]}: a member needs a policy per role")
             counts = {r: len(seeds[r]) for r in pool.roles}
             if len(set(counts.values())) > 1:
                 raise ValueError(f"LeagueConfig.zoo names the roles of side {side!r} unequally often {counts}: the "
                                  f"i-th entries of its roles make its i-th member")
             for i in range(counts[pool.roles[0]]):
                 specs = {r: seeds[r][i] for r in pool.roles}
-                self._add(side, "zoo", epoch, functools.partial(_copy_specs, specs), specs)
+                added.append(self._add(side, "zoo", epoch, functools.partial(_copy_specs, specs), specs))
+            pool.evict(self.ratings)
+        return added
 
     @staticmethod
     def learner(side: str) -> str:

@@ -162,7 +162,7 @@ ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "ma
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget, evaluations while training): a config.json without them gets their defaults; any other
 missing key is an error."""
-LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_threshold")
+LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_threshold", "keep_zoo")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
 
@@ -435,7 +435,7 @@ class Trainer:
         """warp: the seats' trained members with the matches each plays, and the random seats (None: stale)."""
         self._device_policies: dict[int, tuple[FrozenPolicy, Any]] = {}
         if cfg.self_play:
-            self._setup_league(pairs)
+            self._setup_league(pairs, resume)
         if resume:
             self._restore(from_checkpoint)
         else:
@@ -451,7 +451,7 @@ class Trainer:
                               self.evaluations if cfg.eval_every else None)
 
     # ------------------------------------------------------------------ self-play
-    def _setup_league(self, pairs: tuple[str, ...]) -> None:
+    def _setup_league(self, pairs: tuple[str, ...], resume: bool = False) -> None:
         """Sides, roles and seeds of the league (README "Self-play"); errors name the config field.
 
         A side is a team of the roster (paper: ``team`` = Ant and Bug, ``spider``); in a free-for-all
@@ -504,10 +504,12 @@ class Trainer:
                           zip(roles, [a for a in fixed if self.side_of[a] == side], strict=False)]
         lcfg = dataclasses.replace(cfg.league, zoo=(*cfg.league.zoo, *extra))
         try:
-            self.league = League(self.run_dir, lcfg, sides, seed=int(self.rng.integers(2**31 - 1)))
+            # (resuming: the checkpoint's league state holds the seeded members, so seeding would only rewrite them)
+            self.league = League(self.run_dir, lcfg, sides, seed=int(self.rng.integers(2**31 - 1)),
+                                 seed_zoo=not resume)
         except ValueError as err:
             raise ValueError(f"TrainConfig.league: {err}") from None
-        empty = [s for s in self.opponent_sides if not self.league.pools[s].members]
+        empty = [] if resume else [s for s in self.opponent_sides if not self.league.pools[s].members]
         if empty:
             raise ValueError(f"TrainConfig.league.zoo: the pools of {empty} would start empty; name a policy for "
                              f"every role of a side ({ {s: sides[s] for s in empty} }) or none")
