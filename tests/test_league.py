@@ -168,6 +168,35 @@ def test_sampling_frequencies_follow_the_documented_weights(tmp_path: Path, samp
         assert counts[2] > counts[1] > counts[0]  # the Spider it loses to most is drawn most
 
 
+@pytest.mark.parametrize("sampling", ["uniform", "latest", "pfsp"])
+def test_zoo_share_gives_the_seeds_a_fixed_share_of_the_draws(tmp_path: Path, sampling: str) -> None:
+    lg = league(tmp_path, sampling=sampling, zoo_share=0.4)  # spider-0001: the seeded random Spider
+    lg.seed(("spider=passive",), epoch=0)  # spider-0002: a second seed
+    for k in range(3):
+        lg.admit("spider", k + 1, builtin={"spider": "zero"})  # spider-0003..0005: snapshots
+    record = [(0, 0), (0, 0), (10, 9), (10, 5), (10, 1)]
+    for m, (games, wins) in zip(lg.pools["spider"].members, record, strict=True):
+        m.games, m.wins = games, wins
+    p = np.array([(w + 1) / (g + 2) for g, w in record[2:]])
+    rule = {"uniform": np.ones(3), "latest": np.array([0.0, 0.0, 1.0]), "pfsp": (1 - p) ** 2}[sampling]
+    expected = np.concatenate([[0.2, 0.2], 0.6 * rule / rule.sum()])
+    np.testing.assert_allclose(lg.pools["spider"].weights(), expected)
+    n = 8000
+    ids = [m.id for m in lg.pools["spider"].members]
+    counts = np.bincount([ids.index(lg.sample("spider")[0].id) for _ in range(n)], minlength=5)
+    nonzero = expected > 0
+    assert chisquare(counts[nonzero], n * expected[nonzero]).pvalue > 0.001
+    assert abs(counts[:2].sum() / n - 0.4) < 0.03
+    # a pool of seeds only (the team's) ignores the share; so does zoo_share 0
+    np.testing.assert_allclose(lg.pools["team"].weights(), [1.0])
+    plain = league(tmp_path / "plain", sampling="uniform")
+    plain.seed(("spider=passive",), epoch=0)
+    plain.admit("spider", 1, builtin={"spider": "zero"})
+    np.testing.assert_allclose(plain.pools["spider"].weights(), np.full(3, 1 / 3))
+    with pytest.raises(ValueError, match="LeagueConfig.zoo_share must be a number in \\[0, 1\\], got 1.5"):
+        LeagueConfig(zoo_share=1.5)
+
+
 def test_sampling_several_seats_draws_distinct_members_while_the_pool_has_enough(tmp_path: Path) -> None:
     lg = league(tmp_path, sampling="uniform")
     lg.admit("spider", 1, builtin={"spider": "passive"})

@@ -36,7 +36,10 @@ The rules, after AlphaStar's league and RLlib's league example:
   is the facing learner's win rate against member ``i`` (Laplace prior: an unmet member
   counts 0.5), with AlphaStar's weightings ``hard``: ``f(p) = (1 - p) ** exponent``
   (mostly the opponents it loses to) or ``variance``: ``f(p) = p (1 - p)`` (mostly the
-  even matches).
+  even matches). With :attr:`LeagueConfig.zoo_share` ``s > 0`` a pool holding both seeded
+  (``zoo``) members and snapshots gives its seeds ``s`` of the draws, evenly, and its
+  snapshots ``1 - s`` by the rule above, so a fixed opponent (a still team) keeps its
+  share of the matches however large the pool grows.
 * **Live or pool (several learning sides).** When more than one side learns in the run (the
   paper's 2-vs-1 with ``--learn ant=ddpg bug=ddpg spider=ddpg``), :meth:`League.draw_live` decides at
   every match start who plays: with probability :attr:`LeagueConfig.live_share` the live learners
@@ -120,6 +123,10 @@ class LeagueConfig:
     """Never evict the members seeded from ``zoo`` (they do not count against ``max_size`` either): a fixed
     opponent the learner must keep beating, such as a still team (``ant=passive bug=passive``), stays in
     the pool however many snapshots join."""
+    zoo_share: float = 0.0
+    """The share of a pool's draws, in [0, 1], that goes to its seeded (``zoo``) members, evenly; its snapshots
+    get the rest by ``sampling``. 0: every member drawn by ``sampling`` alike. A pool holding only seeds or only
+    snapshots ignores it."""
     snapshot_every: int = 50
     """Check the learners for admission every this many epochs."""
     zoo: tuple[str, ...] = ()
@@ -159,6 +166,9 @@ class LeagueConfig:
         if not (isinstance(self.live_share, int | float) and not isinstance(self.live_share, bool)
                 and 0.0 <= self.live_share <= 1.0):
             raise ValueError(f"LeagueConfig.live_share must be a number in [0, 1], got {self.live_share!r}")
+        if not (isinstance(self.zoo_share, int | float) and not isinstance(self.zoo_share, bool)
+                and 0.0 <= self.zoo_share <= 1.0):
+            raise ValueError(f"LeagueConfig.zoo_share must be a number in [0, 1], got {self.zoo_share!r}")
         for name, minimum in (("window", 1), ("max_size", 3), ("snapshot_every", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < minimum:
@@ -282,17 +292,30 @@ class OpponentPool:
         return float(np.mean(self.window)) if self.window else math.nan
 
     def weights(self) -> np.ndarray:
-        """Each member's probability of being drawn, by :attr:`LeagueConfig.sampling` (module docstring)."""
+        """Each member's probability of being drawn, by :attr:`LeagueConfig.sampling` and
+        :attr:`LeagueConfig.zoo_share` (module docstring)."""
         n = len(self.members)
         if n == 0:
             raise ValueError(f"pool {self.side!r} is empty: seed it (LeagueConfig.zoo) or admit a snapshot first")
+        seeded = np.array([m.source == "zoo" for m in self.members])
+        share = self.config.zoo_share
+        if share > 0 and seeded.any() and not seeded.all():
+            w = np.zeros(n)
+            w[seeded] = share / seeded.sum()
+            w[~seeded] = (1.0 - share) * self._rule([m for m, z in zip(self.members, seeded, strict=True) if not z])
+            return w
+        return self._rule(self.members)
+
+    def _rule(self, members: Sequence[Snapshot]) -> np.ndarray:
+        """:attr:`LeagueConfig.sampling`'s probabilities over ``members`` (in pool order)."""
+        n = len(members)
         if self.config.sampling == "uniform":
             w = np.ones(n)
         elif self.config.sampling == "latest":
             w = np.zeros(n)
             w[-1] = 1.0
         else:
-            p = np.array([m.p_win for m in self.members])
+            p = np.array([m.p_win for m in members])
             w = (1.0 - p) ** self.config.pfsp_exponent if self.config.pfsp_weighting == "hard" else p * (1.0 - p)
         return w / w.sum()
 

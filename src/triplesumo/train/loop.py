@@ -162,7 +162,8 @@ ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "ma
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget, evaluations while training): a config.json without them gets their defaults; any other
 missing key is an error."""
-LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_threshold", "keep_zoo")
+LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_threshold", "keep_zoo",
+                      "zoo_share")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
 
