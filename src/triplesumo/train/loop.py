@@ -510,10 +510,6 @@ class Trainer:
                                  seed_zoo=not resume)
         except ValueError as err:
             raise ValueError(f"TrainConfig.league: {err}") from None
-        empty = [] if resume else [s for s in self.opponent_sides if not self.league.pools[s].members]
-        if empty:
-            raise ValueError(f"TrainConfig.league.zoo: the pools of {empty} would start empty; name a policy for "
-                             f"every role of a side ({ {s: sides[s] for s in empty} }) or none")
 
     def _seat_opponents(self, k: int) -> None:
         """Draw match ``k``'s opponents (at its start) from the pools of the sides that do not learn and,
