@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from pathlib import Path
 
@@ -118,6 +119,7 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.train.loop import RESUME_OVERRIDES, train
 
             plain = ("command", "resume", "fork", "from_checkpoint", "start_over")
+            typed = shlex.join(["triplesumo", *argv])  # this session's leg records it (RUN/legs.json)
             given = {k for k in vars(args) if k not in plain}
             if args.fork:
                 import dataclasses
@@ -133,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
                 base = saved if "out" in given else dataclasses.replace(saved, out=str(parent.parent))
                 run_dir = fork_run(parent, _dcargs.build(TrainConfig, args, base=base), args.from_checkpoint)
                 print(f"forked {parent} into {run_dir} (fork.json says from where and what changed)")
-                result = train(TrainConfig(), resume_dir=run_dir)
+                result = train(TrainConfig(), resume_dir=run_dir, session_command=typed)
             elif args.resume:
                 allowed = RESUME_OVERRIDES
                 if args.start_over:
@@ -145,13 +147,13 @@ def main(argv: list[str] | None = None) -> int:
                                      f"--progress and --no-save-replay may be given, not {flags}")
                 overrides = {k: v for k, v in vars(args).items() if k in allowed}
                 result = train(TrainConfig(), resume_dir=args.resume, overrides=overrides,
-                               from_checkpoint=args.from_checkpoint)
+                               from_checkpoint=args.from_checkpoint, session_command=typed)
             else:
                 if args.from_checkpoint:
                     raise ValueError("--from needs --resume RUN_DIR or --fork RUN_DIR (it names a checkpoint of "
                                      "that run)")
                 cfg = _dcargs.build(TrainConfig, args)
-                result = train(cfg, start_over=args.start_over)
+                result = train(cfg, start_over=args.start_over, session_command=typed)
             print(f"trained {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates "
                   f"in {result.seconds:.0f} s; MWR {result.mwr:+.3f}")
             if len(result.mwrs) > 1:

@@ -42,13 +42,13 @@ import json
 import os
 import re
 import shlex
-import subprocess
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import triplesumo
 from triplesumo import ENV_VERSION
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import policy_fingerprint
@@ -59,7 +59,7 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare, trial_group
 from triplesumo.evaluation.evaluate import EvaluateConfig, check_ray, evaluate
 from triplesumo.model.specs import PhysicsConfig
-from triplesumo.train import sweep
+from triplesumo.train import legs, sweep
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
@@ -451,20 +451,12 @@ def _rows_in(path: Path) -> int:
 
 
 def code_version() -> str:
-    """``git describe`` of the source tree when it is a checkout, else the package version."""
-    from importlib import metadata
-
-    try:
-        done = subprocess.run(["git", "describe", "--always", "--dirty", "--tags"], cwd=Path(__file__).parent,
-                              capture_output=True, text=True, timeout=10, check=False)
-        if done.returncode == 0 and done.stdout.strip():
-            return f"git {done.stdout.strip()}"
-    except OSError:
-        pass
-    try:
-        return f"triplesumo {metadata.version('triplesumo')}"
-    except metadata.PackageNotFoundError:
-        return "unknown"
+    """``git SHORT-SHA`` (``-dirty`` when the package's tracked files differ from it) of the checkout the
+    package was imported from (:func:`triplesumo.train.legs.code_version`), else the package version."""
+    code = legs.code_version()
+    if code is not None:
+        return f"git {code['commit'][:7]}{'-dirty' if code['dirty'] else ''}"
+    return f"triplesumo {triplesumo.__version__}"
 
 
 def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:

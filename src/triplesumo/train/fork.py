@@ -17,6 +17,8 @@ run (its latest by default):
 * ``config.json`` (the fork's config) and ``fork.json``: the parent folder, its run id and
   command, the checkpoint and its epoch and env steps, each changed field as ``[parent,
   fork]``, the fork's command, and the evicted members left behind.
+* ``legs.json``: the parent's legs (:mod:`triplesumo.train.legs`) up to the fork's epoch; the fork's
+  first session appends its own (``kind`` ``fork``).
 
 Training then resumes the new folder (:func:`~triplesumo.train.loop.train` with
 ``resume_dir``); the fork's policy files name the fork's command and carry ``forked_from``
@@ -49,6 +51,7 @@ from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.league import LOG_FILE, League, write_pool
+from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
 from triplesumo.train.loop import (
     FORK_FILE,
     RESUME_OVERRIDES,
@@ -198,6 +201,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         raise ValueError(f"run folder {run_dir} already holds a run; a fork writes a new folder (choose another "
                          f"--name, or continue that run with `triplesumo train --resume {run_dir}`)")
     folder = checkpoint.find(parent_dir, from_checkpoint) if from_checkpoint else checkpoint.latest(parent_dir)
+    parent_legs = read_legs(parent_dir)  # (a corrupt legs.json is refused before anything is written)
     need_replay = cfg.save_replay and (folder / "replay.npz").is_file()
     checkpoint.verify(folder, need_replay=need_replay)
     state = load_json(folder / "state.json")
@@ -226,6 +230,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
     try:
         target = run_dir / "checkpoints" / folder.name
         written += [run_dir / "checkpoints", run_dir / "league", run_dir / FORK_FILE, run_dir / "config.json",
+                    run_dir / LEGS_FILE,
                     *(run_dir / f.name for f in parent_dir.glob("*.csv"))]
         target.mkdir(parents=True)
         for name in ("weights.safetensors", "arrays.npz", checkpoint.MANIFEST,
@@ -249,6 +254,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         for csv_file in sorted(parent_dir.glob("*.csv")):  # metrics*, learning*, eval*: cut back on resume
             shutil.copyfile(csv_file, run_dir / csv_file.name)
         atomic_write_bytes(run_dir / FORK_FILE, (json.dumps(record, indent=1) + "\n").encode())
+        write_legs(run_dir, legs_before(parent_legs, epoch))  # the parent's sessions up to the fork's epoch
         write_run_config(run_dir, cfg)
     except BaseException:  # a half-made fork is no run: take back what was written
         for path in [run_dir] if created else written:

@@ -82,6 +82,7 @@ from triplesumo.train.learners import (
     learner_specs,
     make_learner,
 )
+from triplesumo.train.legs import LEGS_FILE, legs_before, make_leg, read_legs, write_legs
 from triplesumo.train.logger import MetricsLog, run_file
 
 
@@ -345,8 +346,11 @@ class Trainer:
     """
 
     def __init__(self, cfg: TrainConfig, run_dir: Path | None = None, resume: bool = False,
-                 command: str | None = None, start_over: bool = False, from_checkpoint: str | None = None) -> None:
+                 command: str | None = None, start_over: bool = False, from_checkpoint: str | None = None,
+                 session_command: str | None = None) -> None:
         self.cfg = cfg
+        self.resumed = resume
+        """This session continues a checkpoint (a resume, or a fork's first session)."""
         self.match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
                                          reward=cfg.reward, physics=cfg.physics)
         agent_names = list(self.match_cfg.agent_names)
@@ -378,6 +382,10 @@ class Trainer:
             "epoch": fork["epoch"], "command": fork["parent_command"], "changes": fork["changes"]}
         """A fork's parent (``fork.json``), named in every policy manifest it writes; None for other runs."""
         self.command = command or (fork["command"] if fork is not None else command_for(cfg))
+        self.session_command = session_command or self.command
+        """What started this session (its leg's command): the typed command line where the CLI gives it."""
+        self.legs: list[dict[str, Any]] = []
+        """The run's legs (:mod:`triplesumo.train.legs`), this session's last once :meth:`run` starts."""
         self.run_id: str | None = run_id_of(cfg)
         """This run's id (:func:`run_id_of`), kept by its checkpoints: every policy file it writes (its own and
         its league snapshots, across resumes) names it, so copies of them still group by run. None for a run
@@ -871,8 +879,25 @@ class Trainer:
                                f"(epoch {self.epochs_done}, env step {self.env_steps}, {algo}): {what}. Stopped; "
                                f"{self.last_good()}. Lower the learning rates ({rates}) or the reward scale")
 
+    def start_leg(self) -> dict[str, Any]:
+        """Append this session's leg to ``RUN/legs.json`` (cutting the legs of epochs trained again) and
+        return it: ``start`` for a new run, ``fork`` for a fork continued from its fork epoch, else ``resume``."""
+        kind = "start"
+        if self.resumed:
+            at_fork = self.forked_from is not None and self.epochs_done == int(self.forked_from["epoch"])
+            kind = "fork" if at_fork else "resume"
+        cfg = self.cfg
+        leg = make_leg(kind, self.epochs_done, self.env_steps, self.run_id,
+                       {"epochs": cfg.epochs, "max_minutes": cfg.max_minutes, "max_env_steps": cfg.max_env_steps},
+                       self.session_command)
+        self.legs = [*legs_before(read_legs(self.run_dir), self.epochs_done), leg]
+        with checkpoint.writing(self.run_dir / LEGS_FILE):
+            write_legs(self.run_dir, self.legs)
+        return leg
+
     def run(self) -> TrainResult:
         cfg = self.cfg
+        self.start_leg()
         start = time.perf_counter()
         start_steps = self.env_steps
         trained_before, evals_before = self.train_seconds, self._eval_seconds
@@ -979,6 +1004,7 @@ class Trainer:
             "updates": learner.algo.num_updates, "command": self.command,
             **({"run_id": self.run_id} if self.run_id else {}),
             **({"forked_from": self.forked_from} if self.forked_from else {}),
+            "legs": self.legs,  # which code trained which epochs, session by session
             # self-play: the seeds of the opponent pools (league.zoo, else the seats' policies)
             "trained_against": list(self.league.config.zoo if self.league is not None else self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
@@ -1221,21 +1247,24 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
 
 
 def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str, Any] | None = None,
-          start_over: bool = False, from_checkpoint: str | None = None) -> TrainResult:
+          start_over: bool = False, from_checkpoint: str | None = None,
+          session_command: str | None = None) -> TrainResult:
     """Start a run, or resume the one in ``resume_dir`` (with e.g. more epochs).
 
     A new run refuses a folder that already holds a run (:class:`RunExistsError`) unless
     ``start_over``, which moves that run aside to ``RUN.old-K`` first. ``from_checkpoint``
     (``epoch-N``) resumes from an older checkpoint than the latest, e.g. when the latest is
-    damaged; the epochs after it are trained again.
+    damaged; the epochs after it are trained again. ``session_command`` is what started this session
+    (the CLI's command line), recorded in its leg of ``RUN/legs.json`` (:mod:`triplesumo.train.legs`).
     """
     if resume_dir is not None:
         resume_dir = Path(resume_dir)
         saved = config_from_json(load_json(resume_dir / "config.json"), str(resume_dir / "config.json"))
         cfg = dataclasses.replace(saved, **(overrides or {}))
-        trainer = Trainer(cfg, run_dir=resume_dir, resume=True, from_checkpoint=from_checkpoint)
+        trainer = Trainer(cfg, run_dir=resume_dir, resume=True, from_checkpoint=from_checkpoint,
+                          session_command=session_command)
     else:
         if from_checkpoint is not None:
             raise ValueError("--from needs --resume RUN_DIR (it names a checkpoint of that run)")
-        trainer = Trainer(cfg, start_over=start_over)
+        trainer = Trainer(cfg, start_over=start_over, session_command=session_command)
     return trainer.run()

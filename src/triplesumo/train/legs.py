@@ -1,0 +1,118 @@
+"""A run's legs: which code trained which epochs.
+
+A long run is trained over several sessions (``--resume``, ``--fork``), possibly by several
+versions of the code. Every session appends one *leg* to ``RUN/legs.json`` when it starts
+training::
+
+    {"format": "triplesumo-legs/1", "legs": [
+      {"kind": "start", "epoch": 0, "env_steps": 0, "run_id": "...",
+       "code": {"commit": "07161cf...", "dirty": false},
+       "versions": {"triplesumo": "0.1.0", "mujoco": "4.0.0", "torch": "2.13.0+cpu"},
+       "budget": {"epochs": 20000, "max_minutes": 100.0, "max_env_steps": 0},
+       "started": "2026-11-26T08:48:15+00:00", "command": "triplesumo train ..."},
+      {"kind": "resume", "epoch": 5100, ...}]}
+
+``kind`` is ``start`` (a new run), ``fork`` (the first session of a fork, from the parent's
+checkpoint) or ``resume``; ``epoch`` and ``env_steps`` are where the leg starts, so a leg
+trained the epochs up to the next leg's ``epoch``. ``code`` is the git commit of the
+checkout the ``triplesumo`` package was imported from and whether tracked files under the
+package differ from it (``dirty``; untracked files and changes outside the package do not
+count), or ``null`` when the package is not a tracked part of a git checkout (an installed
+wheel). A resume from a checkpoint older than the newest cuts the legs that started at or
+after it (their epochs are trained again); a fork starts with its parent's legs up to the
+fork's epoch. The trainer writes the legs into every policy manifest (its own and its league
+snapshots), so a shipped policy names the code of every session that trained it.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import torch
+
+import triplesumo
+from triplesumo.agents.policy_file import PolicyFileError, atomic_write_bytes, load_json
+
+LEGS_FILE = "legs.json"
+LEGS_FORMAT = "triplesumo-legs/1"
+LEG_KINDS = ("start", "resume", "fork")
+LEG_KEYS = ("kind", "epoch", "env_steps", "run_id", "code", "versions", "budget", "started", "command")
+"""What every leg records (module docstring)."""
+
+
+def _git(package: Path, *args: str) -> str | None:
+    """``git -C package ARGS`` stdout, or None when git is missing or the command fails."""
+    try:
+        done = subprocess.run(["git", "-C", str(package), *args], capture_output=True, text=True, timeout=20,
+                              check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout if done.returncode == 0 else None
+
+
+def code_version(package: Path | str | None = None) -> dict[str, Any] | None:
+    """``{"commit": SHA, "dirty": bool}`` of the git checkout that holds ``package`` (default: the
+    imported ``triplesumo`` package's folder), or None when the folder's files are not tracked by git
+    (an installed wheel, a copy, no git). ``dirty``: a tracked file under ``package`` differs from the
+    commit (staged or not); untracked files and changes elsewhere in the checkout do not count."""
+    package = Path(package) if package is not None else Path(triplesumo.__file__).parent
+    if _git(package, "ls-files", "--error-unmatch", "__init__.py") is None:
+        return None
+    commit = _git(package, "rev-parse", "HEAD")
+    status = _git(package, "status", "--porcelain", "--untracked-files=no", "--", ".")
+    if commit is None or status is None:
+        return None
+    return {"commit": commit.strip(), "dirty": bool(status.strip())}
+
+
+def versions() -> dict[str, str]:
+    """The versions of triplesumo, MuJoCo and torch this process runs."""
+    return {"triplesumo": triplesumo.__version__, "mujoco": mujoco.__version__, "torch": torch.__version__}
+
+
+def make_leg(kind: str, epoch: int, env_steps: int, run_id: str | None, budget: dict[str, Any],
+             command: str, code: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A leg starting now at ``epoch`` / ``env_steps`` (``code``: default :func:`code_version`)."""
+    if kind not in LEG_KINDS:
+        raise ValueError(f"leg kind {kind!r}: expected one of {LEG_KINDS}")
+    return {"kind": kind, "epoch": int(epoch), "env_steps": int(env_steps), "run_id": run_id,
+            "code": code_version() if code is None else code, "versions": versions(), "budget": dict(budget),
+            "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"), "command": command}
+
+
+def read_legs(run_dir: Path | str) -> list[dict[str, Any]]:
+    """The legs of the run in ``run_dir`` (``[]`` where it has no ``legs.json``: a run started before
+    legs were kept); :class:`PolicyFileError` naming the file when it is corrupt or of another format."""
+    path = Path(run_dir) / LEGS_FILE
+    if not path.is_file():
+        return []
+    data = load_json(path)
+    if data.get("format") != LEGS_FORMAT:
+        raise PolicyFileError(f"{path}: format {data.get('format')!r}, expected {LEGS_FORMAT!r}")
+    legs = data.get("legs")
+    if not isinstance(legs, list) or not all(isinstance(leg, dict) for leg in legs):
+        raise PolicyFileError(f"{path}: 'legs' must be a list of objects")
+    for i, leg in enumerate(legs):
+        missing = [k for k in LEG_KEYS if k not in leg]
+        if missing:
+            raise PolicyFileError(f"{path}: leg {i} lacks {missing}")
+        if leg["kind"] not in LEG_KINDS:
+            raise PolicyFileError(f"{path}: leg {i} has kind {leg['kind']!r}, expected one of {LEG_KINDS}")
+    return legs
+
+
+def legs_before(legs: list[dict[str, Any]], epoch: int) -> list[dict[str, Any]]:
+    """The legs that started before ``epoch``: what a run continued from its checkpoint at ``epoch``
+    keeps (a leg that started at or after it trained epochs that are trained again)."""
+    return [leg for leg in legs if int(leg["epoch"]) < epoch]
+
+
+def write_legs(run_dir: Path | str, legs: list[dict[str, Any]]) -> None:
+    """Write ``RUN/legs.json`` atomically."""
+    data = {"format": LEGS_FORMAT, "legs": legs}
+    atomic_write_bytes(Path(run_dir) / LEGS_FILE, (json.dumps(data, indent=1) + "\n").encode())
