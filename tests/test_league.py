@@ -15,7 +15,15 @@ from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.networks import Actor
 from triplesumo.agents.policy_file import PolicyFileError, save_policy
 from triplesumo.evaluation.ratings import Rating, RatingTable
-from triplesumo.train.league import League, LeagueConfig, league_demo, member_ticks, plot_league
+from triplesumo.train.league import (
+    League,
+    LeagueConfig,
+    league_demo,
+    league_figure,
+    member_labels,
+    member_ticks,
+    plot_league,
+)
 
 SIDES = {"team": ("ant", "bug"), "spider": ("spider",)}
 SEEDED = ("ant=random", "bug=random", "spider=random")
@@ -343,6 +351,8 @@ def test_the_league_plot_labels_at_most_24_member_rows_first_and_last_included(n
     shown = member_ticks(n)
     assert shown == sorted(set(shown)) and shown[0] == 0 and shown[-1] == n - 1
     assert len(shown) == n if n <= 24 else 2 <= len(shown) <= 24
+    gaps = np.diff(shown)
+    assert n <= 2 or gaps.min() >= gaps.max() / 2  # no two labels crowd each other (the last one included)
 
 
 def test_bad_league_use_is_a_clear_error(tmp_path: Path) -> None:
@@ -431,3 +441,25 @@ def test_league_config_generates_cli_flags_and_back() -> None:
         ["--threshold", "0.7", "--sampling", "uniform", "--zoo", "spider=zoo:spider", "ant=passive"]))
     assert cfg == LeagueConfig(threshold=0.7, sampling="uniform", zoo=("spider=zoo:spider", "ant=passive"))
     assert _dcargs.build(LeagueConfig, parser.parse_args(_dcargs.to_argv(cfg))) == cfg
+
+
+def test_seeded_members_are_labelled_with_their_policy_and_drawn_apart_in_the_league_plot(tmp_path: Path) -> None:
+    # two Spider seeds (the second as a fork would append it) and a team of two built-ins
+    zoo = ("ant=random", "bug=passive", "spider=passive", "spider=zoo:spider")
+    lg = League(tmp_path, LeagueConfig(zoo=zoo, snapshot_every=1, threshold=0.0, window=1), SIDES, seed=7)
+    for epoch in range(1, 31):
+        lg.record_outcomes([[TEAM], ["spider-0001"]], ["win", "loss"])
+        if lg.admit_due("team", epoch):
+            lg.admit("team", epoch, write=write_actor(epoch))
+        lg.epoch_end(epoch)
+    lg.save()
+    labels = member_labels(tmp_path)
+    assert labels == {"team-0001": "team-0001 seed: random+passive", "spider-0001": "spider-0001 seed: passive",
+                      "spider-0002": "spider-0002 seed: zoo:spider"}
+    fig = league_figure(tmp_path)
+    ticks = [t.get_text() for t in fig.axes[1].get_yticklabels()]
+    assert set(labels.values()) <= set(ticks)  # seeds are always labelled, however many snapshots
+    assert len([t for t in ticks if "seed" not in t]) <= 24 and "team-0031" in ticks  # the last snapshot too
+    crosses = [c for c in fig.axes[1].collections if np.allclose(c.get_facecolor()[0][:3], 0.0)]
+    assert len(crosses) == 3  # one row of black crosses per seed
+    assert member_labels(tmp_path / "elsewhere") == {}

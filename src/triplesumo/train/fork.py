@@ -50,7 +50,7 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import LOG_FILE, League, write_pool
+from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
 from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
 from triplesumo.train.loop import (
     FORK_FILE,
@@ -143,8 +143,6 @@ def drop_unseated_evicted(state: dict[str, Any]) -> tuple[list[str], list[dict[s
     return files, dropped
 
 
-PRUNED_FILE = "pruned.json"
-"""``RUN/league/pruned.json``: the evicted members :func:`compact_run` deleted (id, side, epoch, sha256)."""
 
 
 def compact_run(run_dir: Path | str) -> dict[str, Any]:

@@ -97,6 +97,8 @@ SAMPLING = ("uniform", "latest", "pfsp")
 PFSP_WEIGHTINGS = ("hard", "variance")
 """AlphaStar's PFSP weightings: ``hard`` ``(1 - p) ** exponent``, ``variance`` ``p (1 - p)``."""
 POOL_FILE = "pool.json"
+PRUNED_FILE = "pruned.json"
+"""``RUN/league/pruned.json``: the evicted members ``triplesumo compact`` deleted (id, side, epoch, sha256)."""
 LOG_FILE = "league.csv"
 LOG_COLUMNS = ("epoch", "side", "pool_size", "learner_mu", "learner_sigma", "mean_opponent_mu", "admitted",
                "members")
@@ -701,13 +703,56 @@ def member_ticks(n: int, most: int = 24) -> list[int]:
     if n <= most:
         return list(range(n))
     step = -(-(n - 1) // (most - 1))
-    return sorted({*range(0, n, step), n - 1})
+    ticks = list(range(0, n, step))
+    if n - 1 - ticks[-1] < step / 2 and len(ticks) > 1:  # too close to the last row's label to be read
+        ticks.pop()
+    return sorted({*ticks, n - 1})
+
+
+def member_labels(run_dir: Path) -> dict[str, str]:
+    """``ID seed: POLICY`` of every seeded (``--league.zoo``) member of the run in ``run_dir``, by id, from
+    ``RUN/league/pool.json`` (and ``pruned.json``, which keeps the records of members ``compact`` deleted).
+    The i-th seeded member of a side holds the i-th entries its roles have in the config's zoo, as
+    :meth:`League.seed` made it (a fork's entries come after the parent's); POLICY joins the roles'
+    policies with ``+``, or is one name where they agree. ``{}`` for a run without ``pool.json``."""
+    root = Path(run_dir) / "league"
+    if not (root / POOL_FILE).is_file():
+        return {}
+    state = load_json(root / POOL_FILE)
+    per_role: dict[str, list[str]] = {}
+    for entry in state.get("config", {}).get("zoo", []):
+        role, _, spec = entry.partition("=")
+        per_role.setdefault(role, []).append(spec)
+    pruned = load_json(root / PRUNED_FILE)["members"] if (root / PRUNED_FILE).is_file() else []
+    by_side: dict[str, list[dict[str, Any]]] = {}
+    for m in (*pruned, *(m for pool in state["pools"].values() for m in (*pool["members"], *pool["evicted"]))):
+        if m.get("source") == "zoo":
+            by_side.setdefault(m["side"], []).append(m)
+    roles = {m["side"]: list(m["policies"]) for pool in state["pools"].values() for m in pool["members"]}
+    labels: dict[str, str] = {}
+    for side, seeds in by_side.items():
+        for i, m in enumerate(sorted(seeds, key=lambda m: int(m["id"].rsplit("-", 1)[1]))):
+            specs = [per_role[r][i] if i < len(per_role.get(r, ())) else m.get("policies", {}).get(r, "?")
+                     for r in roles.get(side, m.get("policies", ()))]
+            labels[m["id"]] = f"{m['id']} seed: {'+'.join(dict.fromkeys(specs))}"
+    return labels
 
 
 def plot_league(run_dir: Path, path: Path | None = None) -> Path:
-    """Plot ``RUN/league/league.csv``: each learner's rating mu over epochs with its +- 1.96 sigma band
-    (top) and the members its pool held (bottom; at most 24 labelled). Writes ``RUN/plots/league.png``
-    unless ``path`` is given; returns the path."""
+    """Plot ``RUN/league/league.csv`` (:func:`league_figure`) to ``RUN/plots/league.png``, or ``path`` when
+    given; returns the path."""
+    fig = league_figure(run_dir)
+    out = Path(path) if path is not None else Path(run_dir) / "plots" / "league.png"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    fig.clear()
+    return out
+
+
+def league_figure(run_dir: Path) -> Any:
+    """The figure of ``RUN/league/league.csv``: each learner's rating mu over epochs with its +- 1.96 sigma
+    band (top) and the members its pool held (bottom; at most 24 snapshots labelled; seeded members,
+    :func:`member_labels`, drawn as black crosses and always labelled with their policy)."""
     from matplotlib.figure import Figure
 
     log = Path(run_dir) / "league" / LOG_FILE
@@ -720,6 +765,7 @@ def plot_league(run_dir: Path, path: Path | None = None) -> Path:
     fig = Figure(figsize=(7.5, 6.0))
     ax, bx = fig.subplots(2, 1, sharex=True)
     rows_of_members: list[str] = []  # the members' rows on the lower axis, side by side, oldest first
+    seeded = member_labels(Path(run_dir))
     for side in dict.fromkeys(r["side"] for r in rows):
         mine = [r for r in rows if r["side"] == side]
         epoch = np.array([int(r["epoch"]) for r in mine])
@@ -738,10 +784,17 @@ def plot_league(run_dir: Path, path: Path | None = None) -> Path:
         held_by = [set(r["members"].split()) for r in mine]
         for m in ids:
             held = epoch[[m in members for members in held_by]]
-            bx.scatter(held, np.full(len(held), len(rows_of_members)), s=6, color=line.get_color())
+            y = np.full(len(held), len(rows_of_members))
+            if m in seeded:
+                bx.scatter(held, y, s=14, marker="x", color="black", linewidths=0.8)
+            else:
+                bx.scatter(held, y, s=6, color=line.get_color())
             rows_of_members.append(m)
-    shown = member_ticks(len(rows_of_members))
-    bx.set_yticks(shown, [rows_of_members[i] for i in shown])
+    seed_rows = [i for i, m in enumerate(rows_of_members) if m in seeded]
+    gap = math.ceil(len(rows_of_members) / 48)  # half the spacing of the sampled labels: a seed's keeps clear
+    shown = sorted({*(i for i in member_ticks(len(rows_of_members)) if all(abs(i - j) >= gap for j in seed_rows)),
+                    *seed_rows})
+    bx.set_yticks(shown, [seeded.get(rows_of_members[i], rows_of_members[i]) for i in shown])
     ax.set_ylabel("rating mu (95% band)")
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)
@@ -750,11 +803,7 @@ def plot_league(run_dir: Path, path: Path | None = None) -> Path:
     bx.tick_params(axis="y", labelsize=7)
     bx.grid(alpha=0.3)
     fig.tight_layout()
-    out = Path(path) if path is not None else Path(run_dir) / "plots" / "league.png"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=120)
-    fig.clear()
-    return out
+    return fig
 
 
 DEMO_STAGES: dict[str, tuple[str, str]] = {"team": ("random", "passive"), "spider": ("random", "passive")}
