@@ -15,7 +15,8 @@ script stops naming the epoch. Per ending it records:
   ``--still-steps`` (50) steps of the match.
 
 Prints a table per candidate (wins from the row counts, losses after or without reaching an opponent,
-draws, draws standing still) and writes it as JSON.
+draws, draws standing still) and writes it as JSON (``--out``; candidates already in that file, made
+from the same folder with the same settings, are kept beside the new ones).
 """
 
 from __future__ import annotations
@@ -101,8 +102,12 @@ def main(argv: list[str] | None = None) -> int:
                 counts["draws_still"] += int(moved < args.still_distance)
         table[name] = {"policy": record["candidates"][name]["policy"], "matches": len(rows), **counts}
         print(f"{name}: " + ", ".join(f"{k} {v}" for k, v in table[name].items()), flush=True)
-    if args.out is not None:
+    if args.out is not None:  # candidates already in the file under the same folder and settings are kept
         settings = {"reach": args.reach, "still_steps": args.still_steps, "still_distance": args.still_distance}
+        before = json.loads(args.out.read_text()) if args.out.is_file() else {}
+        if before and (before["folder"], before["settings"]) != (str(args.folder), settings):
+            raise SystemExit(f"{args.out}: made for {before['folder']} with {before['settings']}; choose another --out")
+        table = {**before.get("candidates", {}), **table}
         args.out.write_text(json.dumps({"folder": str(args.folder), "settings": settings, "candidates": table},
                                        indent=1) + "\n")
     return 0
