@@ -143,8 +143,6 @@ def drop_unseated_evicted(state: dict[str, Any]) -> tuple[list[str], list[dict[s
     return files, dropped
 
 
-
-
 def compact_run(run_dir: Path | str) -> dict[str, Any]:
     """Keep only what resuming the run in ``run_dir`` needs, for committing a long run's folder: its newest
     checkpoint (older ones deleted) and the league members its pools and in-flight matches hold. The files of
