@@ -315,6 +315,36 @@ def test_resume_refuses_what_would_change_the_rows(
         evaluate(dataclasses.replace(small, resume=True))
 
 
+def test_a_resume_that_names_no_baselines_keeps_the_folders_own(
+        report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Not given, the baselines are passive and random for a new folder, and those the folder played for a
+    resume: a resume that adds a candidate does not start playing baselines a folder made without them."""
+    import argparse
+
+    from triplesumo import _dcargs
+
+    cfg, _ = report
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    parser = argparse.ArgumentParser()
+    _dcargs.add_arguments(parser, EvaluateConfig)
+    assert _dcargs.build(EvaluateConfig, parser.parse_args([])).baselines is None
+    assert _dcargs.build(EvaluateConfig, parser.parse_args(["--baselines"])).baselines == ()
+    assert _dcargs.build(EvaluateConfig, parser.parse_args(["--baselines", "passive"])).baselines == ("passive",)
+    bare = dataclasses.replace(cfg, baselines=(), epochs=2, out=str(tmp_path / "bare"))
+    assert list(evaluate(bare)["candidates"]) == ["trained"]
+    grown = evaluate(dataclasses.replace(bare, baselines=None, compare=("zoo:bug",), resume=True))
+    assert list(grown["candidates"]) == ["trained", "zoo-bug"]
+    assert not (tmp_path / "bare" / "passive").exists() and not (tmp_path / "bare" / "random").exists()
+    assert grown["config"]["baselines"] == ()
+    folder = tmp_path / "full"
+    shutil.copytree(cfg.out, folder)
+    again = evaluate(dataclasses.replace(cfg, baselines=None, out=str(folder), resume=True))
+    assert list(again["candidates"]) == ["trained", "passive", "random"]
+    fresh = evaluate(dataclasses.replace(bare, baselines=None, out=str(tmp_path / "fresh")))
+    assert list(fresh["candidates"]) == ["trained", "passive", "random"]
+
+
 def test_finished_rows_rejects_files_that_are_not_evaluation_csvs(tmp_path: Path) -> None:
     path = tmp_path / "metrics.csv"
     path.write_text("a,b\n1,2\n")

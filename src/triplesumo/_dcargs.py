@@ -67,7 +67,12 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "",
                                 **kwargs)
         elif origin in (typing.Union, types.UnionType):
             inner = next(a for a in args if a is not type(None))
-            parser.add_argument(_flag(prefix, f.name), type=inner, metavar=inner.__name__.upper(), **kwargs)
+            if typing.get_origin(inner) is tuple:  # tuple | None: None unless the option is given (maybe empty)
+                item = typing.get_args(inner)[0]
+                parser.add_argument(_flag(prefix, f.name), nargs="*", type=item, metavar=item.__name__.upper(),
+                                    **kwargs)
+            else:
+                parser.add_argument(_flag(prefix, f.name), type=inner, metavar=inner.__name__.upper(), **kwargs)
         else:
             parser.add_argument(_flag(prefix, f.name), type=tp, metavar=tp.__name__.upper(), **kwargs)
 

@@ -65,8 +65,9 @@ class EvaluateConfig:
     """AGENT=POLICY for the other agents (fixed, no exploration noise)."""
     compare: tuple[str, ...] = ()
     """Other learner policies played in the same matches (e.g. zoo:bug, a policy file)."""
-    baselines: tuple[str, ...] = ("passive", "random")
-    """Baseline learner policies played in the same matches (built-in names)."""
+    baselines: tuple[str, ...] | None = None
+    """Baseline learner policies played in the same matches (built-in names; --baselines with none: no
+    baselines). Not given: passive and random, or with ``resume`` the baselines the folder already played."""
     epochs: int = 2000
     """Test epochs per candidate (the paper used 20,000)."""
     seed: int = 10_000
@@ -116,7 +117,9 @@ class EvaluateConfig:
             raise ValueError(f"EvaluateConfig.learner must be one of {agents} (scenario {self.scenario!r}), "
                              f"got {self.learner!r}")
         check_policy_pairs("EvaluateConfig.policies", self.policies, self.learner, agents)
-        unknown = [b for b in self.baselines if b not in BUILTIN]
+        if isinstance(self.baselines, str):  # one name given as a plain string
+            object.__setattr__(self, "baselines", (self.baselines,))
+        unknown = [b for b in self.baselines or () if b not in BUILTIN]
         if unknown:
             raise ValueError(f"EvaluateConfig.baselines must be built-in policies {sorted(BUILTIN)}, got {unknown}")
         if isinstance(self.policy, str):  # one spec given as a plain string
@@ -191,6 +194,20 @@ def _label(spec: str) -> str:
     return "".join(c if c.isalnum() or c in "-_" else "-" for c in spec).strip("-") or "policy"
 
 
+DEFAULT_BASELINES = ("passive", "random")
+"""The baselines of an evaluation that names none (and is not a resume)."""
+
+
+def _recorded_baselines(path: Path) -> tuple[str, ...]:
+    """The baselines an evaluation folder played (candidates recorded under a built-in name as their own
+    label); ``()`` when it has no readable record (resuming it then fails with the reason)."""
+    try:
+        recorded = json.loads(path.read_text(encoding="utf-8"))["candidates"]
+        return tuple(label for label, c in recorded.items() if label in BUILTIN and c["policy"] == label)
+    except (OSError, ValueError, KeyError, TypeError):
+        return ()
+
+
 RECORD_FILE = "evaluation.json"
 """What an evaluation folder's rows depend on, for resuming (see the module docstring)."""
 ROW_FIELDS = ("learner", "policies", "seed", "steps_per_epoch", "obs_mode")
@@ -216,7 +233,10 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     seeds = {"trained": trained[0]} if len(trained) == 1 else {f"trained-{_label(p)}": p for p in trained}
     if len(seeds) < len(trained):
         raise ValueError(f"EvaluateConfig.policy names a policy twice: {list(trained)}")
-    candidates = {**seeds, **{_label(c): c for c in cfg.compare}, **{b: b for b in cfg.baselines}}
+    baselines = cfg.baselines
+    if baselines is None:
+        baselines = _recorded_baselines(out / RECORD_FILE) if cfg.resume else DEFAULT_BASELINES
+    candidates = {**seeds, **{_label(c): c for c in cfg.compare}, **{b: b for b in baselines}}
     try:
         others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes)
         policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
@@ -236,7 +256,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         kept = _previous_candidates(out / RECORD_FILE, record)
         record["candidates"] = {**kept, **record["candidates"]}
     _write_json(out / RECORD_FILE, record)
-    summary: dict[str, Any] = {"config": asdict(cfg), "candidates": {}}
+    summary: dict[str, Any] = {"config": {**asdict(cfg), "baselines": baselines}, "candidates": {}}
     with ExitStack() as stack:
         ray_tasks: Any = None
         if cfg.ray:
