@@ -198,16 +198,6 @@ DEFAULT_BASELINES = ("passive", "random")
 """The baselines of an evaluation that names none (and is not a resume)."""
 
 
-def _recorded_baselines(path: Path) -> tuple[str, ...]:
-    """The baselines an evaluation folder played (candidates recorded under a built-in name as their own
-    label); ``()`` when it has no readable record (resuming it then fails with the reason)."""
-    try:
-        recorded = json.loads(path.read_text(encoding="utf-8"))["candidates"]
-        return tuple(label for label, c in recorded.items() if label in BUILTIN and c["policy"] == label)
-    except (OSError, ValueError, KeyError, TypeError):
-        return ()
-
-
 RECORD_FILE = "evaluation.json"
 """What an evaluation folder's rows depend on, for resuming (see the module docstring)."""
 ROW_FIELDS = ("learner", "policies", "seed", "steps_per_epoch", "obs_mode")
@@ -233,9 +223,11 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     seeds = {"trained": trained[0]} if len(trained) == 1 else {f"trained-{_label(p)}": p for p in trained}
     if len(seeds) < len(trained):
         raise ValueError(f"EvaluateConfig.policy names a policy twice: {list(trained)}")
+    old = _read_record(out / RECORD_FILE) if cfg.resume else None
     baselines = cfg.baselines
-    if baselines is None:
-        baselines = _recorded_baselines(out / RECORD_FILE) if cfg.resume else DEFAULT_BASELINES
+    if baselines is None:  # a resume keeps the baselines its folder played (recorded under their own name)
+        baselines = DEFAULT_BASELINES if old is None else tuple(
+            label for label, c in old["candidates"].items() if label in BUILTIN and c["policy"] == label)
     candidates = {**seeds, **{_label(c): c for c in cfg.compare}, **{b: b for b in baselines}}
     try:
         others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes)
@@ -252,8 +244,8 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             names = ", ".join(str(p.relative_to(out)) for p in held)
             raise FileExistsError(f"{out} already holds an evaluation ({names}); "
                                   "nothing was changed: add --resume to continue or extend it, or choose another --out")
-    if cfg.resume:
-        kept = _previous_candidates(out / RECORD_FILE, record)
+    if old is not None:
+        kept = _previous_candidates(old, out, record)
         record["candidates"] = {**kept, **record["candidates"]}
     _write_json(out / RECORD_FILE, record)
     summary: dict[str, Any] = {"config": {**asdict(cfg), "baselines": baselines}, "candidates": {}}
@@ -482,17 +474,26 @@ def _record(cfg: EvaluateConfig, candidates: dict[str, str]) -> dict[str, Any]:
     }
 
 
-def _previous_candidates(path: Path, record: dict[str, Any]) -> dict[str, Any]:
-    """The candidates of the evaluation recorded in ``path``, once it is checked to fit ``record``."""
+def _read_record(path: Path) -> dict[str, Any]:
+    """The record of the evaluation to resume; ``FileNotFoundError`` or ``ValueError`` naming the file when
+    it is missing, unreadable or corrupt."""
     folder = path.parent
     if not path.exists():
         raise FileNotFoundError(f"nothing to resume in {folder}: {path.name} not found (run without resume to "
                                 "start an evaluation there)")
     try:
         old = json.loads(path.read_text(encoding="utf-8"))
-        old_fields, old_others, old_candidates = old["rows_depend_on"], old["others"], old["candidates"]
+        if not all(isinstance(old[key], dict) for key in ("rows_depend_on", "others", "candidates")) or not all(
+                isinstance(c, dict) and "policy" in c for c in old["candidates"].values()):
+            raise ValueError("missing or malformed entries")
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"cannot resume {folder}: {path} is unreadable or corrupt ({exc})") from None
+    return dict(old)
+
+
+def _previous_candidates(old: dict[str, Any], folder: Path, record: dict[str, Any]) -> dict[str, Any]:
+    """The candidates of the evaluation ``old`` recorded in ``folder``, once it is checked to fit ``record``."""
+    old_fields, old_others, old_candidates = old["rows_depend_on"], old["others"], old["candidates"]
     now_fields = record["rows_depend_on"]
     for name in [*now_fields, *(k for k in old_fields if k not in now_fields)]:
         if old_fields.get(name) != now_fields.get(name):
