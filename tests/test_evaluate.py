@@ -345,6 +345,48 @@ def test_a_resume_that_names_no_baselines_keeps_the_folders_own(
     assert list(fresh["candidates"]) == ["trained", "passive", "random"]
 
 
+def test_a_resume_keeps_every_finished_candidate_its_folder_recorded(
+        report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--resume --compare NEW`` grows a folder by one candidate: the summary, per_seed.csv and the paired
+    differences keep the finished candidates it does not name (their files may be gone); an unfinished one
+    is finished when named again and left out when not."""
+    cfg, summary = report
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    folder = tmp_path / "grown"
+    shutil.copytree(cfg.out, folder)
+    grown = evaluate(dataclasses.replace(cfg, out=str(folder), resume=True, baselines=(), compare=("zoo:bug",)))
+    assert list(grown["candidates"]) == ["trained", "passive", "random", "zoo-bug"]
+    for label in ("trained", "passive", "random"):
+        assert grown["candidates"][label] == summary["candidates"][label]
+    assert grown["candidates"]["zoo-bug"]["paired"]["vs"] == "trained"
+    assert tuple(grown["config"]["baselines"]) == ("passive", "random")
+    with (folder / "per_seed.csv").open(newline="") as fh:
+        assert [r["candidate"] for r in csv.DictReader(fh)] == ["trained", "passive", "random", "zoo-bug"]
+    # killed while random was playing: named again it is finished, to the uninterrupted rows
+    path = folder / "random" / "metrics.csv"
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:3]) + lines[3][:5])
+    again = evaluate(dataclasses.replace(cfg, out=str(folder), resume=True, baselines=("random",)))
+    assert path.read_bytes() == (Path(cfg.out) / "random" / "metrics.csv").read_bytes()
+    assert again["candidates"]["random"] == summary["candidates"]["random"]
+    assert list(again["candidates"]) == ["trained", "passive", "random", "zoo-bug"]
+    # ... and not named, it is left out of the summary and the record
+    path.write_text("".join(lines[:3]))
+    dropped = evaluate(dataclasses.replace(cfg, out=str(folder), resume=True, baselines=()))
+    assert list(dropped["candidates"]) == ["trained", "passive", "zoo-bug"]
+    assert "random" not in json.loads((folder / "evaluation.json").read_text())["candidates"]
+    # a finished candidate from a file needs the file no more
+    stem = tmp_path / "other"
+    for suffix in (".json", ".safetensors"):
+        shutil.copy(tiny_zoo.bug_policy.with_suffix(suffix), stem.with_suffix(suffix))
+    small = dataclasses.replace(cfg, baselines=(), compare=(str(stem),), epochs=2, out=str(tmp_path / "small"))
+    first = evaluate(small)
+    for suffix in (".json", ".safetensors"):
+        stem.with_suffix(suffix).unlink()
+    assert evaluate(dataclasses.replace(small, compare=(), resume=True))["candidates"] == first["candidates"]
+
+
 def test_finished_rows_rejects_files_that_are_not_evaluation_csvs(tmp_path: Path) -> None:
     path = tmp_path / "metrics.csv"
     path.write_text("a,b\n1,2\n")

@@ -22,7 +22,10 @@ Resuming: each candidate's rows are appended to its ``metrics.csv`` as the epoch
 policies and the sha256 of their files, seed, step limit, observation mode). A test
 epoch's result depends on its seed alone, so ``resume=True`` keeps the finished epochs,
 plays the rest and gives exactly the rows of an uninterrupted run; it can also extend a
-finished run to more epochs.
+finished run to more epochs. A resume plays the candidates it names (new ones are added) and
+keeps every finished candidate the folder recorded, named again or not (it needs no files):
+``--resume --compare NEW`` grows a folder by one candidate, and its ``summary.json`` and plots
+still hold them all. An unfinished candidate that is not named again is left out.
 """
 
 from __future__ import annotations
@@ -89,7 +92,8 @@ class EvaluateConfig:
     progress: bool = True
     """Show a progress bar."""
     resume: bool = False
-    """Continue the evaluation in ``out`` (killed, or to more epochs): finished epochs are kept."""
+    """Continue the evaluation in ``out`` (killed, to more epochs, or with more candidates): finished epochs
+    and every finished candidate recorded there are kept."""
     record: int = 0
     """Write the first K test epochs of every candidate as replayable match files
     (``OUT/CANDIDATE/matches/epoch_00001.npz`` ...; ``triplesumo replay`` re-renders them)."""
@@ -229,13 +233,20 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         baselines = DEFAULT_BASELINES if old is None else tuple(
             label for label, c in old["candidates"].items() if label in BUILTIN and c["policy"] == label)
     candidates = {**seeds, **{_label(c): c for c in cfg.compare}, **{b: b for b in baselines}}
+
+    def load(specs: dict[str, str]) -> dict[str, Any]:  # every file checked before any epoch is played
+        try:
+            return {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
+                                       action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner])
+                    for label, spec in specs.items()}
+        except ValueError as err:
+            raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
+
     try:
         others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes)
-        policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
-                                       action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner])
-                    for label, spec in candidates.items()}  # every file checked before any epoch is played
     except ValueError as err:
         raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
+    policies = load(candidates)
     record = _record(cfg, candidates)
     kept: dict[str, Any] = {}
     if not cfg.resume:
@@ -244,10 +255,21 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             names = ", ".join(str(p.relative_to(out)) for p in held)
             raise FileExistsError(f"{out} already holds an evaluation ({names}); "
                                   "nothing was changed: add --resume to continue or extend it, or choose another --out")
+    carried: dict[str, str] = {}
     if old is not None:
+        # the finished candidates the folder recorded stay in it, in its order, whether this call names them
+        # or not (they need no files); an unfinished one stays only if named, so a resume can drop it
         kept = _previous_candidates(old, out, record)
+        left_out = [label for label in kept if label not in candidates
+                    and finished_rows(out / label / "metrics.csv", cfg.epochs) < cfg.epochs]
+        kept = {label: c for label, c in kept.items() if label not in left_out}
+        if left_out and cfg.progress:
+            print(f"evaluate: left out, unfinished and not named again: {', '.join(left_out)}")
         record["candidates"] = {**kept, **record["candidates"]}
+        carried = {label: c["policy"] for label, c in kept.items() if label not in candidates}
+        candidates = {label: c["policy"] for label, c in record["candidates"].items()}
     _write_json(out / RECORD_FILE, record)
+    baselines = tuple(label for label, spec in candidates.items() if label in BUILTIN and spec == label)
     summary: dict[str, Any] = {"config": {**asdict(cfg), "baselines": baselines}, "candidates": {}}
     with ExitStack() as stack:
         ray_tasks: Any = None
@@ -287,7 +309,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         stats = summarize(outcomes, metrics["steps"])
         summary["candidates"][label] = {
             "policy": spec,
-            "group": "trained" if label in seeds else label,
+            "group": "trained" if label in seeds or _is_seed_label(label) and label in carried else label,
             **{k: _clean(v) for k, v in dict(stats).items()},
             **{f"mean_{name}": float(np.mean(metrics[name].astype(np.float64)))
                for name in ("total_reward", "dense_reward", "sparse_reward")},
@@ -395,13 +417,24 @@ def _write_per_seed(path: Path, summary: dict[str, Any], record: dict[str, Any])
     import io
 
     cfg = summary["config"]
+    previous: dict[str, dict[str, str]] = {}  # a resume's rows: a kept candidate's files may be gone
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            previous = {row["candidate"]: row for row in csv.DictReader(fh)}
+    except (OSError, KeyError, csv.Error):
+        pass
     buf = io.StringIO()
     writer = csv.DictWriter(buf, PER_SEED_COLUMNS, lineterminator="\n")
     writer.writeheader()
     for label, c in summary["candidates"].items():
+        sha = record["candidates"][label]["sha256"]
+        then = previous.get(label, {})
+        if then.get("sha256") == sha and then.get("policy") == c["policy"] and "algo" in then:
+            algo, train_seed = then["algo"], then.get("train_seed", "")
+        else:
+            algo, train_seed = algo_of(c["policy"]), _manifest_of(c["policy"]).get("seed", "")
         writer.writerow({"group": c["group"], "candidate": label, "policy": c["policy"],
-                         "sha256": record["candidates"][label]["sha256"], "algo": algo_of(c["policy"]),
-                         "train_seed": _manifest_of(c["policy"]).get("seed", ""), "learner": cfg["learner"],
+                         "sha256": sha, "algo": algo, "train_seed": train_seed, "learner": cfg["learner"],
                          "eval_seed": cfg["seed"],
                          "epochs": c["n"], "n_win": c["n_win"], "n_loss": c["n_loss"], "n_draw": c["n_draw"],
                          "test_mwr": c["mean_lwr"], "test_mwr_lo": c["mean_lwr_lo"], "test_mwr_hi": c["mean_lwr_hi"]})
@@ -472,6 +505,12 @@ def _record(cfg: EvaluateConfig, candidates: dict[str, str]) -> dict[str, Any]:
         "candidates": {label: {"policy": spec, "sha256": policy_fingerprint(spec)}
                        for label, spec in candidates.items()},
     }
+
+
+def _is_seed_label(label: str) -> bool:
+    """Whether ``label`` is one that :func:`evaluate` gives the learner's own policies (``trained``, or
+    ``trained-<policy>`` when there are several): how a carried candidate's group is known."""
+    return label == "trained" or label.startswith("trained-")
 
 
 def _read_record(path: Path) -> dict[str, Any]:
