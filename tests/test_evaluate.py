@@ -26,6 +26,7 @@ from triplesumo.agents.policy_file import load_policy
 from triplesumo.evaluation.evaluate import (
     EvaluateConfig,
     RowAppender,
+    _label,
     add_paired,
     evaluate,
     finished_rows,
@@ -385,6 +386,27 @@ def test_a_resume_keeps_every_finished_candidate_its_folder_recorded(
     for suffix in (".json", ".safetensors"):
         stem.with_suffix(suffix).unlink()
     assert evaluate(dataclasses.replace(small, compare=(), resume=True))["candidates"] == first["candidates"]
+
+
+def test_compare_takes_a_glob_of_snapshots_each_its_own_candidate(
+        report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--compare 'RUN/league/members/spider-*/spider'``: every snapshot a candidate, on the same starts."""
+    cfg, summary = report
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    for member in ("bug-0002", "bug-0001"):
+        (tmp_path / member).mkdir()
+        for suffix in (".json", ".safetensors"):
+            shutil.copy(tiny_zoo.bug_policy.with_suffix(suffix), (tmp_path / member / "bug").with_suffix(suffix))
+    glob = str(tmp_path / "bug-*" / "bug")
+    got = evaluate(dataclasses.replace(cfg, baselines=(), compare=(glob,), out=str(tmp_path / "e")))
+    labels = [_label(str(tmp_path / m / "bug")) for m in ("bug-0001", "bug-0002")]
+    assert list(got["candidates"]) == ["trained", *labels]  # sorted, one per file
+    for label in labels:  # the same file as the trained policy, on the same starts: the same rows
+        assert got["candidates"][label]["paired"]["diff"] == 0.0
+        assert got["candidates"][label]["n_win"] == summary["candidates"]["trained"]["n_win"]
+    with pytest.raises(ValueError, match=r"EvaluateConfig\.compare: .* matches no policy file"):
+        evaluate(dataclasses.replace(cfg, baselines=(), compare=(str(tmp_path / "none-*"),), out=str(tmp_path / "f")))
 
 
 def test_finished_rows_rejects_files_that_are_not_evaluation_csvs(tmp_path: Path) -> None:

@@ -67,7 +67,8 @@ class EvaluateConfig:
     policies: tuple[str, ...] = ("ant=zoo:ant", "spider=zoo:spider")
     """AGENT=POLICY for the other agents (fixed, no exploration noise)."""
     compare: tuple[str, ...] = ()
-    """Other learner policies played in the same matches (e.g. zoo:bug, a policy file)."""
+    """Other learner policies played in the same matches (e.g. zoo:bug, a policy file, or a quoted glob such as
+    'runs/x/league/members/spider-*/spider' for every league snapshot of a run, to pick one on held-out starts)."""
     baselines: tuple[str, ...] | None = None
     """Baseline learner policies played in the same matches (built-in names; --baselines with none: no
     baselines). Not given: passive and random, or with ``resume`` the baselines the folder already played."""
@@ -232,7 +233,11 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     if baselines is None:  # a resume keeps the baselines its folder played (recorded under their own name)
         baselines = DEFAULT_BASELINES if old is None else tuple(
             label for label, c in old["candidates"].items() if label in BUILTIN and c["policy"] == label)
-    candidates = {**seeds, **{_label(c): c for c in cfg.compare}, **{b: b for b in baselines}}
+    expanded = expand_policies(cfg.compare, "compare")
+    compare = {_label(c): c for c in expanded}
+    if len(compare) < len(expanded) or compare.keys() & seeds.keys():
+        raise ValueError(f"EvaluateConfig.compare names a policy twice, or one whose label is taken: {expanded}")
+    candidates = {**seeds, **compare, **{b: b for b in baselines}}
 
     def load(specs: dict[str, str]) -> dict[str, Any]:  # every file checked before any epoch is played
         try:
@@ -374,8 +379,9 @@ def head_to_head(folder: Path | str, this: str, others: tuple[str, ...] | list[s
             "paired": paired}
 
 
-def expand_policies(specs: tuple[str, ...]) -> list[str]:
-    """Policy specs with globs (``runs/s*/policy``) expanded to the policy files they match, sorted."""
+def expand_policies(specs: tuple[str, ...], field: str = "policy") -> list[str]:
+    """Policy specs with globs (``runs/s*/policy``) expanded to the policy files they match, sorted;
+    ``ValueError`` naming ``EvaluateConfig.<field>`` for a glob that matches none."""
     import glob
 
     out: list[str] = []
@@ -386,7 +392,7 @@ def expand_policies(specs: tuple[str, ...]) -> list[str]:
         stems = sorted({str(Path(p).with_suffix("")) for p in glob.glob(spec) + glob.glob(spec + ".json")
                         if p.endswith(".json") or Path(p + ".json").exists()})
         if not stems:
-            raise ValueError(f"EvaluateConfig.policy: {spec!r} matches no policy file")
+            raise ValueError(f"EvaluateConfig.{field}: {spec!r} matches no policy file")
         out += stems
     return out
 
