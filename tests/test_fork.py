@@ -104,6 +104,35 @@ def test_a_fork_admits_by_its_own_league_rules_from_the_fork_epoch(
     assert "--league.snapshot-every 1000 --league.side-threshold team=0.95" in record["command"]
 
 
+def test_a_fork_may_fine_tune_under_other_reward_weights_from_the_fork_epoch(
+        runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
+    """``--reward.still 0``: every step after the fork is scored without the time penalty, every step
+    before it with the parent's; a match in flight at the fork is charged for its steps before it only."""
+    _, half = runs
+    assert half.cfg.reward.still == -4.0
+    cfg = dataclasses.replace(half.cfg, name="still0", out=str(tmp_path), epochs=14,
+                              reward=dataclasses.replace(half.cfg.reward, still=0.0))
+    fork_dir = fork_run(half.run_dir, cfg)
+    record = json.loads((fork_dir / "fork.json").read_text())
+    assert record["changes"]["reward.still"] == [-4.0, 0.0] and "--reward.still 0.0" in record["command"]
+    trainer = Trainer(cfg, run_dir=fork_dir, resume=True)
+    trainer.run()
+    assert trainer.cfg.reward.still == 0.0
+    after = 0
+    for name in ("metrics-ant.csv", "metrics-spider.csv"):
+        parent, fork = rows(half.run_dir / name), rows(fork_dir / name)
+        assert fork[:len(parent)] == parent and len(fork) > len(parent)
+        for row in parent:  # before the fork: the full time penalty, -4 a step
+            assert float(row["reward_still"]) == -4.0 * int(row["steps"])
+        new = [float(r["reward_still"]) for r in fork[len(parent):]]
+        steps = [int(r["steps"]) for r in fork[len(parent):]]
+        # after it: nothing, but for the steps before the fork of the matches in flight then (one a slot)
+        assert all(-4.0 * n < v <= 0.0 for v, n in zip(new, steps, strict=True))
+        assert sum(v != 0.0 for v in new) <= cfg.n_envs
+        after += sum(v == 0.0 for v in new)
+    assert after  # some matches were played wholly after the fork
+
+
 def test_what_a_fork_may_not_change_is_refused_by_name_and_nothing_is_written(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     _, half = runs

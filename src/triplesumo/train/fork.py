@@ -27,8 +27,10 @@ what leaves the checkpoint meaningful (:data:`FORK_FIELDS`: the league's rules b
 model, and the budget and bookkeeping fields); ``--league.zoo`` may only gain entries, which
 join their pools at the fork's epoch as seeded members (``fork.json`` lists them under
 ``seeded``: e.g. a still team ``ant=passive bug=passive`` for a Spider whose league never
-showed it one); anything else (networks,
-algorithms, rewards, roster, seed) is refused naming the field, since the networks and
+showed it one); ``--reward.*`` fine-tunes the networks under other reward weights from the fork's
+epoch on (e.g. ``--reward.still 0``: no time penalty; the matches in flight are scored by the new
+weights from their next step, and the returns logged before the fork keep the old ones); anything
+else (networks, algorithms, roster, seed) is refused naming the field, since the networks and
 matches being continued were made under it.
 
 :func:`compact_run` (``triplesumo compact RUN``) keeps, of a run folder, only what resuming it needs:
@@ -64,9 +66,12 @@ from triplesumo.train.loop import (
 )
 
 FORK_FORMAT = "triplesumo-fork/1"
-FORK_FIELDS = ("name", "out", "checkpoint_every", "tensorboard", "max_env_steps", *RESUME_OVERRIDES, "league")
+FORK_FIELDS = ("name", "out", "checkpoint_every", "tensorboard", "max_env_steps", *RESUME_OVERRIDES, "league",
+               "reward")
 """The TrainConfig fields a fork may change (``league`` but its ``rating_model``, and its ``zoo`` only by
-appending entries)."""
+appending entries; ``reward``: the networks fine-tune under the new weights from the fork's epoch)."""
+NESTED = ("league", "reward")
+"""Config sections whose fields a fork records (and its command names) one by one."""
 LEAGUE_FIXED = ("rating_model",)
 """League fields a fork keeps: the pools were rated under it."""
 
@@ -87,8 +92,8 @@ def _changes(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
     old, new = config_to_json(parent), config_to_json(cfg)
     out: dict[str, list[Any]] = {}
     for key in new:
-        if key == "league" and isinstance(new[key], dict):
-            out |= {f"league.{k}": [old[key][k], v] for k, v in new[key].items() if old[key][k] != v}
+        if key in NESTED and isinstance(new[key], dict):
+            out |= {f"{key}.{k}": [old[key][k], v] for k, v in new[key].items() if old[key][k] != v}
         elif old[key] != new[key]:
             out[key] = [old[key], new[key]]
     return out
@@ -121,7 +126,7 @@ def check_fork(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
         flags = ", ".join("--" + k.replace("_", "-") for k in bad)
         raise ValueError(f"a fork continues the parent's networks, matches and pools, so it keeps their config; "
                          f"it may change --league.* (not --league.rating-model; --league.zoo only by adding "
-                         f"entries), --epochs, "
+                         f"entries), --reward.*, --epochs, "
                          f"--max-minutes, --max-env-steps, --checkpoint-every, --progress, --tensorboard and "
                          f"--save-replay, not {flags}")
     added_seeds(parent, cfg)
