@@ -231,27 +231,20 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     old = _read_record(out / RECORD_FILE) if cfg.resume else None
     baselines = cfg.baselines
     if baselines is None:  # a resume keeps the baselines its folder played (recorded under their own name)
-        baselines = DEFAULT_BASELINES if old is None else tuple(
-            label for label, c in old["candidates"].items() if label in BUILTIN and c["policy"] == label)
+        baselines = DEFAULT_BASELINES if old is None else _baselines_in(
+            {label: c["policy"] for label, c in old["candidates"].items()})
     expanded = expand_policies(cfg.compare, "compare")
     compare = {_label(c): c for c in expanded}
     if len(compare) < len(expanded) or compare.keys() & seeds.keys():
         raise ValueError(f"EvaluateConfig.compare names a policy twice, or one whose label is taken: {expanded}")
     candidates = {**seeds, **compare, **{b: b for b in baselines}}
-
-    def load(specs: dict[str, str]) -> dict[str, Any]:  # every file checked before any epoch is played
-        try:
-            return {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
-                                       action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner])
-                    for label, spec in specs.items()}
-        except ValueError as err:
-            raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
-
     try:
         others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes)
+        policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
+                                       action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner])
+                    for label, spec in candidates.items()}  # every file checked before any epoch is played
     except ValueError as err:
         raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
-    policies = load(candidates)
     record = _record(cfg, candidates)
     kept: dict[str, Any] = {}
     if not cfg.resume:
@@ -260,7 +253,7 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             names = ", ".join(str(p.relative_to(out)) for p in held)
             raise FileExistsError(f"{out} already holds an evaluation ({names}); "
                                   "nothing was changed: add --resume to continue or extend it, or choose another --out")
-    carried: dict[str, str] = {}
+    carried: set[str] = set()
     if old is not None:
         # the finished candidates the folder recorded stay in it, in its order, whether this call names them
         # or not (they need no files); an unfinished one stays only if named, so a resume can drop it
@@ -271,10 +264,10 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         if left_out and cfg.progress:
             print(f"evaluate: left out, unfinished and not named again: {', '.join(left_out)}")
         record["candidates"] = {**kept, **record["candidates"]}
-        carried = {label: c["policy"] for label, c in kept.items() if label not in candidates}
+        carried = kept.keys() - candidates.keys()
         candidates = {label: c["policy"] for label, c in record["candidates"].items()}
     _write_json(out / RECORD_FILE, record)
-    baselines = tuple(label for label, spec in candidates.items() if label in BUILTIN and spec == label)
+    baselines = _baselines_in(candidates)
     summary: dict[str, Any] = {"config": {**asdict(cfg), "baselines": baselines}, "candidates": {}}
     with ExitStack() as stack:
         ray_tasks: Any = None
@@ -511,6 +504,11 @@ def _record(cfg: EvaluateConfig, candidates: dict[str, str]) -> dict[str, Any]:
         "candidates": {label: {"policy": spec, "sha256": policy_fingerprint(spec)}
                        for label, spec in candidates.items()},
     }
+
+
+def _baselines_in(candidates: dict[str, str]) -> tuple[str, ...]:
+    """The baselines among ``candidates`` (label -> policy): built-in policies under their own name."""
+    return tuple(label for label, spec in candidates.items() if label in BUILTIN and spec == label)
 
 
 def _is_seed_label(label: str) -> bool:
