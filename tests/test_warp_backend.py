@@ -251,7 +251,7 @@ def test_the_border_rim_reaches_warp_with_the_compiled_model() -> None:
 def test_a_snapshot_restored_into_a_fresh_batch_continues_bit_for_bit() -> None:
     """``snapshot``/``restore`` (exact resume of ``train --backend warp``): a fresh batch restored from a
     snapshot taken mid-match (the solver's warm start warm, one match about to end at ``max_steps``)
-    makes the steps the original makes next, bit for bit -- observations, rewards, flags, autoreset
+    makes the steps the original makes next, bit for bit on Warp's CPU device -- observations, rewards, flags, autoreset
     starts -- while a state of qpos and qvel only (no warm start) does not."""
     cfg = MatchConfig(max_steps=6, reset_noise=ResetNoise(position=0.5))
     actions = torch.as_tensor(np.random.default_rng(2).uniform(-1, 1, (9, 2, 3, 8)), dtype=torch.float32)
@@ -266,15 +266,19 @@ def test_a_snapshot_restored_into_a_fresh_batch_continues_bit_for_bit() -> None:
     again = WarpMatchBatch(cfg, 2, device=DEVICE)
     again.restore(snap, saved_obs)
     assert again.steps.tolist() == [4, 4]
-    for t, expected in zip(range(4, 9), ahead, strict=True):
-        got = again.step(actions[t].to(again.device))
-        for a, b in zip(got[:4], expected[:4], strict=True):
-            assert torch.equal(a, b), t
-        assert all(torch.equal(got[4][k], expected[4][k]) for k in expected[4]), t
     assert bool(ahead[1][4]["_final_obs"].all())  # the matches ended (step 6) and restarted from their streams
     cold = WarpMatchBatch(cfg, 2, device=DEVICE)
     cold.restore(snap, saved_obs)
-    wp.to_torch(cold.d.qacc_warmstart).zero_()
-    assert not torch.equal(cold.step(actions[4].to(cold.device))[0], ahead[0][0])
+    # Bit for bit only on Warp's CPU device: on CUDA, MuJoCo Warp gathers contacts with atomics (its
+    # opt.deterministic is off), so two batches stepping one state may differ in rounding (an H200 did at
+    # the first step after the restore: docs/bench/train_warp_h200.md).
+    if DEVICE == "cpu":
+        for t, expected in zip(range(4, 9), ahead, strict=True):
+            got = again.step(actions[t].to(again.device))
+            for a, b in zip(got[:4], expected[:4], strict=True):
+                assert torch.equal(a, b), t
+            assert all(torch.equal(got[4][k], expected[4][k]) for k in expected[4]), t
+        wp.to_torch(cold.d.qacc_warmstart).zero_()
+        assert not torch.equal(cold.step(actions[4].to(cold.device))[0], ahead[0][0])
     with pytest.raises(ValueError, match="physics of shape"):
         cold.restore([s | {"physics": s["physics"][:-1]} for s in snap], saved_obs)
