@@ -23,6 +23,7 @@ from triplesumo.train.league import (
     member_labels,
     member_ticks,
     plot_league,
+    spec_label,
 )
 
 SIDES = {"team": ("ant", "bug"), "spider": ("spider",)}
@@ -463,3 +464,7 @@ def test_seeded_members_are_labelled_with_their_policy_and_drawn_apart_in_the_le
     crosses = [c for c in fig.axes[1].collections if np.allclose(c.get_facecolor()[0][:3], 0.0)]
     assert len(crosses) == 3  # one row of black crosses per seed
     assert member_labels(tmp_path / "elsewhere") == {}
+    # another run's member file is labelled by its last two parts; built-ins, zoo names and short paths as given
+    assert spec_label("results/run-a/league/members/team-0120/ant") == ".../team-0120/ant"
+    assert [spec_label(s) for s in ("passive", "zoo:spider", "pol/spider-0186")] == ["passive", "zoo:spider",
+                                                                                    "pol/spider-0186"]

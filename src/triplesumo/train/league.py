@@ -709,12 +709,21 @@ def member_ticks(n: int, most: int = 24) -> list[int]:
     return sorted({*ticks, n - 1})
 
 
+def spec_label(spec: str) -> str:
+    """A seed's POLICY as the league plot labels it: a policy file by its last two path parts (``.../team-0120/ant``
+    for another run's ``league/members/team-0120/ant``), so a long path does not crowd out the plot; a built-in or
+    ``zoo:NAME`` as it is."""
+    parts = Path(spec).parts
+    return spec if len(parts) <= 2 else ".../" + "/".join(parts[-2:])
+
+
 def member_labels(run_dir: Path) -> dict[str, str]:
     """``ID seed: POLICY`` of every seeded (``--league.zoo``) member of the run in ``run_dir``, by id, from
     ``RUN/league/pool.json`` (and ``pruned.json``, which keeps the records of members ``compact`` deleted).
     The i-th seeded member of a side holds the i-th entries its roles have in the config's zoo, as
     :meth:`League.seed` made it (a fork's entries come after the parent's); POLICY joins the roles'
-    policies with ``+``, or is one name where they agree. ``{}`` for a run without ``pool.json``."""
+    policies (:func:`spec_label`) with ``+``, or is one name where they agree. ``{}`` for a run without
+    ``pool.json``."""
     root = Path(run_dir) / "league"
     if not (root / POOL_FILE).is_file():
         return {}
@@ -734,7 +743,7 @@ def member_labels(run_dir: Path) -> dict[str, str]:
         for i, m in enumerate(sorted(seeds, key=lambda m: int(m["id"].rsplit("-", 1)[1]))):
             specs = [per_role[r][i] if i < len(per_role.get(r, ())) else m.get("policies", {}).get(r, "?")
                      for r in roles.get(side, m.get("policies", ()))]
-            labels[m["id"]] = f"{m['id']} seed: {'+'.join(dict.fromkeys(specs))}"
+            labels[m["id"]] = f"{m['id']} seed: {'+'.join(dict.fromkeys(map(spec_label, specs)))}"
     return labels
 
 
