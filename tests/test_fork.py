@@ -21,7 +21,7 @@ from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
 from triplesumo.cli import main
 from triplesumo.train.fork import added_seeds, check_fork, fork_run
 from triplesumo.train.league import LeagueConfig
-from triplesumo.train.loop import Trainer, train
+from triplesumo.train.loop import Trainer, config_from_json, train
 
 
 def rows(path: Path) -> list[dict[str, str]]:
@@ -211,7 +211,10 @@ def test_compact_keeps_what_resuming_needs_and_the_resumed_run_is_unchanged(
 def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_them(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     _, half = runs
-    spider_file = half.run_dir / "policy-spider"  # a seed from policy files (not the first member's)
+    (tmp_path / "seed").mkdir()  # a seed from policy files (not the first member's), removed after the fork
+    for ext in ("json", "safetensors"):
+        shutil.copyfile(half.run_dir / f"policy-spider.{ext}", tmp_path / "seed" / f"spider.{ext}")
+    spider_file = tmp_path / "seed" / "spider"
     seeds = ("ant=passive", "bug=passive", f"spider={spider_file}")
     lcfg = dataclasses.replace(half.cfg.league, zoo=seeds, keep_zoo=True)
     cfg = dataclasses.replace(half.cfg, name="seeded", out=str(tmp_path), epochs=16, league=lcfg)
@@ -230,6 +233,11 @@ def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_the
     assert file_sha256(copied.with_suffix(".safetensors")) == file_sha256(spider_file.with_suffix(".safetensors"))
     state = json.loads(next((fork_dir / "checkpoints").glob("epoch-*/state.json")).read_text())
     assert state["league"]["pools"] == pool["pools"]  # the checkpoint a resume reads holds the seeds too
+    # the pool holds its copy: the seed's own file is not needed again (e.g. another run's member that
+    # `triplesumo compact` pruned), so the fork's config still loads and the fork resumes without it
+    seed_bytes = file_sha256(spider_file.with_suffix(".safetensors"))
+    shutil.rmtree(tmp_path / "seed")
+    assert config_from_json(json.loads((fork_dir / "config.json").read_text())) == cfg
     trainer = Trainer(cfg, run_dir=fork_dir, resume=True)  # (resuming seeds nothing again: files unchanged)
     trainer.run()
     assert trainer.league is not None and trainer.epochs_done == 16
@@ -240,6 +248,22 @@ def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_the
     assert sum(members[i].games for i in seeded) > 0  # the learners met the seeds
     assert all(len(p.members) - sum(m.source == "zoo" for m in p.members) <= lcfg.max_size for p in pools.values())
     assert "--league.zoo ant=passive bug=passive" in record["command"] and "--league.keep-zoo" in record["command"]
+    assert file_sha256(copied.with_suffix(".safetensors")) == seed_bytes
+
+
+def test_a_seed_whose_policy_file_is_missing_is_refused_before_anything_is_written(
+        runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
+    _, half = runs
+    missing = tmp_path / "gone" / "spider"
+    lcfg = dataclasses.replace(half.cfg.league, zoo=(f"spider={missing}",))  # a config may name it...
+    cfg = dataclasses.replace(half.cfg, name="seeded", out=str(tmp_path), league=lcfg)
+    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: '.*gone/spider' is neither a built-in policy"):
+        fork_run(half.run_dir, cfg)  # ...but seeding it needs the file
+    assert not (tmp_path / "seeded").exists()
+    fresh = dataclasses.replace(cfg, name="fresh")
+    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: '.*gone/spider' is neither a built-in policy"):
+        Trainer(fresh)
+    assert not (tmp_path / "fresh").exists()
 
 
 def test_a_fork_may_only_append_to_the_parents_zoo(runs: tuple[Trainer, Trainer]) -> None:

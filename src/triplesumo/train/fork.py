@@ -52,7 +52,7 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
+from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, check_seeds, write_pool
 from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
 from triplesumo.train.loop import (
     FORK_FILE,
@@ -195,6 +195,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
     parent = parent_config(parent_dir)
     changes = check_fork(parent, cfg)
     seeds = added_seeds(parent, cfg)
+    check_seeds(seeds)  # their files are copied into the fork's pools below
     run_dir = Path(cfg.out) / cfg.name
     if run_dir.resolve() == parent_dir.resolve():
         raise ValueError(f"a fork needs its own folder: --name/--out give {run_dir}, the parent's folder")

@@ -135,7 +135,8 @@ class LeagueConfig:
     """ROLE=POLICY entries seeding the pools (POLICY: zero, passive, random, zoo:NAME or a policy file,
     e.g. another run's league/members/spider-0094/spider); a pool is seeded when every one of its roles is
     named, with one member per entry of a role: naming a role k times seeds k members (a side's roles
-    named equally often, the i-th entries of its roles making its i-th member)."""
+    named equally often, the i-th entries of its roles making its i-th member). A policy file is copied into
+    the pool when it is seeded, so a resume does not need it again."""
     draw_score: float = 0.0
     """What a match a learner finishes first but not alone (a draw: the time limit, or tied places) adds to
     its win-rate window: 0 (only a win counts, the default) or e.g. 0.5 (half a win, as chess scores it),
@@ -192,7 +193,7 @@ class LeagueConfig:
             role, sep, spec = entry.partition("=")
             if not sep or not role or not spec:
                 raise ValueError(f"LeagueConfig.zoo: expected ROLE=POLICY, got {entry!r}")
-            _check_spec(spec, "LeagueConfig.zoo")
+            _check_spec(spec, "LeagueConfig.zoo", files=False)
 
     def draw_score_of(self, side: str) -> float:
         """What a draw adds to ``side``'s win-rate window: its :attr:`side_draw_score` entry, else
@@ -228,7 +229,18 @@ def _side_values(entries: Sequence[str], name: str = "", value: str = "", bounds
     return out
 
 
-def _check_spec(spec: str, where: str) -> None:
+def check_seeds(entries: Sequence[str]) -> None:
+    """``ValueError`` naming the first ROLE=POLICY entry (:attr:`LeagueConfig.zoo`'s form) whose policy is
+    neither built in, shipped nor a policy file: what seeding them needs, checked before anything is copied."""
+    for entry in entries:
+        _check_spec(entry.partition("=")[2], "LeagueConfig.zoo")
+
+
+def _check_spec(spec: str, where: str, files: bool = True) -> None:
+    """``ValueError`` naming ``where`` unless ``spec`` is a built-in policy, a shipped ``zoo:NAME`` or (with
+    ``files``) a policy file. A config checks its seeds without ``files``: a seed's file is needed only
+    when it is copied into the pool (:meth:`League.seed`), and a run resumed after its seed's file went
+    away (say, another run's member that ``triplesumo compact`` pruned) has the pool's copy."""
     if spec in BUILTIN:
         return
     if spec.startswith("zoo:"):
@@ -236,7 +248,7 @@ def _check_spec(spec: str, where: str) -> None:
             raise ValueError(f"{where}: no policy {spec[4:]!r} in the zoo; shipped: {available()}")
         return
     stem = Path(spec).with_suffix("") if Path(spec).suffix in (".json", ".safetensors") else Path(spec)
-    if not stem.with_suffix(".json").is_file():
+    if files and not stem.with_suffix(".json").is_file():
         raise ValueError(f"{where}: {spec!r} is neither a built-in policy ({sorted(BUILTIN)}), zoo:NAME, "
                          "nor a policy file")
 
@@ -382,6 +394,7 @@ class League:
         unknown = [e for e in entries if e.partition("=")[0] not in all_roles]
         if unknown:
             raise ValueError(f"LeagueConfig.zoo names roles no side has: {unknown}; roles are {sorted(all_roles)}")
+        check_seeds(entries)
         seeds: dict[str, list[str]] = {}
         for entry in entries:
             role, _, spec = entry.partition("=")

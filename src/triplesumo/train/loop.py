@@ -73,7 +73,7 @@ from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import League, LeagueConfig, plot_league
+from triplesumo.train.league import League, LeagueConfig, check_seeds, plot_league
 from triplesumo.train.learners import (
     Learner,
     LearnerSpec,
@@ -366,6 +366,8 @@ class Trainer:
         dims = {spec.name: self._dims(sizing, spec) for spec in self.specs}
         if not resume:
             refuse_existing_run(run_dir, start_over)
+            if cfg.self_play:  # a new league copies its seeds' files into its pools (a resumed one has them)
+                check_seeds(cfg.league.zoo)
         check_replay_memory(cfg, [(spec.name, spec.algo, *dims[spec.name]) for spec in self.specs])
         self.probe = probe = sizing
         """A match of the run's config (never stepped): roster, observation and action sizes."""
