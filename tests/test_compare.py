@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import csv
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +34,18 @@ PNG = b"\x89PNG\r\n\x1a\n"
 
 def col(values: list[float]) -> np.ndarray:
     return np.asarray(values, dtype=np.float64)[:, None]
+
+
+def test_the_cli_parser_loads_rliable_only_when_statistics_are_computed() -> None:
+    """rliable imports scipy.stats (about a second): ``triplesumo --help``, ``train`` and ``play`` need neither,
+    and a machine without them (a GPU box given only the simulation's packages) still runs them."""
+    script = ("import sys; import triplesumo.cli as cli; cli._parser()\n"
+              "print(sorted({m.split('.')[0] for m in sys.modules} & {'rliable', 'scipy'}))\n"
+              "from triplesumo.evaluation.compare import iqm; import numpy as np\n"
+              "print(iqm(np.arange(8.0).reshape(4, 2)), 'rliable' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True).stdout.split("\n")
+    assert out[0] == "[]", out
+    assert out[1] == f"{rly_metrics.aggregate_iqm(np.arange(8.0).reshape(4, 2))} True", out
 
 
 def test_iqm_of_a_known_array_is_the_mean_of_its_middle_half() -> None:

@@ -36,7 +36,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from rliable import metrics as rly_metrics
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, PER_SEED_FILE
@@ -75,11 +74,15 @@ class CompareConfig:
 
 def iqm(scores: NDArray[np.float64]) -> float:
     """Interquartile mean of a ``(runs, tasks)`` score matrix (rliable's ``aggregate_iqm``)."""
+    from rliable import metrics as rly_metrics  # (here: rliable loads scipy.stats, ~1 s the CLI's parser skips)
+
     return float(rly_metrics.aggregate_iqm(np.asarray(scores, dtype=np.float64)))
 
 
 def probability_of_improvement(x: NDArray[np.float64], y: NDArray[np.float64]) -> float:
     """P(X > Y) + P(X = Y) / 2, averaged over tasks (rliable's ``probability_of_improvement``)."""
+    from rliable import metrics as rly_metrics
+
     return float(rly_metrics.probability_of_improvement(np.asarray(x, dtype=np.float64),
                                                         np.asarray(y, dtype=np.float64)))
 
