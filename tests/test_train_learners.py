@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -294,6 +295,22 @@ def test_learner_config_gives_one_learner_its_own_values(tmp_path: Path) -> None
     assert 16 in shapes["ant"]["actor.net.0.weight"] and 8 in shapes["bug"]["actor.net.0.weight"]
     saved = json.loads((tmp_path / "own" / "config.json").read_text())
     assert saved["learner_config"] == ["bug.learn_every=1", "bug.hidden=8 8"]
+
+
+def test_a_schedule_that_would_mostly_update_is_warned_about_naming_the_gpu_setting(tmp_path: Path) -> None:
+    """``learn_every`` counts transitions: 40 matches updating every transition, 2 gradient steps each, make
+    80 updates per step of all the matches; 40 matches at learn_every 40 make 2 (README "GPU training")."""
+    heavy = tiny(tmp_path, "heavy", n_envs=40, learn=("bug=td3", "ant=ppo"), policies=("spider=random",),
+                 learner_config=("bug.learn_every=1", "bug.gradient_steps=2"))
+    with pytest.warns(UserWarning, match=r"learner bug: td3.learn_every=1 and gradient_steps=2 with 40 "
+                                         r"transitions per step of the 40 matches make 80 gradient steps per step"
+                                         r".*set learn_every to 40 and gradient_steps to G"):
+        Trainer(heavy)
+    light = tiny(tmp_path, "light", n_envs=40, learn=("bug=td3", "ant=ppo"), policies=("spider=random",),
+                 learner_config=("bug.learn_every=40", "bug.gradient_steps=2"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        Trainer(light)
 
 
 @pytest.mark.parametrize(("entries", "named"), [

@@ -43,7 +43,8 @@ import os
 import shlex
 import threading
 import time
-from collections.abc import Iterator, Mapping
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -290,6 +291,30 @@ def check_replay_memory(cfg: TrainConfig, learners: list[tuple[str, str, int, in
                          f"{have / 2**30:.1f} GiB of memory and swap; nothing was made")
 
 
+HEAVY_SCHEDULE = 64
+"""Gradient steps per collection step past which :func:`warn_heavy_schedule` warns."""
+
+
+def warn_heavy_schedule(cfg: TrainConfig, specs: Sequence[LearnerSpec]) -> None:
+    """Warn when an off-policy learner's schedule makes more than :data:`HEAVY_SCHEDULE` gradient steps per
+    step of all the matches: ``learn_every`` counts transitions, so a CPU schedule (``learn_every 5``) kept
+    for thousands of GPU matches makes thousands of updates per step and collects almost nothing (README
+    "GPU training": ``learn_every N_ENVS``)."""
+    for spec in specs:
+        if spec.algo == "ppo":
+            continue
+        c = cfg.algo_config(spec.name)
+        transitions = cfg.n_envs * len(spec.agents)
+        per_step = transitions / c.learn_every * c.gradient_steps
+        if per_step > HEAVY_SCHEDULE:
+            warnings.warn(f"learner {spec.name}: {spec.algo}.learn_every={c.learn_every} and gradient_steps="
+                          f"{c.gradient_steps} with {transitions:,} transitions per step of the {cfg.n_envs:,} "
+                          f"matches make {per_step:,.0f} gradient steps per step, so the run will mostly update "
+                          f"and barely collect; for G updates per step of all the matches set learn_every to "
+                          f"{transitions} and gradient_steps to G (README \"GPU training\")", UserWarning,
+                          stacklevel=3)
+
+
 def prepare_run_dir(run_dir: Path) -> Path:
     """Create the run folder and prove it is writable now, not after hours."""
     run_dir = Path(run_dir)
@@ -357,6 +382,7 @@ class Trainer:
         self.specs = learner_specs(cfg, agent_names, {a.name: a.team for a in self.match_cfg.agents})
         self.agents = [a for spec in self.specs for a in spec.agents]
         """The learning agents, learner by learner."""
+        warn_heavy_schedule(cfg, self.specs)
         pairs = expand_pairs(cfg.policies, [a for a in agent_names if a not in self.agents])
         unknown = [p.split("=")[0] for p in pairs if p.split("=")[0] not in agent_names]
         if unknown:
