@@ -354,6 +354,7 @@ def test_the_league_plot_labels_at_most_24_member_rows_first_and_last_included(n
     assert len(shown) == n if n <= 24 else 2 <= len(shown) <= 24
     gaps = np.diff(shown)
     assert n <= 2 or gaps.min() >= gaps.max() / 2  # no two labels crowd each other (the last one included)
+    assert n <= 24 or gaps[-1] >= gaps[0]  # the last row's label is a full step from the one before it
 
 
 def test_bad_league_use_is_a_clear_error(tmp_path: Path) -> None:
@@ -459,8 +460,14 @@ def test_seeded_members_are_labelled_with_their_policy_and_drawn_apart_in_the_le
                       "spider-0002": "spider-0002 seed: zoo:spider"}
     fig = league_figure(tmp_path)
     ticks = [t.get_text() for t in fig.axes[1].get_yticklabels()]
-    assert set(labels.values()) <= set(ticks)  # seeds are always labelled, however many snapshots
-    assert len([t for t in ticks if "seed" not in t]) <= 24 and "team-0031" in ticks  # the last snapshot too
+    assert set(labels.values()) <= {line for t in ticks for line in t.split("\n")}  # always, however many snapshots
+    # the two Spider seeds sit in adjacent rows: one label of two lines between them, not two overlapping
+    assert "spider-0001 seed: passive\nspider-0002 seed: zoo:spider" in ticks
+    rows = dict(zip(ticks, fig.axes[1].get_yticks(), strict=True))
+    assert rows["spider-0001 seed: passive\nspider-0002 seed: zoo:spider"] == 31.5  # team-0001..0031, then these
+    sampled = [t for t in ticks if "seed" not in t]
+    assert 0 < len(sampled) <= 24 and max(rows[t] for t in sampled) >= 28  # late snapshots too, clear of it
+    assert all(abs(rows[t] - 31.5) >= 2 for t in sampled) and "team-0031" not in ticks  # (it would overlap)
     crosses = [c for c in fig.axes[1].collections if np.allclose(c.get_facecolor()[0][:3], 0.0)]
     assert len(crosses) == 3  # one row of black crosses per seed
     assert member_labels(tmp_path / "elsewhere") == {}

@@ -717,7 +717,7 @@ def member_ticks(n: int, most: int = 24) -> list[int]:
         return list(range(n))
     step = -(-(n - 1) // (most - 1))
     ticks = list(range(0, n, step))
-    if n - 1 - ticks[-1] < step / 2 and len(ticks) > 1:  # too close to the last row's label to be read
+    if n - 1 - ticks[-1] < step and len(ticks) > 1:  # closer to the last row's label than a line: they overlap
         ticks.pop()
     return sorted({*ticks, n - 1})
 
@@ -774,7 +774,8 @@ def plot_league(run_dir: Path, path: Path | None = None) -> Path:
 def league_figure(run_dir: Path) -> Any:
     """The figure of ``RUN/league/league.csv``: each learner's rating mu over epochs with its +- 1.96 sigma
     band (top) and the members its pool held (bottom; at most 24 snapshots labelled; seeded members,
-    :func:`member_labels`, drawn as black crosses and always labelled with their policy)."""
+    :func:`member_labels`, drawn as black crosses and always labelled with their policy; seeds in adjacent rows
+    share one label of a line each)."""
     from matplotlib.figure import Figure
 
     log = Path(run_dir) / "league" / LOG_FILE
@@ -812,11 +813,18 @@ def league_figure(run_dir: Path) -> Any:
             else:
                 bx.scatter(held, y, s=6, color=line.get_color())
             rows_of_members.append(m)
-    seed_rows = [i for i, m in enumerate(rows_of_members) if m in seeded]
-    gap = math.ceil(len(rows_of_members) / 48)  # half the spacing of the sampled labels: a seed's keeps clear
-    shown = sorted({*(i for i in member_ticks(len(rows_of_members)) if all(abs(i - j) >= gap for j in seed_rows)),
-                    *seed_rows})
-    bx.set_yticks(shown, [seeded.get(rows_of_members[i], rows_of_members[i]) for i in shown])
+    gap = math.ceil(len(rows_of_members) / 48)  # half the spacing of the sampled labels (about half a line)
+    groups: list[list[int]] = []  # seeds closer than a line apart (a fork's seeds sit side by side): one label
+    for i in (i for i, m in enumerate(rows_of_members) if m in seeded):
+        if groups and i - groups[-1][-1] < 2 * gap:
+            groups[-1].append(i)
+        else:
+            groups.append([i])
+    ticks = {sum(g) / len(g): "\n".join(seeded[rows_of_members[i]] for i in g) for g in groups}
+    for i in member_ticks(len(rows_of_members)):  # sampled snapshots (a line: 2 gap), clear of k-line seed labels
+        if all(abs(i - sum(g) / len(g)) >= gap * (len(g) + 1) for g in groups):
+            ticks[i] = rows_of_members[i]
+    bx.set_yticks(sorted(ticks), [ticks[y] for y in sorted(ticks)])
     ax.set_ylabel("rating mu (95% band)")
     ax.legend(loc="best", fontsize=8)
     ax.grid(alpha=0.3)
