@@ -210,6 +210,29 @@ def test_resume_equals_uninterrupted(uninterrupted: Trained, tmp_path: Path, row
     assert_same_run(uninterrupted.run, killed)
 
 
+def test_a_resume_on_more_physics_threads_trains_what_the_run_would_have(uninterrupted: Trained,
+                                                                         tmp_path: Path) -> None:
+    """A run moved to a machine with more cores: ``--resume RUN --n-threads 2`` steps the matches on two
+    threads and still writes, bit for bit, the run that went on with one."""
+    assert uninterrupted.cfg.n_threads == 1
+    killed = train(tiny(tmp_path, name="B", epochs=E)).run_dir
+    result = train(TrainConfig(), resume_dir=killed, overrides={"epochs": 2 * E, "n_threads": 2})
+    assert result.epochs == uninterrupted.result.epochs and result.updates == uninterrupted.result.updates
+    assert_same_run(uninterrupted.run, killed)
+
+
+def test_cli_resume_takes_n_threads_and_names_what_it_refuses(uninterrupted: Trained, tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture[str]) -> None:
+    killed = train(tiny(tmp_path, name="B", epochs=E)).run_dir
+    assert main(["train", "--resume", str(killed), "--seed", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "--seed" in err and "--n-threads" in err  # the refused flag, and the list of the allowed ones
+    assert main(["train", "--resume", str(killed), "--epochs", str(2 * E), "--n-threads", "2"]) == 0
+    assert_same_run(uninterrupted.run, killed)
+    legs = json.loads((killed / "legs.json").read_text())["legs"]  # the session that changed it says so
+    assert [leg["kind"] for leg in legs] == ["start", "resume"] and "--n-threads 2" in legs[-1]["command"]
+
+
 class SimulatedKill(Exception):
     """Stands for the process dying inside a checkpoint write."""
 

@@ -144,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                     extra = given - set(allowed)
                     flags = ", ".join(sorted("--" + k.replace("__", ".").replace("_", "-") for k in extra))
                     raise ValueError(f"with --resume the run's saved config is used; only --epochs, --max-minutes, "
-                                     f"--progress and --no-save-replay may be given, not {flags}")
+                                     f"--n-threads, --progress and --no-save-replay may be given, not {flags}")
                 overrides = {k: v for k, v in vars(args).items() if k in allowed}
                 result = train(TrainConfig(), resume_dir=args.resume, overrides=overrides,
                                from_checkpoint=args.from_checkpoint, session_command=typed)

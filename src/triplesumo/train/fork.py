@@ -126,9 +126,8 @@ def check_fork(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
         flags = ", ".join("--" + k.replace("_", "-") for k in bad)
         raise ValueError(f"a fork continues the parent's networks, matches and pools, so it keeps their config; "
                          f"it may change --league.* (not --league.rating-model; --league.zoo only by adding "
-                         f"entries), --reward.*, --epochs, "
-                         f"--max-minutes, --max-env-steps, --checkpoint-every, --progress, --tensorboard and "
-                         f"--save-replay, not {flags}")
+                         f"entries), --reward.*, --epochs, --max-minutes, --max-env-steps, "
+                         f"--checkpoint-every, --n-threads, --progress, --tensorboard and --save-replay, not {flags}")
     added_seeds(parent, cfg)
     return changes
 

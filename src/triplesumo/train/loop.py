@@ -133,8 +133,11 @@ def write_run_config(run_dir: Path, cfg: TrainConfig) -> None:
 
 FORK_FILE = "fork.json"
 """In a run folder made by ``train --fork`` (:mod:`triplesumo.train.fork`): where it came from."""
-RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay")
-"""The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``)."""
+RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay", "n_threads")
+"""The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``): budgets, output,
+and ``n_threads``, the threads stepping the CPU physics, which advance every match alone and bit for bit
+whatever their number (``tests/test_batch.py``), so that a run started on a laptop goes on with the cores of a
+larger machine and trains exactly what it would have."""
 
 
 def run_id_of(cfg: TrainConfig) -> str:
