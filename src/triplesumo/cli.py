@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
             run_play(_dcargs.build(PlayConfig, args))
         elif args.command == "train":
             from triplesumo.train.config import TrainConfig
-            from triplesumo.train.loop import RESUME_OVERRIDES, train
+            from triplesumo.train.loop import RESUME_OVERRIDES, flag_list, train
 
             plain = ("command", "resume", "fork", "from_checkpoint", "start_over")
             typed = shlex.join(["triplesumo", *argv])  # this session's leg records it (RUN/legs.json)
@@ -143,8 +143,8 @@ def main(argv: list[str] | None = None) -> int:
                 if given - set(allowed):
                     extra = given - set(allowed)
                     flags = ", ".join(sorted("--" + k.replace("__", ".").replace("_", "-") for k in extra))
-                    raise ValueError(f"with --resume the run's saved config is used; only --epochs, --max-minutes, "
-                                     f"--n-threads, --progress and --no-save-replay may be given, not {flags}")
+                    raise ValueError(f"with --resume the run's saved config is used; only "
+                                     f"{flag_list(allowed)} may be given, not {flags}")
                 overrides = {k: v for k, v in vars(args).items() if k in allowed}
                 result = train(TrainConfig(), resume_dir=args.resume, overrides=overrides,
                                from_checkpoint=args.from_checkpoint, session_command=typed)

@@ -59,6 +59,7 @@ from triplesumo.train.loop import (
     RESUME_OVERRIDES,
     config_from_json,
     config_to_json,
+    flag_list,
     holds_run,
     prepare_run_dir,
     run_id_of,
@@ -126,8 +127,8 @@ def check_fork(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
         flags = ", ".join("--" + k.replace("_", "-") for k in bad)
         raise ValueError(f"a fork continues the parent's networks, matches and pools, so it keeps their config; "
                          f"it may change --league.* (not --league.rating-model; --league.zoo only by adding "
-                         f"entries), --reward.*, --epochs, --max-minutes, --max-env-steps, "
-                         f"--checkpoint-every, --n-threads, --progress, --tensorboard and --save-replay, not {flags}")
+                         f"entries), --reward.*, "
+                         f"{flag_list(f for f in FORK_FIELDS if f not in ('name', 'out', *NESTED))}, not {flags}")
     added_seeds(parent, cfg)
     return changes
 

@@ -44,7 +44,7 @@ import shlex
 import threading
 import time
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -138,6 +138,12 @@ RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay", "n_threa
 and ``n_threads``, the threads stepping the CPU physics, which advance every match alone and bit for bit
 whatever their number (``tests/test_batch.py``), so that a run started on a laptop goes on with the cores of a
 larger machine and trains exactly what it would have."""
+
+
+def flag_list(fields: Iterable[str]) -> str:
+    """``--epochs, --max-minutes, ...``: the command-line flags of TrainConfig ``fields``, for the errors that
+    say which may be given (a boolean's flag also has its ``--no-`` form)."""
+    return ", ".join("--" + f.replace("_", "-") for f in fields)
 
 
 def run_id_of(cfg: TrainConfig) -> str:
