@@ -80,6 +80,11 @@ def _parser() -> argparse.ArgumentParser:
                                              "committing it; the evicted members deleted are listed in "
                                              "league/pruned.json")
     compact.add_argument("run_dir", help="run folder (holds checkpoints/)")
+    average = sub.add_parser("average", help="average the actor weights of snapshots of one run (stochastic weight "
+                                             "averaging) into a new policy file that names its sources")
+    average.add_argument("policies", nargs="+", help="policy files of one run (e.g. "
+                                                     "runs/x/league/members/spider-00{40,41,42}/spider)")
+    average.add_argument("--out", required=True, help="the averaged policy file to write (e.g. runs/x/swa-spider)")
     plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
     plot.add_argument("run_dir", help="run folder (holds metrics.csv, or metrics-<agent>.csv per learning agent)")
     plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
@@ -201,6 +206,12 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.run_dir}: removed {len(removed['checkpoints'])} older checkpoint(s) "
                   f"{removed['checkpoints']} and {len(removed['members'])} evicted league member(s) "
                   f"(listed in league/pruned.json); it resumes as before")
+        elif args.command == "average":
+            from triplesumo.agents.average import average_policies
+
+            made = average_policies(args.policies, args.out, command=shlex.join(["triplesumo", *argv]))
+            print(f"{args.out}: the mean of {len(args.policies)} {made['agent']} policies "
+                  f"(epochs {[s['epochs'] for s in made['average']['sources']]})")
         elif args.command == "plot":
             from triplesumo.train.loop import plot_metrics
 
