@@ -31,6 +31,7 @@ from triplesumo.evaluation.evaluate import (
     evaluate,
     finished_rows,
     format_summary,
+    play_candidates_on_workers,
     play_test_epochs,
 )
 from triplesumo.evaluation.metrics import OUTCOMES, summarize
@@ -288,6 +289,38 @@ def test_resume_extends_a_finished_evaluation_to_more_epochs(
         evaluate(dataclasses.replace(cfg, out=str(folder), resume=True))
 
 
+def test_workers_write_the_bytes_of_one_process_and_resume(tiny_zoo: TinyZoo, tmp_path: Path) -> None:
+    # policy files, not zoo names: the worker processes do not see a monkeypatched ZOO_DIR
+    others = (f"ant={tiny_zoo.zoo_dir / 'ant'}", f"spider={tiny_zoo.zoo_dir / 'spider'}")
+    base = EvaluateConfig(policy=(str(tiny_zoo.bug_policy),), policies=others, epochs=5, n_envs=2,
+                          steps_per_epoch=STEPS, progress=False, ray_chunk=2)
+    one = evaluate(dataclasses.replace(base, out=str(tmp_path / "one")))
+    spread = dataclasses.replace(base, out=str(tmp_path / "workers"), workers=3)
+    evaluate(dataclasses.replace(spread, epochs=3))  # a first part, as if stopped after 3 epochs
+    resumed = evaluate(dataclasses.replace(spread, resume=True))
+    assert resumed["candidates"] == one["candidates"]
+    assert set(one["candidates"]) == {"trained", "passive", "random"}
+    for label in one["candidates"]:
+        got = (tmp_path / "workers" / label / "metrics.csv").read_bytes()
+        assert got == (tmp_path / "one" / label / "metrics.csv").read_bytes()
+        assert got.count(b"\n") == 6
+
+
+def test_workers_hand_on_each_candidates_rows_in_order_and_raise_a_tasks_error(tiny_zoo: TinyZoo,
+                                                                                tmp_path: Path) -> None:
+    others = {"ant": str(tiny_zoo.zoo_dir / "ant"), "spider": str(tiny_zoo.zoo_dir / "spider")}
+    seen: list[tuple[str, int]] = []
+    play_candidates_on_workers({"z": "zero", "r": "random"}, {"r": 2}, others, "bug", 7, 100,
+                               MatchConfig(max_steps=STEPS), workers=2, chunk=2, n_envs=2,
+                               on_row=lambda label, row: seen.append((label, row["epoch"])))
+    assert [e for label, e in seen if label == "z"] == [1, 2, 3, 4, 5, 6, 7]
+    assert [e for label, e in seen if label == "r"] == [3, 4, 5, 6, 7]  # from firsts["r"] on
+    with pytest.raises(Exception, match="nowhere"):
+        play_candidates_on_workers({"z": "zero", "x": str(tmp_path / "nowhere" / "bug")}, {}, others, "bug", 4, 100,
+                                   MatchConfig(max_steps=STEPS), workers=2, chunk=2, n_envs=2,
+                                   on_row=lambda label, row: None)
+
+
 def test_resume_refuses_what_would_change_the_rows(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -476,6 +509,8 @@ def test_format_summary_survives_an_undefined_interval() -> None:
     ({"window": 0}, r"EvaluateConfig\.window"),
     ({"n_envs": -1}, r"EvaluateConfig\.n_envs"),
     ({"n_threads": 0}, r"EvaluateConfig\.n_threads"),
+    ({"workers": 0}, r"EvaluateConfig\.workers"),
+    ({"workers": 2, "ray": True}, r"EvaluateConfig\.workers and EvaluateConfig\.ray"),
     ({"policies": ("ant",)}, r"EvaluateConfig\.policies"),
     ({"policies": ("ant=",)}, r"EvaluateConfig\.policies"),
 ])

@@ -107,15 +107,23 @@ class EvaluateConfig:
     ray_address: str = ""
     """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray."""
     ray_chunk: int = 50
-    """With ray: test epochs per Ray task."""
+    """With ray or workers > 1: test epochs per task."""
+    workers: int = 1
+    """Processes playing the test epochs at once on this machine (no Ray needed), one MuJoCo thread
+    each: every candidate's epochs are cut into tasks of ray_chunk epochs in one queue, the first
+    task of every candidate before the second of any, so a stopped run leaves them about equally far.
+    The same rows as one process. 1: played here, on n_threads threads."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
             raise ValueError(f"EvaluateConfig.record must be an int >= 0, got {self.record!r}")
-        for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads", "ray_chunk"):
+        for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads", "ray_chunk", "workers"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"EvaluateConfig.{name} must be an int >= 1, got {value!r}")
+        if self.ray and self.workers > 1:
+            raise ValueError("EvaluateConfig.workers and EvaluateConfig.ray both spread the test epochs: "
+                             "choose one (workers on this machine, ray on a cluster)")
         check_ray("EvaluateConfig", self.ray, self.ray_address)
         agents = list(scenario_config(self.scenario).agent_names)  # names the scenario if unknown
         if self.learner not in agents:
@@ -186,6 +194,95 @@ def play_test_epochs(
                            progress=f"evaluate {label}".strip() if progress else None, end_seat=L,
                            record=record, record_dir=record_dir, policy_names=policy_names)
     return [row(r) for r in results]
+
+
+def play_test_chunk(learner_spec: str, other_specs: dict[str, str], learner: str, seed: int, match_cfg: MatchConfig,
+                    n_envs: int, record: int, record_dir: str | None, policy_names: dict[str, str] | None,
+                    first: int, end: int) -> list[dict[str, Any]]:
+    """The rows of test epochs ``first .. end - 1`` of the policy ``learner_spec`` against ``other_specs``
+    (agent -> spec), played from the specs on one MuJoCo thread: what a worker process or a Ray task runs
+    (the same rows as :func:`play_test_epochs` with those policies)."""
+    probe = Match(match_cfg)
+    motors = dict(zip(probe.agents, probe.action_sizes, strict=True))
+    sizes = probe.observer.sizes
+    obs_mode = match_cfg.obs_mode
+    learner_policy = make_policy(learner_spec, seed=seed, expect_obs_mode=obs_mode, action_size=motors[learner],
+                                 expect_obs_dim=sizes[learner])
+    others = policies_from_pairs(tuple(f"{a}={s}" for a, s in other_specs.items()), seed, obs_mode,
+                                 action_sizes=motors, obs_dims=sizes)
+    return play_test_epochs(learner_policy, others, learner, end, seed, match_cfg, n_envs=min(n_envs, end - first),
+                            n_threads=1, first=first, record=record,
+                            record_dir=None if record_dir is None else Path(record_dir),
+                            policy_names=policy_names or {**other_specs, learner: learner_spec})
+
+
+ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+"""Variables set to 1 for worker processes (unless set already): each plays on one core."""
+
+
+def play_candidates_on_workers(candidates: dict[str, str], firsts: dict[str, int], other_specs: dict[str, str],
+                               learner: str, epochs: int, seed: int, match_cfg: MatchConfig, workers: int,
+                               chunk: int, n_envs: int, on_row: Callable[[str, dict[str, Any]], None],
+                               record: int = 0, record_dirs: dict[str, Path] | None = None,
+                               progress: str | None = None) -> None:
+    """Test epochs ``firsts[label] .. epochs - 1`` of every candidate (label -> learner spec) in ``workers``
+    processes: tasks of ``chunk`` epochs in one queue, chunk-major (the first chunk of every candidate before
+    the second of any). ``on_row(label, row)`` gets each candidate's rows in epoch order, each as soon as
+    it and every earlier one of that candidate are in. A failing task stops the rest and raises; the rows
+    handed on before stay valid (a resume plays the others)."""
+    import multiprocessing
+    import os
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    bounds = {label: [(a, min(a + chunk, epochs)) for a in range(firsts.get(label, 0), epochs, chunk)]
+              for label in candidates}
+    order = sorted(((k, i, label) for i, label in enumerate(candidates) for k in range(len(bounds[label]))))
+    if not order:
+        return
+    bar = None
+    if progress is not None:
+        from tqdm import tqdm
+
+        bar = tqdm(total=sum(b - a for spans in bounds.values() for a, b in spans), unit="epoch", desc=progress,
+                   dynamic_ncols=True)
+    done: dict[str, dict[int, list[dict[str, Any]]]] = {label: {} for label in candidates}
+    next_chunk = dict.fromkeys(candidates, 0)
+    saved = {name: os.environ.get(name) for name in ONE_THREAD}
+    os.environ.update({name: os.environ.get(name) or "1" for name in ONE_THREAD})  # inherited by the workers
+    try:
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            pending = {}
+            for k, _, label in order:
+                a, b = bounds[label][k]
+                names = {**other_specs, learner: candidates[label]}
+                rec_dir = None if record_dirs is None else str(record_dirs[label])
+                future = pool.submit(play_test_chunk, candidates[label], other_specs, learner, seed, match_cfg,
+                                     n_envs, record, rec_dir, names, a, b)
+                pending[future] = (label, k)
+            try:
+                while pending:
+                    finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+                    for future in finished:
+                        label, k = pending.pop(future)
+                        done[label][k] = future.result()
+                        if bar is not None:
+                            bar.update(len(done[label][k]))
+                        while next_chunk[label] in done[label]:
+                            for row in done[label].pop(next_chunk[label]):
+                                on_row(label, row)
+                            next_chunk[label] += 1
+            except BaseException:
+                for future in pending:
+                    future.cancel()
+                raise
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+        if bar is not None:
+            bar.close()
 
 
 def _clean(value: Any) -> Any:
@@ -276,10 +373,23 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
 
             ray_tasks = ray_module
             stack.enter_context(ray_tasks.session(cfg.ray_address))
+        if cfg.workers > 1:
+            appenders, firsts = {}, {}
+            for label in candidates:
+                path = out / label / "metrics.csv"
+                firsts[label] = finished_rows(path, cfg.epochs) if label in kept else 0
+                if firsts[label] < cfg.epochs:
+                    appenders[label] = stack.enter_context(RowAppender(path, fresh=firsts[label] == 0))
+            play_candidates_on_workers(
+                {label: candidates[label] for label in appenders}, firsts, dict(p.split("=", 1) for p in pairs),
+                cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.workers, cfg.ray_chunk, cfg.n_envs,
+                lambda label, row: appenders[label](row), record=cfg.record,
+                record_dirs={label: out / label / "matches" for label in appenders},
+                progress=f"evaluate {len(appenders)} candidates on {cfg.workers} workers" if cfg.progress else None)
         for label, spec in candidates.items():
             path = out / label / "metrics.csv"
             done = finished_rows(path, cfg.epochs) if label in kept else 0
-            if done >= cfg.epochs:
+            if done >= cfg.epochs or cfg.workers > 1:
                 continue
             seat_names: dict[str, str] = {**dict(p.split("=", 1) for p in pairs), cfg.learner: spec}
             with RowAppender(path, fresh=done == 0) as append:

@@ -33,7 +33,7 @@ except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
                       'pip install "triplesumo[ray]"') from exc
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.evaluation.evaluate import play_test_epochs
+from triplesumo.evaluation.evaluate import play_test_chunk
 from triplesumo.rules.config import MatchConfig
 
 __all__ = ["play_chunks_on_ray", "play_test_epochs_on_ray", "play_tournament_on_ray", "portable_spec",
@@ -119,21 +119,8 @@ def play_chunks_on_ray(play: Callable[..., list[Row]], args: Sequence[Any], n: i
 def _play_test_chunk(learner_spec: str, other_specs: dict[str, str], learner: str, seed: int, match_cfg: MatchConfig,
                      n_envs: int, record: int, record_dir: str | None, policy_names: dict[str, str] | None,
                      first: int, end: int) -> list[Row]:
-    from triplesumo.agents.zoo import make_policy, policies_from_pairs
-    from triplesumo.envs.match import Match
-
-    probe = Match(match_cfg)
-    motors = dict(zip(probe.agents, probe.action_sizes, strict=True))
-    sizes = probe.observer.sizes
-    obs_mode = match_cfg.obs_mode
-    learner_policy = make_policy(learner_spec, seed=seed, expect_obs_mode=obs_mode, action_size=motors[learner],
-                                 expect_obs_dim=sizes[learner])
-    others = policies_from_pairs(tuple(f"{a}={s}" for a, s in other_specs.items()), seed, obs_mode,
-                                 action_sizes=motors, obs_dims=sizes)
-    return play_test_epochs(learner_policy, others, learner, end, seed, match_cfg, n_envs=min(n_envs, end - first),
-                            n_threads=1, first=first, record=record,
-                            record_dir=None if record_dir is None else Path(record_dir),
-                            policy_names=policy_names or {**other_specs, learner: learner_spec})
+    return play_test_chunk(learner_spec, other_specs, learner, seed, match_cfg, n_envs, record, record_dir,
+                           policy_names, first, end)
 
 
 def play_test_epochs_on_ray(learner_spec: str, other_specs: Mapping[str, str], learner: str, epochs: int, seed: int,
