@@ -54,7 +54,7 @@ def test_a_killed_worker_is_retried_and_its_epochs_replay_exactly(ray_tasks: Any
     killed = None
     deadline = time.monotonic() + 60
     while killed is None and thread.is_alive() and time.monotonic() < deadline:
-        pids = own_ray_workers("_play_test_chunk")
+        pids = own_ray_workers("play_test_chunk")
         if pids:
             killed = pids[0]
             os.kill(killed, signal.SIGKILL)

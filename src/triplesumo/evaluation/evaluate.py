@@ -254,10 +254,9 @@ def play_candidates_on_workers(candidates: dict[str, str], firsts: dict[str, int
             pending = {}
             for k, _, label in order:
                 a, b = bounds[label][k]
-                names = {**other_specs, learner: candidates[label]}
                 rec_dir = None if record_dirs is None else str(record_dirs[label])
                 future = pool.submit(play_test_chunk, candidates[label], other_specs, learner, seed, match_cfg,
-                                     n_envs, record, rec_dir, names, a, b)
+                                     n_envs, record, rec_dir, None, a, b)
                 pending[future] = (label, k)
             try:
                 while pending:
@@ -373,31 +372,28 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
 
             ray_tasks = ray_module
             stack.enter_context(ray_tasks.session(cfg.ray_address))
+        other_specs = dict(p.split("=", 1) for p in pairs)
+        firsts = {label: finished_rows(out / label / "metrics.csv", cfg.epochs) if label in kept else 0
+                  for label in candidates}
+        todo = [label for label in candidates if firsts[label] < cfg.epochs]
         if cfg.workers > 1:
-            appenders, firsts = {}, {}
-            for label in candidates:
-                path = out / label / "metrics.csv"
-                firsts[label] = finished_rows(path, cfg.epochs) if label in kept else 0
-                if firsts[label] < cfg.epochs:
-                    appenders[label] = stack.enter_context(RowAppender(path, fresh=firsts[label] == 0))
+            appenders = {label: stack.enter_context(RowAppender(out / label / "metrics.csv", fresh=firsts[label] == 0))
+                         for label in todo}
             play_candidates_on_workers(
-                {label: candidates[label] for label in appenders}, firsts, dict(p.split("=", 1) for p in pairs),
-                cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.workers, cfg.ray_chunk, cfg.n_envs,
-                lambda label, row: appenders[label](row), record=cfg.record,
-                record_dirs={label: out / label / "matches" for label in appenders},
-                progress=f"evaluate {len(appenders)} candidates on {cfg.workers} workers" if cfg.progress else None)
-        for label, spec in candidates.items():
-            path = out / label / "metrics.csv"
-            done = finished_rows(path, cfg.epochs) if label in kept else 0
-            if done >= cfg.epochs or cfg.workers > 1:
-                continue
-            seat_names: dict[str, str] = {**dict(p.split("=", 1) for p in pairs), cfg.learner: spec}
-            with RowAppender(path, fresh=done == 0) as append:
+                {label: candidates[label] for label in todo}, firsts, other_specs, cfg.learner, cfg.epochs,
+                cfg.seed, match_cfg, cfg.workers, cfg.ray_chunk, cfg.n_envs, lambda label, row: appenders[label](row),
+                record=cfg.record, record_dirs={label: out / label / "matches" for label in todo},
+                progress=f"evaluate {len(todo)} candidates on {cfg.workers} workers" if cfg.progress else None)
+            todo = []
+        for label in todo:
+            spec, done = candidates[label], firsts[label]
+            seat_names: dict[str, str] = {**other_specs, cfg.learner: spec}
+            with RowAppender(out / label / "metrics.csv", fresh=done == 0) as append:
                 if ray_tasks is not None:
                     ray_tasks.play_test_epochs_on_ray(
-                        spec, {a: s for a, s in seat_names.items() if a != cfg.learner}, cfg.learner, cfg.epochs,
-                        cfg.seed, match_cfg, first=done, chunk=cfg.ray_chunk, n_envs=cfg.n_envs, on_row=append,
-                        record=cfg.record, record_dir=out / label / "matches", policy_names=seat_names,
+                        spec, other_specs, cfg.learner, cfg.epochs, cfg.seed, match_cfg, first=done,
+                        chunk=cfg.ray_chunk, n_envs=cfg.n_envs, on_row=append, record=cfg.record,
+                        record_dir=out / label / "matches", policy_names=seat_names,
                         progress=f"evaluate {cfg.learner}={spec}" if cfg.progress else None)
                 else:
                     play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg,

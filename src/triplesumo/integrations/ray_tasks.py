@@ -116,13 +116,6 @@ def play_chunks_on_ray(play: Callable[..., list[Row]], args: Sequence[Any], n: i
     return rows
 
 
-def _play_test_chunk(learner_spec: str, other_specs: dict[str, str], learner: str, seed: int, match_cfg: MatchConfig,
-                     n_envs: int, record: int, record_dir: str | None, policy_names: dict[str, str] | None,
-                     first: int, end: int) -> list[Row]:
-    return play_test_chunk(learner_spec, other_specs, learner, seed, match_cfg, n_envs, record, record_dir,
-                           policy_names, first, end)
-
-
 def play_test_epochs_on_ray(learner_spec: str, other_specs: Mapping[str, str], learner: str, epochs: int, seed: int,
                             match_cfg: MatchConfig | None = None, first: int = 0, chunk: int = 50,
                             n_envs: int = 8, max_retries: int = 3, on_row: Callable[[Row], None] | None = None,
@@ -142,7 +135,7 @@ def play_test_epochs_on_ray(learner_spec: str, other_specs: Mapping[str, str], l
     specs = {a: portable_spec(s) for a, s in other_specs.items()}
     args = (portable_spec(learner_spec), specs, learner, seed, match_cfg or MatchConfig(), n_envs, record,
             None if record_dir is None else str(Path(record_dir).resolve()), policy_names)
-    return play_chunks_on_ray(_play_test_chunk, args, epochs, first, chunk, on_row, max_retries, progress)
+    return play_chunks_on_ray(play_test_chunk, args, epochs, first, chunk, on_row, max_retries, progress)
 
 
 def _play_tournament_chunk(cfg: Any, match_cfg: MatchConfig | None, first: int, end: int) -> list[Row]:
