@@ -17,7 +17,7 @@ from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.networks import Actor, ActorPolicy
 from triplesumo.agents.policy_file import PolicyFileError, load_fixed_policy, load_policy, save_policy
-from triplesumo.agents.zoo import load, make_policy, policies_from_pairs
+from triplesumo.agents.zoo import ZOO_DIR, load, make_policy, policies_from_pairs, policy_fingerprint, policy_stem
 
 OBS_DIM = 12
 
@@ -202,6 +202,23 @@ def test_zoo_load_unknown_name() -> None:
         load("nonexistent")
     with pytest.raises(FileNotFoundError, match="nonexistent"):
         make_policy("zoo:nonexistent")
+
+
+def test_policy_stem_one_lookup_for_every_spec(tmp_path: Path) -> None:
+    """zoo:NAME, a path with or without its suffix (dots in the name kept): one stem, the one the
+    fingerprint hashes; built-ins have no file and unknown zoo names list the shipped ones."""
+    assert policy_stem("zoo:spider") == ZOO_DIR / "spider"
+    for spec in ("runs/a10000.v2-spider", "runs/a10000.v2-spider.json", "runs/a10000.v2-spider.safetensors"):
+        assert policy_stem(spec) == Path("runs/a10000.v2-spider")
+    assert policy_stem(Path("runs/x/policy.json")) == Path("runs/x/policy")
+    with pytest.raises(FileNotFoundError, match=r"no policy 'beetle' in the zoo.*shipped: \[.*'spider'"):
+        policy_stem("zoo:beetle")
+    with pytest.raises(ValueError, match="'passive' is a built-in policy"):
+        policy_stem("passive")
+    stem = tmp_path / "copy.v1"
+    for suffix in (".json", ".safetensors"):
+        stem.with_name(stem.name + suffix).write_bytes((ZOO_DIR / f"spider{suffix}").read_bytes())
+    assert policy_fingerprint(str(stem) + ".json") == policy_fingerprint("zoo:spider") != policy_fingerprint("zoo:ant")
 
 
 def test_policies_from_pairs_seeds_each_policy_apart() -> None:

@@ -26,6 +26,7 @@ from torch.optim.swa_utils import AveragedModel
 
 from triplesumo.agents.networks import Actor
 from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy, save_policy
+from triplesumo.agents.zoo import policy_stem
 
 AGREE = ("agent", "obs_mode", "obs_dim", "act_dim", "hidden", "algo")
 """Manifest entries every averaged source must share."""
@@ -40,19 +41,6 @@ def run_id_of(manifest: dict[str, Any]) -> str | None:
     return None
 
 
-def _stem(path: Path | str) -> Path:
-    """The policy file stem ``path`` names (``zoo:NAME`` names a shipped policy)."""
-    if isinstance(path, str) and path.startswith("zoo:"):
-        from triplesumo.agents.zoo import ZOO_DIR, available
-
-        name = path.removeprefix("zoo:")
-        if name not in available():
-            raise ValueError(f"{path}: no such zoo policy (the zoo holds {available()})")
-        return ZOO_DIR / name
-    stem = Path(path)
-    return stem.with_suffix("") if stem.suffix in (".json", ".safetensors") else stem
-
-
 def average_policies(sources: list[Path | str], out: Path | str, command: str = "") -> dict[str, Any]:
     """Write the equal-weight average of the actors of ``sources`` (policy files of one run) to
     ``out`` (``out.safetensors`` and ``out.json``); returns the written manifest.
@@ -61,7 +49,7 @@ def average_policies(sources: list[Path | str], out: Path | str, command: str = 
     sources, one named twice, a source that does not load, sources that disagree on an
     :data:`AGREE` entry or on their run, or that hold different observation normalisers.
     """
-    stems = [_stem(s) for s in sources]
+    stems = [policy_stem(s) for s in sources]
     if len(stems) < 2:
         raise ValueError(f"averaging needs at least two policy files, got {len(stems)}")
     if len({s.resolve() for s in stems}) < len(stems):
@@ -100,7 +88,7 @@ def average_policies(sources: list[Path | str], out: Path | str, command: str = 
                      "epochs": m.get("epochs"), "league_member": m.get("league_member")}
                     for stem, (_, m) in zip(stems, loaded, strict=True)],
     }
-    out = _stem(out)
+    out = policy_stem(out)
     if out.resolve() in {s.resolve() for s in stems}:
         raise ValueError(f"{out}: the output would overwrite one of the averaged policies")
     try:

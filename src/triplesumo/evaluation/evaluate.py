@@ -499,12 +499,12 @@ def expand_policies(specs: tuple[str, ...], field: str = "policy") -> list[str]:
 def _manifest_of(spec: str) -> dict[str, Any]:
     """A policy file's manifest; ``{}`` for a built-in policy."""
     from triplesumo.agents.policy_file import load_json
-    from triplesumo.agents.zoo import ZOO_DIR
+    from triplesumo.agents.zoo import policy_stem
 
     if spec in BUILTIN:
         return {}
-    path = ZOO_DIR / spec[4:] if spec.startswith("zoo:") else Path(spec)
-    return load_json(path if path.suffix == ".json" else path.with_suffix(".json"))
+    stem = policy_stem(spec)
+    return load_json(stem.with_name(stem.name + ".json"))
 
 
 def algo_of(spec: str) -> str:

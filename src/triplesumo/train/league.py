@@ -89,7 +89,7 @@ from triplesumo.agents.policy_file import (
     load_fixed_policy,
     load_json,
 )
-from triplesumo.agents.zoo import ZOO_DIR, available
+from triplesumo.agents.zoo import policy_stem
 from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Rating, RatingTable
 
 SAMPLING = ("uniform", "latest", "pfsp")
@@ -243,12 +243,11 @@ def _check_spec(spec: str, where: str, files: bool = True) -> None:
     away (say, another run's member that ``triplesumo compact`` pruned) has the pool's copy."""
     if spec in BUILTIN:
         return
-    if spec.startswith("zoo:"):
-        if spec[4:] not in available():
-            raise ValueError(f"{where}: no policy {spec[4:]!r} in the zoo; shipped: {available()}")
-        return
-    stem = Path(spec).with_suffix("") if Path(spec).suffix in (".json", ".safetensors") else Path(spec)
-    if files and not stem.with_suffix(".json").is_file():
+    try:
+        stem = policy_stem(spec)
+    except FileNotFoundError as err:  # an unknown zoo:NAME
+        raise ValueError(f"{where}: {err}") from None
+    if files and not spec.startswith("zoo:") and not stem.with_name(stem.name + ".json").is_file():
         raise ValueError(f"{where}: {spec!r} is neither a built-in policy ({sorted(BUILTIN)}), zoo:NAME, "
                          "nor a policy file")
 
@@ -704,8 +703,7 @@ def _copy_specs(specs: Mapping[str, str], stems: Mapping[str, Path]) -> None:
     """Copy the policy files named by ``specs`` (zoo:NAME or a path) to ``stems``."""
     for role, stem in stems.items():
         spec = specs[role]
-        src = ZOO_DIR / spec[4:] if spec.startswith("zoo:") else Path(spec)
-        src = src.with_suffix("") if src.suffix in (".json", ".safetensors") else src
+        src = policy_stem(spec)
         for suffix in (".json", ".safetensors"):
             shutil.copyfile(src.with_name(src.name + suffix), stem.with_name(stem.name + suffix))
 

@@ -26,12 +26,27 @@ def available() -> list[str]:
     return sorted(p.stem for p in ZOO_DIR.glob("*.json"))
 
 
+def policy_stem(spec: str | Path) -> Path:
+    """The policy-file stem (the path without ``.json``/``.safetensors``) that ``spec`` names:
+    ``zoo:NAME`` a shipped policy (``FileNotFoundError`` naming the shipped ones when there is no
+    ``NAME``), anything else a policy-file path, given with or without a suffix. Built-in policies
+    (``passive``, ``random``, ...) have no file: ``ValueError``. Whether a path's files exist is
+    for the loader to say."""
+    if isinstance(spec, str) and spec in BUILTIN:
+        raise ValueError(f"{spec!r} is a built-in policy: it has no policy file")
+    if isinstance(spec, str) and spec.startswith("zoo:"):
+        name = spec[4:]
+        if name not in available():
+            raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
+        return ZOO_DIR / name
+    path = Path(spec)
+    return path.with_suffix("") if path.suffix in (".json", ".safetensors") else path
+
+
 def load(name: str, expect_obs_mode: str | None = None) -> tuple[Any, dict[str, Any]]:
     """Load a shipped policy (a numpy :class:`~triplesumo.agents.frozen.FrozenPolicy`: fork-safe)
     and its manifest by name (``"ant"``, ``"spider"``, ``"bug"``)."""
-    if name not in available():
-        raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
-    return load_fixed_policy(ZOO_DIR / name, expect_obs_mode=expect_obs_mode)
+    return load_fixed_policy(policy_stem(f"zoo:{name}"), expect_obs_mode=expect_obs_mode)
 
 
 def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = None,
@@ -74,9 +89,7 @@ def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None 
         return cls(seed, action_size=action_size) if spec == "random" else cls(action_size=action_size)
     if spec.startswith("zoo:"):
         # The torch actor: recorded trainings and evaluations replay its float32 arithmetic exactly.
-        if spec[4:] not in available():
-            raise FileNotFoundError(f"no policy {spec[4:]!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
-        return load_policy(ZOO_DIR / spec[4:], expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
+        return load_policy(policy_stem(spec), expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
     path = Path(spec)
     if path.suffix in ("", ".json", ".safetensors") and (path.with_suffix(".json").exists() or path.exists()):
         return load_policy(path, expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
@@ -88,8 +101,7 @@ def policy_fingerprint(spec: str) -> str:
     """sha256 of the files behind a policy spec (``builtin:NAME`` for a built-in), to tell if it changed."""
     if spec in BUILTIN:
         return f"builtin:{spec}"
-    path = ZOO_DIR / spec[4:] if spec.startswith("zoo:") else Path(spec)
-    stem = path.with_suffix("") if path.suffix in (".json", ".safetensors") else path
+    stem = policy_stem(spec)
     digest = hashlib.sha256()
     for suffix in (".json", ".safetensors"):
         digest.update(stem.with_name(stem.name + suffix).read_bytes())
