@@ -219,6 +219,14 @@ def test_policy_stem_one_lookup_for_every_spec(tmp_path: Path) -> None:
     for suffix in (".json", ".safetensors"):
         stem.with_name(stem.name + suffix).write_bytes((ZOO_DIR / f"spider{suffix}").read_bytes())
     assert policy_fingerprint(str(stem) + ".json") == policy_fingerprint("zoo:spider") != policy_fingerprint("zoo:ant")
+    # the loader and the writer keep the dot too: the copy loads, and a save under a dotted stem writes that name
+    assert policy_file.policy_paths(str(stem) + ".safetensors") == (tmp_path / "copy.v1.json",
+                                                                  tmp_path / "copy.v1.safetensors")
+    copy = make_policy(str(stem))
+    _, manifest = load_policy(stem)
+    assert manifest["agent"] == "spider" and copy.obs_dim == manifest["obs_dim"]
+    written = save_policy(tmp_path / "again.v2", copy.actor, {k: manifest[k] for k in ("agent", "obs_mode")})
+    assert written == (tmp_path / "again.v2.safetensors", tmp_path / "again.v2.json")
 
 
 def test_policies_from_pairs_seeds_each_policy_apart() -> None:

@@ -25,7 +25,7 @@ import torch
 from torch.optim.swa_utils import AveragedModel
 
 from triplesumo.agents.networks import Actor
-from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy, save_policy
+from triplesumo.agents.policy_file import PolicyFileError, file_sha256, load_policy, policy_paths, save_policy
 from triplesumo.agents.zoo import policy_stem
 
 AGREE = ("agent", "obs_mode", "obs_dim", "act_dim", "hidden", "algo")
@@ -84,7 +84,7 @@ def average_policies(sources: list[Path | str], out: Path | str, command: str = 
     manifest["average"] = {
         "method": "equal-weight mean of the actor parameters (torch.optim.swa_utils.AveragedModel)",
         "command": command,
-        "sources": [{"policy": str(stem), "sha256": file_sha256(stem.with_suffix(".safetensors")),
+        "sources": [{"policy": str(stem), "sha256": file_sha256(policy_paths(stem)[1]),
                      "epochs": m.get("epochs"), "league_member": m.get("league_member")}
                     for stem, (_, m) in zip(stems, loaded, strict=True)],
     }

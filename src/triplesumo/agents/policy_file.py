@@ -102,6 +102,15 @@ def load_json(path: Path) -> dict[str, Any]:
     return data
 
 
+def policy_paths(stem: Path | str) -> tuple[Path, Path]:
+    """The ``.json`` manifest and ``.safetensors`` weights of the policy file pair ``stem`` names, given with or
+    without either suffix; a dot inside the name is kept (``a10000.v2-spider`` is not cut at ``.v2``)."""
+    stem = Path(stem)
+    if stem.suffix in (".json", ".safetensors"):
+        stem = stem.with_suffix("")
+    return stem.with_name(stem.name + ".json"), stem.with_name(stem.name + ".safetensors")
+
+
 def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any],
                 obs_norm: ObsNormalizer | None = None) -> tuple[Path, Path]:
     """Write ``stem.safetensors`` and ``stem.json`` (with the normaliser, if any); returns both paths."""
@@ -112,7 +121,7 @@ def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any],
     missing = [k for k in REQUIRED if k not in full]
     if missing:
         raise ValueError(f"policy manifest lacks {missing}")
-    weights, meta = stem.with_suffix(".safetensors"), stem.with_suffix(".json")
+    meta, weights = policy_paths(stem)
     tensors = {f"actor.{k}": v for k, v in actor.state_dict().items()}
     if obs_norm is not None:
         tensors |= {f"obs_norm.{k}": v for k, v in obs_norm.state_dict().items()}
@@ -125,10 +134,7 @@ def save_policy(stem: Path, actor: Actor, manifest: dict[str, Any],
 def _read_manifest(stem: Path, expect_obs_mode: str | None,
                    expect_obs_dim: int | None) -> tuple[dict[str, Any], Path]:
     """The checked manifest of a policy file pair and the path of its weights."""
-    stem = Path(stem)
-    if stem.suffix in (".json", ".safetensors"):
-        stem = stem.with_suffix("")
-    meta_path, weights_path = stem.with_suffix(".json"), stem.with_suffix(".safetensors")
+    meta_path, weights_path = policy_paths(stem)
     manifest = load_json(meta_path)
     missing = [k for k in REQUIRED if k not in manifest]
     if missing:

@@ -498,13 +498,12 @@ def expand_policies(specs: tuple[str, ...], field: str = "policy") -> list[str]:
 
 def _manifest_of(spec: str) -> dict[str, Any]:
     """A policy file's manifest; ``{}`` for a built-in policy."""
-    from triplesumo.agents.policy_file import load_json
+    from triplesumo.agents.policy_file import load_json, policy_paths
     from triplesumo.agents.zoo import policy_stem
 
     if spec in BUILTIN:
         return {}
-    stem = policy_stem(spec)
-    return load_json(stem.with_name(stem.name + ".json"))
+    return load_json(policy_paths(policy_stem(spec))[0])
 
 
 def algo_of(spec: str) -> str:

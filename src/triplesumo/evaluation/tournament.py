@@ -74,7 +74,7 @@ from typing import Any
 import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy
+from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy, policy_paths
 from triplesumo.agents.zoo import load as zoo_load
 from triplesumo.agents.zoo import make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
@@ -260,7 +260,7 @@ def _manifest(spec: str, obs_mode: str) -> dict[str, Any] | None:
     if spec.startswith("zoo:"):
         return zoo_load(spec[4:])[1]
     path = Path(spec)
-    if not (path.with_suffix(".json").exists() or path.exists()):
+    if not (policy_paths(path)[0].exists() or path.exists()):
         raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' or the path of a "
                          "policy file")
     return load_policy(path)[1]

@@ -88,6 +88,7 @@ from triplesumo.agents.policy_file import (
     file_sha256,
     load_fixed_policy,
     load_json,
+    policy_paths,
 )
 from triplesumo.agents.zoo import policy_stem
 from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Rating, RatingTable
@@ -247,7 +248,7 @@ def _check_spec(spec: str, where: str, files: bool = True) -> None:
         stem = policy_stem(spec)
     except FileNotFoundError as err:  # an unknown zoo:NAME
         raise ValueError(f"{where}: {err}") from None
-    if files and not spec.startswith("zoo:") and not stem.with_name(stem.name + ".json").is_file():
+    if files and not spec.startswith("zoo:") and not policy_paths(stem)[0].is_file():
         raise ValueError(f"{where}: {spec!r} is neither a built-in policy ({sorted(BUILTIN)}), zoo:NAME, "
                          "nor a policy file")
 
@@ -703,9 +704,8 @@ def _copy_specs(specs: Mapping[str, str], stems: Mapping[str, Path]) -> None:
     """Copy the policy files named by ``specs`` (zoo:NAME or a path) to ``stems``."""
     for role, stem in stems.items():
         spec = specs[role]
-        src = policy_stem(spec)
-        for suffix in (".json", ".safetensors"):
-            shutil.copyfile(src.with_name(src.name + suffix), stem.with_name(stem.name + suffix))
+        for src, dst in zip(policy_paths(policy_stem(spec)), policy_paths(stem), strict=True):
+            shutil.copyfile(src, dst)
 
 
 def member_ticks(n: int, most: int = 24) -> list[int]:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.builtin import ACTION_SIZE, BUILTIN
-from triplesumo.agents.policy_file import load_fixed_policy, load_policy, save_policy
+from triplesumo.agents.policy_file import load_fixed_policy, load_policy, policy_paths, save_policy
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
 
@@ -39,8 +39,7 @@ def policy_stem(spec: str | Path) -> Path:
         if name not in available():
             raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
         return ZOO_DIR / name
-    path = Path(spec)
-    return path.with_suffix("") if path.suffix in (".json", ".safetensors") else path
+    return policy_paths(spec)[0].with_suffix("")
 
 
 def load(name: str, expect_obs_mode: str | None = None) -> tuple[Any, dict[str, Any]]:
@@ -91,7 +90,7 @@ def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None 
         # The torch actor: recorded trainings and evaluations replay its float32 arithmetic exactly.
         return load_policy(policy_stem(spec), expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
     path = Path(spec)
-    if path.suffix in ("", ".json", ".safetensors") and (path.with_suffix(".json").exists() or path.exists()):
+    if policy_paths(path)[0].exists() or (path.suffix in ("", ".json", ".safetensors") and path.exists()):
         return load_policy(path, expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
     raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' "
                      f"(shipped: {available()}) or the path of a policy file")
@@ -101,10 +100,9 @@ def policy_fingerprint(spec: str) -> str:
     """sha256 of the files behind a policy spec (``builtin:NAME`` for a built-in), to tell if it changed."""
     if spec in BUILTIN:
         return f"builtin:{spec}"
-    stem = policy_stem(spec)
     digest = hashlib.sha256()
-    for suffix in (".json", ".safetensors"):
-        digest.update(stem.with_name(stem.name + suffix).read_bytes())
+    for path in policy_paths(policy_stem(spec)):
+        digest.update(path.read_bytes())
     return digest.hexdigest()
 
 
