@@ -14,7 +14,9 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
+import torch
 
 from test_train_selfplay import BOTH_COMMAND, both
 from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
@@ -133,12 +135,51 @@ def test_a_fork_may_fine_tune_under_other_reward_weights_from_the_fork_epoch(
     assert after  # some matches were played wholly after the fork
 
 
+def test_a_fork_may_fine_tune_the_learners_step_sizes_and_exploration(
+        runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
+    """``--ddpg.actor-lr``, ``--ddpg.noise-sigma`` and one learner's ``--learner-config``: the fork's learners
+    step with the new rates and explore with the new σ, while their Adam moments and update count go on
+    from the checkpoint's (a fresh optimiser would have restarted them)."""
+    _, half = runs
+    ddpg = dataclasses.replace(half.cfg.ddpg, actor_lr=half.cfg.ddpg.actor_lr / 5, noise_sigma=0.05)
+    cfg = dataclasses.replace(half.cfg, name="tuned", out=str(tmp_path), epochs=10, ddpg=ddpg,
+                              learner_config=("spider.critic_lr=0.0002",))
+    fork_dir = fork_run(half.run_dir, cfg)
+    record = json.loads((fork_dir / "fork.json").read_text())
+    assert record["changes"]["ddpg.actor_lr"] == [half.cfg.ddpg.actor_lr, ddpg.actor_lr]
+    assert record["changes"]["ddpg.noise_sigma"] == [half.cfg.ddpg.noise_sigma, 0.05]
+    assert record["changes"]["learner_config"] == [[], ["spider.critic_lr=0.0002"]]
+    assert "--ddpg.noise-sigma 0.05" in record["command"]
+    assert "--learner-config spider.critic_lr=0.0002" in record["command"]
+    parent = Trainer(half.cfg, run_dir=half.run_dir, resume=True)  # the parent's checkpoint, loaded as it was
+    trainer = Trainer(cfg, run_dir=fork_dir, resume=True)
+    for old, new in zip(parent.learners, trainer.learners, strict=True):
+        assert new.algo.num_updates == old.algo.num_updates > 0
+        lrs = [g["lr"] for g in new.algo.actor_optimizer.param_groups]
+        assert lrs == [ddpg.actor_lr] and [g["lr"] for g in old.algo.actor_optimizer.param_groups] == [
+            half.cfg.ddpg.actor_lr]
+        critic = 0.0002 if new.spec.name == "spider" else half.cfg.ddpg.critic_lr
+        assert [g["lr"] for g in new.algo.critic_optimizer.param_groups] == [critic]
+        for name in ("actor_optimizer", "critic_optimizer"):
+            a, b = (getattr(x.algo, name).state_dict()["state"] for x in (old, new))
+            assert a.keys() == b.keys() and a
+            assert all(torch.equal(a[i]["exp_avg"], b[i]["exp_avg"]) for i in a)
+        assert new.noise is not None and new.noise.sigma == 0.05 and old.noise is not None
+        assert np.array_equal(new.noise.state_dict()["x"], old.noise.state_dict()["x"])  # the process goes on
+    before = [lr.algo.num_updates for lr in trainer.learners]
+    trainer.run()
+    assert all(lr.algo.num_updates > n for lr, n in zip(trainer.learners, before, strict=True))
+    assert [g["lr"] for g in trainer.learners[0].algo.actor_optimizer.param_groups] == [ddpg.actor_lr]
+
+
 def test_what_a_fork_may_not_change_is_refused_by_name_and_nothing_is_written(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     _, half = runs
     base = dataclasses.replace(half.cfg, name="bad", out=str(tmp_path))
-    for change, flag in (({"seed": 4}, "--seed"), ({"ddpg": dataclasses.replace(half.cfg.ddpg, actor_lr=1.0)},
-                                                   "--ddpg"),
+    for change, flag in (({"seed": 4}, "--seed"), ({"ddpg": dataclasses.replace(half.cfg.ddpg, hidden=(8,))},
+                                                   "--ddpg.hidden"),
+                         ({"ddpg": dataclasses.replace(half.cfg.ddpg, noise="gaussian")}, "--ddpg.noise"),
+                         ({"learner_config": ("spider.buffer_size=100",)}, "--learner-config spider.buffer_size"),
                          ({"league": dataclasses.replace(half.cfg.league, rating_model="BradleyTerryFull")},
                           "--league.rating-model")):
         with pytest.raises(ValueError, match=f"a fork continues .* not {flag}"):

@@ -318,6 +318,7 @@ def test_a_schedule_that_would_mostly_update_is_warned_about_naming_the_gpu_sett
     (("learn_every=1",), r"expected LEARNER.FIELD=VALUE"),
     (("spider.learn_every=1",), r"'spider' is not a learner; the learning agents are \['ant', 'bug'\]"),
     (("bug.nope=1",), r"TD3Config \(the td3 config\) has no field 'nope' \(its fields: .*learn_every"),
+    (("bug.TUNABLE=x",), r"TD3Config \(the td3 config\) has no field 'TUNABLE'"),  # a class variable
     (("bug.learn_every=x",), r"'bug.learn_every=x': 'x' is not a int"),
     (("bug.learn_every=0",), r"learner_config \(learner bug\): .*learn_every"),
     (("bug.learn_every=1", "bug.learn_every=2"), r"bug.learn_every given twice"),

@@ -197,7 +197,8 @@ class Algorithm:
 
         Tensor keys are ``<optimizer>.state.<param index>.<exp_avg|exp_avg_sq|step>`` and,
         for learners that draw random numbers in updates, ``generator.state``; ``meta`` holds
-        each optimiser's ``param_groups`` (lr, betas, ...) and ``num_updates``.
+        each optimiser's ``param_groups`` (lr, betas, ...; on loading, :data:`CONFIG_KEYS` come from the
+        learner's config) and ``num_updates``.
         """
         tensors: dict[str, torch.Tensor] = {}
         meta: dict[str, Any] = {"num_updates": self.num_updates}
@@ -245,12 +246,15 @@ class Algorithm:
                     )
                 state.setdefault(index, {})[field] = value.clone()
             groups = copy.deepcopy(list(meta[name]["param_groups"]))
-            for group in groups:
+            for group, live in zip(groups, optimizer.param_groups, strict=False):  # a count mismatch: torch says
                 if "betas" in group:
                     group["betas"] = tuple(group["betas"])
                 for key in IMPLEMENTATION_FLAGS:  # how the step runs, not state: keep this learner's
                     if key in optimizer.defaults:
                         group[key] = optimizer.defaults[key]
+                for key in CONFIG_KEYS:  # the config's step sizes, not state: keep this learner's
+                    if key in live:
+                        group[key] = live[key]
             loaded[name] = {"state": state, "param_groups": groups}
         known = (*(f"{n}.state." for n in self.optimizers), "generator.state")
         stray = [k for k in tensors if not k.startswith(known)
@@ -324,6 +328,10 @@ def descend(optimizer: torch.optim.Optimizer, loss: torch.Tensor, max_grad_norm:
 
 IMPLEMENTATION_FLAGS = ("foreach", "fused")
 """Adam options that choose how a step runs, not what it computes; a loaded checkpoint keeps the live ones."""
+CONFIG_KEYS = ("lr", "weight_decay")
+"""Adam options the learner's config sets (``actor_lr``, ``weight_decay``, ...); a loaded checkpoint keeps the
+live ones, so that a run forked with another learning rate (``TUNABLE``) steps with it. Resuming with the
+same config, they are the saved ones."""
 
 
 def adam(params: Any, lr: float, weight_decay: float = 0.0, eps: float = 1e-8) -> torch.optim.Adam:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 
 def require(config: Any, name: str, ok: bool, message: str) -> None:
@@ -114,6 +114,13 @@ class OffPolicyConfig:
     """L2 weight decay of the critics' Adam (Lillicrap et al. used 1e-2; the paper none)."""
     normalize_obs: bool = False
     """Normalise observations by their running mean and variance (off in the paper)."""
+
+    TUNABLE: ClassVar[tuple[str, ...]] = ("actor_lr", "critic_lr", "gamma", "tau", "batch_size", "learn_every",
+                                          "gradient_steps", "weight_decay")
+    """The fields a run continued from a checkpoint may change (``train --fork RUN --ddpg.actor-lr 2e-5``,
+    fine-tuning): step sizes, the update schedule and exploration, on which no saved tensor's shape or
+    meaning depends. The others (widths, replay size, normalisation, noise kind, warm-up) make what the
+    checkpoint holds, or act only before it. A class variable, not a field."""
 
     def __post_init__(self) -> None:
         hidden_sizes(self)

@@ -27,6 +27,7 @@ run bit-for-bit on CPU.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 
@@ -53,6 +54,8 @@ class DDPGConfig(OffPolicyConfig):
     """σ of the exploration noise, in normalized action units (paper's original code)."""
     noise_theta: float = 0.15
     """θ of the OU noise (paper's original code); ignored by other kinds."""
+
+    TUNABLE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.TUNABLE, "noise_sigma", "noise_theta")
 
     def __post_init__(self) -> None:
         super().__post_init__()

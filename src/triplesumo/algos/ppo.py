@@ -33,7 +33,7 @@ empties it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -82,6 +82,13 @@ class PPOConfig:
     """Initial log σ of the state-independent Gaussian."""
     normalize_obs: bool = True
     """Normalise observations by their running mean and variance."""
+
+    TUNABLE: ClassVar[tuple[str, ...]] = ("lr", "gamma", "gae_lambda", "n_epochs", "n_minibatches", "clip_coef",
+                                          "clip_value", "normalize_advantages", "ent_coef", "vf_coef",
+                                          "max_grad_norm", "target_kl")
+    """The fields a run continued from a checkpoint may change (fine-tuning; see
+    :attr:`~triplesumo.algos.config.OffPolicyConfig.TUNABLE`): not the rollout length, widths, σ's
+    parametrisation or normalisation, which make what the checkpoint holds."""
 
     def __post_init__(self) -> None:
         hidden_sizes(self)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -59,6 +59,8 @@ class SACConfig(OffPolicyConfig):
     """Adam learning rate of log α, in (0, 1] (CleanRL uses the critic's, 1e-3)."""
     target_entropy: float | None = None
     """Target entropy H̄ of the learned temperature; None means -act_dim (SAC v2)."""
+
+    TUNABLE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.TUNABLE, "alpha_lr", "target_entropy")
 
     def __post_init__(self) -> None:
         super().__post_init__()

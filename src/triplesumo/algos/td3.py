@@ -14,6 +14,7 @@ paper's and CleanRL's ``td3_continuous_action.py``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 
@@ -52,6 +53,8 @@ class TD3Config(DDPGConfig):
     """c: the smoothing noise is clipped to [-c, c], >= 0 (TD3 paper: 0.5)."""
     policy_delay: int = 2
     """d: the actor and the targets are updated once every d critic updates (TD3 paper: 2)."""
+
+    TUNABLE: ClassVar[tuple[str, ...]] = (*DDPGConfig.TUNABLE, "policy_noise", "noise_clip", "policy_delay")
 
     def __post_init__(self) -> None:
         super().__post_init__()

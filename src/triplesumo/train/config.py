@@ -235,7 +235,8 @@ class TrainConfig:
             if len(agents) > 1 and self.share != "team":
                 raise ValueError(f"{where}: {learner!r} names a team's shared learner, which needs share=team")
             cls = type(getattr(self, learning[agents[0]]))
-            hints = typing.get_type_hints(cls)
+            fields = {f.name for f in dataclasses.fields(cls)}
+            hints = {k: v for k, v in typing.get_type_hints(cls).items() if k in fields}  # not TUNABLE
             if name not in hints:
                 raise ValueError(f"{where}: {cls.__name__} (the {learning[agents[0]]} config) has no field {name!r} "
                                  f"(its fields: {', '.join(hints)})")

@@ -29,9 +29,12 @@ join their pools at the fork's epoch as seeded members (``fork.json`` lists them
 ``seeded``: e.g. a still team ``ant=passive bug=passive`` for a Spider whose league never
 showed it one); ``--reward.*`` fine-tunes the networks under other reward weights from the fork's
 epoch on (e.g. ``--reward.still 0``: no time penalty; the matches in flight are scored by the new
-weights from their next step, and the returns logged before the fork keep the old ones); anything
-else (networks, algorithms, roster, seed) is refused naming the field, since the networks and
-matches being continued were made under it.
+weights from their next step, and the returns logged before the fork keep the old ones); the
+algorithms' ``TUNABLE`` fields fine-tune the learners from the fork's epoch on (e.g. ``--ddpg.actor-lr
+2e-5 --ddpg.noise-sigma 0.1``: learning rates, the update schedule, target averaging, exploration;
+the optimisers keep their moments and take the new rates); anything else (widths, replay, algorithms,
+roster, seed) is refused naming the field, since the networks and matches being continued were made
+under it.
 
 :func:`compact_run` (``triplesumo compact RUN``) keeps, of a run folder, only what resuming it needs:
 its newest checkpoint and the league members that checkpoint's pools and in-flight matches hold. A
@@ -51,7 +54,7 @@ from typing import Any
 
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
-from triplesumo.train.config import TrainConfig
+from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, check_seeds, write_pool
 from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
 from triplesumo.train.loop import (
@@ -71,7 +74,7 @@ FORK_FIELDS = ("name", "out", "checkpoint_every", "tensorboard", "max_env_steps"
                "reward")
 """The TrainConfig fields a fork may change (``league`` but its ``rating_model``, and its ``zoo`` only by
 appending entries; ``reward``: the networks fine-tune under the new weights from the fork's epoch)."""
-NESTED = ("league", "reward")
+NESTED = ("league", "reward", *ALGOS)
 """Config sections whose fields a fork records (and its command names) one by one."""
 LEAGUE_FIXED = ("rating_model",)
 """League fields a fork keeps: the pools were rated under it."""
@@ -119,15 +122,32 @@ def fork_command(parent_dir: Path, cfg: TrainConfig, changes: dict[str, list[Any
     return " ".join(shlex.quote(a) for a in argv)
 
 
+def untuned(parent: TrainConfig, cfg: TrainConfig, changes: dict[str, list[Any]]) -> list[str]:
+    """The algorithm fields among ``changes`` a fork may not tune (``--ALGO.FIELD`` or, through
+    ``--learner-config``, one learner's), as flags: those outside their config's ``TUNABLE``."""
+    bad = ["--" + k.replace("_", "-") for k in changes if k.split(".")[0] in ALGOS
+           and k.split(".", 1)[1] not in type(getattr(cfg, k.split(".")[0])).TUNABLE]
+    if "learner_config" in changes:
+        for learner in sorted({*parent.learner_configs(), *cfg.learner_configs()}):
+            old, new = (dataclasses.asdict(c.algo_config(learner)) for c in (parent, cfg))
+            bad += [f"--learner-config {learner}.{f}" for f in new if new[f] != old[f]
+                    and f not in type(cfg.algo_config(learner)).TUNABLE]
+    return bad
+
+
 def check_fork(parent: TrainConfig, cfg: TrainConfig) -> dict[str, list[Any]]:
     """The fork's changes (:func:`_changes`); ``ValueError`` naming a field a fork may not change."""
     changes = _changes(parent, cfg)
-    bad = [k for k in changes if k.split(".")[0] not in FORK_FIELDS or k.removeprefix("league.") in LEAGUE_FIXED]
+    bad = ["--" + k.replace("_", "-") for k in changes
+           if k.split(".")[0] not in (*FORK_FIELDS, *ALGOS, "learner_config")
+           or k.removeprefix("league.") in LEAGUE_FIXED] + untuned(parent, cfg, changes)
     if bad:
-        flags = ", ".join("--" + k.replace("_", "-") for k in bad)
+        flags = ", ".join(bad)
+        tunable = "; ".join(f"{a}: {', '.join(type(getattr(cfg, a)).TUNABLE)}" for a in ALGOS)
         raise ValueError(f"a fork continues the parent's networks, matches and pools, so it keeps their config; "
                          f"it may change --league.* (not --league.rating-model; --league.zoo only by adding "
-                         f"entries), --reward.*, "
+                         f"entries), --reward.*, the algorithms' step sizes, schedules and exploration "
+                         f"(--ALGO.FIELD or --learner-config LEARNER.FIELD=VALUE; {tunable}), "
                          f"{flag_list(f for f in FORK_FIELDS if f not in ('name', 'out', *NESTED))}, not {flags}")
     added_seeds(parent, cfg)
     return changes
