@@ -298,11 +298,11 @@ def test_a_seed_whose_policy_file_is_missing_is_refused_before_anything_is_writt
     missing = tmp_path / "gone" / "spider"
     lcfg = dataclasses.replace(half.cfg.league, zoo=(f"spider={missing}",))  # a config may name it...
     cfg = dataclasses.replace(half.cfg, name="seeded", out=str(tmp_path), league=lcfg)
-    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: '.*gone/spider' is neither a built-in policy"):
+    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: unknown policy '.*gone/spider'"):
         fork_run(half.run_dir, cfg)  # ...but seeding it needs the file
     assert not (tmp_path / "seeded").exists()
     fresh = dataclasses.replace(cfg, name="fresh")
-    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: '.*gone/spider' is neither a built-in policy"):
+    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: unknown policy '.*gone/spider'"):
         Trainer(fresh)
     assert not (tmp_path / "fresh").exists()
 

@@ -17,7 +17,15 @@ from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.networks import Actor, ActorPolicy
 from triplesumo.agents.policy_file import PolicyFileError, load_fixed_policy, load_policy, save_policy
-from triplesumo.agents.zoo import ZOO_DIR, load, make_policy, policies_from_pairs, policy_fingerprint, policy_stem
+from triplesumo.agents.zoo import (
+    ZOO_DIR,
+    find_policy_file,
+    load,
+    make_policy,
+    policies_from_pairs,
+    policy_fingerprint,
+    policy_stem,
+)
 
 OBS_DIM = 12
 
@@ -195,6 +203,33 @@ def test_make_policy_unknown_name_lists_the_choices(tmp_path: Path) -> None:
         make_policy("telepathy")
     with pytest.raises(ValueError, match="unknown policy"):
         make_policy(str(tmp_path / "no-such-policy"))
+
+
+def test_find_policy_file_is_the_one_answer_to_is_this_spec_a_policy_file(stem: Path, tmp_path: Path) -> None:
+    """make_policy, the tournament and a league's seeds ask :func:`find_policy_file`: a pair (with or without a
+    suffix) is one, a path where neither file is is an unknown policy, and weights without their
+    manifest are a broken policy file named as such (the loader's words), not an unknown name."""
+    from triplesumo.evaluation.tournament import _manifest
+    from triplesumo.train.league import check_seeds
+
+    for spec in (str(stem), str(stem.with_suffix(".json")), str(stem.with_suffix(".safetensors"))):
+        assert find_policy_file(spec) == stem
+    assert find_policy_file("zoo:spider") == ZOO_DIR / "spider"
+    with pytest.raises(ValueError, match="'passive' is a built-in policy"):
+        find_policy_file("passive")
+    stem.with_suffix(".json").unlink()
+    missing = re.escape(f"{stem.with_suffix('.json')}: file not found (its weights")
+    with pytest.raises(PolicyFileError, match=missing):
+        make_policy(str(stem))
+    with pytest.raises(PolicyFileError, match=missing):
+        _manifest(str(stem), "paper")
+    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: " + missing):
+        check_seeds((f"spider={stem}",))
+    gone = str(tmp_path / "gone")
+    for call in (lambda: make_policy(gone), lambda: _manifest(gone, "paper"),
+                 lambda: check_seeds((f"spider={gone}",))):
+        with pytest.raises(ValueError, match=f"unknown policy '{re.escape(gone)}'"):
+            call()
 
 
 def test_zoo_load_unknown_name() -> None:

@@ -102,12 +102,16 @@ def load_json(path: Path) -> dict[str, Any]:
     return data
 
 
+def bare_stem(path: Path | str) -> Path:
+    """The stem of a policy file pair given with or without either suffix; a dot inside the name is kept
+    (``a10000.v2-spider`` is not cut at ``.v2``)."""
+    path = Path(path)
+    return path.with_suffix("") if path.suffix in (".json", ".safetensors") else path
+
+
 def policy_paths(stem: Path | str) -> tuple[Path, Path]:
-    """The ``.json`` manifest and ``.safetensors`` weights of the policy file pair ``stem`` names, given with or
-    without either suffix; a dot inside the name is kept (``a10000.v2-spider`` is not cut at ``.v2``)."""
-    stem = Path(stem)
-    if stem.suffix in (".json", ".safetensors"):
-        stem = stem.with_suffix("")
+    """The ``.json`` manifest and ``.safetensors`` weights of the pair ``stem`` names (:func:`bare_stem`)."""
+    stem = bare_stem(stem)
     return stem.with_name(stem.name + ".json"), stem.with_name(stem.name + ".safetensors")
 
 

@@ -74,9 +74,8 @@ from typing import Any
 import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy, policy_paths
-from triplesumo.agents.zoo import load as zoo_load
-from triplesumo.agents.zoo import make_policy, policy_fingerprint
+from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy
+from triplesumo.agents.zoo import find_policy_file, make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
@@ -257,13 +256,7 @@ def _manifest(spec: str, obs_mode: str) -> dict[str, Any] | None:
     """A policy file's manifest (``None`` for built-ins); errors name the spec."""
     if spec in BUILTIN:
         return None
-    if spec.startswith("zoo:"):
-        return zoo_load(spec[4:])[1]
-    path = Path(spec)
-    if not (policy_paths(path)[0].exists() or path.exists()):
-        raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' or the path of a "
-                         "policy file")
-    return load_policy(path)[1]
+    return load_policy(find_policy_file(spec))[1]  # the weights too: a broken file is refused before any match
 
 
 def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> list[str]:

@@ -90,7 +90,7 @@ from triplesumo.agents.policy_file import (
     load_json,
     policy_paths,
 )
-from triplesumo.agents.zoo import policy_stem
+from triplesumo.agents.zoo import find_policy_file, policy_stem
 from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Rating, RatingTable
 
 SAMPLING = ("uniform", "latest", "pfsp")
@@ -245,12 +245,12 @@ def _check_spec(spec: str, where: str, files: bool = True) -> None:
     if spec in BUILTIN:
         return
     try:
-        stem = policy_stem(spec)
-    except FileNotFoundError as err:  # an unknown zoo:NAME
+        if files:
+            find_policy_file(spec)
+        else:
+            policy_stem(spec)
+    except (ValueError, FileNotFoundError) as err:  # not a policy file; an unknown zoo:NAME
         raise ValueError(f"{where}: {err}") from None
-    if files and not spec.startswith("zoo:") and not policy_paths(stem)[0].is_file():
-        raise ValueError(f"{where}: {spec!r} is neither a built-in policy ({sorted(BUILTIN)}), zoo:NAME, "
-                         "nor a policy file")
 
 
 @dataclass

@@ -16,7 +16,14 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.builtin import ACTION_SIZE, BUILTIN
-from triplesumo.agents.policy_file import load_fixed_policy, load_policy, policy_paths, save_policy
+from triplesumo.agents.policy_file import (
+    PolicyFileError,
+    bare_stem,
+    load_fixed_policy,
+    load_policy,
+    policy_paths,
+    save_policy,
+)
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
 
@@ -39,7 +46,25 @@ def policy_stem(spec: str | Path) -> Path:
         if name not in available():
             raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
         return ZOO_DIR / name
-    return policy_paths(spec)[0].with_suffix("")
+    return bare_stem(spec)
+
+
+def find_policy_file(spec: str) -> Path:
+    """The stem of the policy file pair that ``spec`` names, checked to be there: ``zoo:NAME`` or a path (with
+    or without a suffix) whose manifest exists. The one answer to "is this spec a policy file" for everything
+    that takes one (:func:`make_policy`, tournaments, league seeds). Errors: a built-in policy (it has no
+    file) or a path where neither file is, ``ValueError`` ("unknown policy", naming the choices); an unknown
+    ``zoo:NAME``, ``FileNotFoundError`` naming the shipped ones; weights without their manifest,
+    :class:`~triplesumo.agents.policy_file.PolicyFileError` naming the missing file."""
+    if spec in BUILTIN or spec.startswith("zoo:"):
+        return policy_stem(spec)
+    manifest, weights = policy_paths(spec)
+    if manifest.is_file():
+        return bare_stem(spec)
+    if weights.exists():
+        raise PolicyFileError(f"{manifest}: file not found (its weights {weights.name} are there)")
+    raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' "
+                     f"(shipped: {available()}) or the path of a policy file")
 
 
 def load(name: str, expect_obs_mode: str | None = None) -> tuple[Any, dict[str, Any]]:
@@ -86,14 +111,8 @@ def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None 
     if spec in BUILTIN:
         cls = BUILTIN[spec]
         return cls(seed, action_size=action_size) if spec == "random" else cls(action_size=action_size)
-    if spec.startswith("zoo:"):
-        # The torch actor: recorded trainings and evaluations replay its float32 arithmetic exactly.
-        return load_policy(policy_stem(spec), expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
-    path = Path(spec)
-    if policy_paths(path)[0].exists() or (path.suffix in ("", ".json", ".safetensors") and path.exists()):
-        return load_policy(path, expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
-    raise ValueError(f"unknown policy {spec!r}: use one of {sorted(BUILTIN)}, 'zoo:NAME' "
-                     f"(shipped: {available()}) or the path of a policy file")
+    # The torch actor: recorded trainings and evaluations replay its float32 arithmetic exactly.
+    return load_policy(find_policy_file(spec), expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
 
 
 def policy_fingerprint(spec: str) -> str:
