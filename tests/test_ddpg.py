@@ -64,7 +64,10 @@ def test_networks_shapes_and_ranges() -> None:
     one = policy(np.zeros(OBS_DIM, dtype=np.float64))
     many = policy(np.zeros((3, OBS_DIM)))
     assert one.shape == (ACT_DIM,) and one.dtype == np.float32
-    assert many.shape == (3, ACT_DIM) and np.array_equal(many[0], one)
+    assert many.shape == (3, ACT_DIM)
+    # one row alone runs torch's matrix-vector kernel, a batch its matrix-matrix one: equal to float rounding
+    # (bit-equal on most runs, not on all thread counts: it failed once under pytest -n 2 beside a training run)
+    np.testing.assert_allclose(many[0], one, rtol=0, atol=1e-6)
     with pytest.raises(ValueError, match="obs"):
         policy(np.zeros(OBS_DIM + 1))
     with pytest.raises(ValueError, match="hidden"):
