@@ -20,7 +20,8 @@ SHIPPED = ("ant", "spider", "bug")
 
 def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
     assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay", "spider-selfplay-v1", "spider-selfplay-v2",
-                                     "spider-selfplay-v3", "spider-selfplay-v4", "ffa-selfplay", "ant-selfplay"}
+                                     "spider-selfplay-v3", "spider-selfplay-v4", "spider-selfplay-v5", "ffa-selfplay",
+                                     "ant-selfplay"}
 
 
 @pytest.mark.parametrize("name", zoo.available())
@@ -79,7 +80,7 @@ HEAD_TO_HEAD = [n for n in zoo.available()
 
 
 def test_some_shipped_policy_is_published_with_head_to_head_claims() -> None:
-    assert {"ant-selfplay", "spider-selfplay-v3", "spider-selfplay-v4"} <= set(HEAD_TO_HEAD)
+    assert {"ant-selfplay", "spider-selfplay-v3", "spider-selfplay-v4", "spider-selfplay-v5"} <= set(HEAD_TO_HEAD)
 
 
 def _lwr(candidate: Path) -> np.ndarray:
