@@ -440,6 +440,12 @@ def test_compare_takes_a_glob_of_snapshots_each_its_own_candidate(
         assert got["candidates"][label]["n_win"] == summary["candidates"]["trained"]["n_win"]
     with pytest.raises(ValueError, match=r"EvaluateConfig\.compare: .* matches no policy file"):
         evaluate(dataclasses.replace(cfg, baselines=(), compare=(str(tmp_path / "none-*"),), out=str(tmp_path / "f")))
+    # the same glob expanded by the shell names both files of each pair: refused, nothing played or written
+    shell = tuple(str((tmp_path / "bug-0001" / "bug").with_suffix(x)) for x in (".json", ".safetensors"))
+    with pytest.raises(ValueError, match=r"'.*bug-0001/bug\.json' and '.*bug-0001/bug\.safetensors' name one policy "
+                                         r"file pair .*quote it"):
+        evaluate(dataclasses.replace(cfg, baselines=(), compare=shell, out=str(tmp_path / "g")))
+    assert not (tmp_path / "g").exists()
 
 
 def test_finished_rows_rejects_files_that_are_not_evaluation_csvs(tmp_path: Path) -> None:

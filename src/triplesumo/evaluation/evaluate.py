@@ -313,6 +313,8 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     """
     from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
 
+    trained, expanded = expand_policies(cfg.policy), expand_policies(cfg.compare, "compare")
+    _one_name_each([*trained, *expanded])  # before anything is written
     out = check_writable(Path(cfg.out), folder=True)
     match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
                                 physics=cfg.physics)
@@ -320,7 +322,6 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     sizes = probe.observer.sizes
     motors = dict(zip(probe.agents, probe.action_sizes, strict=True))
     pairs = expand_pairs(cfg.policies, [a for a in match_cfg.agent_names if a != cfg.learner])
-    trained = expand_policies(cfg.policy)
     seeds = {"trained": trained[0]} if len(trained) == 1 else {f"trained-{_label(p)}": p for p in trained}
     if len(seeds) < len(trained):
         raise ValueError(f"EvaluateConfig.policy names a policy twice: {list(trained)}")
@@ -329,7 +330,6 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     if baselines is None:  # a resume keeps the baselines its folder played (recorded under their own name)
         baselines = DEFAULT_BASELINES if old is None else _baselines_in(
             {label: c["policy"] for label, c in old["candidates"].items()})
-    expanded = expand_policies(cfg.compare, "compare")
     compare = {_label(c): c for c in expanded}
     if len(compare) < len(expanded) or compare.keys() & seeds.keys():
         raise ValueError(f"EvaluateConfig.compare names a policy twice, or one whose label is taken: {expanded}")
@@ -494,6 +494,24 @@ def expand_policies(specs: tuple[str, ...], field: str = "policy") -> list[str]:
             raise ValueError(f"EvaluateConfig.{field}: {spec!r} matches no policy file")
         out += stems
     return out
+
+
+def _one_name_each(specs: list[str]) -> None:
+    """``ValueError`` when two specs name one policy file pair by different names (``a.json`` and ``a.safetensors``,
+    or ``a`` and ``a.json``): it would be played twice under two labels. The usual cause is a glob the shell
+    expanded (``--compare runs/x/spider-*``) where quoted, :func:`expand_policies` takes each pair once."""
+    from triplesumo.agents.policy_file import bare_stem
+
+    seen: dict[Path, str] = {}
+    for spec in specs:
+        if spec in BUILTIN or spec.startswith("zoo:"):
+            continue
+        stem = bare_stem(spec)
+        if stem in seen and seen[stem] != spec:
+            raise ValueError(f"EvaluateConfig: {seen[stem]!r} and {spec!r} name one policy file pair ({stem}); "
+                             f"give each policy once (a glob expanded by the shell names both files of a pair: "
+                             f"quote it, or end it in .json)")
+        seen.setdefault(stem, spec)
 
 
 def _manifest_of(spec: str) -> dict[str, Any]:
