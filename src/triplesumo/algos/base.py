@@ -246,7 +246,8 @@ class Algorithm:
                     )
                 state.setdefault(index, {})[field] = value.clone()
             groups = copy.deepcopy(list(meta[name]["param_groups"]))
-            for group, live in zip(groups, optimizer.param_groups, strict=False):  # a count mismatch: torch says
+            # strict=False: a group count that differs is torch's load_state_dict to refuse, with its own message
+            for group, live in zip(groups, optimizer.param_groups, strict=False):
                 if "betas" in group:
                     group["betas"] = tuple(group["betas"])
                 for key in IMPLEMENTATION_FLAGS:  # how the step runs, not state: keep this learner's

@@ -125,8 +125,11 @@ def fork_command(parent_dir: Path, cfg: TrainConfig, changes: dict[str, list[Any
 def untuned(parent: TrainConfig, cfg: TrainConfig, changes: dict[str, list[Any]]) -> list[str]:
     """The algorithm fields among ``changes`` a fork may not tune (``--ALGO.FIELD`` or, through
     ``--learner-config``, one learner's), as flags: those outside their config's ``TUNABLE``."""
-    bad = ["--" + k.replace("_", "-") for k in changes if k.split(".")[0] in ALGOS
-           and k.split(".", 1)[1] not in type(getattr(cfg, k.split(".")[0])).TUNABLE]
+    bad = []
+    for key in changes:
+        section, _, name = key.partition(".")
+        if section in ALGOS and name not in type(getattr(cfg, section)).TUNABLE:
+            bad.append("--" + key.replace("_", "-"))
     if "learner_config" in changes:
         for learner in sorted({*parent.learner_configs(), *cfg.learner_configs()}):
             old, new = (dataclasses.asdict(c.algo_config(learner)) for c in (parent, cfg))
