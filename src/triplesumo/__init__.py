@@ -3,8 +3,8 @@
 A reimplementation of Wang, Das & Millard, *Learning cooperative behaviours in
 adversarial multi-agent systems* (TAROS 2022), on MuJoCo, PettingZoo and Gymnasium.
 
-``import triplesumo`` registers the Gymnasium ids (``TripleSumo-v1``,
-``TripleSumo-Paper-v1``, ...) and nothing heavier: the env classes, PettingZoo and torch are
+``import triplesumo`` registers the Gymnasium ids (``TripleSumo-v2``,
+``TripleSumo-Paper-v2``, ...) and nothing heavier: the env classes, PettingZoo and torch are
 imported when first used (``triplesumo.parallel_env``, ``triplesumo.Match``, ...).
 """
 
@@ -18,8 +18,8 @@ from triplesumo._gl import ensure_headless_gl
 ensure_headless_gl()
 
 __version__ = "0.1.0"
-ENV_VERSION = "v1"
-"""Version of the envs' behaviour, in every id (``TripleSumo-v1``, ``triplesumo_v1``); the history is in
+ENV_VERSION = "v2"
+"""Version of the envs' behaviour, in every id (``TripleSumo-v2``, ``triplesumo_v2``); the history is in
 :class:`triplesumo.envs.parallel.TripleSumoParallelEnv`."""
 
 _LAZY = {

@@ -12,7 +12,7 @@ __all__ = ["ZOO_DIR", "available", "load", "make_paper_env", "make_paper_vector_
 
 
 def make_paper_env(**kwargs: Any) -> Any:
-    """``TripleSumo-Paper-v1``: Bug learns; Ant and Spider are the shipped zoo policies.
+    """``TripleSumo-Paper-v2``: Bug learns; Ant and Spider are the shipped zoo policies.
 
     Keyword arguments are those of :class:`triplesumo.envs.single.TripleSumoEnv`;
     ``policies`` replaces the zoo's Ant and Spider.
@@ -29,7 +29,7 @@ def make_paper_env(**kwargs: Any) -> Any:
 
 
 def make_paper_vector_env(num_envs: int = 1, **kwargs: Any) -> Any:
-    """``gym.make_vec("TripleSumo-Paper-v1", num_envs)``: the paper's setup in ``num_envs``
+    """``gym.make_vec("TripleSumo-Paper-v2", num_envs)``: the paper's setup in ``num_envs``
     matches stepped together (:class:`triplesumo.envs.vector.TripleSumoVectorEnv`), the
     zoo's Ant and Spider acting on all matches at once."""
     from triplesumo.envs.vector import TripleSumoVectorEnv

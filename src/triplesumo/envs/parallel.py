@@ -119,6 +119,18 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
       names end in ``-v1`` / ``_v1``; making a ``-v0`` id raises Gymnasium's ``DeprecatedEnv``.
       ``PhysicsConfig(border_rim=False)`` (``triplesumo.model.V0_PHYSICS``) is v0's
       simulation; the v0 zoo policy ``zoo:spider-selfplay`` was trained on it.
+    - v2: a fair start and a rim both engines collide alike. Every torso starts as far from
+      its nearest edge and from the edge behind it (``PhysicsConfig.layout="fair"``: up to four
+      agents on the ring's diagonals, 1.0 m from two edges as in the paper's code, turned so
+      that no leg rests on the rim; v1's circle of 1.4 m started the Ant 0.60 m from the edge
+      behind it and the others 0.79 m from theirs). The rim is four boxes of the cylinders'
+      height and width (``PhysicsConfig.rim_shape="box"``): MuJoCo Warp and MuJoCo part on a
+      cylinder once legs touch it. Reset noise on torso positions and headings is
+      ``ResetNoise(position=0.02, yaw=0.05)`` (was 0.1 and 0.1) so that it keeps the agents'
+      edge distances within 5 cm of each other. Ids and names end in ``-v2`` / ``_v2``; making
+      a ``-v1`` id raises Gymnasium's ``DeprecatedEnv`` naming the ``-v2`` id.
+      ``triplesumo.model.V1_PHYSICS`` (with ``ResetNoise(position=0.1, yaw=0.1)``) is v1's
+      simulation, on which the v1 zoo was trained.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": f"triplesumo_{ENV_VERSION}", "is_parallelizable": True,

@@ -54,10 +54,10 @@ class TripleSumoEnv(MatchAccess, gym.Env):
     scenario's, ``"bug"`` for the paper), ``policies`` (``{agent: callable}`` for the others; an agent
     without a policy is passive: zero action), ``render_mode`` (``"rgb_array"`` or
     ``"human"``), ``width``, ``height``, and any :class:`MatchConfig` field as a keyword.
-    Registered ids: ``TripleSumo-v1`` (others passive unless given) and
-    ``TripleSumo-Paper-v1`` (Ant and Spider from the shipped policy zoo), and one per other
-    scenario with the others passive: ``TripleSumo-FFA-v1``, ``TripleSumo-Pursuit-v1``
-    (learner: the evader), ``TripleSumo-2v2-v1``, ``TripleSumo-Bodies-v1``.
+    Registered ids: ``TripleSumo-v2`` (others passive unless given) and
+    ``TripleSumo-Paper-v2`` (Ant and Spider from the shipped policy zoo), and one per other
+    scenario with the others passive: ``TripleSumo-FFA-v2``, ``TripleSumo-Pursuit-v2``
+    (learner: the evader), ``TripleSumo-2v2-v2``, ``TripleSumo-Bodies-v2``.
 
     ## Version History
     - v0: first release.
@@ -65,6 +65,8 @@ class TripleSumoEnv(MatchAccess, gym.Env):
       added (the paper's solid ring rim, off by default until v1); details in
       :class:`triplesumo.envs.parallel.TripleSumoParallelEnv`.
     - v1: the paper's solid ring rim by default, and the zoo rebuilt on it (details there).
+    - v2: a fair start layout (every torso as far from the edges), a box rim that MuJoCo and
+      MuJoCo Warp collide alike, and smaller position/heading reset noise (details there).
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20}

@@ -1,6 +1,6 @@
 """The Gymnasium vector view: one learner in each of many matches, stepped together.
 
-``gym.make_vec("TripleSumo-Paper-v1", num_envs=N)`` reaches :class:`TripleSumoVectorEnv`
+``gym.make_vec("TripleSumo-Paper-v2", num_envs=N)`` reaches :class:`TripleSumoVectorEnv`
 through the ids' ``vector_entry_point``: no subprocesses, the physics of the ``N``
 matches on MuJoCo's threads (:class:`~triplesumo.envs.batch.VectorMatches`), the other
 agents' fixed policies called once per step on all ``N`` observations.

@@ -8,7 +8,7 @@ imports Ray.
   env in RLlib's ``ParallelPettingZooEnv``), built from an ``env_config`` holding
   :class:`~triplesumo.rules.MatchConfig` field overrides or a whole config under
   ``"match_config"``; :func:`register_envs` registers every scenario by name
-  (``"triplesumo_paper_v1"``, ...).
+  (``"triplesumo_paper_v2"``, ...).
 - :func:`make_config` returns an ``AlgorithmConfig`` (PPO by default) with one RLModule per
   agent (module ids = agent names) or per team (``share="team"``: module ids = team labels),
   the policy-mapping function, ``policies_to_train``, the project's observation and action
@@ -70,7 +70,7 @@ __all__ = ["OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "Outcom
            "register_envs", "scenario_config"]
 
 SCENARIOS: tuple[str, ...] = scenarios()
-"""Named scenarios (``triplesumo.scenarios()``); each is registered as ``triplesumo_{name}_v1`` by
+"""Named scenarios (``triplesumo.scenarios()``); each is registered as ``triplesumo_{name}_v2`` by
 :func:`register_envs`."""
 SHARE_MODES = (None, "team")
 """``share`` values of :func:`make_config`: one module per agent, or one per team."""
@@ -94,7 +94,7 @@ def scenario_config(scenario: str | MatchConfig = "paper", **overrides: Any) -> 
 
 
 def env_id(scenario: str) -> str:
-    """RLlib env name of a scenario, e.g. ``"triplesumo_paper_v1"``."""
+    """RLlib env name of a scenario, e.g. ``"triplesumo_paper_v2"``."""
     if scenario not in SCENARIOS:
         raise ValueError(f"scenario: unknown scenario {scenario!r}; known: {list(SCENARIOS)}")
     return f"triplesumo_{scenario}_{ENV_VERSION}"
@@ -147,7 +147,7 @@ def _creator(scenario: str) -> Any:
 def register_envs() -> list[str]:
     """Register every scenario by name with RLlib (Tune's env registry); returns the names.
 
-    For hand-written configs (``PPOConfig().environment("triplesumo_paper_v1")``);
+    For hand-written configs (``PPOConfig().environment("triplesumo_paper_v2")``);
     :func:`make_config` passes the env class itself, which needs no registry.
     """
     ids = []

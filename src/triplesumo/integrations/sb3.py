@@ -8,7 +8,7 @@ SB3 ``VecEnv``, so PPO, SAC, TD3 and DDPG train on many matches in one process::
     from stable_baselines3 import PPO
     from triplesumo.integrations.sb3 import make_vec_env
 
-    env = make_vec_env("TripleSumo-Paper-v1", n_envs=8)
+    env = make_vec_env("TripleSumo-Paper-v2", n_envs=8)
     PPO("MlpPolicy", env).learn(10_000)
 
 SB3's conventions: when match ``k`` ends, the returned observation is already its next

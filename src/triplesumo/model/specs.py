@@ -20,6 +20,12 @@ GREEN = (0.15, 0.7, 0.2, 1.0)
 
 _NAME = re.compile(r"^[a-z][a-z0-9_]*$")
 INTEGRATORS = ("RK4", "Euler", "implicit", "implicitfast")
+LAYOUTS = ("fair", "circle")
+"""Start layouts (:mod:`triplesumo.model.layout`): ``fair`` (env v2) puts every torso equally far from
+the ring's edges; ``circle`` (env v0 and v1) spaces agents evenly on a circle of ``start_radius``."""
+RIM_SHAPES = ("box", "cylinder")
+"""Shapes of the ring's rim: ``box`` (env v2), which MuJoCo and MuJoCo Warp collide alike, or RoboSumo's
+``cylinder`` (env v1), where the two engines part once legs touch it."""
 
 
 @dataclass(frozen=True)
@@ -88,16 +94,27 @@ class PhysicsConfig:
     """Physics steps per env step (env dt = timestep * frame_skip)."""
     memory: str = "16M"
     """Arena memory for contacts and constraints (MJCF ``<size memory>``)."""
+    layout: str = "fair"
+    """Start layout: "fair" (default since env v2) starts every torso ``start_edge`` from its nearest
+    edge and as far from the edge behind it, legs clear of the rim; "circle" (env v0 and v1) spaces
+    agents on a circle of ``start_radius``, facing the centre (:mod:`triplesumo.model.layout`)."""
+    start_edge: float = 1.0
+    """Fair layout: distance (m) from every torso to its nearest edge of the ring and to the edge behind
+    it. The paper's code started the torsos at (-1, -1), (1, -1) and (1, 1): 1.0 m from two edges."""
     start_radius: float = 1.4
-    """Agents start evenly spaced on a circle of this radius, facing the centre. RoboSumo used
-    1.15 for two agents; with three, legs touch below 1.4 (measured), so 1.4."""
+    """Circle layout: agents start evenly spaced on a circle of this radius, facing the centre. RoboSumo
+    used 1.15 for two agents; with three, legs touch below 1.4 (measured), so 1.4."""
     start_height: float = 1.25
     """Start height of the torso centre; agents fall onto the tatami (top at z = 0.5)."""
     border_rim: bool = True
-    """The four border cylinders collide, as in RoboSumo's and the paper's ``tatami.xml``
-    (MuJoCo's default collision flags there): a solid ridge 3 cm high along the ring's edge
-    that agents hit. True (default since env v1) is the paper's ring; False makes them visual
-    markers only, the ring of env v0 (:data:`V0_PHYSICS`)."""
+    """The ring's border collides: a solid ridge 3 cm high along the edge that agents hit, as the
+    colliding border cylinders of RoboSumo's and the paper's ``tatami.xml``. True (default since env
+    v1) is the paper's ring; False makes the border a visual marker only, the ring of env v0
+    (:data:`V0_PHYSICS`)."""
+    rim_shape: str = "box"
+    """Shape of the border geoms: "box" (default since env v2; 6 cm wide, its top 3 cm above the
+    tatami, as the cylinder's) or "cylinder" (RoboSumo's, env v0 and v1). MuJoCo Warp collides a
+    cylinder with the legs' capsules unlike MuJoCo (torsos part by 2 cm within 14 steps), boxes alike."""
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.timestep) and self.timestep > 0):
@@ -112,12 +129,31 @@ class PhysicsConfig:
             raise ValueError(f"PhysicsConfig.memory must look like '16M', got {self.memory!r}")
         if not (0.0 <= self.start_radius < 2.0):
             raise ValueError(f"PhysicsConfig.start_radius must be in [0, 2), got {self.start_radius}")
+        if self.layout not in LAYOUTS:
+            raise ValueError(f"PhysicsConfig.layout must be one of {LAYOUTS}, got {self.layout!r}")
+        if not (isinstance(self.start_edge, int | float) and 0.2 <= self.start_edge < 2.0):
+            raise ValueError(f"PhysicsConfig.start_edge must be in [0.2, 2), got {self.start_edge!r}")
+        if self.rim_shape not in RIM_SHAPES:
+            raise ValueError(f"PhysicsConfig.rim_shape must be one of {RIM_SHAPES}, got {self.rim_shape!r}")
         if not isinstance(self.border_rim, bool):
             raise ValueError(f"PhysicsConfig.border_rim must be a bool, got {self.border_rim!r}")
         if not self.start_height > 0.5:
             raise ValueError(f"PhysicsConfig.start_height must be > 0.5, got {self.start_height}")
 
 
-V0_PHYSICS = PhysicsConfig(border_rim=False)
+V1_PHYSICS = PhysicsConfig(layout="circle", rim_shape="cylinder")
+"""The simulation of env v1: the agents on a circle of 1.4 m and RoboSumo's colliding border cylinders."""
+V0_PHYSICS = PhysicsConfig(layout="circle", rim_shape="cylinder", border_rim=False)
 """The simulation of env v0 (visual-only border markers): what a run folder, policy manifest or
 evaluation record without a ``physics`` entry was made on."""
+PHYSICS_ADDED_LATER = {"layout": "circle", "start_edge": 1.0, "rim_shape": "cylinder"}
+"""PhysicsConfig fields newer than env v1, with the value every record written before them used."""
+
+
+def physics_record(data: object) -> object:
+    """A physics record (``asdict(PhysicsConfig)`` read back from JSON) with the fields it predates
+    filled in as env v0/v1 ran them; anything that is not a dict is returned as it is (for the caller
+    to refuse by name)."""
+    if not isinstance(data, dict):
+        return data
+    return {**{k: v for k, v in PHYSICS_ADDED_LATER.items() if k not in data}, **data}

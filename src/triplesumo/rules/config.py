@@ -71,10 +71,11 @@ class RewardConfig:
 class ResetNoise:
     """Seeded noise added to the documented start pose at every reset."""
 
-    position: float = 0.1
-    """Half-width (m) of the uniform noise on each torso's x and y."""
-    yaw: float = 0.1
-    """Half-width (rad) of the uniform noise on each torso's heading."""
+    position: float = 0.02
+    """Half-width (m) of the uniform noise on each torso's x and y (env v0, v1: 0.1). Small enough
+    that the agents' distances to the ring's edges stay within 5 cm of each other."""
+    yaw: float = 0.05
+    """Half-width (rad) of the uniform noise on each torso's heading (env v0, v1: 0.1)."""
     joints: float = 0.1
     """Half-width (rad) of the uniform noise on each leg joint angle."""
     velocity: float = 0.1

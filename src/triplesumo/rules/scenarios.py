@@ -98,7 +98,7 @@ class Scenario:
 
     @property
     def pettingzoo_name(self) -> str:
-        """PettingZoo-style name, e.g. ``triplesumo_ffa_v1`` (the paper's: ``triplesumo_v1``)."""
+        """PettingZoo-style name, e.g. ``triplesumo_ffa_v2`` (the paper's: ``triplesumo_v2``)."""
         return f"triplesumo_{ENV_VERSION}" if self.name == "paper" else f"triplesumo_{self.name}_{ENV_VERSION}"
 
     def config(self, **overrides: Any) -> MatchConfig:

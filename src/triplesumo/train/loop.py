@@ -66,7 +66,7 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.envs.batch import MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
-from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
 from triplesumo.rules.config import RewardConfig, check_shared_network
 from triplesumo.rules.outcome import ERROR_CODE, PLAYING
 from triplesumo.rules.outcome import outcome_name as code_name
@@ -187,7 +187,8 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
     data = _check_keys(data, TrainConfig, "", source)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
     try:
-        data["physics"] = PhysicsConfig(**_check_keys(data["physics"], PhysicsConfig, "physics.", source))
+        data["physics"] = PhysicsConfig(**_check_keys(physics_record(data["physics"]), PhysicsConfig, "physics.",
+                                                      source))
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{source}: {exc}") from exc
     for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
