@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from triplesumo.envs.match import Match
-from triplesumo.model import PAPER_AGENTS, V0_PHYSICS, AgentSpec, PhysicsConfig, build_model, ring_half_size
+from triplesumo.model import PAPER_AGENTS, V0_PHYSICS, V1_PHYSICS, AgentSpec, PhysicsConfig, build_model, ring_half_size
 from triplesumo.model import names as mjcf_names
 from triplesumo.model.specs import BLUE, GREEN, RED
 from triplesumo.rules.config import MatchConfig, ResetNoise, RewardConfig
@@ -227,10 +227,10 @@ def test_agents_at_rest_never_touch_and_stand_on_the_tatami(make_match, zeros) -
         np.testing.assert_allclose(forces[i * g:(i + 1) * g].sum(axis=0), [0.0, 0.0, weight], atol=1e-3 * weight)
 
 
-def test_on_the_rim_agents_at_rest_lean_on_it_and_slide_inward(make_match, zeros) -> None:
-    """The paper's ring (the default since env v1): from the default start (radius 1.4) legs land on
-    the 3 cm rim, which pushes every agent toward the centre; nobody leaves the ring."""
-    match = make_match()
+def test_on_the_v1_rim_agents_at_rest_lean_on_it_and_slide_inward(make_match, zeros) -> None:
+    """Env v1's ring: from its start (a circle of radius 1.4) legs land on the 3 cm rim, which pushes
+    every agent toward the centre; nobody leaves the ring. (Env v2's fair start keeps legs off it.)"""
+    match = make_match(physics=V1_PHYSICS)
     start = match.sim.torso_positions().copy()
     border = {match.model.geom(n).id for n in mjcf_names.BORDER_GEOMS}
     touched = set()
@@ -252,7 +252,8 @@ def _push_ant_at_the_rim(border_rim: bool) -> tuple[set[str], float]:
     """Ant, settled at its start, moved 0.3 m toward the right border and pushed at it at 2 m/s
     for 30 env steps: the names of its geoms that touched a border geom, and the x component of
     the border's contact forces on them, summed over contacts and steps."""
-    match = Match(MatchConfig(physics=PhysicsConfig(border_rim=border_rim), reset_noise=ResetNoise(0, 0, 0, 0)))
+    match = Match(MatchConfig(physics=PhysicsConfig(border_rim=border_rim, layout="circle"),  # Ant at (1.4, 0)
+                              reset_noise=ResetNoise(0, 0, 0, 0)))
     match.reset(seed=0)
     sim, model = match.sim, match.model
     for _ in range(30):
@@ -287,7 +288,7 @@ def test_border_rim_is_solid_by_default_and_visual_in_v0() -> None:
     assert (plain.geom_contype[rim] == 0).all() and (plain.geom_conaffinity[rim] == 0).all()
     assert (solid.geom_contype[rim] == 1).all() and (solid.geom_conaffinity[rim] == 1).all()
     np.testing.assert_array_equal(solid.geom_size[rim], plain.geom_size[rim])
-    np.testing.assert_allclose(solid.geom_size[rim, 0], 0.03)  # a 3 cm ridge on the tatami's top
+    np.testing.assert_allclose(solid.geom_size[rim, 2], 0.03)  # a 3 cm ridge on the tatami's top
     np.testing.assert_allclose(solid.geom_pos[rim, 2], 0.5)
     others = np.setdiff1d(np.arange(plain.ngeom), rim)
     np.testing.assert_array_equal(solid.geom_contype[others], plain.geom_contype[others])
