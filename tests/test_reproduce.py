@@ -33,17 +33,21 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "ppo", "--seeds", "0", "--no-progress",
             "--ablations", "noise=gaussian", "still=-1", "--publish"]
     assert main(argv) == 0
-    stages = ["ant", "spider", "contest", "bug", "ablations", "evaluation", "compare"]
+    stages = ["match", "contest", "bug", "ablations", "evaluation", "compare"]
     record = _record(out)
     assert record["runs"][-1]["ran"] == stages and record["runs"][-1]["version"]
     for name in stages:
         for rel in record["stages"][name]["outputs"]:
             assert (out / rel).exists(), rel
         assert record["stages"][name]["commands"]
-    assert record["stages"]["ant"]["commands"][0].startswith("triplesumo train --name ant")
+    match_cmd = record["stages"]["match"]["commands"][0]
+    assert match_cmd.startswith("triplesumo train --name match") and "--learn ant=ddpg spider=ddpg" in match_cmd
+    assert "--reward.still -1" in match_cmd  # the pre-training reward: losing costs more than surviving
     assert (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.json").exists()
     contest = json.loads((out / "contest" / "contest.json").read_text())
-    assert contest["matches"] == 4 and contest["spider_wins"] + contest["ant_wins"] + contest["draws"] == 1.0
+    assert contest["matches"] == 4 and contest["team_wins"] + contest["team_losses"] + contest["draws"] == 1.0
+    assert set(contest["counts"]) == {"ant-pushes", "spider-pushes", "match"}
+    assert contest["contest"] == (not contest["failed"])  # tiny: recorded, not enforced (the Bug stage ran)
     with (out / "evaluation" / "per_seed.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     assert sorted(r["algo"] for r in rows) == ["ddpg", "ddpg", "ddpg", "passive", "ppo", "random"]
@@ -58,7 +62,8 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     groups = {g["group"]: g for g in json.loads((out / "compare" / "compare.json").read_text())["groups"]}
     assert set(groups) == {"ddpg", "ppo", "ddpg,ddpg.noise=gaussian", "ddpg,reward.still=-1", "passive", "random"}
     report = (out / "REPRODUCTION.md").read_text()
-    assert "## Stage 6: per algorithm across seeds" in report and "Ring: `border_rim=True`" in report
+    assert "## Stage 5: per algorithm across seeds" in report and "Ring: `border_rim=True`" in report
+    assert "## Stage 2: is it a contest?" in report and f"{contest['team_mwr']:+.3f}" in report
     # time to skill: from the evaluations the Bug runs made while training (every 20 env steps when tiny)
     with (out / "bug" / "learn=bug=ddpg,seed=0" / "eval.csv").open() as fh:
         evals = list(csv.DictReader(fh))
@@ -75,7 +80,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     ablations = report[report.index("## Ablations"):]
     g = groups["ddpg,reward.still=-1"]
     assert f"| reward.still=-1 | 1 | {g['scores'][0]:+.3f} | {g['iqm']:+.3f} [" in ablations
-    assert "| ddpg,reward.still=-1 |" not in report.split("## Ablations")[0].split("## Stage 6")[1]
+    assert "| ddpg,reward.still=-1 |" not in report.split("## Ablations")[0].split("## Stage 5")[1]
     # published: the paper-preset DDPG Bug as zoo:bug, the best Bug of any algorithm (not an ablation) as bug-ALGO
     trained = [r for r in rows if "/bug/" in r["policy"]]
     best = max(trained, key=lambda r: float(r["test_mwr"]))
@@ -87,7 +92,6 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     for name in ("ant", "spider"):  # every stage's ring, and the contest check of the pair
         pair = json.loads((zoo / f"{name}.json").read_text())
         assert pair["physics"] == shipped["physics"] and pair["evaluation"]["contest"] == contest
-        assert pair["evaluation"]["n"] == contest["matches"] and 0 <= pair["evaluation"]["win_rate_lo"]
     assert [shipped["evaluation"][k] for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")] == [
         float(best[k]) for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")]
     assert json.loads((zoo / "bug.json").read_text())["algo"] == "ddpg"
@@ -155,6 +159,9 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     ({"ablations": ("noise=gaussian", "ddpg.noise=gaussian")}, "a change given twice"),
     ({"ablations": ("noise=gaussian",), "algos": ("sac",)}, "algos must include ddpg"),
     ({"cpus_per_trial": 0}, "ReproduceConfig.cpus_per_trial must be an int >= 1"),
+    ({"pretrain_still": -4.0}, r"pretrain_still -4.0: surviving without a result would be worth -400"),
+    ({"pretrain_still": 1.0}, "pretrain_still must be a finite number <= 0"),
+    ({"pair": ("zoo:ant",)}, "pair must be two policies"),
     ({"num_cpus": 2}, "options of ray"),
 ])
 def test_bad_options_name_the_field(kw: dict, message: str) -> None:
@@ -255,7 +262,7 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
     rows = {line.split()[1]: line.split()[2:] for line in capsys.readouterr().out.splitlines()[1:-1]}
     assert rows["learn=bug=ddpg,seed=0"][:2] == ["complete", _rows_env_steps(out / "bug" / "learn=bug=ddpg,seed=0")]
     assert rows["learn=bug=ddpg,seed=1"][:3] == ["running", "or", "stopped"]
-    assert rows["ant"][0] == rows["compare"][0] == "complete"
+    assert rows["match"][0] == rows["contest"][0] == rows["compare"][0] == "complete"
     assert _record(out) == record  # nothing ran, nothing recorded
     skill = (out / "REPRODUCTION.md").read_text().split("## Time to skill")[1]
     assert "| learn=bug=ddpg,seed=1 | not yet |" in skill and "| learn=bug=ddpg,seed=0 | not yet |" not in skill
@@ -272,7 +279,7 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
         "<!-- reproduce:end -->\n\n## History\n") and "\nold\n" not in text
     assert "\n### Time to skill\n" in text and "\n## Time to skill\n" in generated
     assert "](../rep/bug/test_mwr.png)" in text and "](bug/test_mwr.png)" in generated
-    assert "\n# ant (" in text  # the commands block keeps its bash comments
+    assert "\n# match (" in text  # the commands block keeps its bash comments
     page.write_text("# Ours, no markers\n")
     capsys.readouterr()
     assert main([*argv, "--status", "--docs", str(page)]) == 2
@@ -281,3 +288,42 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
 
 def _rows_env_steps(run: Path) -> str:
     return f"{int(_csv_rows(run / 'metrics.csv', header=True)[-1]['env_steps']):,}"
+
+
+def test_the_contest_rule_checks_each_side_and_the_band() -> None:
+    from triplesumo.reproduce import CONTEST_BAND, PUSH_MIN, contest_verdict
+
+    def counts(ant_wins: int, spider_wins: int, match: tuple[int, int, int]) -> dict[str, dict[str, int]]:
+        return {"ant-pushes": {"n": 100, "n_win": ant_wins, "n_loss": 0, "n_draw": 100 - ant_wins},
+                "spider-pushes": {"n": 100, "n_win": spider_wins, "n_loss": 0, "n_draw": 100 - spider_wins},
+                "match": dict(zip(("n_win", "n_loss", "n_draw"), match, strict=True)) | {"n": 100}}
+
+    assert CONTEST_BAND == (-0.5, -0.1) and PUSH_MIN == 0.5
+    ok = contest_verdict(counts(60, 70, (50, 20, 30)), "a", "s")  # the Spider's 50 wins, the team's 20
+    assert ok["contest"] and ok["team_mwr"] == pytest.approx(-0.30) and ok["failed"] == []
+    edge = contest_verdict(counts(50, 50, (60, 10, 30)), "a", "s")  # -0.50 and 50 %: both bounds included
+    assert edge["contest"]
+    hopeless = contest_verdict(counts(60, 70, (82, 4, 14)), "a", "s")  # the v1 pair: Spider won 82 %
+    assert not hopeless["contest"] and hopeless["failed"] == [
+        "with Bug passive the team's MWR is -0.780 (the band is [-0.50, -0.10])"]
+    lazy = contest_verdict(counts(0, 70, (30, 10, 60)), "a", "s")  # the v1 Ant: 0 of 32 against a passive Spider
+    assert lazy["failed"] == ["the Ant pushes a passive Spider out in 0.0% of the starts (at least 50%)"]
+
+
+def test_the_bug_stage_refuses_a_pair_that_is_no_contest(tmp_path: Path) -> None:
+    """A scripted pair, both passive: nobody pushes anybody (all draws), so every check fails, the contest is
+    recorded as failed and the Bug stage refuses to start, naming each failed check and the file; no Bug trains."""
+    from triplesumo.reproduce import ContestError, run_reproduce
+
+    cfg = ReproduceConfig(out=str(tmp_path / "rep"), pair=("passive", "passive"), contest_epochs=4, n_envs=2,
+                          algos=("ddpg",), seeds=(0,), progress=False)
+    with pytest.raises(ContestError, match=r"stage bug refused: the pair passive / passive failed the contest rule: "
+                                           r"the Ant pushes a passive Spider out in 0.0% .*the Spider pushes a passive "
+                                           r"Ant out in 0.0% .*team's MWR is \+0.000 .*contest.json"):
+        run_reproduce(cfg)
+    contest = json.loads((tmp_path / "rep" / "contest" / "contest.json").read_text())
+    assert contest["contest"] is False and contest["draws"] == 1.0 and contest["matches"] == 4
+    assert not (tmp_path / "rep" / "bug").exists()
+    assert _record(tmp_path / "rep")["stages"].keys() == {"contest"}
+    with pytest.raises(ContestError):  # and again on a re-run: the recorded verdict stands
+        run_reproduce(cfg)

@@ -1,27 +1,45 @@
 """``triplesumo reproduce``: the whole reproduction protocol from one command, resumable.
 
-Six stages, in order, each a function with declared outputs under ``out``:
+The paper trains an Ant (3,000 epochs), then a second agent (20,000 epochs) to make "an ongoing
+game", then adds Bug. Built that way literally, the match was no contest (env v1, measured): an
+Ant trained against a random Spider learned nothing (a random Spider walks off the ring by itself
+in 28 of 32 matches, so a passive Ant already "wins" 87.5 %), and a Spider then trained for
+20,000 epochs against that frozen Ant won 82 % with Bug passive. The stages here build the
+ongoing match so that both sides learn to push, check that it is a contest, and only then train Bug:
 
-1. ``ant``: Ant trained (DDPG) against a random Spider, Bug passive (``OUT/ant``).
-2. ``spider``: Spider trained against the stage-1 Ant, Bug passive (``OUT/spider``).
-3. ``contest``: the new pair evaluated with Bug passive (``OUT/contest``): a contest when
-   neither side wins more than 70 % of the test matches. Recorded; a warning, not a failure.
-4. ``bug``: Bug trained with each algorithm x seed in the stage-1/2 match, as the trials of
+1. ``match``: Ant and Spider learn together from scratch (DDPG each; ``train --learn ant=ddpg
+   spider=ddpg``), Bug passive, for ``match_epochs`` (the paper's 20,000: its second agent's
+   budget, which the Ant now shares, so neither side faces an opponent that stopped learning or one
+   that leaves the ring by itself). Pre-training reward: the paper's terms with the still
+   punishment ``pretrain_still`` (default -1), so that losing costs more than surviving: with the
+   paper's -4 and gamma 0.99, still / (1 - gamma) = -400 = the loss reward, and being pushed out at
+   any step is worth as much as surviving without winning (``__post_init__`` refuses such a value).
+   ``pair`` skips the stage and checks a given pair instead (``--pair zoo:ant zoo:spider``).
+2. ``contest``: the pair on ``contest_epochs`` held-out starts (``contest_seed`` + i, apart from
+   the Bug's test starts), three evaluations (``OUT/contest``): the Ant against a passive Spider,
+   the Spider against a passive Ant (each must push its opponent out in at least
+   :data:`PUSH_MIN` of the matches), and the match with Bug passive, whose team MWR must lie in
+   :data:`CONTEST_BAND` (the team loses without Bug's help, but not hopelessly). ``contest.json``
+   holds each check and the verdict.
+3. ``bug``: Bug trained with each algorithm x seed in that match, as the trials of
    :mod:`triplesumo.train.sweep` run here one after another (``OUT/bug/learn=bug=ALGO,seed=S``).
+   **It refuses to start on a pair that failed the contest rule** (:class:`ContestError`); with
+   ``tiny`` (2-epoch agents are no contest) the verdict is recorded and printed, not enforced.
    With ``ablations`` (``--ablations noise=gaussian still=-1``), stage ``ablations`` then trains
    the paper-preset DDPG Bug with each one change over the same seeds and env-step budget
    (``OUT/ablations/learn=bug=ddpg,ddpg.noise=gaussian,seed=S``).
-5. ``evaluation``: every Bug (ablations included) plus the passive and random baselines on the
+4. ``evaluation``: every Bug (ablations included) plus the passive and random baselines on the
    same seeded test matches (``OUT/evaluation``, ``per_seed.csv``).
-6. ``compare``: IQM with bootstrap intervals by trial (each algorithm, each ablation) and its
+5. ``compare``: IQM with bootstrap intervals by trial (each algorithm, each ablation) and its
    plot (``OUT/compare``).
 
-``--publish`` then ships the stage-1 Ant and stage-2 Spider, the paper-preset DDPG Bug of the
+``--publish`` then ships the stage-1 Ant and Spider, the paper-preset DDPG Bug of the
 best seed as ``zoo:bug`` and the best Bug of any algorithm as ``zoo:bug-<algo>``, each manifest
-with its command, seed, env steps, the code version and its test MWR with 95 % interval.
+with its command, seed, env steps, the code version, its contest check and its test MWR with
+95 % interval.
 
-Time to skill comes from stage 4 itself: every Bug run evaluates its current policy every
-``bug_eval_every`` env steps on the first ``bug_eval_epochs`` test matches of stage 5
+Time to skill comes from stage 3 itself: every Bug run evaluates its current policy every
+``bug_eval_every`` env steps on the first ``bug_eval_epochs`` test matches of stage 4
 (``train --eval-every``, ``eval.csv``), and the report gives, per algorithm and seed, the
 env steps and training wall time until its test MWR first reached +0.2, with the curves
 (``bug/test_mwr.png``).
@@ -39,6 +57,7 @@ import csv
 import dataclasses
 import datetime
 import json
+import math
 import os
 import re
 import shlex
@@ -59,6 +78,7 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare, trial_group
 from triplesumo.evaluation.evaluate import EvaluateConfig, check_ray, evaluate
 from triplesumo.model.specs import PhysicsConfig
+from triplesumo.rules.config import RewardConfig
 from triplesumo.train import legs, sweep
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import command_for, training_done
@@ -66,8 +86,15 @@ from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_
 
 RECORD_FILE = "reproduce.json"
 REPORT_FILE = "REPRODUCTION.md"
-CONTEST_LIMIT = 0.7
-"""Neither side of the ongoing match may win more than this share of its test matches."""
+CONTEST_BAND = (-0.50, -0.10)
+"""The contest rule: with Bug passive, the team's MWR on the contest starts lies in this band (both ends
+included): the team loses without Bug's help, but not hopelessly."""
+PUSH_MIN = 0.5
+"""Each pre-trained side pushes a passive opponent out in at least this share of the contest starts."""
+
+
+class ContestError(RuntimeError):
+    """The Bug stage refused a pair that failed the contest rule (the message names each failed check)."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
 RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish", "docs")
@@ -108,41 +135,48 @@ class ReproduceConfig:
     """Algorithms Bug is trained with (ddpg is the paper preset)."""
     seeds: tuple[int, ...] = (0, 1, 2)
     """Training seeds of Bug, for every algorithm."""
-    ant_epochs: int = 3000
-    """Stage 1: Ant's training epochs (the paper's 3,000)."""
-    spider_epochs: int = 20_000
-    """Stage 2: Spider's training epochs (the paper's 20,000)."""
+    match_epochs: int = 20_000
+    """Stage 1: epochs of Ant and Spider learning together (the paper's 20,000 for its second agent)."""
+    match_seed: int = 1
+    """Seed of the stage-1 run."""
+    pretrain_still: float = -1.0
+    """Stage 1: the still punishment of the pre-training reward (the paper's other terms as they are). It must
+    make losing cost more than surviving: still / (1 - gamma) > the loss reward (-1 / 0.01 = -100 > -400); the
+    paper's -4 gives exactly -400."""
+    pair: tuple[str, ...] = ()
+    """Skip stage 1 and check this Ant and Spider instead (two policy specs: ``zoo:ant zoo:spider``, files,
+    ``passive``); the contest rule and everything after it run on them."""
     bug_epochs: int = 20_000
-    """Stage 4: at most this many epochs per Bug run (the paper's 20,000)."""
+    """Stage 3: at most this many epochs per Bug run (the paper's 20,000)."""
     bug_env_steps: int = 1_000_000
-    """Stage 4: the env-step budget of every Bug run, the same for every algorithm whatever its matches
+    """Stage 3: the env-step budget of every Bug run, the same for every algorithm whatever its matches
     last (``train --max-env-steps``); a run stops at the first epoch end past it. 0: epochs only."""
     bug_learn_every: int = 16
-    """Stage 4 (and the ablations): collected transitions per gradient step of the TD3 and SAC Bugs, one per step
+    """Stage 3 (and the ablations): collected transitions per gradient step of the TD3 and SAC Bugs, one per step
     of the 16 matches, the algorithm schedule of ``bench train``. Their library default, 1 (the papers' one update
     per transition), costs 11-16 ms of CPU per update on a 2-core machine: 3-4 h per 1 M env steps and run.
     0 keeps the algorithm's default. DDPG keeps the paper preset (30) and PPO its rollouts."""
     bug_eval_every: int = 100_000
-    """Stage 4 (and the ablations): every this many env steps each Bug run evaluates its current policy on the
-    first bug_eval_epochs test matches of stage 5 (``train --eval-every``): the test-MWR curves and time to skill.
+    """Stage 3 (and the ablations): every this many env steps each Bug run evaluates its current policy on the
+    first bug_eval_epochs test matches of stage 4 (``train --eval-every``): the test-MWR curves and time to skill.
     0: none."""
     bug_eval_epochs: int = 200
     """Test matches of each evaluation during stage 4."""
-    contest_epochs: int = 400
-    """Stage 3: test matches of the new Ant-Spider pair with Bug passive."""
+    contest_epochs: int = 1000
+    """Stage 2: held-out starts of each contest check (Ant vs passive Spider, Spider vs passive Ant, the match
+    with Bug passive)."""
+    contest_seed: int = 20_000
+    """Contest start i resets with contest_seed + i: held out from training and from the Bug's test starts."""
     eval_epochs: int = 2000
-    """Stage 5: test matches per Bug policy and per baseline (the same seeded matches for all)."""
+    """Stage 4: test matches per Bug policy and per baseline (the same seeded matches for all)."""
     eval_seed: int = 10_000
-    """Test match i resets with eval_seed + i (stages 3 and 5), and seeds the bootstrap."""
-    ant_seed: int = 1
-    """Seed of the Ant run (the shipped zoo:ant's)."""
-    spider_seed: int = 2
-    """Seed of the Spider run (the shipped zoo:spider's)."""
+    """Test match i resets with eval_seed + i (stage 4 and the Bug's evaluations while training), and seeds
+    the bootstrap."""
     n_envs: int = 16
     """Matches collected or played at once."""
     border_rim: bool = True
-    """Train and evaluate on the paper's ring, whose border cylinders form a solid rim (``PhysicsConfig.border_rim``);
-    False: the visual-only markers of env v0, the ring the first shipped zoo was trained on."""
+    """Train and evaluate on the paper's ring with its solid rim (``PhysicsConfig.border_rim``; env v2: a box rim
+    and the fair start); False: visual-only border markers, as env v0."""
     save_replay: bool = True
     """Checkpoints hold the replay buffer (an exact resume); False keeps them small enough to commit
     (a resume then starts with an empty buffer)."""
@@ -195,7 +229,22 @@ class ReproduceConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 0, got {value!r}")
-        for name in ("ant_epochs", "spider_epochs", "bug_epochs", "bug_eval_epochs", "contest_epochs", "eval_epochs",
+        if isinstance(self.pair, list):
+            object.__setattr__(self, "pair", tuple(self.pair))
+        if self.pair and len(self.pair) != 2:
+            raise ValueError(f"ReproduceConfig.pair must be two policies (Ant, Spider), got {self.pair!r}")
+        gamma = DDPGConfig().gamma
+        if not (isinstance(self.pretrain_still, int | float) and math.isfinite(self.pretrain_still)
+                and self.pretrain_still <= 0):
+            raise ValueError(f"ReproduceConfig.pretrain_still must be a finite number <= 0, "
+                             f"got {self.pretrain_still!r}")
+        worth, loss = self.pretrain_still / (1 - gamma), RewardConfig().loss
+        if worth <= loss or math.isclose(worth, loss):  # (-4 / (1 - 0.99) is -399.99999999999966 in floats)
+            raise ValueError(f"ReproduceConfig.pretrain_still {self.pretrain_still}: surviving without a result would "
+                             f"be worth {worth:.0f} (still / (1 - gamma), gamma {gamma}), no more than losing "
+                             f"({loss:.0f}); the pre-trained sides would not learn to stay in. Use a value above "
+                             f"{loss * (1 - gamma):g}")
+        for name in ("match_epochs", "bug_epochs", "bug_eval_epochs", "contest_epochs", "eval_epochs",
                      "n_envs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -232,21 +281,21 @@ class Protocol:
         tiny = cfg.tiny
         self.steps = 20 if tiny else 500
         self.n_envs = 2 if tiny else cfg.n_envs
-        self.epochs = {"ant": 2, "spider": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
-            "ant": cfg.ant_epochs, "spider": cfg.spider_epochs, "bug": cfg.bug_epochs,
-            "contest": cfg.contest_epochs, "eval": cfg.eval_epochs}
+        self.epochs = {"match": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
+            "match": cfg.match_epochs, "bug": cfg.bug_epochs, "contest": cfg.contest_epochs, "eval": cfg.eval_epochs}
         self.physics = PhysicsConfig(border_rim=cfg.border_rim)
-        self.ant_policy = str(self.out / "ant" / "policy")
-        self.spider_policy = str(self.out / "spider" / "policy")
+        match_dir = self.out / "match"
+        self.ant_policy, self.spider_policy = cfg.pair or (str(match_dir / "policy-ant"),
+                                                           str(match_dir / "policy-spider"))
         self.stages = [
-            Stage("ant", "Ant vs random Spider, Bug passive", (self.out / "ant" / "policy.json",),
-                  lambda: self._trained(self._ant()), lambda: self._train(self._ant())),
-            Stage("spider", "Spider vs the stage-1 Ant, Bug passive", (self.out / "spider" / "policy.json",),
-                  lambda: self._trained(self._spider()), lambda: self._train(self._spider())),
-            Stage("contest", "is the new pair a contest? (Bug passive)", (self.out / "contest" / "contest.json",),
-                  self._contest_complete, self._contest),
-            Stage("bug", "Bug per algorithm x seed in the stage-1/2 match", (self.out / "bug",),
-                  lambda: all(finished(t) for t in self.bug_trials()), lambda: self._train_trials(self.bug_trials())),
+            *([] if cfg.pair else [
+                Stage("match", "Ant and Spider learn together, Bug passive",
+                      (match_dir / "policy-ant.json", match_dir / "policy-spider.json"),
+                      lambda: self._trained(self._match()), lambda: self._train(self._match()))]),
+            Stage("contest", "is the pair a contest? (each side pushes; the team loses without Bug, not hopelessly)",
+                  (self.out / "contest" / "contest.json",), self._contest_complete, self._contest),
+            Stage("bug", "Bug per algorithm x seed in the stage-1 match", (self.out / "bug",),
+                  lambda: all(finished(t) for t in self.bug_trials()), self._bug_stage),
             *([Stage("ablations", "paper-preset DDPG Bug with one change each, per seed", (self.out / "ablations",),
                      lambda: all(finished(t) for t in self.ablation_trials()),
                      lambda: self._train_trials(self.ablation_trials()))] if cfg.ablations else []),
@@ -270,21 +319,18 @@ class Protocol:
                            progress=self.cfg.progress, tensorboard=not self.cfg.tiny, physics=self.physics,
                            save_replay=self.cfg.save_replay, **extra, **kw)
 
-    def _ant(self) -> TrainConfig:
-        base = self._base(name="ant", learner="ant", policies=("spider=random", "bug=zero"),
-                          epochs=self.epochs["ant"], seed=self.cfg.ant_seed)
-        # stages 1-2 learn every 5 transitions, as the shipped pair did (docs/REPRODUCTION.md)
-        return base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
-                                                              checkpoint_every=500)
-
-    def _spider(self) -> TrainConfig:
-        base = self._base(name="spider", learner="spider", policies=(f"ant={self.ant_policy}", "bug=zero"),
-                          epochs=self.epochs["spider"], seed=self.cfg.spider_seed)
+    def _match(self) -> TrainConfig:
+        """Stage 1: Ant and Spider learn together (DDPG each), Bug passive, on the pre-training reward."""
+        base = self._base(name="match", learn=("ant=ddpg", "spider=ddpg"), policies=("bug=passive",),
+                          epochs=self.epochs["match"], seed=self.cfg.match_seed,
+                          reward=RewardConfig(still=self.cfg.pretrain_still))
+        # one gradient step per 5 transitions of each learner, as the v1 pair learned (docs/REPRODUCTION.md)
         return base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
                                                               checkpoint_every=500)
 
     def _trained(self, cfg: TrainConfig) -> bool:
-        return training_done(cfg) and (Path(cfg.out) / cfg.name / "policy.json").exists()
+        run = Path(cfg.out) / cfg.name
+        return training_done(cfg) and all((run / f"policy-{a.split('=')[0]}.json").exists() for a in cfg.learn)
 
     def _train(self, cfg: TrainConfig) -> list[str]:
         run_trial(cfg)  # resumes the run from its last checkpoint when there is one
@@ -364,30 +410,52 @@ class Protocol:
         evaluate(dataclasses.replace(ecfg, resume=resume))
         return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]
 
-    def contest_config(self) -> EvaluateConfig:
-        return EvaluateConfig(learner="spider", policy=(self.spider_policy,),
-                              policies=(f"ant={self.ant_policy}", "bug=zero"), baselines=(),
-                              epochs=self.epochs["contest"], seed=self.cfg.eval_seed, steps_per_epoch=self.steps,
-                              physics=self.physics,
-                              out=str(self.out / "contest"), n_envs=self.n_envs, progress=self.cfg.progress)
+    def contest_configs(self) -> dict[str, EvaluateConfig]:
+        """Stage 2's three evaluations on the same held-out starts: each side against a passive opponent, and the
+        match with Bug passive (played from the Spider's seat; the team's MWR is minus the Spider's)."""
+        def one(name: str, learner: str, policy: str, others: tuple[str, ...]) -> EvaluateConfig:
+            return EvaluateConfig(learner=learner, policy=(policy,), policies=others, baselines=(),
+                                  epochs=self.epochs["contest"], seed=self.cfg.contest_seed,
+                                  steps_per_epoch=self.steps, physics=self.physics,
+                                  out=str(self.out / "contest" / name), n_envs=self.n_envs, progress=self.cfg.progress)
+
+        return {"ant-pushes": one("ant-pushes", "ant", self.ant_policy, ("spider=passive", "bug=passive")),
+                "spider-pushes": one("spider-pushes", "spider", self.spider_policy, ("ant=passive", "bug=passive")),
+                "match": one("match", "spider", self.spider_policy, (f"ant={self.ant_policy}", "bug=passive"))}
 
     def _contest_complete(self) -> bool:
         path = self.out / "contest" / "contest.json"
-        return path.exists() and json.loads(path.read_text())["matches"] == self.epochs["contest"]
+        return path.exists() and json.loads(path.read_text()).get("matches") == self.epochs["contest"]
 
     def _contest(self) -> list[str]:
-        commands = self._evaluate(self.contest_config())
-        summary = json.loads((self.out / "contest" / "summary.json").read_text())
-        c = next(iter(summary["candidates"].values()))
-        n = c["n"]
-        facts = {"matches": n, "spider_wins": c["n_win"] / n, "ant_wins": c["n_loss"] / n, "draws": c["n_draw"] / n,
-                 "limit": CONTEST_LIMIT}
-        facts["contest"] = max(facts["spider_wins"], facts["ant_wins"]) <= CONTEST_LIMIT
-        if not facts["contest"]:
-            print(f"  warning: the new pair is not a contest: Spider wins {facts['spider_wins']:.0%}, Ant wins "
-                  f"{facts['ant_wins']:.0%} of {n} matches with Bug passive (limit {CONTEST_LIMIT:.0%})")
+        commands: list[str] = []
+        counts: dict[str, dict[str, int]] = {}
+        for name, ecfg in self.contest_configs().items():
+            commands += self._evaluate(ecfg)
+            summary = json.loads((Path(ecfg.out) / "summary.json").read_text())
+            c = next(iter(summary["candidates"].values()))
+            counts[name] = {k: int(c[k]) for k in ("n", "n_win", "n_loss", "n_draw")}
+        facts = contest_verdict(counts, *(self._in_out(p) for p in (self.ant_policy, self.spider_policy)))
+        print(format_contest(facts))
         atomic_write_bytes(self.out / "contest" / "contest.json", (json.dumps(facts, indent=2) + "\n").encode())
         return commands
+
+    def _in_out(self, policy: str) -> str:
+        """A policy path relative to the folder when it lies in it (records that stay true when it moves)."""
+        path = Path(policy).resolve()
+        return str(path.relative_to(self.out)) if path.is_relative_to(self.out) else policy
+
+    def _bug_stage(self) -> list[str]:
+        """Stage 3, after the contest rule: :class:`ContestError` on a pair that failed it (tiny: a warning)."""
+        facts = json.loads((self.out / "contest" / "contest.json").read_text())
+        if not facts["contest"]:
+            problem = (f"the pair {self.ant_policy} / {self.spider_policy} failed the contest rule: "
+                       + "; ".join(facts["failed"]) + f" ({self.out / 'contest' / 'contest.json'})")
+            if not self.cfg.tiny:
+                raise ContestError(f"stage bug refused: {problem}. Bug would learn in a match that is no contest; "
+                                   "train the pair longer or check another (--pair), then re-run")
+            print(f"  warning (tiny, not enforced): {problem}")
+        return self._train_trials(self.bug_trials())
 
     def evaluation_config(self) -> EvaluateConfig:
         return EvaluateConfig(learner="bug", policy=tuple(str(Path(t.config.out) / t.name / "policy")
@@ -457,6 +525,40 @@ def code_version() -> str:
     if code is not None:
         return f"git {code['commit'][:7]}{'-dirty' if code['dirty'] else ''}"
     return f"triplesumo {triplesumo.__version__}"
+
+
+def contest_verdict(counts: dict[str, dict[str, int]], ant: str, spider: str) -> dict[str, Any]:
+    """The contest rule on stage 2's counts (``{"ant-pushes" | "spider-pushes" | "match": {n, n_win, n_loss,
+    n_draw}}``, each from the learner's seat): every check with its value and bound, ``failed`` (one line per
+    failed check) and the verdict ``contest``."""
+    ant_push = counts["ant-pushes"]["n_win"] / counts["ant-pushes"]["n"]
+    spider_push = counts["spider-pushes"]["n_win"] / counts["spider-pushes"]["n"]
+    m = counts["match"]
+    team_mwr = (m["n_loss"] - m["n_win"]) / m["n"]  # the Spider's losses are the team's wins
+    lo, hi = CONTEST_BAND
+    failed = []
+    if ant_push < PUSH_MIN:
+        failed.append(f"the Ant pushes a passive Spider out in {ant_push:.1%} of the starts (at least {PUSH_MIN:.0%})")
+    if spider_push < PUSH_MIN:
+        failed.append(f"the Spider pushes a passive Ant out in {spider_push:.1%} of the starts "
+                      f"(at least {PUSH_MIN:.0%})")
+    if not lo <= team_mwr <= hi:
+        failed.append(f"with Bug passive the team's MWR is {team_mwr:+.3f} (the band is [{lo:+.2f}, {hi:+.2f}])")
+    return {"ant": ant, "spider": spider, "matches": m["n"], "counts": counts, "push_min": PUSH_MIN,
+            "band": list(CONTEST_BAND), "ant_pushes": ant_push, "spider_pushes": spider_push, "team_mwr": team_mwr,
+            "team_wins": m["n_loss"] / m["n"], "team_losses": m["n_win"] / m["n"], "draws": m["n_draw"] / m["n"],
+            "failed": failed, "contest": not failed}
+
+
+def format_contest(facts: dict[str, Any]) -> str:
+    """The contest checks as lines of text."""
+    lo, hi = facts["band"]
+    return "\n".join([
+        f"  Ant pushes a passive Spider out: {facts['ant_pushes']:.1%} (at least {facts['push_min']:.0%})",
+        f"  Spider pushes a passive Ant out: {facts['spider_pushes']:.1%} (at least {facts['push_min']:.0%})",
+        f"  Bug passive: team wins {facts['team_wins']:.1%}, loses {facts['team_losses']:.1%}, draws "
+        f"{facts['draws']:.1%}; team MWR {facts['team_mwr']:+.3f} (band [{lo:+.2f}, {hi:+.2f}])",
+        f"  verdict: {'a contest' if facts['contest'] else 'NOT a contest'} ({facts['matches']:,} starts each)"])
 
 
 def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:
@@ -570,11 +672,12 @@ def status(protocol: Protocol) -> list[dict[str, Any]]:
         else:  # one row for the stage; a training stage's run folder is named after it
             runs = [(stage.name, protocol.out / stage.name, stage.complete())]
         for name, folder, done in runs:
-            started = (folder / "metrics.csv").exists()
+            csv_name = "metrics-ant.csv" if stage.name == "match" else "metrics.csv"  # stage 1: two learners
+            started = (folder / csv_name).exists()
             evals = _evals(folder)
             rows.append({"stage": stage.name, "run": name,
                          "state": "complete" if done else "running or stopped" if started else "not started",
-                         "env_steps": run_facts(folder, 200)["env_steps"] if started else None,
+                         "env_steps": run_facts(folder, 200, csv_name)["env_steps"] if started else None,
                          "test_mwr": float(evals[-1]["test_mwr"]) if evals else None})
     return rows
 
@@ -615,10 +718,8 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
     def mwr(row: dict[str, str]) -> float:
         return float(row["test_mwr"])
 
-    # Ant and Spider: the stage-3 contest they were checked in (Bug passive; 95% intervals in the Spider's rows)
-    contest = {"contest": json.loads((protocol.out / "contest" / "contest.json").read_text()),
-               "opponents": [f"ant={protocol.ant_policy}", "bug=zero"],
-               **json.loads((protocol.out / "contest" / "summary.json").read_text())["candidates"]["trained"]}
+    # Ant and Spider: the stage-2 contest checks they passed (recomputable from contest/*/metrics.csv)
+    contest = {"contest": json.loads((protocol.out / "contest" / "contest.json").read_text())}
     ship: list[tuple[Path, str, dict[str, Any] | None]] = [(Path(protocol.ant_policy), "ant", None),
                                                            (Path(protocol.spider_policy), "spider", None)]
     preset = [r for r in rows if r["algo"] == "ddpg"]
@@ -640,11 +741,15 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
 
 
 # ---------------------------------------------------------------- the report
-def _run_row(protocol: Protocol, name: str) -> str:
+def _run_row(protocol: Protocol, name: str, learner: str = "") -> str:
+    """A table row of a run's training; ``learner`` names one learner of a run with several."""
     run = protocol.out / name
-    if not (run / "metrics.csv").exists():
+    csv_name = f"metrics-{learner}.csv" if learner else "metrics.csv"
+    if learner:
+        name = f"{name} ({learner})"
+    if not (run / csv_name).exists():
         return f"| {name} | - | - | - |"
-    facts = run_facts(run, 200)
+    facts = run_facts(run, 200, csv_name)
     return f"| {name} | {facts['epochs']:,} | {facts['env_steps']:,} | {facts['final_mwr']:+.3f} |"
 
 
@@ -660,37 +765,49 @@ def _ci(x: float, lo: float, hi: float) -> str:
 def report(protocol: Protocol, record: dict[str, Any]) -> str:
     """``REPRODUCTION.md`` of a reproduction folder, every number read from the files it wrote."""
     out, cfg = protocol.out, protocol.cfg
-    ring = ("`border_rim=True`: the paper's ring, whose four border cylinders collide (a solid 3 cm rim)"
-            if cfg.border_rim else "`border_rim=False`: visual-only border markers (the ring of the first shipped zoo)")
+    ring = ("`border_rim=True`: the paper's ring with its solid 3 cm rim (env v2: four boxes), agents starting "
+            "fair (each 1.0 m from its nearest edge and from the edge behind it)" if cfg.border_rim
+            else "`border_rim=False`: visual-only border markers (the ring of the first shipped zoo)")
     lines = [f"# Reproduction report ({out.name})", "",
              f"Written by `triplesumo reproduce` (code version {record['runs'][-1]['version']}) from the files in "
              f"`{out.name}/`." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
                                                     if cfg.tiny else ""), "",
              f"Ring: {ring}; every stage trained and was evaluated on it.", "",
-             "## Stages 1-2: the ongoing match", "",
-             "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |",
-             _run_row(protocol, "ant"), _run_row(protocol, "spider"), ""]
+             "## Stage 1: the ongoing match (Ant and Spider learn together, Bug passive)", "",
+             *([f"Skipped: the pair was given (`--pair {' '.join(cfg.pair)}`).", ""] if cfg.pair else [
+                 f"Pre-training reward: the paper's terms with still = {cfg.pretrain_still:g} (losing costs more than "
+                 "surviving).", "",
+                 "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |",
+                 _run_row(protocol, "match", "ant"), _run_row(protocol, "match", "spider"), ""])]
     contest_path = out / "contest" / "contest.json"
-    lines += ["## Stage 3: is it a contest? (Bug passive)", ""]
+    lines += ["## Stage 2: is it a contest?", ""]
     if contest_path.exists():
         c = json.loads(contest_path.read_text())
-        verdict = "a contest" if c["contest"] else f"**not a contest** (one side above {c['limit']:.0%})"
-        lines += [f"Neither side may win more than {c['limit']:.0%} of the test matches with Bug passive.", "",
-                  "| test matches | Spider wins | Ant wins | draws | verdict |", "| ---: | ---: | ---: | ---: | --- |",
-                  f"| {c['matches']:,} | {c['spider_wins']:.1%} | {c['ant_wins']:.1%} | {c['draws']:.1%} | {verdict} |",
-                  ""]
+        lo, hi = c["band"]
+        verdict = "a contest" if c["contest"] else "**not a contest**: the Bug stage refuses it"
+        lines += [f"On {c['matches']:,} held-out starts each (seed {cfg.contest_seed}): each side must push a passive "
+                  f"opponent out in at least {c['push_min']:.0%} of them, and with Bug passive the team's MWR must lie "
+                  f"in [{lo:+.2f}, {hi:+.2f}].", "",
+                  "| check | value | bound | |", "| --- | ---: | ---: | --- |",
+                  f"| Ant pushes a passive Spider out | {c['ant_pushes']:.1%} | >= {c['push_min']:.0%} | "
+                  f"{'ok' if c['ant_pushes'] >= c['push_min'] else 'failed'} |",
+                  f"| Spider pushes a passive Ant out | {c['spider_pushes']:.1%} | >= {c['push_min']:.0%} | "
+                  f"{'ok' if c['spider_pushes'] >= c['push_min'] else 'failed'} |",
+                  f"| team MWR, Bug passive (wins {c['team_wins']:.1%}, losses {c['team_losses']:.1%}, draws "
+                  f"{c['draws']:.1%}) | {c['team_mwr']:+.3f} | [{lo:+.2f}, {hi:+.2f}] | "
+                  f"{'ok' if lo <= c['team_mwr'] <= hi else 'failed'} |", "", f"Verdict: {verdict}.", ""]
     budget = "" if cfg.tiny else f" (budget {cfg.bug_env_steps:,} env steps per run)"
     schedule = [] if cfg.tiny else [
         "DDPG: the paper preset (one gradient step per 30 transitions); TD3 and SAC: one gradient step per "
         + (f"{cfg.bug_learn_every} transitions (`--bug-learn-every`)" if cfg.bug_learn_every
            else "transition (their default)") + "; PPO: its rollouts. The exact commands are at the end.", ""]
-    lines += [f"## Stage 4: Bug per algorithm and seed (training){budget}", "", *schedule,
+    lines += [f"## Stage 3: Bug per algorithm and seed (training){budget}", "", *schedule,
               "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |"]
     lines += [_run_row(protocol, f"bug/{t.name}") for t in protocol.bug_trials()]
     lines += [_run_row(protocol, f"ablations/{t.name}") for t in protocol.ablation_trials()] + [""]
     rows = _read_csv(out / "evaluation" / "per_seed.csv")
     epochs = rows[0]["epochs"] if rows else "-"
-    lines += [f"## Stage 5: test MWR per seed ({epochs} seeded test matches each, the same for all)", "",
+    lines += [f"## Stage 4: test MWR per seed ({epochs} seeded test matches each, the same for all)", "",
               "| run | train seed | test MWR [95% CI] | wins | losses | draws |",
               "| --- | ---: | ---: | ---: | ---: | ---: |"]
     for r in rows:
@@ -703,7 +820,7 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
     if cmp_path.exists():
         table = json.loads(cmp_path.read_text())
         pct = round(100 * table["confidence"])
-        lines += ["## Stage 6: per algorithm across seeds (IQM, stratified bootstrap)", "",
+        lines += ["## Stage 5: per algorithm across seeds (IQM, stratified bootstrap)", "",
                   f"| algorithm | seeds | per-seed test MWR | IQM [{pct}% CI] |", "| --- | ---: | --- | ---: |"]
         for g in table["groups"]:
             if g["group"] in ablated:
