@@ -81,7 +81,7 @@ def test_readme_example_runs(name: str) -> None:
             import gymnasium as gym, numpy as np, torch, triplesumo
             torch.set_num_threads(2)
             triplesumo.zoo.make_policy("zoo:ant")(np.zeros((4, 222), np.float32))
-            gym.make("TripleSumo-Paper-v1").reset(seed=0)
+            gym.make("TripleSumo-Paper-v2").reset(seed=0)
         """) + code
     run_python(code + textwrap.dedent(CHECKS[name]) + "\nprint('checked')\n")
 
@@ -93,8 +93,8 @@ def test_sb3_subproc_vec_env_with_fork_after_the_parent_built_the_env() -> None:
         from stable_baselines3.common.vec_env import SubprocVecEnv
         torch.set_num_threads(2)
         triplesumo.zoo.make_policy("zoo:spider")(np.zeros((4, 222), np.float32))
-        gym.make("TripleSumo-Paper-v1").reset(seed=0)
-        env = make_vec_env("TripleSumo-Paper-v1", n_envs=2, vec_env_cls=SubprocVecEnv,
+        gym.make("TripleSumo-Paper-v2").reset(seed=0)
+        env = make_vec_env("TripleSumo-Paper-v2", n_envs=2, vec_env_cls=SubprocVecEnv,
                            vec_env_kwargs={"start_method": "fork"}, env_kwargs={"max_steps": 3})
         env.reset()
         dones = [env.step(np.zeros((2, 8), np.float32))[2] for _ in range(3)]

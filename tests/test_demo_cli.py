@@ -24,6 +24,8 @@ from conftest import TinyZoo
 from triplesumo.agents.policy_file import load_fixed_policy, load_json, load_policy, save_policy
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.cli import main
+from triplesumo.demo import match_to_record
+from triplesumo.evaluation.evaluate import EvaluateConfig
 from triplesumo.evaluation.video import count_frames
 from triplesumo.train.logger import COLUMNS
 
@@ -70,9 +72,12 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
     assert summary["candidates"]["zoo-bug"]["policy"] == "zoo:bug"
     assert all(c["n"] == 4 for c in summary["candidates"].values())
     assert (out / "evaluation" / "compare_mwr.png").read_bytes()[:8] == PNG
-    # 3. a decodable video of one test match
+    # 3. a decodable video of one test match: the one the demo says it chose, as long as that match
+    seed, why = match_to_record(out / "evaluation" / "zoo-bug" / "metrics.csv", EvaluateConfig().seed)
+    assert f"{why} (seed {seed})" in printed
+    steps = int(why.split(" after ")[1].split()[0])
     frames = count_frames(out / "match.mp4")
-    assert 1 < frames <= DEMO_STEPS + 1
+    assert 1 < frames <= DEMO_STEPS + 1 and frames == steps + 1
     assert f"({frames} frames)" in printed
     # the end of the output says where everything is
     where = printed.split("where to look:")[1]
@@ -176,7 +181,7 @@ def test_play_with_an_unknown_policy_fails_with_exit_code_2(capsys: pytest.Captu
 
 # ---------------------------------------------------------------- the Gymnasium id
 def test_paper_env_drives_ant_and_spider_with_the_zoo_and_passes_check_env(zoo: TinyZoo) -> None:
-    env = gym.make("TripleSumo-Paper-v1")
+    env = gym.make("TripleSumo-Paper-v2")
     try:
         base = env.unwrapped
         match = base.match
@@ -197,3 +202,23 @@ def test_paper_env_drives_ant_and_spider_with_the_zoo_and_passes_check_env(zoo: 
         check_env(base, skip_render_check=True)
     finally:
         env.close()
+
+
+def test_the_demo_films_the_first_long_win_else_the_longest_win_else_the_longest_match(tmp_path: Path) -> None:
+    rows = [("loss", 300), ("win", 40), ("win", 150), ("win", 400), ("draw", 500)]
+    path = tmp_path / "metrics.csv"
+
+    def write(outcomes: list[tuple[str, int]]) -> None:
+        path.write_text("epoch,outcome,steps\n" + "".join(f"{i},{o},{n}\n" for i, (o, n) in enumerate(outcomes, 1)))
+
+    write(rows)
+    assert match_to_record(path, 10_000) == (10_002, "the first test match the team won in at least 100 steps: "
+                                                     "test match 3, win after 150 steps")
+    write(rows[:2])
+    assert match_to_record(path, 10_000)[0] == 10_001  # a short win beats no win
+    write([("loss", 30), ("draw", 500), ("loss", 80)])
+    seed, why = match_to_record(path, 5)
+    assert seed == 6 and why.startswith("the longest test match (the team won none)")
+    write([])
+    with pytest.raises(ValueError, match="no test matches"):
+        match_to_record(path, 5)

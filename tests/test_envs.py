@@ -49,7 +49,7 @@ def test_pettingzoo_aec_api_test() -> None:
 
 
 def test_gymnasium_check_env_on_registered_id() -> None:
-    env = gymnasium.make("TripleSumo-v1")
+    env = gymnasium.make("TripleSumo-v2")
     assert isinstance(env.unwrapped, TripleSumoEnv)
     gym_check_env(env.unwrapped, skip_render_check=True)
     env.close()
@@ -289,7 +289,7 @@ def test_gymnasium_view_rejects_bad_setup() -> None:
         TripleSumoEnv(max_step=10)
 
 
-@pytest.mark.parametrize("make", [lambda: parallel_env(), lambda: gymnasium.make("TripleSumo-v1")],
+@pytest.mark.parametrize("make", [lambda: parallel_env(), lambda: gymnasium.make("TripleSumo-v2")],
                          ids=["pettingzoo", "gymnasium"])
 def test_unwrapped_exposes_mujoco_model_and_data(make) -> None:
     env = make()
@@ -496,23 +496,27 @@ def test_arena_stack_overflow_is_a_physics_error() -> None:
     assert "arena_overflow" in (match.physics_error or "")
 
 
-def test_registered_ids_are_v1_and_v0_names_its_successor() -> None:
+def test_registered_ids_are_v2_and_older_ids_name_their_successor() -> None:
     from triplesumo.registration import ENV_IDS
 
-    assert triplesumo.ENV_VERSION == "v1"
-    assert "TripleSumo-v1" in gymnasium.registry and "TripleSumo-Paper-v1" in gymnasium.registry
-    assert all(i.endswith("-v1") and i in gymnasium.registry for i in ENV_IDS)
-    assert triplesumo.parallel_env().metadata["name"] == "triplesumo_v1"
-    # v0's ids are gone: Gymnasium's own error names the current one
-    with pytest.raises(gymnasium.error.DeprecatedEnv, match="TripleSumo-Paper-v1"):
-        gymnasium.make("TripleSumo-Paper-v0")
+    assert triplesumo.ENV_VERSION == "v2"
+    assert "TripleSumo-v2" in gymnasium.registry and "TripleSumo-Paper-v2" in gymnasium.registry
+    assert all(i.endswith("-v2") and i in gymnasium.registry for i in ENV_IDS)
+    assert triplesumo.parallel_env().metadata["name"] == "triplesumo_v2"
+    # v0's and v1's ids are gone: Gymnasium's own error names the current one
+    for old in ("TripleSumo-Paper-v0", "TripleSumo-Paper-v1"):
+        with pytest.raises(gymnasium.error.DeprecatedEnv, match="TripleSumo-Paper-v2"):
+            gymnasium.make(old)
 
 
-def test_v1_plays_on_the_paper_rim_and_v0_physics_is_the_visual_ring() -> None:
-    from triplesumo.model import V0_PHYSICS, PhysicsConfig
+def test_v2_plays_on_the_fair_start_and_box_rim_and_older_physics_stay_reachable() -> None:
+    from triplesumo.model import V0_PHYSICS, V1_PHYSICS, PhysicsConfig
 
     assert PhysicsConfig().border_rim and not V0_PHYSICS.border_rim
-    assert gymnasium.make("TripleSumo-v1").unwrapped.match.config.physics.border_rim
+    physics = gymnasium.make("TripleSumo-v2").unwrapped.match.config.physics
+    assert physics == PhysicsConfig() and (physics.layout, physics.rim_shape) == ("fair", "box")
+    assert (V1_PHYSICS.layout, V1_PHYSICS.rim_shape, V1_PHYSICS.border_rim) == ("circle", "cylinder", True)
+    assert gymnasium.make("TripleSumo-v2", physics=V1_PHYSICS).unwrapped.match.config.physics == V1_PHYSICS
 
 
 def test_paper_observations_are_separate_arrays_per_agent() -> None:

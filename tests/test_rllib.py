@@ -153,7 +153,7 @@ def test_frozen_module_plays_the_zoo_policy_deterministically(rllib: Any) -> Non
 
 
 def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
-    assert rllib.register_envs() == [f"triplesumo_{name}_v1" for name in triplesumo.scenarios()]
+    assert rllib.register_envs() == [f"triplesumo_{name}_v2" for name in triplesumo.scenarios()]
     env = rllib.make_env({"max_steps": 7})
     obs, _ = env.reset(seed=1)
     assert set(obs) == {"ant", "bug", "spider"} and env.observation_space["bug"].shape == (222,)

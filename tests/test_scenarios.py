@@ -45,7 +45,7 @@ def test_scenarios_are_named_and_registered() -> None:
         assert sc.gym_id in ENV_IDS and sc.gym_id in gym.registry
         env = triplesumo.parallel_env(scenario=name)
         assert env.metadata["name"] == sc.pettingzoo_name
-        assert sc.pettingzoo_name == ("triplesumo_v1" if name == "paper" else f"triplesumo_{name}_v1")
+        assert sc.pettingzoo_name == ("triplesumo_v2" if name == "paper" else f"triplesumo_{name}_v2")
         assert f"### {name}" in (TripleSumoParallelEnv.__doc__ or "")
         for section in ("## Agents", "## Rules", "## Rewards", "## Episode End"):
             assert section in sc.doc
@@ -283,7 +283,7 @@ def test_n_vs_m_rosters_from_team_sizes() -> None:
 
 
 def test_gymnasium_view_ends_when_the_learner_is_eliminated(place) -> None:
-    env = gym.make("TripleSumo-FFA-v1", reset_noise=NO_NOISE).unwrapped
+    env = gym.make("TripleSumo-FFA-v2", reset_noise=NO_NOISE).unwrapped
     env.reset(seed=0)
     match = env.match  # type: ignore[attr-defined]
     place(match, "ant", x=2.5)

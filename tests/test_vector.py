@@ -127,8 +127,8 @@ def _compare_infos(x: dict, y: dict, where: str) -> None:
 def test_make_vec_is_the_native_vector_env_and_equals_a_seeded_sync_vector_env() -> None:
     """Same game as N single envs: observations, rewards, flags and infos, exit and time limit alike."""
     kwargs = {"max_steps": 60}
-    native = gym.make_vec("TripleSumo-Paper-v1", num_envs=3, **kwargs)
-    sync = gym.make_vec("TripleSumo-Paper-v1", num_envs=3, vectorization_mode="sync",
+    native = gym.make_vec("TripleSumo-Paper-v2", num_envs=3, **kwargs)
+    sync = gym.make_vec("TripleSumo-Paper-v2", num_envs=3, vectorization_mode="sync",
                         vector_kwargs={"autoreset_mode": AutoresetMode.SAME_STEP}, **kwargs)
     assert type(native.unwrapped).__name__ == "TripleSumoVectorEnv"
     assert native.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
@@ -154,7 +154,7 @@ def test_make_vec_is_the_native_vector_env_and_equals_a_seeded_sync_vector_env()
 def test_vector_view_does_not_depend_on_num_envs_or_threads() -> None:
     runs = []
     for n, threads in ((2, 1), (4, 2)):
-        env = gym.make_vec("TripleSumo-Paper-v1", num_envs=n, num_threads=threads, max_steps=20)
+        env = gym.make_vec("TripleSumo-Paper-v2", num_envs=n, num_threads=threads, max_steps=20)
         obs, _ = env.reset(seed=3)
         rows = [obs[:2]]
         for t in range(45):
@@ -191,7 +191,7 @@ def test_sb3_trains_on_the_batched_path(algo: str) -> None:
     from stable_baselines3.common.vec_env import VecCheckNan
 
     torch.set_num_threads(1)
-    env = VecCheckNan(make_vec_env("TripleSumo-Paper-v1", n_envs=4, seed=0, max_steps=25), raise_exception=True)
+    env = VecCheckNan(make_vec_env("TripleSumo-Paper-v2", n_envs=4, seed=0, max_steps=25), raise_exception=True)
     kwargs = ({"n_steps": 25, "batch_size": 50, "n_epochs": 2} if algo == "PPO" else
               {"learning_starts": 40, "batch_size": 32})
     model = getattr(stable_baselines3, algo)("MlpPolicy", env, seed=0, policy_kwargs={"net_arch": [32, 32]},

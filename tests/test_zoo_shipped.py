@@ -13,9 +13,13 @@ import triplesumo
 from triplesumo.agents import zoo
 from triplesumo.envs.match import Match
 from triplesumo.model import V0_PHYSICS, PhysicsConfig
+from triplesumo.model.specs import physics_record
 from triplesumo.rules.scenarios import scenario_config
 
 SHIPPED = ("ant", "spider", "bug")
+PENDING_REBUILD = ("v1",)
+"""Env versions the shipped paper roster may still be from: v2's zoo is built by ``triplesumo reproduce`` (issue
+38); until then TripleSumo-Paper-v2 warns that it plays v1's pair (test_paper_env_names_a_pair_of_an_older_env)."""
 
 
 def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
@@ -37,12 +41,12 @@ def test_shipped_policy_manifest_says_how_it_was_made(name: str) -> None:
     assert manifest["command"].startswith("triplesumo train")
     assert isinstance(manifest["seed"], int)
     assert manifest["epochs"] > 0
-    assert manifest["mujoco_version"] and manifest["env_version"] in ("v0", triplesumo.ENV_VERSION)
+    assert manifest["mujoco_version"] and manifest["env_version"] in ("v0", "v1", triplesumo.ENV_VERSION)
     # the simulation it was trained on: that of its env version (a manifest without physics: v0's)
-    physics = PhysicsConfig(**manifest["physics"]) if "physics" in manifest else V0_PHYSICS
+    physics = PhysicsConfig(**physics_record(manifest["physics"])) if "physics" in manifest else V0_PHYSICS
     assert (physics == PhysicsConfig()) == (manifest["env_version"] == triplesumo.ENV_VERSION)
-    if name in SHIPPED:  # the paper roster that TripleSumo-Paper-v1 plays with is the current version's
-        assert manifest["env_version"] == triplesumo.ENV_VERSION
+    if name in SHIPPED:  # the paper roster that TripleSumo-Paper-v2 plays with: v1's until reproduce rebuilds it
+        assert manifest["env_version"] in (triplesumo.ENV_VERSION, *PENDING_REBUILD)  # on v2 (issue 38)
     assert "evaluation" in manifest
 
 
@@ -61,10 +65,20 @@ def test_shipped_policy_loads_by_name_and_acts_deterministically(name: str) -> N
     assert manifest["obs_dim"] == obs[i].shape[0]
 
 
+def test_paper_env_names_a_pair_of_an_older_env() -> None:
+    import gymnasium as gym
+
+    old = [n for n in ("ant", "spider") if zoo.load(n)[1].get("env_version") != triplesumo.ENV_VERSION]
+    if not old:
+        pytest.skip("the shipped pair is the current env version's")
+    with pytest.warns(UserWarning, match=rf"zoo:{old[0]} was trained on env v1, not {triplesumo.ENV_VERSION}"):
+        gym.make("TripleSumo-Paper-v2")
+
+
 def test_paper_env_uses_the_shipped_ant_and_spider() -> None:
     import gymnasium as gym
 
-    env = gym.make("TripleSumo-Paper-v1")
+    env = gym.make("TripleSumo-Paper-v2")
     env.reset(seed=0)
     env.step(np.zeros(8, dtype=np.float32))
     data, match = env.unwrapped.data, env.unwrapped.match

@@ -5,7 +5,9 @@
 2. Evaluate the Bug it trained, the shipped Bug (``zoo:bug``, paper-preset DDPG, 1 M env steps)
    and the passive and random Bug baselines, all in the same seeded test matches, with
    no exploration noise.
-3. Record one match of the shipped Bug with Ant against Spider as mp4.
+3. Record one match of the shipped Bug with Ant against Spider as mp4: the first of the test
+   matches of step 2 that the team won and that lasted at least :data:`MIN_VIDEO_STEPS` steps
+   (long enough to watch), or, where it won none, its longest match; the output says which.
 
 Everything lands in one folder (default ``runs/demo``); the end of the output says
 where. The full reproduction is ``triplesumo reproduce`` (see docs/REPRODUCTION.md).
@@ -17,6 +19,7 @@ evaluated against the passive and random baselines, and plays the recorded match
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +31,30 @@ from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.scenarios import get_scenario
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import holds_run, train
+
+MIN_VIDEO_STEPS = 100
+"""A recorded match lasts at least this many steps (5 s at 20 frames per second) where a win that long exists."""
+
+
+def match_to_record(metrics_csv: Path, eval_seed: int, min_steps: int = MIN_VIDEO_STEPS) -> tuple[int, str]:
+    """The reset seed of the test match to film from an evaluation's per-match rows (epoch ``i`` reset with
+    ``eval_seed + i - 1``) and why it was chosen: the first win of at least ``min_steps`` steps, else the
+    longest win, else the longest match."""
+    with metrics_csv.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    if not rows:
+        raise ValueError(f"{metrics_csv}: no test matches to choose a match to record from")
+    wins = [r for r in rows if r["outcome"] == "win"]
+    long_wins = [r for r in wins if int(r["steps"]) >= min_steps]
+    if long_wins:
+        row, why = long_wins[0], f"the first test match the team won in at least {min_steps} steps"
+    elif wins:
+        row = max(wins, key=lambda r: int(r["steps"]))
+        why = f"the longest test match the team won (none lasted {min_steps})"
+    else:
+        row, why = max(rows, key=lambda r: int(r["steps"])), "the longest test match (the team won none)"
+    return (eval_seed + int(row["epoch"]) - 1,
+            f"{why}: test match {row['epoch']}, {row['outcome']} after {row['steps']} steps")
 
 
 @dataclass(frozen=True)
@@ -100,9 +127,10 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     paths = {"run": result.run_dir, "training_plots": result.run_dir / "plots",
              "evaluation": out / "evaluation", "comparison_plot": out / "evaluation" / "compare_mwr.png"}
     if cfg.video:
-        print("[3/3] recording a test match of the shipped Bug with Ant against Spider")
+        seed, why = match_to_record(out / "evaluation" / "zoo-bug" / "metrics.csv", eval_cfg.seed)
+        print(f"[3/3] recording a test match of the shipped Bug with Ant against Spider: {why} (seed {seed})")
         video = out / "match.mp4"
-        run_play(PlayConfig(seed=eval_cfg.seed, video=str(video), max_steps=cfg.steps_per_epoch,
+        run_play(PlayConfig(seed=seed, video=str(video), max_steps=cfg.steps_per_epoch,
                             width=cfg.video_size, height=cfg.video_size,
                             policies=("bug=zoo:bug", "ant=zoo:ant", "spider=zoo:spider")))
         paths["video"] = video
