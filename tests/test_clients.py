@@ -15,7 +15,10 @@ import sys
 import textwrap
 from pathlib import Path
 
+import gymnasium as gym
 import pytest
+
+import triplesumo
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -119,4 +122,37 @@ def test_torchrl_check_env_specs_passes(obs_mode: str) -> None:
     outcome = rollout["next", "spider", "info", "outcome"].flatten()
     assert outcome[5].item() == 3 and outcome[0].item() == 0  # draw at the step limit, playing before
     assert rollout["next", "bug", "info", "out_of_ring"].dtype in (torch.bool, torch.float32)
+    env.close()
+
+
+def test_torchrl_gymenv_makes_the_registered_id_by_name() -> None:
+    """TorchRL's ``GymEnv(id)`` first passes ``frameskip``; an unknown keyword is a ``TypeError`` (and still a
+    ``ValueError`` naming the option), on which it retries without it (issue 39, item 6)."""
+    from torchrl.envs import GymEnv
+    from torchrl.envs.utils import check_env_specs
+
+    from triplesumo.rules.scenarios import UnknownOptionError
+
+    with pytest.raises(TypeError, match=r"unknown option\(s\) \['frameskip'\]"):
+        triplesumo.scenario_config("paper", frameskip=1)
+    assert issubclass(UnknownOptionError, ValueError)
+    env = GymEnv("TripleSumo-Paper-v2", max_steps=5)
+    check_env_specs(env, seed=0)
+    rollout = env.rollout(6, break_when_any_done=False)
+    assert rollout["observation"].shape == (6, 222) and rollout["next", "truncated"][4].item()
+    env.close()
+
+
+def test_torchrl_gymwrapper_takes_the_native_vector_env() -> None:
+    """``GymWrapper(gym.make_vec(...))`` reads ``env.autoreset_mode`` as an attribute (Gymnasium >= 1.1 vector envs
+    have it; issue 39, item 7)."""
+    from gymnasium.vector import AutoresetMode
+    from torchrl.envs import GymWrapper
+
+    vec = gym.make_vec("TripleSumo-Paper-v2", num_envs=4, max_steps=5)
+    assert vec.autoreset_mode == AutoresetMode.SAME_STEP == vec.metadata["autoreset_mode"]
+    env = GymWrapper(vec)
+    rollout = env.rollout(7, break_when_any_done=False)
+    assert rollout["observation"].shape == (4, 7, 222)
+    assert rollout["next", "truncated"][:, 4].all() and not rollout["next", "done"][:, 3].any()
     env.close()

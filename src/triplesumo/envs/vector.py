@@ -91,6 +91,7 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
         self._driven = [(agents.index(a), a, p) for a, p in policies.items()]
         self.num_envs = num_envs
         self.render_mode = None
+        self.autoreset_mode = AutoresetMode.SAME_STEP  # read as an attribute by Gymnasium >= 1.1 clients (TorchRL)
         self.single_observation_space = self.matches.single_observation_space
         self.single_action_space = spaces.Box(-1.0, 1.0, (self.matches.action_sizes[self._learner_index],), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)

@@ -77,6 +77,12 @@ def _check_count(field: str, value: Any, minimum: int) -> None:
         raise ValueError(f"{field} must be an integer >= {minimum}, got {value!r}")
 
 
+class UnknownOptionError(TypeError, ValueError):
+    """A keyword no scenario or :class:`MatchConfig` takes: a ``TypeError``, as Python raises for an unexpected
+    keyword argument (clients such as TorchRL's ``GymEnv`` retry without an option on that), and a
+    ``ValueError`` as every other bad option here."""
+
+
 @dataclass(frozen=True)
 class Scenario:
     """One named game: how to build its roster, and the rule fields it sets."""
@@ -107,8 +113,8 @@ class Scenario:
         unknown = sorted(set(overrides) - known - set(self.sizes))
         if unknown:
             sizes = f"; roster sizes: {sorted(self.sizes)}" if self.sizes else ""
-            raise ValueError(f"scenario {self.name!r}: unknown option(s) {unknown}; MatchConfig fields: "
-                             f"{sorted(known)}{sizes}")
+            raise UnknownOptionError(f"scenario {self.name!r} got an unexpected keyword argument {unknown[0]!r}: "
+                                     f"unknown option(s) {unknown}; MatchConfig fields: {sorted(known)}{sizes}")
         given = {k: overrides.pop(k) for k in list(overrides) if k in self.sizes}
         if given and "agents" in overrides:
             raise ValueError(f"scenario {self.name!r}: give either agents or {sorted(given)}, not both")
