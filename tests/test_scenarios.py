@@ -319,3 +319,23 @@ def test_ffa_of_two_is_a_duel(place) -> None:
     assert all(terms.values())
     assert (infos["ant"]["outcome"], infos["ant"]["reward_outcome"]) == (WIN, 500.0)
     assert (infos["bug"]["outcome"], infos["bug"]["reward_outcome"]) == (LOSS, -400.0)
+
+
+def test_an_agent_out_on_the_last_step_is_terminated_not_truncated(place) -> None:
+    """Issue 39, item 2: leaving the ring on the step that reaches the limit ends that agent's episode by the
+    rules (terminated, its outcome reward paid), in the PettingZoo view as in ``vector_env``; the agents the
+    limit stopped are truncated."""
+    env = make("ffa", max_steps=1)
+    place(env.match, "bug", x=2.5)
+    _, rewards, terms, truncs, infos = env.step(zero_actions(env))
+    assert infos["bug"]["eliminated"] and rewards["bug"] < -390
+    assert terms == {"ant": False, "bug": True, "spider": False}
+    assert truncs == {"ant": True, "bug": False, "spider": True}
+    assert env.agents == []
+
+    vec = triplesumo.vector_env(1, scenario="ffa", max_steps=1, reset_noise=NO_NOISE)
+    vec.reset(seed=0)
+    place(vec.batch.matches[0], "bug", x=2.5)
+    _, _, term, trunc, infos = vec.step(np.zeros((1, 3, 8), np.float32))
+    assert infos["eliminated"][0].tolist() == [False, True, False]
+    assert term[0].tolist() == [False, True, False] and trunc[0].tolist() == [True, False, True]

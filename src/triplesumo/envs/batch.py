@@ -615,7 +615,8 @@ class VectorMatches:
         # infos["eliminated"], until its match ends).
         a = self.n_agents
         term = np.repeat(terminated[:, None], a, 1) | result.leaving
-        return obs.copy(), result.rewards.astype(np.float32), term, np.repeat(truncated[:, None], a, 1), infos
+        trunc = np.repeat(truncated[:, None], a, 1) & ~result.leaving  # an agent out is terminated, never truncated
+        return obs.copy(), result.rewards.astype(np.float32), term, trunc, infos
 
     reset_seed: Callable[[int], int | None] | None = None
     """Who seeds slot ``k``'s next match at an autoreset: ``reset_seed(k)`` is called for each

@@ -187,12 +187,13 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
             infos = {a: result.infos[i] for a, i in zip(names, index, strict=True)}
         terms = dict.fromkeys(names, result.terminated)
         truncs = dict.fromkeys(names, result.truncated)
+        if result.eliminated is not None:  # out by the rules: terminated, even on the step the limit stops the rest
+            for a, leaving in zip(self.possible_agents, result.eliminated, strict=True):
+                if leaving:
+                    terms[a], truncs[a] = True, False
         if result.terminated or result.truncated:
             self.agents = []
         elif result.eliminated is not None:
-            for a, leaving in zip(self.possible_agents, result.eliminated, strict=True):
-                if leaving:
-                    terms[a] = True
             self.agents = self.match.agents_in_play
         if self.render_mode == "human":
             self.render()
