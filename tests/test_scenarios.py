@@ -13,7 +13,7 @@ import triplesumo
 from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.registration import ENV_IDS
 from triplesumo.rules import TERMS
-from triplesumo.rules.config import ResetNoise
+from triplesumo.rules.config import ResetNoise, RewardConfig
 from triplesumo.rules.outcome import DRAW_CODE as DRAW
 from triplesumo.rules.outcome import LOSS_CODE as LOSS
 from triplesumo.rules.outcome import WIN_CODE as WIN
@@ -240,7 +240,7 @@ def test_pursuit_evader_wins_by_pushing_every_pursuer_out_or_surviving(place) ->
     env = make("pursuit", n_pursuers=2, max_steps=2)
     env.step(zero_actions(env))
     _, _, terms, truncs, infos = env.step(zero_actions(env))
-    assert all(truncs.values()) and not any(terms.values())
+    assert all(terms.values()) and not any(truncs.values())  # a decided result at the limit is terminal (issue 39)
     assert infos["evader"]["outcome"] == WIN and infos["evader"]["place"] == 1
     assert infos["pursuer_0"]["outcome"] == LOSS and infos["pursuer_0"]["reward_outcome"] == -400.0
 
@@ -339,3 +339,18 @@ def test_an_agent_out_on_the_last_step_is_terminated_not_truncated(place) -> Non
     _, _, term, trunc, infos = vec.step(np.zeros((1, 3, 8), np.float32))
     assert infos["eliminated"][0].tolist() == [False, True, False]
     assert term[0].tolist() == [False, True, False] and trunc[0].tolist() == [True, False, True]
+
+
+def test_survivors_sharing_a_draw_at_the_limit_are_truncated_and_draw_is_refused_under_elimination() -> None:
+    """Issue 39, item 4: ``RewardConfig.draw`` is the first_out rules' draw; elimination rules pay survivors their
+    shared places, so a draw other than 0 is refused by name instead of being ignored."""
+    env = make("ffa", max_steps=1)
+    _, rewards, terms, truncs, infos = env.step(zero_actions(env))
+    assert all(truncs.values()) and not any(terms.values())
+    assert all(info["outcome"] == DRAW for info in infos.values())
+    assert {info["reward_outcome"] for info in infos.values()} == {50.0}  # places 1..3 of 3 shared
+    with pytest.raises(ValueError, match=r"reward.draw is -7.0 but rules='elimination' never pays it"):
+        triplesumo.parallel_env(scenario="ffa", reward=RewardConfig(draw=-7.0))
+    with pytest.raises(ValueError, match="never pays it"):
+        triplesumo.scenario_config("pursuit", reward=RewardConfig(draw=1.0))
+    assert triplesumo.scenario_config("paper", reward=RewardConfig(draw=-7.0)).reward.draw == -7.0

@@ -56,7 +56,10 @@ class RewardConfig:
     """Sparse reward to every agent of a losing side (elimination rules: the last place, first
     out; places between are interpolated linearly)."""
     draw: float = 0.0
-    """Sparse reward when the step limit is reached, or when both sides exit together."""
+    """Sparse reward of a draw under the ``first_out`` rules: the step limit reached, or both sides out together.
+    Under ``elimination`` rules survivors at the limit share their places instead (``win`` to ``loss``
+    interpolated, :func:`triplesumo.rules.outcome.place_value`), so ``MatchConfig`` refuses a ``draw`` other than
+    0 there rather than ignore it."""
 
     def __post_init__(self) -> None:
         for name in ("opponent_velocity", "self_velocity", "partner_velocity", "still", "win", "loss", "draw"):
@@ -138,6 +141,10 @@ class MatchConfig:
             )
         if self.rules not in RULES:
             raise ValueError(f"MatchConfig.rules must be one of {RULES}, got {self.rules!r}")
+        if self.rules == "elimination" and self.reward.draw != 0.0:
+            raise ValueError(f"MatchConfig.reward.draw is {self.reward.draw} but rules='elimination' never pays it: "
+                             "survivors at the step limit share their places (win to loss interpolated); leave "
+                             "RewardConfig.draw at 0, or set win and loss")
         if self.evader is not None:
             if self.evader not in self.agent_names:
                 raise ValueError(f"MatchConfig.evader must be one of the agents {list(self.agent_names)}, "
