@@ -171,6 +171,24 @@ def test_gae_hand_computed_with_termination_and_truncation() -> None:
     torch.testing.assert_close(mc[:, 0], torch.tensor([1.75, 1.5, 1.0]))
 
 
+def test_gae_stops_its_trace_at_a_dropped_row() -> None:
+    """Issue 39, item 3: a physics-error row (reward 0, terminated, ``valid`` 0, left out of the loss) carries
+    nothing back; the valid step before it ends at its own δ, bootstrapping from V of the state it reached (here
+    0.9 = 1 + 0.9 * 1.0 - 1.0, where the leak made it 0.9 - 0.9 * 0.5 * 1.0)."""
+    gamma, lam = 0.9, 0.5
+    r = torch.tensor([[1.0], [0.0], [2.0]])
+    v = torch.tensor([[1.0], [1.0], [0.5]])  # V(s_1) = 1.0: the state before the bad physics step
+    term = torch.tensor([[0.0], [1.0], [0.0]])  # the error row is recorded as terminated
+    trunc = torch.zeros(3, 1)
+    valid = torch.tensor([[1.0], [0.0], [1.0]])
+    next_v = torch.tensor([[1.0], [7.0], [0.0]])
+    adv = gae(r, v, next_v, term, trunc, gamma, lam, valid)
+    assert adv[0, 0].item() == pytest.approx(1 + 0.9 * 1.0 - 1.0)
+    leaked = gae(r, v, next_v, term, trunc, gamma, lam)  # without valid: the old trace through the dropped row
+    assert leaked[0, 0].item() == pytest.approx(0.9 + 0.9 * 0.5 * (0 - 1.0))
+    torch.testing.assert_close(adv[1:], leaked[1:])  # only the step before the dropped row changes
+
+
 @pytest.mark.parametrize(("advantage", "ratio", "zero"), [
     (1.0, 1.5, True), (1.0, 1.1, False), (1.0, 0.5, False),
     (-1.0, 0.5, True), (-1.0, 0.9, False), (-1.0, 1.5, False),

@@ -109,13 +109,17 @@ class PPOConfig:
 
 
 def gae(rewards: torch.Tensor, values: torch.Tensor, next_values: torch.Tensor,
-        terminated: torch.Tensor, truncated: torch.Tensor, gamma: float, lam: float) -> torch.Tensor:
+        terminated: torch.Tensor, truncated: torch.Tensor, gamma: float, lam: float,
+        valid: torch.Tensor | None = None) -> torch.Tensor:
     """Generalised advantage estimates over a ``(T, N)`` rollout (Schulman et al., 2016).
 
     ``next_values[t]`` is V of the state that followed step t (for a truncated step, its
     real final observation). ``δ_t = r_t + γ (1 - terminated_t) next_values_t - values_t``;
     ``Â_t = δ_t + γλ (1 - end_t) Â_{t+1}`` with ``end = terminated or truncated``, and
     ``Â_T = 0`` (the value of the state after the last step is in ``next_values[T-1]``).
+    A row with ``valid == 0`` (an agent already out, a physics error: left out of the loss)
+    carries nothing back: the step before it ends its trace at ``δ_t``, bootstrapping from V
+    of the state it reached, as at a truncation.
     """
     advantages = torch.zeros_like(rewards)
     carry = torch.zeros_like(rewards[0])
@@ -124,6 +128,8 @@ def gae(rewards: torch.Tensor, values: torch.Tensor, next_values: torch.Tensor,
         end = torch.maximum(terminated[t], truncated[t])
         carry = delta + gamma * lam * (1.0 - end) * carry
         advantages[t] = carry
+        if valid is not None:
+            carry = carry * valid[t]
     return advantages
 
 
@@ -267,7 +273,7 @@ class PPO(Algorithm):
         next_values = torch.cat([r["value"][1:], last_value[None]])
         next_values = torch.where(r["truncated"] > 0, r["bootstrap"], next_values)
         adv = gae(r["reward"], r["value"], next_values, r["terminated"], r["truncated"],
-                  self.config.gamma, self.config.gae_lambda)
+                  self.config.gamma, self.config.gae_lambda, r["valid"])
         return adv, adv + r["value"]
 
     def update(self, next_obs: np.ndarray | torch.Tensor) -> dict[str, float]:
