@@ -265,7 +265,7 @@ def test_ratings_move_with_results_for_teams_and_free_for_all(tmp_path: Path) ->
         ffa.record_match([[me], ["ffa-0001"], ["ffa-0002"]], [1, 2, 3])
     assert ffa.ratings[me].mu > ffa.ratings["ffa-0001"].mu > ffa.ratings["ffa-0002"].mu
     assert list(ffa.pools["ffa"].window) == [1] * 10
-    # a member in two seats is rated once, at its first seat
+    # a member in two teams of one match is rated once, at its best place
     before = ffa.ratings["ffa-0003"]
     ffa.record_match([[me], ["ffa-0003"], ["ffa-0003"]], [2, 1, 3])
     assert ffa.ratings["ffa-0003"].mu > before.mu and ffa.ratings.matches["ffa-0003"] == 1
@@ -275,12 +275,31 @@ def test_ratings_move_with_results_for_teams_and_free_for_all(tmp_path: Path) ->
     two.admit("team", 1, builtin={"ant": "passive", "bug": "passive"})
     one = league(tmp_path / "teams")
     one.admit("team", 1, builtin={"ant": "passive", "bug": "passive"})
-    two.record_seat_outcomes(["team-0002", "team-0002", "spider:learner"], ["loss", "loss", "win"])
+    two.record_seat_outcomes(["team-0002", "team-0002", "spider:learner"], ["loss", "loss", "win"],
+                             ["team", "team", "spider"])
     one.record_outcomes([["team-0002"], ["spider:learner"]], ["loss", "win"])
     assert two.state_dict()["ratings"] == one.state_dict()["ratings"]
     assert list(two.pools["spider"].window) == [1] and two.pools["team"].members[1].games == 1
     with pytest.raises(KeyError, match="ffa-0099"):
         ffa.record_match([[me], ["ffa-0099"]], [1, 2])
+
+
+def test_ffa_seats_sharing_a_member_keep_their_own_places(tmp_path: Path) -> None:
+    """Issue 39, item 1: a free-for-all pool of one member gives it both opponent seats. Seat 1 out first, the
+    learner second, seat 2 survives: the learner finished second, not first. Merging the member's seats at its
+    first seat made that a win in the admission window and rated the learner above the member."""
+    ffa = League(tmp_path, LeagueConfig(zoo=("agent=random",), sampling="latest"), {"ffa": ("agent",)})
+    member = ffa.pools["ffa"].members[0].id
+    me = League.learner("ffa")
+    ffa.record_seats([member, me, member], [3.0, 2.0, 1.0], ["ant", "bug", "spider"])
+    assert list(ffa.pools["ffa"].window) == [0]  # not first: no win
+    assert ffa.ratings[member].mu > ffa.ratings[me].mu  # rated at its best seat, ahead of the learner
+    m = ffa.pools["ffa"].members[0]
+    assert (m.games, m.wins, m.draws) == (2, 1, 0)  # the learner met both seats: beat one, lost to the other
+    ffa.record_seats([member, me, member], [2.0, 1.0, 3.0], ["ant", "bug", "spider"])
+    assert list(ffa.pools["ffa"].window) == [0, 1]  # first, alone: a win
+    with pytest.raises(ValueError, match="one place and one team per seat"):
+        ffa.record_seats([member, me], [1.0, 2.0], ["ant"])
 
 
 def test_resume_restores_the_league_exactly(tmp_path: Path) -> None:

@@ -14,7 +14,7 @@ The rules, after AlphaStar's league and RLlib's league example:
 * **Results.** :meth:`League.record_match` takes the players of a match grouped by team
   with their places (1 = first; equal places a draw). Every player is rated with openskill
   (:class:`~triplesumo.evaluation.ratings.RatingTable`, teams of any size, any number of
-  teams); a player seated twice in one match is rated once, at its first seat
+  teams); a player in two teams of one match is rated once, at its best place
   (:meth:`League.record_seats` takes one player per seat, as
   :func:`~triplesumo.evaluation.runner.play_matches` reports them). Each learner
   in the match appends 1 (it finished first, alone), its side's draw score (first, tied: a draw;
@@ -470,14 +470,19 @@ class League:
         """
         if len(teams) != len(places):
             raise ValueError(f"one place per team, got {len(teams)} teams and {len(places)} places")
-        seen: set[str] = set()
-        rated_teams, rated_places = [], []
-        for team, place in zip(teams, places, strict=True):
+        for team in teams:
             for name in team:
                 if not self._is_learner(name):
                     self.member(name)  # raises for an unknown id
-            kept = [n for n in team if n not in seen]
-            seen.update(kept)
+        # a player in several teams of one match (a member drawn for two free-for-all seats) is rated once,
+        # at its best place (openskill rates a player once per match); its other seats still count as met
+        rated_at: dict[str, int] = {}
+        for t in sorted(range(len(teams)), key=lambda u: places[u]):
+            for name in teams[t]:
+                rated_at.setdefault(name, t)
+        rated_teams, rated_places = [], []
+        for t, (team, place) in enumerate(zip(teams, places, strict=True)):
+            kept = [n for n in team if rated_at[n] == t]
             if kept:
                 rated_teams.append(kept)
                 rated_places.append(place)
@@ -499,22 +504,25 @@ class League:
                             m.wins += int(place < other_place)
                             m.draws += int(place == other_place)
 
-    def record_seats(self, players: Sequence[str], places: Sequence[float]) -> None:
-        """:meth:`record_match` from one player per seat (roster order) and each seat's place: the seats
-        of one player (a snapshot of a team drives all its seats) form one team, placed as its first seat."""
-        if len(players) != len(places):
-            raise ValueError(f"one place per seat, got {len(players)} players and {len(places)} places")
-        first: dict[str, float] = {}
-        for name, place in zip(players, places, strict=True):
-            first.setdefault(name, place)
-        self.record_match([[n] for n in first], list(first.values()))
+    def record_seats(self, players: Sequence[str], places: Sequence[float], teams: Sequence[str]) -> None:
+        """:meth:`record_match` from one player per seat (roster order), each seat's place and each seat's team
+        label: the seats of one player in one team (a snapshot of a team drives all its seats) are one entry;
+        seats are seats otherwise, each at its own place, even where two opponent seats share a member (a
+        free-for-all pool of one draws it for both), so the learner's place is its own."""
+        if not len(players) == len(places) == len(teams):
+            raise ValueError(f"one place and one team per seat, got {len(players)} players, {len(places)} places and "
+                             f"{len(teams)} teams")
+        entries: dict[tuple[str, str], float] = {}
+        for name, place, team in zip(players, places, teams, strict=True):
+            entries.setdefault((name, team), place)
+        self.record_match([[name] for name, _ in entries], list(entries.values()))
 
-    def record_seat_outcomes(self, players: Sequence[str], outcomes: Sequence[str]) -> None:
+    def record_seat_outcomes(self, players: Sequence[str], outcomes: Sequence[str], teams: Sequence[str]) -> None:
         """:meth:`record_seats` from each seat's ``win``/``loss``/``draw`` (a :class:`SeatedResult`'s outcomes)."""
         bad = [o for o in outcomes if o not in PLACE_OF_OUTCOME]
         if bad:
             raise ValueError(f"outcomes must be among {sorted(PLACE_OF_OUTCOME)}, got {bad}")
-        self.record_seats(players, [PLACE_OF_OUTCOME[o] for o in outcomes])
+        self.record_seats(players, [PLACE_OF_OUTCOME[o] for o in outcomes], teams)
 
     def record_outcomes(self, teams: Sequence[Sequence[str]], outcomes: Sequence[str]) -> None:
         """:meth:`record_match` from each team's ``win``/``loss``/``draw``."""
@@ -885,7 +893,8 @@ def league_demo(run_dir: Path, epochs: int = 40, seed: int = 0, max_steps: int =
                 continue
             team_player, spider_player = ((League.learner("team"), opponent.id) if side == "team"
                                           else (opponent.id, League.learner("spider")))
-            league.record_seat_outcomes([team_player, team_player, spider_player], res.outcomes)
+            league.record_seat_outcomes([team_player, team_player, spider_player], res.outcomes,
+                                        [a.team for a in match_cfg.agents])
             for s in league.pools:
                 if league.admit_due(s, epoch):
                     league.admit(s, epoch, builtin=learner_policies(s, epoch))

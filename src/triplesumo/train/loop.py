@@ -614,7 +614,8 @@ class Trainer:
         if not (outcomes == ERROR_CODE).any():
             players = [self.seat_members[k][i] or League.learner(self.side_of[a])
                        for i, a in enumerate(self.probe.agents)]
-            league.record_seats(players, [float(p) if int(p) > 0 else 1.0 for p in places])
+            league.record_seats(players, [float(p) if int(p) > 0 else 1.0 for p in places],
+                                [a.team for a in self.match_cfg.agents])
         for side in self.learning_sides:
             if league.admit_due(side, self.epochs_done):
                 league.admit(side, self.epochs_done, write=functools.partial(self._write_snapshot, side))
