@@ -318,9 +318,9 @@ class Match:
         all_out = not any(judged.alive)
         # a step that pays a decided result is terminal: the last team standing, or the evader surviving to the
         # limit (a win by the rules); only survivors sharing a draw at the limit are truncated
-        decided = any(judged.alive[i] and judged.outcomes[i] in (rules_outcome.WIN, rules_outcome.LOSS)
-                      for i in range(self.n_agents))
-        terminated = judged.over and (all_out or decided or len({self._team_of[i] for i in range(self.n_agents)
+        paid = any(judged.alive[i] and judged.outcomes[i] in (rules_outcome.WIN, rules_outcome.LOSS)
+                   for i in range(self.n_agents))
+        terminated = judged.over and (all_out or paid or len({self._team_of[i] for i in range(self.n_agents)
                                                                  if judged.alive[i]}) <= 1)
         truncated = judged.over and not terminated
         self._last_obs = self._observe()
