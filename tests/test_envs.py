@@ -525,3 +525,16 @@ def test_paper_observations_are_separate_arrays_per_agent() -> None:
     assert np.array_equal(obs["ant"], obs["bug"])
     obs["ant"][:] = 0.0
     assert np.abs(obs["bug"]).sum() > 0 and np.abs(obs["spider"]).sum() > 0
+
+
+def test_one_seed_gives_one_start_in_every_view() -> None:
+    """Issue 39, item 11: ``reset(seed=s)`` starts the same match in the PettingZoo view, the Gymnasium view and
+    each slot of the native vector view (seed s + k in slot k), and differs for another seed."""
+    pz, _ = triplesumo.parallel_env().reset(seed=0)
+    single, _ = gymnasium.make("TripleSumo-v2").reset(seed=0)
+    other, _ = gymnasium.make("TripleSumo-v2").reset(seed=1)
+    vec, _ = gymnasium.make_vec("TripleSumo-v2", num_envs=2).reset(seed=0)
+    np.testing.assert_array_equal(single, pz["bug"])
+    np.testing.assert_array_equal(vec[0], pz["bug"])
+    np.testing.assert_array_equal(vec[1], other)
+    assert not np.array_equal(single, other)

@@ -106,12 +106,11 @@ class TripleSumoEnv(MatchAccess, gym.Env):
             seed = int(self.np_random.integers(2**63))
             self._np_random = np.random.default_rng(seed)
         children = np.random.SeedSequence(seed).spawn(len(self.policies) + 1)
-        match_seed = int(children[0].generate_state(1, np.uint64)[0])
         for child, policy in zip(children[1:], self.policies.values(), strict=True):
             reset = getattr(policy, "reset", None)
             if callable(reset):
                 reset(seed=int(child.generate_state(1, np.uint64)[0]))
-        self._obs, infos = self.match.reset(seed=match_seed)
+        self._obs, infos = self.match.reset(seed=seed)  # one seed, one start, whatever the view
         if self.render_mode == "human":
             self.render()
         return self._obs[self._learner_index], infos[self._learner_index]

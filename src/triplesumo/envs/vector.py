@@ -108,8 +108,7 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
                 rng = np.random.default_rng()
             seed = int(rng.integers(2**63))
         self._env_rngs[k] = np.random.default_rng(seed)
-        child = np.random.SeedSequence(seed).spawn(len(self.policies) + 1)[0]
-        return int(child.generate_state(1, np.uint64)[0])
+        return seed
 
     def reset(self, *, seed: int | Sequence[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
