@@ -63,6 +63,15 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
     config = json.loads((out / "ddpg" / "config.json").read_text())
     assert config["learn"] == ["bug=ddpg"] and config["steps_per_epoch"] == 20
     assert result["command"].startswith("triplesumo bench skill") and "--target 1.0" in result["command"]
+    # the machine is named in the record and the table; a CPU-only run says its GPU figure is not measured
+    import os
+
+    from triplesumo.benchmarks.skill import format_skill
+
+    m = result["machine"]
+    assert m["cores"] == os.cpu_count() and m["backend"] == "cpu" and m["device"] == "cpu" and m["gpu"] is None
+    assert f"measured on {os.cpu_count()} CPU cores" in format_skill(result)
+    assert "GPU: not measured" in format_skill(result)
 
 
 def test_resume_raised_budget_lost_evaluation_and_lower_target(not_reached: tuple[Path, dict[str, Any]]) -> None:

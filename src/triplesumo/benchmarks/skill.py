@@ -173,7 +173,7 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
         "config": json.loads(json.dumps(dataclasses.asdict(cfg))), "depends_on": _depends(cfg),
         "command": " ".join(["triplesumo", "bench", "skill", *_dcargs.to_argv(cfg)]),
         "target": cfg.target, "eval_every": cfg.eval_every, "eval_epochs": cfg.eval_epochs,
-        "max_env_steps": cfg.max_env_steps, "algos": {}}
+        "max_env_steps": cfg.max_env_steps, "machine": machine(cfg.train), "algos": {}}
 
     for algo in cfg.algos:
         print(f"bench skill: Bug with {algo}, target test MWR {cfg.target:+.2f}")
@@ -183,6 +183,22 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
     plot_skill(result, out / PLOT)
     report(format_skill(result), result, cfg.json or None)
     return result
+
+
+def machine(train_cfg: TrainConfig) -> dict[str, Any]:
+    """Where the times were measured: the CPU (its cores), and the backend and device the matches stepped on
+    (a GPU's own name where one did; none here means no GPU figure: "not measured")."""
+    import os
+    import platform
+
+    device = train_cfg.device or ("cpu" if train_cfg.backend == "cpu" else "cuda")
+    gpu = None
+    if device.startswith("cuda"):
+        import torch
+
+        gpu = torch.cuda.get_device_name(torch.device(device)) if torch.cuda.is_available() else None
+    return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(), "backend": train_cfg.backend,
+            "device": device, "gpu": gpu, "n_threads": train_cfg.n_threads, "torch_threads": train_cfg.torch_threads}
 
 
 def plot_skill(result: dict[str, Any], path: Path) -> Path:
@@ -213,8 +229,14 @@ def plot_skill(result: dict[str, Any], path: Path) -> Path:
 
 def format_skill(result: dict[str, Any]) -> str:
     """The table printed by the bench (also the reproduction report's)."""
+    m = result.get("machine")
+    where = ("" if m is None else
+             f"measured on {m['cores']} CPU cores ({m['cpu']}), backend {m['backend']} on "
+             f"{m['gpu'] or m['device']}, {m['n_threads']} MuJoCo / {m['torch_threads']} torch threads"
+             + ("" if m["gpu"] else "; GPU: not measured"))
     lines = [f"time to skill: first test MWR >= {result['target']:+.2f} ({result['eval_epochs']} seeded test "
-             f"matches every {result['eval_every']:,} env steps, budget {result['max_env_steps']:,})", "",
+             f"matches every {result['eval_every']:,} env steps, budget {result['max_env_steps']:,})",
+             *([where] if where else []), "",
              f"{'algo':6s} {'reached':>11s} {'env steps':>11s} {'train (s)':>10s} {'with eval (s)':>13s} "
              f"{'evals':>5s}  test MWR curve"]
     for algo, e in result["algos"].items():
