@@ -156,3 +156,27 @@ def test_torchrl_gymwrapper_takes_the_native_vector_env() -> None:
     assert rollout["observation"].shape == (4, 7, 222)
     assert rollout["next", "truncated"][:, 4].all() and not rollout["next", "done"][:, 3].any()
     env.close()
+
+
+def test_the_gymnasium_and_pettingzoo_paths_do_not_import_torch() -> None:
+    """Issue 39, item 9: the zoo's fixed policies run on numpy, so making and stepping the paper env (its Ant
+    and Spider from the zoo), its vector env and the PettingZoo env never imports torch (8-17 s under load,
+    paid again by every worker process). Checked in a fresh interpreter."""
+    out = subprocess.run([sys.executable, "-c", textwrap.dedent("""
+        import sys, warnings
+        warnings.simplefilter("ignore")
+        import gymnasium as gym
+        import numpy as np
+        import triplesumo
+        env = gym.make("TripleSumo-Paper-v2")
+        env.reset(seed=0)
+        env.step(np.zeros(8, np.float32))
+        vec = gym.make_vec("TripleSumo-Paper-v2", num_envs=2)
+        vec.reset(seed=0)
+        vec.step(np.zeros((2, 8), np.float32))
+        pz = triplesumo.parallel_env()
+        pz.reset(seed=0)
+        pz.step({a: np.zeros(8, np.float32) for a in pz.agents})
+        print("torch" in sys.modules)
+    """)], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.strip() == "False", out.stdout + out.stderr

@@ -16,16 +16,18 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import torch
 from safetensors import SafetensorError
 from safetensors.numpy import load_file as load_numpy
-from safetensors.torch import load_file, save_file
 
 from triplesumo.agents.frozen import FrozenPolicy
-from triplesumo.agents.networks import Actor, ActorPolicy
-from triplesumo.agents.normalizer import ObsNormalizer
+
+if TYPE_CHECKING:  # torch is imported where torch tensors are made: playing a policy file needs numpy only
+    import torch
+
+    from triplesumo.agents.networks import Actor, ActorPolicy
+    from triplesumo.agents.normalizer import ObsNormalizer
 
 FORMAT = "triplesumo-policy/1"
 LEAGUE_FORMAT = "triplesumo-league/1"
@@ -55,6 +57,8 @@ def atomic_write_bytes(path: Path, payload: bytes) -> None:
 
 def atomic_save_tensors(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str] | None = None) -> None:
     """safetensors ``save_file`` made atomic (temp file in the same folder, then replace)."""
+    from safetensors.torch import save_file
+
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     os.close(fd)
@@ -79,6 +83,8 @@ def file_sha256(path: Path) -> str:
 
 def load_tensors(path: Path) -> dict[str, torch.Tensor]:
     """Load a safetensors file, or :class:`PolicyFileError` naming the file and the reason."""
+    from safetensors.torch import load_file
+
     path = Path(path)
     if not path.is_file():
         raise PolicyFileError(f"{path}: file not found")
@@ -168,6 +174,9 @@ def load_policy(stem: Path, expect_obs_mode: str | None = None,
     """Load a policy file pair as a torch actor (to train on, or to publish); checks the
     manifest against the weights and expectations. To drive an agent, prefer
     :func:`load_fixed_policy`."""
+    from triplesumo.agents.networks import Actor, ActorPolicy
+    from triplesumo.agents.normalizer import ObsNormalizer
+
     manifest, weights_path = _read_manifest(stem, expect_obs_mode, expect_obs_dim)
     tensors = load_tensors(weights_path)
     try:
