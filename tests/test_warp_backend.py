@@ -314,3 +314,24 @@ def test_a_snapshot_restored_into_a_fresh_batch_continues_bit_for_bit() -> None:
         assert not torch.equal(cold.step(actions[4].to(cold.device))[0], ahead[0][0])
     with pytest.raises(ValueError, match="physics of shape"):
         cold.restore([s | {"physics": s["physics"][:-1]} for s in snap], saved_obs)
+
+
+def test_both_backends_give_the_same_info_keys_dtypes_and_shapes(capfd: pytest.CaptureFixture[str]) -> None:
+    """Issue 39, item 10: code written against one backend runs on the other (``eliminated`` and ``out_of_ring``
+    were missing on Warp, its reward terms float32), and Warp's module log stays quiet unless asked for."""
+    import triplesumo
+
+    capfd.readouterr()
+    cpu = triplesumo.vector_env(2)
+    gpu = triplesumo.vector_env(2, backend="warp", device=DEVICE)
+    cpu.reset(seed=0)
+    gpu.reset(seed=0)
+    zeros = np.zeros((2, 3, 8), np.float32)
+    for _ in range(3):
+        *_, on_cpu = cpu.step(zeros)
+        *_, on_warp = gpu.step(torch.as_tensor(zeros))
+    assert set(on_cpu) == set(on_warp)
+    for key, value in on_cpu.items():
+        other = on_warp[key].cpu().numpy()
+        assert (np.asarray(value).dtype, np.asarray(value).shape) == (other.dtype, other.shape), key
+    assert "Module" not in capfd.readouterr().out  # no "Module ... load" lines without verbose

@@ -79,7 +79,9 @@ class WarpMatchBatch:
     """``num_envs`` matches of one config stepped together by MuJoCo Warp on ``device``."""
 
     def __init__(self, config: MatchConfig | None = None, num_envs: int = 16, device: str = "cuda",
-                 nconmax: int = 64, njmax: int = 320, graph: bool | None = None, seed: int | None = None) -> None:
+                 nconmax: int = 64, njmax: int = 320, graph: bool | None = None, seed: int | None = None,
+                 verbose: bool = False) -> None:
+        set_warp_verbose(verbose)
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         for name, value in (("nconmax", nconmax), ("njmax", njmax)):
@@ -298,15 +300,17 @@ class WarpMatchBatch:
             obs = self._observe(state)
             error = trouble[:, None]
             code = torch.where(error, rules_batched.ERROR_CODE, code)
-            infos: dict[str, torch.Tensor] = {
-                name: torch.where(error, 0.0, terms[name]) for name in (*TERMS, "dense_reward", "sparse_reward")}
+            infos: dict[str, torch.Tensor] = {  # float64, as the CPU backend's (the terms of float32 physics)
+                name: torch.where(error, 0.0, terms[name]).double() for name in (*TERMS, "dense_reward",
+                                                                                 "sparse_reward")}
             reward = torch.where(error, 0.0, terms["reward"])
             obs = torch.where(trouble[:, None, None], self._last_obs, obs)
             terminated = (ended & ~trouble)[:, None].expand(e, n).contiguous()
             truncated = (timed_out | trouble)[:, None].expand(e, n).contiguous()
             done = ended | timed_out | trouble
+            left = out & ~error  # first-out rules: out of the ring is eliminated, as on the CPU backend
             infos.update(outcome=code, place=_first_out_place(code), step=self.steps.clone(),
-                         final_obs=obs, _final_obs=done)
+                         out_of_ring=left, eliminated=left.clone(), final_obs=obs, _final_obs=done)
             rows = torch.nonzero(done).flatten().cpu().numpy()  # the step's one host sync
             if len(rows) and self.config.on_physics_error == "raise" and bool(trouble.any()):
                 k = int(torch.nonzero(trouble)[0])
@@ -377,6 +381,13 @@ def _first_out_place(code: torch.Tensor) -> torch.Tensor:
     match goes on (or on a physics error)."""
     won = (code == rules_batched.WIN_CODE) | (code == rules_batched.DRAW_CODE)
     return torch.where(code == rules_batched.LOSS_CODE, 2, torch.where(won, 1, 0))
+
+
+def set_warp_verbose(verbose: bool) -> None:
+    """Warp's info log (its banner and a ``Module ... load`` line per compiled module: about 47 lines on a
+    cold compile) only when asked for; warnings and errors always. A cold compile of this env's kernels takes
+    about 4 min on Warp's CPU device (seconds on a GPU) and is cached in ``~/.cache/warp``."""
+    wp.config.log_level = wp.LOG_INFO if verbose else max(wp.config.log_level, wp.LOG_WARNING)
 
 
 def make_warp_vector_env(config: MatchConfig | None, num_envs: int, device: str | None = None,
