@@ -205,3 +205,37 @@ def test_sb3_trains_on_the_batched_path(algo: str) -> None:
     assert len(model.ep_info_buffer) == len(callback.outcomes)
     assert all(e["l"] <= 25 for e in model.ep_info_buffer)
     env.close()
+
+
+@pytest.mark.parametrize("env_id", ["TripleSumo-FFA-v2", "TripleSumo-Pursuit-v2"])
+def test_make_vec_of_the_elimination_scenarios_is_a_sync_vector_of_single_matches(env_id: str) -> None:
+    """Issue 39, item 8: ``gym.make_vec`` works for every registered id in its default mode. The elimination
+    scenarios have no native vector env (a learner out ends its own episode while its match goes on), so
+    Gymnasium's SyncVectorEnv of single matches plays them; the learner's elimination ends its episode."""
+    from triplesumo.registration import ELIMINATION_SCENARIOS
+
+    assert {n for n in triplesumo.scenarios() if triplesumo.scenario_config(n).rules == "elimination"} == set(
+        ELIMINATION_SCENARIOS)
+    env = gym.make_vec(env_id, num_envs=2, max_steps=300)
+    assert isinstance(env, gym.vector.SyncVectorEnv)
+    obs, _ = env.reset(seed=0)
+    ended = 0
+    rng = np.random.default_rng(0)
+    for _ in range(320):
+        obs, reward, term, trunc, info = env.step(rng.uniform(-1, 1, (2, 8)).astype(np.float32))
+        assert env.observation_space.contains(obs) and np.isfinite(reward).all()
+        ended += int((term | trunc).sum())
+    assert ended >= 2
+    env.close()
+
+
+def test_make_vec_refusing_its_arguments_says_why_and_nothing_else() -> None:
+    """A refused ``make_vec`` raises its error and no ``AttributeError`` from ``__del__`` (issue 39, item 16)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", "import gymnasium as gym, triplesumo\n"
+                          "try:\n    gym.make_vec('TripleSumo-v2', num_envs=0)\nexcept ValueError as e:\n"
+                          "    print('refused:', e)\n"], capture_output=True, text=True, timeout=120)
+    assert "refused: num_envs" in out.stdout, out.stdout + out.stderr
+    assert "AttributeError" not in out.stderr and "Exception ignored" not in out.stderr, out.stderr

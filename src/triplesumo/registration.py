@@ -16,6 +16,11 @@ SCENARIO_IDS = {f"TripleSumo-{label}-{ENV_VERSION}": scenario
                 for label, scenario in (("FFA", "ffa"), ("Pursuit", "pursuit"), ("2v2", "2v2"), ("Bodies", "bodies"))}
 """The single-learner view of each scenario besides the paper's, the others passive unless given
 (kept in step with ``triplesumo.rules.scenarios.SCENARIOS``, checked by the tests)."""
+ELIMINATION_SCENARIOS = ("ffa", "pursuit")
+"""Scenarios under elimination rules (checked against ``triplesumo.rules.scenarios`` by the tests). Their ids have no
+native vector env: in one, a learner out ends its own episode while the match goes on, which a slot of the native
+vector view (all agents' steps in lock step) cannot express; ``gym.make_vec`` of them is Gymnasium's
+``SyncVectorEnv`` of single matches, each learner's episode ending when it is out."""
 ENV_IDS = (BASE_ID, PAPER_ID, *SCENARIO_IDS)
 """Only the current version is registered: ``gym.make`` of an older one raises Gymnasium's
 ``DeprecatedEnv``, naming the current id."""
@@ -33,5 +38,6 @@ def register_envs() -> None:
                      vector_entry_point="triplesumo.zoo:make_paper_vector_env")
     for env_id, scenario in SCENARIO_IDS.items():
         if env_id not in gym.registry:
+            native = None if scenario in ELIMINATION_SCENARIOS else "triplesumo.envs.vector:TripleSumoVectorEnv"
             gym.register(env_id, entry_point="triplesumo.envs.single:TripleSumoEnv", kwargs={"scenario": scenario},
-                         vector_entry_point="triplesumo.envs.vector:TripleSumoVectorEnv")
+                         vector_entry_point=native)

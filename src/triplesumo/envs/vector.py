@@ -163,4 +163,6 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
         return out
 
     def close_extras(self, **kwargs: Any) -> None:
-        self.matches.close()
+        matches = getattr(self, "matches", None)  # absent when __init__ refused its arguments
+        if matches is not None:
+            matches.close()
