@@ -198,6 +198,29 @@ def test_torn_last_row_is_cut_off_on_resume(tmp_path: Path) -> None:
     assert len(metrics["epoch"]) == result.epochs >= 11
 
 
+def test_a_row_torn_at_the_checkpoints_epoch_resumes_from_the_checkpoint_before(tmp_path: Path,
+                                                                                  capsys: pytest.CaptureFixture[str]
+                                                                                  ) -> None:
+    """Issue 39, item 15: the newest checkpoint is at epoch 6, whose metrics row the kill tore. The resume goes on
+    from the newest checkpoint the intact rows reach (epoch 4), cutting the rows after it, and ends exactly as an
+    uninterrupted run does; with no such checkpoint it names --start-over."""
+    whole = train(tiny(tmp_path / "whole", epochs=8, checkpoint_every=2, steps_per_epoch=5, save_replay=True)).run_dir
+    run = train(tiny(tmp_path / "torn", epochs=6, checkpoint_every=2, steps_per_epoch=5, save_replay=True)).run_dir
+    assert checkpoint.latest(run).name == "epoch-000006"
+    text = (run / "metrics.csv").read_text()
+    (run / "metrics.csv").write_text(text[: text.rindex("6,")] + "6,wi")  # row 6 torn by the kill
+    capsys.readouterr()
+    result = train(TrainConfig(), resume_dir=run, overrides={"epochs": 8})
+    assert "resuming from epoch-000004 (epoch 4)" in capsys.readouterr().out
+    assert result.epochs == 8 and rows_of(run) == rows_of(whole)
+    for folder in (run / "checkpoints").glob("epoch-*"):  # a later kill, with only checkpoints past the rows
+        if folder != checkpoint.latest(run):
+            shutil.rmtree(folder)
+    (run / "metrics.csv").write_text((run / "metrics.csv").read_text().split("\n", 1)[0] + "\n1,w")
+    with pytest.raises(checkpoint.CheckpointError, match=r"epochs 1..0 only .* --start-over"):
+        train(TrainConfig(), resume_dir=run, overrides={"epochs": 9})
+
+
 def _csv(rows: int) -> str:
     line = "{},win,1.0,12,500.0,0.0,500.0," + ",".join("0.0" for _ in COLUMNS[7:-2]) + ",100,1.5\n"
     return ",".join(COLUMNS) + "\n" + "".join(line.format(i) for i in range(1, rows + 1))

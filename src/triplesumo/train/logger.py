@@ -62,10 +62,24 @@ def repair_metrics_csv(path: Path, keep_through: int | None = None, columns: tup
     ``columns``, ``row_problem(row, number)`` (why a row is not row ``number``, or None) and
     ``what`` (the table's name in errors).
     """
-    row_problem = row_problem or _row_problem
-    path = Path(path)
+    good, complete, whole = _finished_rows(Path(path), keep_through, columns, row_problem or _row_problem, what)
+    if not whole:
+        with writing(path):
+            atomic_write_bytes(path, ("\n".join(complete[: good + 1]) + "\n").encode("utf-8"))
+    return good
+
+
+def intact_rows(path: Path, columns: tuple[str, ...] = COLUMNS,
+                row_problem: Callable[[list[str], int], str | None] | None = None, what: str = "metrics CSV") -> int:
+    """How many finished rows :func:`repair_metrics_csv` would keep, without changing the file (its errors alike)."""
+    return _finished_rows(Path(path), None, columns, row_problem or _row_problem, what)[0]
+
+
+def _finished_rows(path: Path, keep_through: int | None, columns: tuple[str, ...],
+                   row_problem: Callable[[list[str], int], str | None], what: str) -> tuple[int, list[str], bool]:
+    """The finished rows a table keeps, its complete lines, and whether it holds nothing else (no rewrite)."""
     if not path.exists():
-        return 0
+        return 0, [], True
     data = path.read_bytes()
     try:
         text = data.decode("utf-8")
@@ -87,10 +101,7 @@ def repair_metrics_csv(path: Path, keep_through: int | None = None, columns: tup
                                  f"follow it; fix or delete that line by hand, nothing was changed")
             break
         good += 1
-    if good + 1 < len(complete) or lines[-1] != "":
-        with writing(path):
-            atomic_write_bytes(path, ("\n".join(complete[: good + 1]) + "\n").encode("utf-8"))
-    return good
+    return good, complete, not (good + 1 < len(complete) or lines[-1] != "")
 
 
 LEARNING_COLUMNS = ("epoch", "updates", "actor_loss", "critic_loss", "q_mean", "entropy", "alpha", "alpha_loss",
@@ -100,7 +111,7 @@ stats its algorithm reported over the updates since the previous row (empty: non
 rows of a run resumed from before this file existed are all empty)."""
 
 
-def _learning_row_problem(row: list[str], epoch: int) -> str | None:
+def learning_row_problem(row: list[str], epoch: int) -> str | None:
     """Why ``row`` is not the finished learning row of ``epoch`` (None if it is)."""
     if len(row) != len(LEARNING_COLUMNS):
         return f"{len(row)} fields, expected {len(LEARNING_COLUMNS)}"
@@ -215,7 +226,7 @@ class MetricsLog:
                                   _row_problem, resume_epoch if resume_rows is None else resume_rows[a],
                                   "metrics CSV") for a in agents}
         self.learning = {n: _Table(Path(run_dir) / run_file("learning", n, self.several, ".csv"), LEARNING_COLUMNS,
-                                   _learning_row_problem, resume_epoch, "learning CSV", backfill=True)
+                                   learning_row_problem, resume_epoch, "learning CSV", backfill=True)
                          for n in learners}
         self.evals = {} if evaluations is None else {
             n: _Table(Path(run_dir) / run_file("eval", n, self.several, ".csv"), EVAL_COLUMNS, _eval_row_problem,

@@ -44,7 +44,7 @@ import shlex
 import threading
 import time
 import warnings
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -84,7 +84,7 @@ from triplesumo.train.learners import (
     make_learner,
 )
 from triplesumo.train.legs import LEGS_FILE, legs_before, make_leg, read_legs, write_legs
-from triplesumo.train.logger import MetricsLog, run_file
+from triplesumo.train.logger import COLUMNS, LEARNING_COLUMNS, MetricsLog, intact_rows, learning_row_problem, run_file
 
 
 @dataclass
@@ -1100,6 +1100,34 @@ class Trainer:
     def _needs_replay(self) -> bool:
         return self.cfg.save_replay and any(isinstance(lr, OffPolicyLearner) for lr in self.learners)
 
+    def _checkpoint_within_rows(self, folder: Path) -> Path:
+        """``folder`` (the latest checkpoint), or, where a kill tore the run's last rows at or before its epoch,
+        the newest checkpoint that the intact rows reach (the rows after it are cut and its epochs trained
+        again, as the torn-row repair promises); ``CheckpointError`` names ``--start-over`` when none does.
+        Self-play runs, whose agents may sit matches out, keep the check of their own tables."""
+        epoch = checkpoint.recorded_epoch(folder)
+        if self.league is not None or epoch is None:
+            return folder
+        learners = [s.name for s in self.specs]
+        several = len(self.agents) > 1 or len(learners) > 1 or self.agents != learners
+        tables: list[tuple[Path, tuple[str, ...], Callable[[list[str], int], str | None] | None]] = [
+            (self.run_dir / run_file("metrics", a, several, ".csv"), COLUMNS, None) for a in self.agents]
+        tables += [(self.run_dir / run_file("learning", n, several, ".csv"), LEARNING_COLUMNS, learning_row_problem)
+                   for n in learners]
+        rows = min(intact_rows(path, columns, problem) for path, columns, problem in tables if path.exists())
+        if rows >= epoch:
+            return folder
+        fits = [(e, f) for e, f in checkpoint.checkpoints(self.run_dir) if e <= rows]
+        if not fits:
+            raise checkpoint.CheckpointError(
+                f"{self.run_dir}: its tables hold the rows of epochs 1..{rows} only (a kill tore the rest), but every "
+                f"checkpoint is later (the newest at epoch {epoch}): nothing to resume from; `triplesumo train "
+                f"--resume {self.run_dir} --start-over` trains it again from the start")
+        e, chosen = fits[-1]
+        print(f"resume: the run's tables hold epochs 1..{rows} (a kill tore the rest) and the latest checkpoint is "
+              f"at epoch {epoch}; resuming from {chosen.name} (epoch {e}), the newest within them")
+        return chosen
+
     def _restore(self, from_checkpoint: str | None) -> None:
         need_replay = self._needs_replay()
         if from_checkpoint is not None:
@@ -1107,7 +1135,7 @@ class Trainer:
             loaded = checkpoint.load(folder, need_replay=need_replay)
         else:
             try:
-                folder = checkpoint.latest(self.run_dir)
+                folder = self._checkpoint_within_rows(checkpoint.latest(self.run_dir))
                 loaded = checkpoint.load(folder, need_replay=need_replay)
             except checkpoint.CheckpointError as exc:
                 intact = checkpoint.newest_intact(self.run_dir)
