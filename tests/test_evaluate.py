@@ -35,7 +35,7 @@ from triplesumo.evaluation.evaluate import (
     play_test_epochs,
 )
 from triplesumo.evaluation.metrics import OUTCOMES, summarize
-from triplesumo.model.specs import PhysicsConfig
+from triplesumo.model.specs import V0_PHYSICS, V1_PHYSICS
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import DENSE_TERMS
 from triplesumo.train.logger import COLUMNS
@@ -331,7 +331,9 @@ def test_resume_refuses_what_would_change_the_rows(
     with pytest.raises(ValueError, match="candidate 'trained'"):
         evaluate(dataclasses.replace(cfg, resume=True, policy=("zoo:bug",)))
     with pytest.raises(ValueError, match="physics was .*'border_rim': True.*, now None"):  # the v0 ring
-        evaluate(dataclasses.replace(cfg, resume=True, physics=PhysicsConfig(border_rim=False)))
+        evaluate(dataclasses.replace(cfg, resume=True, physics=V0_PHYSICS))
+    with pytest.raises(ValueError, match="physics was .*'layout': 'fair'.*, now .*'layout': 'circle'"):  # v1's
+        evaluate(dataclasses.replace(cfg, resume=True, physics=V1_PHYSICS))
     # The same path, other contents: the policy file was retrained in place.
     stem = tmp_path / "bug"
     for suffix in (".json", ".safetensors"):

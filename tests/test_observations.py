@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from triplesumo.envs.match import Match
-from triplesumo.model import AgentSpec
+from triplesumo.model import AgentSpec, PhysicsConfig
 from triplesumo.rules import MatchConfig, ResetNoise
 
 
@@ -63,8 +63,10 @@ def test_egocentric_observations_equal_the_reference_over_a_rollout(agents) -> N
 
 
 def test_egocentric_frame_puts_the_ring_centre_ahead() -> None:
-    """At a noise-free start every agent faces the centre: the others are ahead (+x), left and right (+-y)."""
-    match = Match(MatchConfig(obs_mode="egocentric", reset_noise=ResetNoise(0, 0, 0, 0)))
+    """At a noise-free start on the circle layout every agent faces the centre: the others are ahead (+x), left
+    and right (+-y). (The fair layout turns each agent 45 degrees off the centre.)"""
+    match = Match(MatchConfig(obs_mode="egocentric", reset_noise=ResetNoise(0, 0, 0, 0),
+                              physics=PhysicsConfig(layout="circle")))
     obs, _ = match.reset(seed=0)
     structure = match.observer.structure
     for agent, o in zip(match.agents, obs, strict=True):

@@ -501,7 +501,8 @@ def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_v0_
         rim.batch.close()
     saved = config_to_json(tiny(tmp_path))
     del saved["physics"]  # a run folder written before the field existed: env v0's visual ring, as it ran
-    assert config_from_json(saved).physics == V0_PHYSICS == PhysicsConfig(border_rim=False)
+    assert config_from_json(saved).physics == V0_PHYSICS == PhysicsConfig(border_rim=False, layout="circle",
+                                                                            rim_shape="cylinder")
     with pytest.raises(ValueError, match="PhysicsConfig.frame_skip"):
         config_from_json({**config_to_json(tiny(tmp_path)), "physics": {**asdict(PhysicsConfig()), "frame_skip": 0}})
 

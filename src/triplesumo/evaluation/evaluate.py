@@ -49,7 +49,7 @@ from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import mean_interval
 from triplesumo.evaluation.video import check_writable
-from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train.logger import COLUMNS, repair_metrics_csv
@@ -654,6 +654,8 @@ def _read_record(path: Path) -> dict[str, Any]:
             raise ValueError("missing or malformed entries")
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"cannot resume {folder}: {path} is unreadable or corrupt ({exc})") from None
+    if "physics" in old["rows_depend_on"]:  # recorded before a PhysicsConfig field existed: as those runs played
+        old["rows_depend_on"] = {**old["rows_depend_on"], "physics": physics_record(old["rows_depend_on"]["physics"])}
     return dict(old)
 
 

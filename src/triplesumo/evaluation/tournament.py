@@ -83,7 +83,7 @@ from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Elo, RatingT
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import wilson_interval
 from triplesumo.evaluation.video import check_writable
-from triplesumo.model.specs import PhysicsConfig
+from triplesumo.model.specs import PhysicsConfig, physics_record
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config, scenarios
 from triplesumo.rules.teams import Teams
@@ -465,6 +465,9 @@ def _check_resumable(path: Path, record: dict[str, Any]) -> None:
     try:
         old = json.loads(path.read_text(encoding="utf-8"))
         old_fields, old_entries = old["rows_depend_on"], old["entries"]
+        match = old_fields.get("match")
+        if isinstance(match, dict) and isinstance(match.get("physics"), dict):  # recorded before a physics field
+            old_fields = {**old_fields, "match": {**match, "physics": physics_record(match["physics"])}}
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"cannot resume {folder}: {path} is unreadable or corrupt ({exc})") from None
     for name, value in record["rows_depend_on"].items():
