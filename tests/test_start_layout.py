@@ -84,7 +84,7 @@ def test_no_leg_rests_on_the_rim_at_a_fair_start(scenario: str, sizes: dict) -> 
     """Zero actions for 15 steps from a noise-free and a noisy start: no agent geom touches a border geom
     (env v1's start put every agent's legs on it), and every body's zero pose is clear of it."""
     cfg = scenario_config(scenario, **sizes)
-    for noise in (ResetNoise(0, 0, 0, 0), ResetNoise()):
+    for noise in (ResetNoise(0, 0, 0, 0), None):  # noise-free, and the fair layout's own noise
         match = Match(MatchConfig(agents=cfg.agents, reset_noise=noise))
         match.reset(seed=3)
         border = {match.model.geom(n).id for n in mjcf_names.BORDER_GEOMS}
@@ -147,3 +147,15 @@ def test_old_records_read_back_as_the_circle_and_the_cylinder() -> None:
         PhysicsConfig(layout="square")
     with pytest.raises(ValueError, match="PhysicsConfig.rim_shape must be one of"):
         PhysicsConfig(rim_shape="torus")
+
+
+def test_each_layout_brings_its_own_reset_noise() -> None:
+    """A match config that names no noise gets its layout's: the fair start's small noise (edge distances within
+    5 cm), v1's 0.1 m and 0.1 rad on the circle, so that V1_PHYSICS replays env v1 exactly."""
+    from triplesumo.rules.config import LAYOUT_NOISE
+
+    assert MatchConfig().reset_noise == LAYOUT_NOISE["fair"] == ResetNoise(position=0.02, yaw=0.05)
+    assert MatchConfig(physics=V1_PHYSICS).reset_noise == ResetNoise() == ResetNoise(0.1, 0.1, 0.1, 0.1)
+    assert MatchConfig(physics=V1_PHYSICS, reset_noise=ResetNoise(0, 0, 0, 0)).reset_noise.position == 0
+    with pytest.raises(ValueError, match="MatchConfig.reset_noise must be a ResetNoise"):
+        MatchConfig(reset_noise=0.1)  # type: ignore[arg-type]

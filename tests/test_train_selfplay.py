@@ -252,7 +252,7 @@ def both(out: Path, epochs: int = 16) -> TrainConfig:
     return TrainConfig(name="both", out=str(out), epochs=epochs, steps_per_epoch=20, n_envs=2, checkpoint_every=8,
                        seed=3, ddpg=DDPG, progress=False, tensorboard=False, self_play=True, league=BOTH_LEAGUE,
                        learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"), share="team", obs_mode="egocentric",
-                       physics=PhysicsConfig(start_radius=1.7))
+                       physics=PhysicsConfig(layout="circle", start_radius=1.7))
 
 
 @pytest.fixture(scope="module")

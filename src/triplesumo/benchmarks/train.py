@@ -279,14 +279,16 @@ def update_profile(variants: dict[str, Any], seed: int) -> dict[str, dict[str, d
 def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1, rounds: int = 3,
                         chunk: int = 2000, policies: tuple[str, ...] = ("ant=random", "spider=random"),
                         seed: int = 0, learning_starts: int = 1000, sb3: bool = True,
-                        algo_steps: int | None = 2048, update_steps: bool = True) -> dict[str, Any]:
+                        algo_steps: int | None = 2048, update_steps: bool = True,
+                        steps_per_epoch: int = 500) -> dict[str, Any]:
     """Measure env-only, paper-preset training and (optionally) SB3 DDPG, then (unless
     ``algo_steps`` is None) TD3, SAC, PPO and three learners at once against SB3's same
     algorithms, then (``update_steps``) the cost of one gradient step of each, split by phase
     (:func:`update_profile`); returns a JSON-able dict."""
     torch.set_num_threads(1)
     base = TrainConfig(name="bench", policies=policies, n_envs=n_envs, n_threads=n_threads, seed=seed,
-                       progress=False, tensorboard=False, save_replay=False, epochs=10**9)
+                       progress=False, tensorboard=False, save_replay=False, epochs=10**9,
+                       steps_per_epoch=steps_per_epoch)
     tmp = tempfile.TemporaryDirectory(prefix="triplesumo-bench-")
     root = Path(tmp.name)
     variants: dict[str, Any] = {
@@ -591,13 +593,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--device {args.device} needs --backend warp")
     args.policies = args.policies or ["ant=random", "spider=random"]
     args.steps, args.envs = args.steps or 6000, args.envs or 16
-    if args.quick:
+    steps_per_epoch = 500
+    if args.quick:  # (matches of 24 steps: some end within the 64 measured, however far from the edges they start)
         args.steps, args.envs, args.rounds, args.chunk, learning_starts = 64, 2, 1, 32, 32
-        args.algo_steps = 64
+        args.algo_steps, steps_per_epoch = 64, 24
     result = run_train_benchmark(steps=args.steps, n_envs=args.envs, n_threads=args.threads, rounds=args.rounds,
                                  chunk=args.chunk, policies=tuple(args.policies), seed=args.seed,
                                  learning_starts=learning_starts, sb3=not args.no_sb3,
                                  algo_steps=None if args.no_algos else args.algo_steps,
-                                 update_steps=not args.no_update_profile)
+                                 update_steps=not args.no_update_profile, steps_per_epoch=steps_per_epoch)
     report(format_table(result), result, args.json)
     return 0

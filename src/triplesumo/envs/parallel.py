@@ -125,12 +125,12 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
       that no leg rests on the rim; v1's circle of 1.4 m started the Ant 0.60 m from the edge
       behind it and the others 0.79 m from theirs). The rim is four boxes of the cylinders'
       height and width (``PhysicsConfig.rim_shape="box"``): MuJoCo Warp and MuJoCo part on a
-      cylinder once legs touch it. Reset noise on torso positions and headings is
-      ``ResetNoise(position=0.02, yaw=0.05)`` (was 0.1 and 0.1) so that it keeps the agents'
-      edge distances within 5 cm of each other. Ids and names end in ``-v2`` / ``_v2``; making
-      a ``-v1`` id raises Gymnasium's ``DeprecatedEnv`` naming the ``-v2`` id.
-      ``triplesumo.model.V1_PHYSICS`` (with ``ResetNoise(position=0.1, yaw=0.1)``) is v1's
-      simulation, on which the v1 zoo was trained.
+      cylinder once legs touch it. The fair start's reset noise on torso positions and headings
+      is ``ResetNoise(position=0.02, yaw=0.05)`` (v1's circle: 0.1 and 0.1) so that it keeps the
+      agents' edge distances within 5 cm of each other (``MatchConfig.reset_noise`` left out is
+      the layout's). Ids and names end in ``-v2`` / ``_v2``; making a ``-v1`` id raises
+      Gymnasium's ``DeprecatedEnv`` naming the ``-v2`` id. ``triplesumo.model.V1_PHYSICS`` is
+      v1's simulation, start and noise, on which the v1 zoo was trained.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "name": f"triplesumo_{ENV_VERSION}", "is_parallelizable": True,

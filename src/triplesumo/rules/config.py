@@ -74,11 +74,10 @@ class RewardConfig:
 class ResetNoise:
     """Seeded noise added to the documented start pose at every reset."""
 
-    position: float = 0.02
-    """Half-width (m) of the uniform noise on each torso's x and y (env v0, v1: 0.1). Small enough
-    that the agents' distances to the ring's edges stay within 5 cm of each other."""
-    yaw: float = 0.05
-    """Half-width (rad) of the uniform noise on each torso's heading (env v0, v1: 0.1)."""
+    position: float = 0.1
+    """Half-width (m) of the uniform noise on each torso's x and y."""
+    yaw: float = 0.1
+    """Half-width (rad) of the uniform noise on each torso's heading."""
     joints: float = 0.1
     """Half-width (rad) of the uniform noise on each leg joint angle."""
     velocity: float = 0.1
@@ -91,6 +90,10 @@ class ResetNoise:
                 raise ValueError(f"ResetNoise.{name} must be finite and >= 0, got {value!r}")
 
 
+LAYOUT_NOISE = {"fair": ResetNoise(position=0.02, yaw=0.05), "circle": ResetNoise()}
+"""The reset noise of each start layout (``PhysicsConfig.layout``) where a match config names none."""
+
+
 @dataclass(frozen=True)
 class MatchConfig:
     """Everything that defines one TripleSumo match."""
@@ -101,8 +104,11 @@ class MatchConfig:
     """MuJoCo options (timestep, integrator, physics steps per env step)."""
     reward: RewardConfig = field(default_factory=RewardConfig)
     """Reward weights."""
-    reset_noise: ResetNoise = field(default_factory=ResetNoise)
-    """Start-pose noise; all zeros gives an identical start every reset."""
+    reset_noise: ResetNoise = None  # type: ignore[assignment]  # (None: the layout's, set in __post_init__)
+    """Start-pose noise; all zeros gives an identical start every reset. Left out (None), the layout's
+    (:data:`LAYOUT_NOISE`): on the fair start (env v2) torsos move at most 2 cm and turn at most 0.05 rad, so
+    that the agents' distances to the edges stay within 5 cm of each other; on env v0/v1's circle, 0.1 and
+    0.1, as those versions ran (so their physics, ``V1_PHYSICS``, replays them exactly)."""
     max_steps: int = 500
     """Step limit of a match; reaching it is a draw (truncation)."""
     obs_mode: str = "paper"
@@ -123,6 +129,11 @@ class MatchConfig:
     observe; 0 observes it exactly."""
 
     def __post_init__(self) -> None:
+        if self.reset_noise is None:
+            object.__setattr__(self, "reset_noise", LAYOUT_NOISE[self.physics.layout])
+        if not isinstance(self.reset_noise, ResetNoise):
+            raise ValueError(f"MatchConfig.reset_noise must be a ResetNoise (or None: the layout's), "
+                             f"got {self.reset_noise!r}")
         if not isinstance(self.agents, tuple) or not all(isinstance(a, AgentSpec) for a in self.agents):
             raise ValueError("MatchConfig.agents must be a tuple of AgentSpec")
         validate_roster(self.agents)
