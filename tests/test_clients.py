@@ -16,6 +16,7 @@ import textwrap
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
 import triplesumo
@@ -180,3 +181,29 @@ def test_the_gymnasium_and_pettingzoo_paths_do_not_import_torch() -> None:
         print("torch" in sys.modules)
     """)], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.strip() == "False", out.stdout + out.stderr
+
+
+def test_a_lean_info_level_keeps_the_outcome_for_torchrl() -> None:
+    """Issue 39, item 13: ``info_level="outcome"`` keeps outcome, place and eliminated (at reset and every step,
+    the same keys and types, as TorchRL's PettingZooWrapper needs) and passes its spec check; the full infos
+    hold every reward term besides. Its speed-up is a benchmark figure (the issue note), not a test."""
+    from torchrl.envs import PettingZooWrapper
+    from torchrl.envs.utils import check_env_specs
+
+    lean = triplesumo.parallel_env(info_level="outcome", max_steps=6)
+    _, infos = lean.reset(seed=0)
+    assert all(set(i) == {"outcome", "place", "eliminated"} for i in infos.values())
+    *_, infos = lean.step({a: lean.action_space(a).sample() for a in lean.agents})
+    assert all(set(i) == {"outcome", "place", "eliminated"} for i in infos.values())
+    full = triplesumo.parallel_env(max_steps=6)
+    full.reset(seed=0)
+    assert {"reward_still", "reward_outcome", "step"} <= set(full.step(
+        {a: np.zeros(8, np.float32) for a in full.agents})[4]["bug"])
+    with pytest.raises(ValueError, match="info_level must be one of"):
+        triplesumo.parallel_env(info_level="none")
+    env = PettingZooWrapper(triplesumo.parallel_env(info_level="outcome", max_steps=6), return_state=True)
+    check_env_specs(env, seed=0)
+    rollout = env.rollout(8, break_when_any_done=False)
+    assert set(rollout["next", "bug", "info"].keys()) == {"outcome", "place", "eliminated"}
+    assert rollout["next", "bug", "info", "outcome"].flatten()[5].item() == 3  # a draw at the step limit
+    env.close()
