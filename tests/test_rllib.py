@@ -200,3 +200,29 @@ def test_core_never_imports_ray_and_a_missing_ray_names_the_extra() -> None:
                "    except ImportError as e:\n        print(e)\n")
     out = subprocess.run([sys.executable, "-c", blocked], check=True, capture_output=True, text=True).stdout
     assert out.count('pip install "triplesumo[ray]"') == 2, out
+
+
+@pytest.mark.parametrize("obs_mode", ["paper", "egocentric"])
+def test_rllibs_env_checker_passes_every_scenario_without_a_warning(obs_mode: str,
+                                                                    caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 39, item 12: RLlib's own checker (reset and step observations inside their spaces, float32 as the
+    spaces say) on every scenario, warning-free; the observations it saw are checked here too."""
+    import logging
+
+    from ray.rllib.utils.pre_checks.env import check_multiagent_environments
+
+    from triplesumo.integrations import rllib
+
+    for scenario in triplesumo.scenarios():
+        extra = {"evader_obs_noise": 0.5} if scenario == "pursuit" else {}
+        env = rllib.make_env({"max_steps": 5, "obs_mode": obs_mode, **extra}, scenario=scenario)
+        with caplog.at_level(logging.WARNING):
+            check_multiagent_environments(env)
+        obs, _ = env.reset(seed=1)
+        for agent, o in obs.items():
+            assert o.dtype == np.float32 and env.observation_space[agent].contains(o), (scenario, agent)
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING], caplog.text
+    lean = rllib.make_env({"max_steps": 5, "info_level": "outcome"})
+    lean.reset(seed=0)
+    *_, infos = lean.step({a: lean.get_action_space(a).sample() for a in lean.get_agent_ids()})
+    assert set(infos["bug"]) == {"outcome", "place", "eliminated"}

@@ -129,12 +129,17 @@ class TripleSumoMultiAgentEnv(ParallelPettingZooEnv):
     """
 
     def __init__(self, env_config: Mapping[str, Any] | None = None) -> None:
-        super().__init__(TripleSumoParallelEnv(match_config_from(env_config)))
+        cfg = dict(env_config or {})
+        info_level = cfg.pop("info_level", "full")  # "outcome": lean infos (outcome, place, eliminated)
+        super().__init__(TripleSumoParallelEnv(match_config_from(cfg), info_level=info_level))
 
 
 def make_env(env_config: Mapping[str, Any] | None = None, scenario: str = "paper") -> TripleSumoMultiAgentEnv:
-    """An RLlib multi-agent env of one match of ``scenario`` (see :func:`match_config_from`)."""
-    return TripleSumoMultiAgentEnv({"match_config": match_config_from(env_config, scenario)})
+    """An RLlib multi-agent env of one match of ``scenario`` (see :func:`match_config_from`); an ``info_level``
+    entry (``"full"``, ``"outcome"``) sets how much its infos say (``TripleSumoParallelEnv``)."""
+    cfg = dict(env_config or {})
+    info_level = cfg.pop("info_level", "full")
+    return TripleSumoMultiAgentEnv({"match_config": match_config_from(cfg, scenario), "info_level": info_level})
 
 
 def _creator(scenario: str) -> Any:
