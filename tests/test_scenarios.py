@@ -354,3 +354,29 @@ def test_survivors_sharing_a_draw_at_the_limit_are_truncated_and_draw_is_refused
     with pytest.raises(ValueError, match="never pays it"):
         triplesumo.scenario_config("pursuit", reward=RewardConfig(draw=1.0))
     assert triplesumo.scenario_config("paper", reward=RewardConfig(draw=-7.0)).reward.draw == -7.0
+
+
+@pytest.mark.parametrize(("sizes", "message"), [
+    ({"scenario": "ffa", "n_agents": 100}, r"n_agents 100 makes a roster of 100 agents; at most 8"),
+    ({"scenario": "pursuit", "n_pursuers": 100}, r"n_pursuers 100 makes a roster of 101 agents"),
+    ({"scenario": "2v2", "team_sizes": (50, 50)}, r"team_sizes \(50, 50\) make a roster of 100 agents"),
+])
+def test_oversized_rosters_are_refused_by_their_size_before_any_model_is_built(sizes: dict, message: str) -> None:
+    """Issue 39, item 16: ffa with 100 agents took 891 s to refuse (the layout searched first); the size is now
+    checked before anything is built, and the error names the option."""
+    with pytest.raises(ValueError, match=message):
+        triplesumo.parallel_env(**sizes)
+
+
+def test_complex_actions_and_overflowing_noise_are_refused() -> None:
+    """Issue 39, item 16 S: complex actions lost their imaginary part in ``parallel_env`` and ``vector_env`` (the
+    Gymnasium view refused them), and ``evader_obs_noise=1e308`` gave inf observations."""
+    env = make("paper")
+    with pytest.raises(ValueError, match="action of 'ant' must be real numbers, got complex"):
+        env.step({a: np.zeros(8) + 0.5j for a in env.agents})
+    vec = triplesumo.vector_env(2)
+    vec.reset(seed=0)
+    with pytest.raises(ValueError, match="actions must be real numbers, got complex"):
+        vec.step(np.zeros((2, 3, 8), np.complex64))
+    with pytest.raises(ValueError, match=r"evader_obs_noise must be in \[0, 100\]"):
+        triplesumo.parallel_env(scenario="pursuit", evader_obs_noise=1e308)

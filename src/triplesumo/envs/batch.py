@@ -289,6 +289,9 @@ class MatchBatch:
     def _checked_shape(self, actions: np.ndarray) -> np.ndarray:
         """``actions`` as float64 ``(n_matches, n_agents, action_width)``; ``ValueError`` for another shape,
         ``RuntimeError`` if a match is over."""
+        if np.iscomplexobj(actions) or getattr(actions, "is_complex", lambda: False)():
+            raise ValueError("actions must be real numbers, got complex values (their imaginary parts would be "
+                             "dropped)")
         actions = np.asarray(actions, dtype=np.float64)
         expected = (self.n_matches, self.n_agents, self.action_width)
         if actions.shape != expected:

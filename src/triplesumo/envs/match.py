@@ -160,8 +160,10 @@ class Match:
                 padded[i, :self.action_sizes[i]] = self.check_action(a, actions[a])
             return padded
         try:
+            if any(np.iscomplexobj(actions[a]) for a in agents):
+                raise TypeError("complex")  # numpy would drop the imaginary part: let check_action refuse it
             stacked = np.array([actions[a] for a in agents], dtype=np.float64)
-        except (TypeError, ValueError):  # ragged or not numbers: let check_action name the agent
+        except (TypeError, ValueError):  # ragged, complex or not numbers: let check_action name the agent
             stacked = None
         if stacked is None or stacked.shape != (self.n_agents, self.action_width):
             for a in agents:

@@ -90,6 +90,9 @@ class ResetNoise:
                 raise ValueError(f"ResetNoise.{name} must be finite and >= 0, got {value!r}")
 
 
+MAX_EVADER_OBS_NOISE = 100.0
+"""Largest standard deviation of the evader's observation noise: far past any use (the ring is 4 m across),
+and small enough that the noisy observations stay finite."""
 LAYOUT_NOISE = {"fair": ResetNoise(position=0.02, yaw=0.05), "circle": ResetNoise()}
 """The reset noise of each start layout (``PhysicsConfig.layout``) where a match config names none."""
 
@@ -163,8 +166,9 @@ class MatchConfig:
             if self.rules != "elimination":
                 raise ValueError("MatchConfig.evader needs rules='elimination'")
         if not (isinstance(self.evader_obs_noise, int | float) and math.isfinite(self.evader_obs_noise)
-                and self.evader_obs_noise >= 0):
-            raise ValueError(f"MatchConfig.evader_obs_noise must be finite and >= 0, got {self.evader_obs_noise!r}")
+                and 0 <= self.evader_obs_noise <= MAX_EVADER_OBS_NOISE):
+            raise ValueError(f"MatchConfig.evader_obs_noise must be in [0, {MAX_EVADER_OBS_NOISE:g}] (m, m/s: the "
+                             f"ring is 4 m across), got {self.evader_obs_noise!r}")
         if self.evader_obs_noise > 0 and self.evader is None:
             raise ValueError("MatchConfig.evader_obs_noise needs an evader (MatchConfig.evader)")
 

@@ -39,6 +39,11 @@ def distinct_colours(n: int) -> list[tuple[float, float, float, float]]:
     return [(*colorsys.hsv_to_rgb(k / n, 0.8, 0.9), 1.0) for k in range(n)]
 
 
+MAX_AGENTS = 8
+"""Largest roster a scenario builds: no more quadrupeds stand clear of each other inside the ring (six need the
+circle start), and checking the size first answers at once instead of after minutes of layout search."""
+
+
 def ffa_roster(n_agents: int = 3) -> tuple[AgentSpec, ...]:
     """``n_agents`` agents, each its own team, in distinct colours."""
     _check_count("n_agents", n_agents, 2)
@@ -48,7 +53,7 @@ def ffa_roster(n_agents: int = 3) -> tuple[AgentSpec, ...]:
 
 def pursuit_roster(n_pursuers: int = 3) -> tuple[AgentSpec, ...]:
     """``n_pursuers`` pursuers (team ``pursuers``, red to orange) and one ``evader`` (green)."""
-    _check_count("n_pursuers", n_pursuers, 1)
+    _check_count("n_pursuers", n_pursuers, 1, total=n_pursuers + 1 if isinstance(n_pursuers, int) else None)
     pursuers = tuple(AgentSpec(f"pursuer_{k}", "pursuers", CTRL_RANGE,
                                (*colorsys.hsv_to_rgb(0.12 * k / max(1, n_pursuers - 1), 0.85, 0.85), 1.0))
                      for k in range(n_pursuers))
@@ -60,7 +65,10 @@ def teams_roster(team_sizes: tuple[int, ...] = (2, 2)) -> tuple[AgentSpec, ...]:
     if not isinstance(team_sizes, tuple) or len(team_sizes) < 2:
         raise ValueError(f"team_sizes must be a tuple of >= 2 team sizes, got {team_sizes!r}")
     for size in team_sizes:
-        _check_count("team_sizes", size, 1)
+        _check_count("team_sizes", size, 1, total=0)  # each an int >= 1; the roster's size next
+    if sum(team_sizes) > MAX_AGENTS:
+        raise ValueError(f"team_sizes {team_sizes!r} make a roster of {sum(team_sizes)} agents; at most {MAX_AGENTS} "
+                         "fit on the ring")
     agents, k = [], 0
     for t, size in enumerate(team_sizes):
         hue = t / len(team_sizes)
@@ -72,9 +80,12 @@ def teams_roster(team_sizes: tuple[int, ...] = (2, 2)) -> tuple[AgentSpec, ...]:
     return tuple(agents)
 
 
-def _check_count(field: str, value: Any, minimum: int) -> None:
+def _check_count(field: str, value: Any, minimum: int, total: int | None = None) -> None:
     if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
         raise ValueError(f"{field} must be an integer >= {minimum}, got {value!r}")
+    if (total if total is not None else value) > MAX_AGENTS:
+        raise ValueError(f"{field} {value!r} makes a roster of {total if total is not None else value} agents; at "
+                         f"most {MAX_AGENTS} fit on the ring")
 
 
 class UnknownOptionError(TypeError, ValueError):
