@@ -272,6 +272,28 @@ def test_a_killed_evaluation_resumes_to_exactly_the_uninterrupted_rows(
         assert (folder / label / "metrics.csv").read_bytes() == (Path(cfg.out) / label / "metrics.csv").read_bytes()
 
 
+def test_an_evaluation_killed_before_its_first_row_resumes_as_a_fresh_start(
+        report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 39, item 16: a kill before the first row leaves a 0-byte metrics CSV (or one torn inside its
+    header) and maybe a 0-byte record; --resume, which refused them, plays them as a fresh start."""
+    cfg, summary = report
+    monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", tiny_zoo.zoo_dir)
+    folder = tmp_path / "killed"
+    shutil.copytree(cfg.out, folder)
+    (folder / "passive" / "metrics.csv").write_bytes(b"")
+    (folder / "random" / "metrics.csv").write_text("epoch,outc")
+    resumed = evaluate(dataclasses.replace(cfg, out=str(folder), resume=True))
+    assert resumed["candidates"] == summary["candidates"]
+    for label in summary["candidates"]:
+        assert (folder / label / "metrics.csv").read_bytes() == (Path(cfg.out) / label / "metrics.csv").read_bytes()
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    (fresh / "evaluation.json").write_bytes(b"")
+    again = evaluate(dataclasses.replace(cfg, out=str(fresh), resume=True))
+    assert again["candidates"] == summary["candidates"]
+
+
 def test_resume_extends_a_finished_evaluation_to_more_epochs(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:

@@ -136,6 +136,19 @@ def test_a_killed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(duel: t
     assert (part / "matches.csv").read_bytes() == done
 
 
+def test_a_tournament_killed_before_its_first_row_resumes_as_a_fresh_start(duel: tuple[Path, dict],
+                                                                            tmp_path: Path) -> None:
+    """Issue 39, item 16: killed before anything was written, a tournament leaves an empty record and an empty
+    table; --resume starts it afresh (it refused the 0-byte files) and ends as an uninterrupted one."""
+    out, _ = duel
+    part = tmp_path / "part"
+    part.mkdir()
+    (part / "tournament.json").write_bytes(b"")
+    (part / "matches.csv").write_bytes(b"")
+    run_tournament(duel_cfg(part, rounds=6, resume=True), DUEL)
+    assert (part / "matches.csv").read_bytes().splitlines() == (out / "matches.csv").read_bytes().splitlines()[:13]
+
+
 def test_resume_refuses_what_changed(tmp_path: Path) -> None:
     part = tmp_path / "r"
     run_tournament(duel_cfg(part, rounds=2), DUEL)

@@ -640,13 +640,15 @@ def _is_seed_label(label: str) -> bool:
     return label == "trained" or label.startswith("trained-")
 
 
-def _read_record(path: Path) -> dict[str, Any]:
-    """The record of the evaluation to resume; ``FileNotFoundError`` or ``ValueError`` naming the file when
-    it is missing, unreadable or corrupt."""
+def _read_record(path: Path) -> dict[str, Any] | None:
+    """The record of the evaluation to resume, ``None`` for an empty file (killed before it was written: a fresh
+    start); ``FileNotFoundError`` or ``ValueError`` naming the file when it is missing, unreadable or corrupt."""
     folder = path.parent
     if not path.exists():
         raise FileNotFoundError(f"nothing to resume in {folder}: {path.name} not found (run without resume to "
                                 "start an evaluation there)")
+    if path.stat().st_size == 0:
+        return None
     try:
         old = json.loads(path.read_text(encoding="utf-8"))
         if not all(isinstance(old[key], dict) for key in ("rows_depend_on", "others", "candidates")) or not all(

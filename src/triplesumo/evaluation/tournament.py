@@ -417,9 +417,14 @@ def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) 
     rows_path = out / ROWS_FILE
     done = 0
     if cfg.resume:
-        _check_resumable(out / RECORD_FILE, record)
+        empty_record = (out / RECORD_FILE).exists() and (out / RECORD_FILE).stat().st_size == 0
+        if not empty_record:  # (empty: killed before anything was written, a fresh start if no row was either)
+            _check_resumable(out / RECORD_FILE, record)
         done = finished_rows(rows_path, t.n_matches, t.columns, t.valid_row,
                              ("table of tournament matches", "matches", "matches of this schedule"))
+        if empty_record and done:
+            raise ValueError(f"cannot resume {out}: {RECORD_FILE} is empty, so nothing says what its {done} matches "
+                             f"in {ROWS_FILE} depend on; choose another --out")
     from triplesumo.agents.policy_file import atomic_write_bytes
 
     atomic_write_bytes(out / RECORD_FILE, (json.dumps(record, indent=2) + "\n").encode())

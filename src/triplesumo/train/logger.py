@@ -85,6 +85,9 @@ def _finished_rows(path: Path, keep_through: int | None, columns: tuple[str, ...
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not a {what} (byte {exc.start} is not UTF-8 text)") from None
+    header = ",".join(columns)
+    if header.startswith(text.rstrip("\n")) and text.count("\n") <= 1:  # empty, or killed while writing the header
+        return 0, [header], text == header + "\n"
     lines = text.split("\n")
     complete = lines[:-1]  # a file ending in a newline leaves "" last; anything else is cut off
     if not complete or tuple(next(csv.reader(complete[:1]), [])) != columns:
