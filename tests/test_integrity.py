@@ -221,6 +221,22 @@ def test_a_row_torn_at_the_checkpoints_epoch_resumes_from_the_checkpoint_before(
         train(TrainConfig(), resume_dir=run, overrides={"epochs": 9})
 
 
+def test_a_run_stopped_before_its_first_checkpoint_names_start_over(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 39, item 16: --resume of a run with no checkpoint yet said only 'no checkpoint', and a rerun says the
+    folder holds a run; both name --start-over, which trains it again."""
+    cfg = tiny(tmp_path, epochs=4, checkpoint_every=4, steps_per_epoch=5)
+    run = train(cfg).run_dir
+    shutil.rmtree(run / "checkpoints")  # as if killed before the first checkpoint was written
+    with pytest.raises(checkpoint.CheckpointError, match="stopped before its first checkpoint.*--start-over"):
+        train(TrainConfig(), resume_dir=run)
+    argv = ["train", "--name", cfg.name, "--out", cfg.out, "--epochs", "4", "--steps-per-epoch", "5", "--n-envs", "2",
+            "--no-progress", "--no-tensorboard"]
+    capsys.readouterr()
+    assert main(argv) == 2 and "--start-over" in capsys.readouterr().err
+    assert main([*argv, "--start-over"]) == 0 and (run / "policy.json").exists()
+
+
 def _csv(rows: int) -> str:
     line = "{},win,1.0,12,500.0,0.0,500.0," + ",".join("0.0" for _ in COLUMNS[7:-2]) + ",100,1.5\n"
     return ",".join(COLUMNS) + "\n" + "".join(line.format(i) for i in range(1, rows + 1))

@@ -205,7 +205,9 @@ def latest(run_dir: Path) -> Path:
         saved = checkpoints(run_dir)
         if saved:
             return saved[-1][1]
-        raise CheckpointError(f"{pointer}: no checkpoint to resume from (file not found)")
+        raise CheckpointError(f"{pointer}: no checkpoint to resume from (file not found: the run was stopped before "
+                              f"its first checkpoint); train it again with its command plus --start-over (the "
+                              f"folder is moved aside to {Path(run_dir).name}.old-K), or choose another --name")
     try:
         info = load_json(pointer)
     except PolicyFileError as exc:
