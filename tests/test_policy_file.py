@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from safetensors.torch import save_file
+from safetensors.torch import load_file, save_file
 
 from triplesumo.agents import policy_file
 from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
@@ -73,7 +73,9 @@ def test_failed_save_keeps_the_previous_file(stem: Path, actor: Actor, monkeypat
         Path(path).write_bytes(b"half")
         raise OSError("disk full")
 
-    monkeypatch.setattr(policy_file, "save_file", dies)
+    import safetensors.torch
+
+    monkeypatch.setattr(safetensors.torch, "save_file", dies)  # (imported where tensors are saved)
     with torch.no_grad():
         actor.net[0].weight.add_(1.0)
     with pytest.raises(OSError, match="disk full"):
@@ -113,6 +115,29 @@ def _flip_data_byte(stem: Path) -> None:
     path.write_bytes(bytes(data))
 
 
+def _rewrite_weights(change: Callable[[str, torch.Tensor], torch.Tensor]) -> Callable[[Path], None]:
+    """Weights rewritten tensor by tensor (a valid safetensors file, other contents)."""
+    def rewrite(stem: Path) -> None:
+        path = stem.with_suffix(".safetensors")
+        tensors = load_file(str(path))
+        save_file({k: change(k, v) for k, v in tensors.items()}, str(path))
+    return rewrite
+
+
+def _nan_weight(key: str, value: torch.Tensor) -> torch.Tensor:
+    if key == "actor.net.0.weight":
+        value = value.clone()
+        value[0, 0] = float("nan")
+    return value
+
+
+def _json_null(**fields: object) -> Callable[[Path], None]:
+    def edit(stem: Path) -> None:
+        path = stem.with_suffix(".json")
+        path.write_text(json.dumps({**json.loads(path.read_text()), **fields}))
+    return edit
+
+
 def _unchecked(*damages: Callable[[Path], None]) -> Callable[[Path], None]:
     """A file written before the sha256 was recorded: damage it, and take the checksum away."""
     def damage(stem: Path) -> None:
@@ -142,6 +167,16 @@ BROKEN = {
     "manifest-disagrees-with-weights": (_edit_manifest(obs_dim=OBS_DIM + 1), ".safetensors", {},
                                         f"weights are {OBS_DIM}->8, manifest says {OBS_DIM + 1}->8"),
     "weights-not-an-actor": (_unchecked(_not_an_actor), ".safetensors", {}, "not an actor"),
+    # issue 39, item 16: these were accepted (and published, averaged, or failed at the first step)
+    "nan-weights": (_unchecked(_rewrite_weights(_nan_weight)), ".safetensors", {},
+                    "actor.net.0.weight holds NaN or inf"),
+    "int32-weights": (_unchecked(_rewrite_weights(lambda k, v: v.to(torch.int32))), ".safetensors", {},
+                      "is int32, expected float32"),
+    "hidden-disagrees-with-weights": (_edit_manifest(hidden=[16, 99]), ".safetensors", {},
+                                      "hidden widths are [16, 16], its manifest says [16, 99]"),
+    "obs-dim-null": (_json_null(obs_dim=None), ".json", {}, "obs_dim must be a positive integer, got None"),
+    "obs-dim-list": (_json_null(obs_dim=[OBS_DIM]), ".json", {}, "obs_dim must be a positive integer"),
+    "hidden-not-a-list": (_json_null(hidden=16), ".json", {}, "hidden must be a list of positive integers"),
 }
 
 

@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from safetensors import SafetensorError
 from safetensors.numpy import load_file as load_numpy
 
@@ -151,6 +152,12 @@ def _read_manifest(stem: Path, expect_obs_mode: str | None,
         raise PolicyFileError(f"{meta_path}: manifest lacks {missing}")
     if manifest["format"] != FORMAT:
         raise PolicyFileError(f"{meta_path}: format {manifest['format']!r}, expected {FORMAT!r}")
+    for key in ("obs_dim", "act_dim"):
+        if not _positive_int(manifest[key]):
+            raise PolicyFileError(f"{meta_path}: {key} must be a positive integer, got {manifest[key]!r}")
+    hidden = manifest["hidden"]
+    if not (isinstance(hidden, list) and hidden and all(_positive_int(h) for h in hidden)):
+        raise PolicyFileError(f"{meta_path}: hidden must be a list of positive integers, got {hidden!r}")
     if expect_obs_mode is not None and manifest["obs_mode"] != expect_obs_mode:
         raise PolicyFileError(f"{meta_path}: policy was trained with obs_mode {manifest['obs_mode']!r}, "
                               f"the match uses {expect_obs_mode!r}")
@@ -161,6 +168,29 @@ def _read_manifest(stem: Path, expect_obs_mode: str | None,
         raise PolicyFileError(f"{weights_path}: sha256 differs from the one {meta_path} records "
                               "(damaged, or replaced by other weights)")
     return manifest, weights_path
+
+
+def _positive_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value > 0
+
+
+def check_weights(weights_path: Path, tensors: dict[str, Any], manifest: dict[str, Any]) -> None:
+    """``PolicyFileError`` naming the file unless every actor tensor is finite float32 and the actor's hidden
+    widths are the manifest's ``hidden`` (NaN, inf or int32 weights, or a manifest that lies about the widths,
+    fail here, on loading, not at the first step or in a published copy)."""
+    widths = []
+    for key, value in tensors.items():
+        array = value.detach().cpu().numpy() if hasattr(value, "detach") else np.asarray(value)
+        if key.startswith("actor."):
+            if array.dtype != np.float32:
+                raise PolicyFileError(f"{weights_path}: {key} is {array.dtype}, expected float32")
+            if key.endswith(".weight") and array.ndim == 2:
+                widths.append(int(array.shape[0]))
+        if not np.isfinite(array).all():
+            raise PolicyFileError(f"{weights_path}: {key} holds NaN or inf values")
+    if widths and widths[:-1] != list(manifest["hidden"]):  # (no actor weights at all: the loader says so)
+        raise PolicyFileError(f"{weights_path}: the actor's hidden widths are {widths[:-1]}, its manifest says "
+                              f"{manifest['hidden']}")
 
 
 def _check_sizes(weights_path: Path, manifest: dict[str, Any], obs_dim: int, act_dim: int) -> None:
@@ -179,6 +209,7 @@ def load_policy(stem: Path, expect_obs_mode: str | None = None,
 
     manifest, weights_path = _read_manifest(stem, expect_obs_mode, expect_obs_dim)
     tensors = load_tensors(weights_path)
+    check_weights(weights_path, tensors, manifest)
     try:
         actor = Actor.from_state_dict(tensors, prefix="actor.")
     except (KeyError, ValueError, RuntimeError) as exc:
@@ -211,6 +242,7 @@ def load_fixed_policy(stem: Path, expect_obs_mode: str | None = None,
     except (SafetensorError, OSError, ValueError, RuntimeError) as exc:
         raise PolicyFileError(f"{weights_path}: not a readable safetensors file (truncated or corrupt?): "
                               f"{exc}") from exc
+    check_weights(weights_path, tensors, manifest)
     try:
         policy = FrozenPolicy.from_tensors(tensors, prefix="actor.",
                                            obs_norm_prefix="obs_norm." if manifest.get("obs_norm", False) else None)
