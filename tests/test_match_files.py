@@ -152,3 +152,39 @@ def test_evaluate_record_from_the_command_line(tmp_path: Path) -> None:
         assert [f.name for f in files] == ["epoch_00001.npz"]
         assert MatchFile.load(files[0]).policies["bug"] == ("random" if label == "trained" else "passive")
     assert main(["evaluate", "--record", "-1", "--out", str(out)]) == 2
+
+
+def test_a_failed_write_keeps_the_earlier_match_file_and_names_it(recorded: tuple[Path, MatchFile], tmp_path: Path,
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 39, item 16 D: ``play --record FILE`` onto an existing recording with a full disk overwrote it in
+    place (a corrupt zip) and named no file. The write is atomic now: a disk that fills while the temp file is
+    written leaves the earlier file whole and the error names the path."""
+    import errno
+    import os
+
+    _, match = recorded
+    path = tmp_path / "match.npz"
+    match.save(path)
+    before = path.read_bytes()
+    real_fdopen = os.fdopen
+
+    class FullDisk:
+        def __init__(self, fh: object) -> None:
+            self.fh = fh
+
+        def __enter__(self) -> FullDisk:
+            return self
+
+        def __exit__(self, *exc: object) -> None:
+            self.fh.close()  # type: ignore[attr-defined]
+
+        def write(self, data: bytes) -> int:
+            self.fh.write(data[: len(data) // 2])  # type: ignore[attr-defined]
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(os, "fdopen", lambda fd, mode="r": FullDisk(real_fdopen(fd, mode)))
+    with pytest.raises(OSError, match=rf"{path}: the match file was not written \(No space left on device\)"):
+        match.save(path)
+    monkeypatch.undo()
+    assert path.read_bytes() == before and MatchFile.load(path).steps == match.steps
+    assert [p.name for p in tmp_path.iterdir()] == ["match.npz"]  # no temp file left behind

@@ -15,6 +15,7 @@ checks that every state comes out bit for bit as recorded.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import typing
 import zipfile
@@ -26,6 +27,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.envs.match import Match
 from triplesumo.rules.config import MatchConfig
 
@@ -63,16 +65,23 @@ class MatchFile:
         return len(self.actions)
 
     def save(self, path: Path) -> Path:
-        """Write the match to ``path`` (``.npz``, compressed); returns the path."""
+        """Write the match to ``path`` (``.npz``, compressed) atomically (a temp file in the same folder, fsync,
+        rename, as checkpoints are): a full disk or a kill leaves any earlier file at ``path`` as it was, and the
+        ``OSError`` names the file. Returns the path."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         meta = {"seed": self.seed, "policies": self.policies, "outcomes": self.outcomes,
                 "state_spec": int(STATE_SPEC), "mujoco": mujoco.__version__}
-        with path.open("wb") as f:
-            np.savez_compressed(f, format=np.array(FORMAT), meta=np.array(json.dumps(meta)),
-                                config=np.array(json.dumps(dataclasses.asdict(self.config))),
-                                actions=np.asarray(self.actions, np.float64),
-                                states=np.asarray(self.states, np.float64))
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, format=np.array(FORMAT), meta=np.array(json.dumps(meta)),
+                            config=np.array(json.dumps(dataclasses.asdict(self.config))),
+                            actions=np.asarray(self.actions, np.float64),
+                            states=np.asarray(self.states, np.float64))
+        try:
+            atomic_write_bytes(path, buffer.getvalue())
+        except OSError as exc:
+            raise OSError(exc.errno, f"{path}: the match file was not written ({exc.strerror or exc}); any earlier "
+                                     "file there is unchanged") from exc
         return path
 
     @classmethod
