@@ -31,17 +31,39 @@ def _check_folder(folder: Path, path: Path) -> Path:
 
 
 def write_mp4(frames: Iterable[np.ndarray], path: Path, fps: int) -> int:
-    """Encode ``(H, W, 3)`` uint8 frames as H.264 mp4; returns the number of frames written."""
+    """Encode ``(H, W, 3)`` uint8 frames as H.264 mp4; returns the number of frames written.
+
+    The video is written to a temp file beside ``path``, decoded back and renamed into place only when it
+    holds every frame: ffmpeg reports a failed write (a full disk: "Error writing trailer") only on its
+    stderr, so a truncated file would otherwise pass as written. ``OSError`` names ``path``, and any earlier
+    file there is left as it was.
+    """
     path = check_writable(Path(path))
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
     n = 0
-    writer: Any = imageio.get_writer(path, fps=fps, codec="libx264", quality=7, macro_block_size=8)
-    with writer:
-        for frame in frames:
-            writer.append_data(np.asarray(frame, dtype=np.uint8))
-            n += 1
-    if n == 0:
-        path.unlink(missing_ok=True)
-        raise ValueError("no frames to write")
+    try:
+        writer: Any = imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7, macro_block_size=8)
+        with writer:
+            for frame in frames:
+                writer.append_data(np.asarray(frame, dtype=np.uint8))
+                n += 1
+        if n == 0:
+            raise ValueError("no frames to write")
+        try:
+            written = count_frames(tmp)
+        except Exception as exc:  # (imageio raises OSError, RuntimeError or its own for a broken mp4)
+            raise OSError(f"{path}: the video was not written: ffmpeg left an unreadable file ({exc}); a full "
+                          "disk?") from exc
+        if written != n:
+            raise OSError(f"{path}: the video was not written: {written} of {n} frames reached the disk (a full "
+                          "disk?)")
+        os.replace(tmp, path)
+    except OSError as exc:
+        if str(path) in str(exc):
+            raise
+        raise OSError(f"{path}: the video was not written ({exc})") from exc
+    finally:
+        tmp.unlink(missing_ok=True)
     return n
 
 
