@@ -75,3 +75,32 @@ def test_bench_env_measures_a_scenario(scenario: str) -> None:
     result = run_env_benchmark(steps=6, n_matches=2, n_threads=1, rounds=1, chunk=3, scenario=scenario)
     assert result["setup"]["scenario"] == scenario
     assert all(rate > 0 for rate in result["rates"].values())
+
+
+def test_a_policy_file_plays_only_the_seats_it_was_trained_for(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 39, item 16 S: play, evaluate and train seated a paper-observation policy in a seat it was not
+    trained for (the tournament refused it), and took a manifest naming agent "zebra". One check now serves all."""
+    import json
+    import shutil
+
+    from triplesumo.agents.zoo import ZOO_DIR
+    from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+    from triplesumo.train.config import TrainConfig
+    from triplesumo.train.loop import Trainer
+
+    assert main(["play", "--policies", "ant=zoo:spider", "--max-steps", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "policy 'zoo:spider'" in err and "cannot play 'ant'" in err and "spider.json" in err
+    assert main(["play", "--policies", "ant=zoo:spider", "spider=zoo:ant", "--max-steps", "5"]) == 2
+    assert "cannot play" in capsys.readouterr().err
+    with pytest.raises(ValueError, match=r"policy 'zoo:spider' .*spider.json\) cannot play 'ant'"):
+        evaluate(EvaluateConfig(learner="ant", policy=("zoo:spider",), policies=("spider=zoo:spider", "bug=passive"),
+                                epochs=1, steps_per_epoch=5, n_envs=1, progress=False, out=str(tmp_path / "ev")))
+    assert not (tmp_path / "ev" / "evaluation.json").exists()
+    zebra = tmp_path / "zebra"
+    shutil.copy(ZOO_DIR / "spider.safetensors", zebra.with_suffix(".safetensors"))
+    manifest = json.loads((ZOO_DIR / "spider.json").read_text())
+    zebra.with_suffix(".json").write_text(json.dumps({**manifest, "agent": "zebra"}))
+    with pytest.raises(ValueError, match=r"zebra.json: agent 'zebra' is not in the roster it records"):
+        Trainer(TrainConfig(out=str(tmp_path), name="t", policies=(f"spider={zebra}", "ant=passive")))
+    assert main(["play", "--policies", "spider=zoo:spider", "ant=zoo:ant", "--max-steps", "3"]) == 0  # their seats

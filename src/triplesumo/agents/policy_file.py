@@ -158,6 +158,11 @@ def _read_manifest(stem: Path, expect_obs_mode: str | None,
     hidden = manifest["hidden"]
     if not (isinstance(hidden, list) and hidden and all(_positive_int(h) for h in hidden)):
         raise PolicyFileError(f"{meta_path}: hidden must be a list of positive integers, got {hidden!r}")
+    roster = manifest.get("agents")
+    if isinstance(roster, list):  # the seats it was trained for must be seats of the roster it was trained in
+        for seat in [manifest["agent"], *(manifest.get("plays") or [])]:
+            if seat not in roster:
+                raise PolicyFileError(f"{meta_path}: agent {seat!r} is not in the roster it records {roster}")
     if expect_obs_mode is not None and manifest["obs_mode"] != expect_obs_mode:
         raise PolicyFileError(f"{meta_path}: policy was trained with obs_mode {manifest['obs_mode']!r}, "
                               f"the match uses {expect_obs_mode!r}")
@@ -168,6 +173,48 @@ def _read_manifest(stem: Path, expect_obs_mode: str | None,
         raise PolicyFileError(f"{weights_path}: sha256 differs from the one {meta_path} records "
                               "(damaged, or replaced by other weights)")
     return manifest, weights_path
+
+
+def trained_partners(manifest: dict[str, Any]) -> int | None:
+    """How many partners the seat a policy was trained in had: its manifest's ``partners``, or for files written
+    before that key, its scenario's default roster (``None`` where neither can say)."""
+    from triplesumo.rules.scenarios import scenario_config
+    from triplesumo.rules.teams import Teams
+
+    if isinstance(manifest.get("partners"), int):
+        return int(manifest["partners"])
+    try:
+        roster = scenario_config(str(manifest.get("scenario", "paper"))).agents
+    except ValueError:
+        return None
+    seat = (manifest.get("plays") or [manifest.get("agent")])[0]
+    names = [a.name for a in roster]
+    if list(manifest.get("agents") or names) != names or seat not in names:
+        return None
+    return len(Teams.from_agents(roster).partners[names.index(seat)])
+
+
+def seat_problem(manifest: dict[str, Any], seat: str, teams: dict[str, str]) -> str | None:
+    """Why the policy file of ``manifest`` cannot drive ``seat`` of a match whose roster is ``teams`` (agent ->
+    team label, roster order), or ``None`` if it can. With ``paper`` observations (one global vector, nothing in
+    it says which body the network drives) only the seats it was trained for (``plays``, else ``agent``), in the
+    roster it was trained in; with ``egocentric`` ones any seat with as many partners as it was trained with."""
+    roster = list(teams)
+    if manifest.get("obs_mode") == "paper":
+        trained = manifest.get("agents")
+        if trained is not None and list(trained) != roster:
+            return f"it was trained in the roster {list(trained)}, this match's is {roster}"
+        plays = list(manifest.get("plays") or [manifest.get("agent")])
+        if seat not in plays:
+            return (f"it was trained to drive {plays} and reads the paper's global observations, which do not say "
+                    f"which body it drives, so it cannot drive {seat!r}")
+        return None
+    partners = sum(1 for a, t in teams.items() if t == teams[seat] and a != seat)
+    trained_with = trained_partners(manifest)
+    if trained_with is not None and trained_with != partners:
+        return (f"it was trained in a seat with {trained_with} partner(s); {seat!r} has {partners} (egocentric "
+                "observations list partners before opponents)")
+    return None
 
 
 def _positive_int(value: Any) -> bool:

@@ -43,7 +43,14 @@ import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
-from triplesumo.agents.zoo import check_policy_pairs, expand_pairs, make_policy, policies_from_pairs, policy_fingerprint
+from triplesumo.agents.zoo import (
+    check_policy_pairs,
+    check_seat,
+    expand_pairs,
+    make_policy,
+    policies_from_pairs,
+    policy_fingerprint,
+)
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.runner import SeatedResult, play_matches
@@ -335,7 +342,10 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
         raise ValueError(f"EvaluateConfig.compare names a policy twice, or one whose label is taken: {expanded}")
     candidates = {**seeds, **compare, **{b: b for b in baselines}}
     try:
-        others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes)
+        teams = {a.name: a.team for a in match_cfg.agents}
+        others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes, teams=teams)
+        for spec in candidates.values():  # a policy file drives the learner's seat only if trained for it
+            check_seat(spec, cfg.learner, teams)
         policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
                                        action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner])
                     for label, spec in candidates.items()}  # every file checked before any epoch is played

@@ -52,7 +52,8 @@ def run_play(cfg: PlayConfig) -> MatchRecord:
     check_policy_pairs("PlayConfig.policies", pairs, agents=list(match.agents))
     try:
         policies = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, obs_dims=match.observer.sizes,
-                                       action_sizes=dict(zip(match.agents, match.action_sizes, strict=True)))
+                                       action_sizes=dict(zip(match.agents, match.action_sizes, strict=True)),
+                                       teams={a.name: a.team for a in match.config.agents})
     except ValueError as err:
         raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
     video = Path(cfg.video) if cfg.video else None

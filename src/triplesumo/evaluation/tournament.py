@@ -74,7 +74,7 @@ from typing import Any
 import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy
+from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy, seat_problem
 from triplesumo.agents.zoo import find_policy_file, make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
@@ -268,18 +268,8 @@ def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> 
     motors = dict(zip(match.agents, match.action_sizes, strict=True))
     seats = [a for a in match.agents
              if match.observer.sizes[a] == int(manifest["obs_dim"]) and motors[a] == int(manifest["act_dim"])]
-    if match.config.obs_mode == "paper":
-        trained_roster = manifest.get("agents")
-        if trained_roster is not None and list(trained_roster) != list(match.agents):
-            return []
-        plays = manifest.get("plays") or [manifest.get("agent")]  # a team's shared network: its team's seats
-        seats = [a for a in seats if a in plays]
-    else:  # egocentric: partners' blocks come before opponents', so a seat needs as many partners as trained
-        trained = _trained_partners(manifest)
-        if trained is not None:
-            teams = Teams.from_agents(match.config.agents)
-            seats = [a for i, a in enumerate(match.agents) if a in seats and len(teams.partners[i]) == trained]
-    return seats
+    roster = {a.name: a.team for a in match.config.agents}
+    return [a for a in seats if seat_problem(manifest, a, roster) is None]
 
 
 def _run_of(spec: str, manifest: dict[str, Any]) -> str | None:
@@ -295,22 +285,6 @@ def _run_of(spec: str, manifest: dict[str, Any]) -> str | None:
     if (path.parent / "league" / "pool.json").exists():  # a self-play run's own policy (RUN/policy)
         return str(path.parent / "league")
     return manifest.get("command")
-
-
-def _trained_partners(manifest: dict[str, Any]) -> int | None:
-    """How many partners the seat a policy was trained in had: its manifest's ``partners``, or for
-    files written before that key, its scenario's default roster (``None`` where neither can say)."""
-    if isinstance(manifest.get("partners"), int):
-        return int(manifest["partners"])
-    try:
-        roster = scenario_config(str(manifest.get("scenario", "paper"))).agents
-    except ValueError:
-        return None
-    seat = (manifest.get("plays") or [manifest.get("agent")])[0]
-    names = [a.name for a in roster]
-    if list(manifest.get("agents") or names) != names or seat not in names:
-        return None
-    return len(Teams.from_agents(roster).partners[names.index(seat)])
 
 
 def lineups(seats_of: dict[str, list[str]], agents: tuple[str, ...]) -> list[tuple[str, ...]]:

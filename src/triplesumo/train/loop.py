@@ -434,7 +434,8 @@ class Trainer:
         try:
             self.policies = policies_from_pairs(
                 pairs, cfg.seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
-                action_sizes=dict(zip(probe.agents, probe.action_sizes, strict=True)))
+                action_sizes=dict(zip(probe.agents, probe.action_sizes, strict=True)),
+                teams={a.name: a.team for a in self.match_cfg.agents})
         except ValueError as err:
             raise ValueError(f"TrainConfig.policies (scenario {cfg.scenario!r}): {err}") from None
         self.others = [(probe.agents.index(a), p) for a, p in self.policies.items()]

@@ -20,9 +20,11 @@ from triplesumo.agents.policy_file import (
     PolicyFileError,
     bare_stem,
     load_fixed_policy,
+    load_json,
     load_policy,
     policy_paths,
     save_policy,
+    seat_problem,
 )
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
@@ -154,14 +156,28 @@ def expand_pairs(pairs: tuple[str, ...], agents: list[str] | tuple[str, ...]) ->
     return tuple(out)
 
 
+def check_seat(spec: str, seat: str, teams: dict[str, str]) -> None:
+    """``ValueError`` naming the policy file unless the policy ``spec`` can drive ``seat`` of a match whose roster
+    is ``teams`` (agent -> team label) (:func:`~triplesumo.agents.policy_file.seat_problem`; built-ins take any
+    seat). The tournament, play, evaluate and train give one answer."""
+    if spec in BUILTIN:
+        return
+    stem = find_policy_file(spec)
+    problem = seat_problem(load_json(policy_paths(stem)[0]), seat, teams)
+    if problem is not None:
+        raise ValueError(f"policy {spec!r} ({policy_paths(stem)[0]}) cannot play {seat!r}: {problem}")
+
+
 def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str,
                         action_sizes: dict[str, int] | None = None,
-                        obs_dims: dict[str, int] | None = None) -> dict[str, Any]:
+                        obs_dims: dict[str, int] | None = None,
+                        teams: dict[str, str] | None = None) -> dict[str, Any]:
     """``("ant=zoo:ant", "spider=random")`` -> ``{"ant": policy, "spider": policy}``.
 
     ``action_sizes`` (agent -> motors, default 8 each) sizes built-in policies; ``obs_dims``
     (agent -> the match's observation size) checks every policy file against the roster; the
-    error names the agent and both sizes.
+    error names the agent and both sizes. ``teams`` (agent -> team label, the roster) checks that each
+    policy file can drive its seat (:func:`check_seat`).
     """
     out: dict[str, Any] = {}
     for k, pair in enumerate(pairs):
@@ -177,4 +193,6 @@ def policies_from_pairs(pairs: tuple[str, ...], seed: int, obs_mode: str,
             if expect is None:
                 raise
             raise ValueError(f"policy {spec!r} for {agent!r} does not fit this roster: {err}") from None
+        if teams is not None:  # (after the sizes: their error is the more concrete)
+            check_seat(spec, agent, teams)
     return out
