@@ -494,3 +494,22 @@ def test_seeded_members_are_labelled_with_their_policy_and_drawn_apart_in_the_le
     assert spec_label("results/run-a/league/members/team-0120/ant") == ".../team-0120/ant"
     assert [spec_label(s) for s in ("passive", "zoo:spider", "pol/spider-0186")] == ["passive", "zoo:spider",
                                                                                     "pol/spider-0186"]
+
+
+def test_a_torn_last_line_of_the_league_log_is_cut_on_resume(tmp_path: Path) -> None:
+    """Issue 39, item 16 S: a kill while writing ``league.csv`` left a torn last line that the resumed run glued
+    its next row onto (kept when its epoch was the resume point's); it now goes through the metrics CSVs' repair
+    routine (torn tail cut, epochs past the resume point cut)."""
+    lg = league(tmp_path)
+    for epoch in (1, 2, 3):
+        play(lg, ["win"])
+        lg.epoch_end(epoch)
+    log = lg.root / "league.csv"
+    whole = log.read_text()
+    log.write_text("".join(whole.splitlines(keepends=True)[:5]) + "3,spi")  # killed while writing epoch 3's rows
+    lg.truncate_log(3)
+    assert log.read_text() == "".join(whole.splitlines(keepends=True)[:5])
+    lg.epoch_end(3)  # the rows of epoch 3 again, each on a line of its own
+    assert all(len(r.split(",")) == 8 and r.split(",")[0] in "123" for r in log.read_text().splitlines()[1:])
+    lg.truncate_log(1)  # a resume from epoch 1: later epochs cut
+    assert [r.split(",")[0] for r in log.read_text().splitlines()[1:]] == ["1", "1"]

@@ -92,6 +92,7 @@ from triplesumo.agents.policy_file import (
 )
 from triplesumo.agents.zoo import find_policy_file, policy_stem
 from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Rating, RatingTable
+from triplesumo.train.logger import repair_metrics_csv
 
 SAMPLING = ("uniform", "latest", "pfsp")
 """Opponent sampling rules (see the module docstring)."""
@@ -679,14 +680,21 @@ class League:
         return league
 
     def truncate_log(self, epoch: int) -> None:
-        """Drop ``league.csv`` rows of epochs after ``epoch`` (written before a resume point)."""
+        """Drop ``league.csv`` rows of epochs after ``epoch`` (written before a resume point) and a torn last line
+        (a kill while writing it, which the next row would be glued onto): the repair routine of the metrics CSVs
+        (:func:`~triplesumo.train.logger.repair_metrics_csv`), which names the file and line of a damaged row."""
         log = self.root / LOG_FILE
         if not log.exists():
             return
-        lines = log.read_text().splitlines(keepends=True)
-        first = [ln.split(",", 1)[0] for ln in lines]
-        kept = lines[:1] + [ln for ln, e in zip(lines[1:], first[1:], strict=True) if e.isdigit() and int(e) <= epoch]
-        atomic_write_bytes(log, "".join(kept).encode())
+        complete = log.read_text(encoding="utf-8", errors="replace").split("\n")[1:-1]
+        through = sum(1 for row in csv.reader(complete) if row and row[0].isdigit() and int(row[0]) <= epoch)
+
+        def problem(row: list[str], number: int) -> str | None:
+            if len(row) != len(LOG_COLUMNS) or not row[0].isdigit():
+                return f"{len(row)} fields, expected {len(LOG_COLUMNS)} starting with the epoch"
+            return None
+
+        repair_metrics_csv(log, through, tuple(LOG_COLUMNS), problem, "league log")
 
     # -- helpers ----------------------------------------------------------------------------
     def _pool(self, side: str) -> OpponentPool:
