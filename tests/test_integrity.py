@@ -548,8 +548,17 @@ def test_complex_or_grad_tensor_actions_are_refused(action: Any, reason: str) ->
         match.check_action("bug", action)
 
 
-def test_huge_buffer_is_refused_before_anything_is_made(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    argv = ["train", "--out", str(tmp_path), "--name", "huge", "--ddpg.buffer-size", str(10**12), "--no-progress"]
+@pytest.mark.parametrize(("flags", "named"), [
+    (["--ddpg.buffer-size", str(10**12)], r"TrainConfig.ddpg.buffer_size=1000000000000"),
+    (["--ddpg.hidden", "100000", "100000"], r"TrainConfig.ddpg.hidden=\[100000, 100000\]"),  # issue 39, 16 T
+    (["--learn", "bug=ppo", "--ppo.n-steps", "100000000"], r"TrainConfig.ppo.n_steps=100000000"),
+])
+def test_runs_too_big_for_the_machine_are_refused_before_anything_is_made(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], flags: list[str], named: str) -> None:
+    """Replay buffers, networks and PPO rollouts are sized before the run folder is made: a MemoryError there
+    left files behind, so that a rerun needed --start-over."""
+    argv = ["train", "--out", str(tmp_path), "--name", "huge", *flags, "--no-progress"]
     assert main(argv) == 2
-    assert re.search(r"TrainConfig.ddpg.buffer_size=1000000000000 needs \d+\.\d GiB", capsys.readouterr().err)
+    err = capsys.readouterr().err
+    assert re.search(rf"{named}.* need \d+\.\d GiB for 1 learner\(s\).*nothing was made", err), err
     assert not (tmp_path / "huge").exists()

@@ -286,19 +286,45 @@ def machine_memory() -> int:
             return 0
 
 
-def check_replay_memory(cfg: TrainConfig, learners: list[tuple[str, str, int, int]]) -> None:
-    """``ValueError`` naming the ``buffer_size`` fields if the learners' full replay buffers
-    (``(learner, algo, obs_dim, act_dim)`` each; PPO has none) cannot fit this machine."""
+def network_bytes(hidden: Sequence[int], obs_dim: int, act_dim: int, critics: int = 1) -> int:
+    """Bytes an actor-critic learner's float32 networks take with their targets, gradients and Adam's two moments
+    (about five copies of every parameter; ``critics`` Q networks of the same widths)."""
+    def params(widths: list[int]) -> int:
+        return sum((a + 1) * b for a, b in zip(widths[:-1], widths[1:], strict=True))
+
+    actor = params([obs_dim, *hidden, 2 * act_dim])
+    critic = params([obs_dim + act_dim, *hidden, 1])
+    return 5 * 4 * (actor + critics * critic)
+
+
+def check_memory(cfg: TrainConfig, learners: list[tuple[str, str, int, int]]) -> None:
+    """``ValueError`` naming the fields if what the learners hold at once (``(learner, algo, obs_dim, act_dim)``
+    each) cannot fit this machine: full replay buffers (``buffer_size``), networks (``hidden``) and PPO's
+    rollouts (``n_steps`` x the matches' transitions). Checked before anything is made: a MemoryError there left
+    a run folder behind."""
     own = cfg.learner_configs()
-    sized = [(f"TrainConfig.learner_config {name}.buffer_size" if "buffer_size" in own.get(name, {})
-              else f"TrainConfig.{algo}.buffer_size", cfg.algo_config(name).buffer_size, obs, act)
-             for name, algo, obs, act in learners if algo != "ppo"]
-    need, have = sum(replay_bytes(size, obs, act) for _, size, obs, act in sized), machine_memory()
+    fields: set[str] = set()
+    need = 0
+    for name, algo, obs, act in learners:
+        c = cfg.algo_config(name)
+
+        def field(key: str, value: Any, name: str = name, algo: str = algo) -> None:
+            own_key = key in own.get(name, {})
+            fields.add(f"TrainConfig.{f'learner_config {name}' if own_key else algo}.{key}={value}")
+
+        field("hidden", list(c.hidden))
+        need += network_bytes(c.hidden, obs, act, critics=1 if algo in ("ddpg", "ppo") else 2)
+        if algo == "ppo":
+            field("n_steps", c.n_steps)
+            need += c.n_steps * cfg.n_envs * (obs + 2 * act + 8) * 4  # observations, actions, flags, values
+        else:
+            field("buffer_size", c.buffer_size)
+            need += replay_bytes(c.buffer_size, obs, act)
+    have = machine_memory()
     if have and need > have:
-        fields = ", ".join(sorted({f"{field}={size}" for field, size, _, _ in sized}))
-        raise ValueError(f"{fields} needs {need / 2**30:.1f} GiB for {len(sized)} full replay buffer(s) "
-                         f"({sized[0][2]}-value observations), more than this machine's "
-                         f"{have / 2**30:.1f} GiB of memory and swap; nothing was made")
+        raise ValueError(f"{', '.join(sorted(fields))} need {need / 2**30:.1f} GiB for {len(learners)} learner(s) "
+                         f"({learners[0][2]}-value observations), more than this machine's {have / 2**30:.1f} GiB "
+                         "of memory and swap; nothing was made")
 
 
 HEAVY_SCHEDULE = 64
@@ -404,7 +430,7 @@ class Trainer:
             refuse_existing_run(run_dir, start_over)
             if cfg.self_play:  # a new league copies its seeds' files into its pools (a resumed one has them)
                 check_seeds(cfg.league.zoo)
-        check_replay_memory(cfg, [(spec.name, spec.algo, *dims[spec.name]) for spec in self.specs])
+        check_memory(cfg, [(spec.name, spec.algo, *dims[spec.name]) for spec in self.specs])
         self.probe = probe = sizing
         """A match of the run's config (never stepped): roster, observation and action sizes."""
         self.elimination = probe.elimination
