@@ -160,7 +160,8 @@ def _read_manifest(stem: Path, expect_obs_mode: str | None,
         raise PolicyFileError(f"{meta_path}: hidden must be a list of positive integers, got {hidden!r}")
     roster = manifest.get("agents")
     if isinstance(roster, list):  # the seats it was trained for must be seats of the roster it was trained in
-        for seat in [manifest["agent"], *(manifest.get("plays") or [])]:
+        seats = [*str(manifest["agent"]).split("+"), *(manifest.get("plays") or [])]  # (a shared net: "ant+bug")
+        for seat in seats:
             if seat not in roster:
                 raise PolicyFileError(f"{meta_path}: agent {seat!r} is not in the roster it records {roster}")
     if expect_obs_mode is not None and manifest["obs_mode"] != expect_obs_mode:
@@ -175,30 +176,13 @@ def _read_manifest(stem: Path, expect_obs_mode: str | None,
     return manifest, weights_path
 
 
-def trained_partners(manifest: dict[str, Any]) -> int | None:
-    """How many partners the seat a policy was trained in had: its manifest's ``partners``, or for files written
-    before that key, its scenario's default roster (``None`` where neither can say)."""
-    from triplesumo.rules.scenarios import scenario_config
-    from triplesumo.rules.teams import Teams
-
-    if isinstance(manifest.get("partners"), int):
-        return int(manifest["partners"])
-    try:
-        roster = scenario_config(str(manifest.get("scenario", "paper"))).agents
-    except ValueError:
-        return None
-    seat = (manifest.get("plays") or [manifest.get("agent")])[0]
-    names = [a.name for a in roster]
-    if list(manifest.get("agents") or names) != names or seat not in names:
-        return None
-    return len(Teams.from_agents(roster).partners[names.index(seat)])
-
-
-def seat_problem(manifest: dict[str, Any], seat: str, teams: dict[str, str]) -> str | None:
+def seat_problem(manifest: dict[str, Any], seat: str, teams: dict[str, str],
+                 trained_with: int | None = None) -> str | None:
     """Why the policy file of ``manifest`` cannot drive ``seat`` of a match whose roster is ``teams`` (agent ->
     team label, roster order), or ``None`` if it can. With ``paper`` observations (one global vector, nothing in
     it says which body the network drives) only the seats it was trained for (``plays``, else ``agent``), in the
-    roster it was trained in; with ``egocentric`` ones any seat with as many partners as it was trained with."""
+    roster it was trained in; with ``egocentric`` ones any seat with as many partners as it was trained with
+    (``trained_with``, default the manifest's ``partners``; files older than that key say nothing here)."""
     roster = list(teams)
     if manifest.get("obs_mode") == "paper":
         trained = manifest.get("agents")
@@ -210,7 +194,8 @@ def seat_problem(manifest: dict[str, Any], seat: str, teams: dict[str, str]) -> 
                     f"which body it drives, so it cannot drive {seat!r}")
         return None
     partners = sum(1 for a, t in teams.items() if t == teams[seat] and a != seat)
-    trained_with = trained_partners(manifest)
+    if trained_with is None and isinstance(manifest.get("partners"), int):
+        trained_with = int(manifest["partners"])
     if trained_with is not None and trained_with != partners:
         return (f"it was trained in a seat with {trained_with} partner(s); {seat!r} has {partners} (egocentric "
                 "observations list partners before opponents)")

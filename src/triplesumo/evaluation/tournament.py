@@ -269,7 +269,24 @@ def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> 
     seats = [a for a in match.agents
              if match.observer.sizes[a] == int(manifest["obs_dim"]) and motors[a] == int(manifest["act_dim"])]
     roster = {a.name: a.team for a in match.config.agents}
-    return [a for a in seats if seat_problem(manifest, a, roster) is None]
+    trained_with = _trained_partners(manifest)
+    return [a for a in seats if seat_problem(manifest, a, roster, trained_with) is None]
+
+
+def _trained_partners(manifest: dict[str, Any]) -> int | None:
+    """How many partners the seat a policy was trained in had: its manifest's ``partners``, or for
+    files written before that key, its scenario's default roster (``None`` where neither can say)."""
+    if isinstance(manifest.get("partners"), int):
+        return int(manifest["partners"])
+    try:
+        roster = scenario_config(str(manifest.get("scenario", "paper"))).agents
+    except ValueError:
+        return None
+    seat = (manifest.get("plays") or [manifest.get("agent")])[0]
+    names = [a.name for a in roster]
+    if list(manifest.get("agents") or names) != names or seat not in names:
+        return None
+    return len(Teams.from_agents(roster).partners[names.index(seat)])
 
 
 def _run_of(spec: str, manifest: dict[str, Any]) -> str | None:
