@@ -80,7 +80,7 @@ def _fair_layout(bodies: tuple[str, ...], edge: float, half_size: float) -> tupl
     inward = [round(edge + _STEP * k, 6) for k in range(7)]
     outward = [round(edge - _STEP * k, 6) for k in range(1, 100) if edge - _STEP * k >= 0.2 - 1e-9]
     for e in [x for x in inward if x < half_size] + outward:
-        for turn, signs in _SIGNED_TURNS(n):
+        for turn, signs in _signed_turns(n):
             poses = _fair_poses(n, half_size - e, [math.radians(turn) * sgn for sgn in signs])
             if all(rim_margin(b, p, half_size) >= RIM_CLEARANCE for b, p in zip(bodies, poses, strict=True)) and all(
                     _gap(shapes[i], poses[i], shapes[j], poses[j]) >= CLEARANCE for i in range(n) for j in range(i)):
@@ -88,7 +88,7 @@ def _fair_layout(bodies: tuple[str, ...], edge: float, half_size: float) -> tupl
     return None
 
 
-def _SIGNED_TURNS(n: int) -> list[tuple[float, tuple[int, ...]]]:  # noqa: N802 (a table, built per size)
+def _signed_turns(n: int) -> list[tuple[float, tuple[int, ...]]]:
     """Each turn of :data:`_TURNS` for all agents alike, then (for turns > 0) with every other agent
     turned the other way: the mirror image of a pose is as far from the edges, so both are fair."""
     out: list[tuple[float, tuple[int, ...]]] = []
