@@ -24,6 +24,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from triplesumo import ENV_VERSION
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 from triplesumo.evaluation.play import PlayConfig, run_play
@@ -55,6 +56,15 @@ def match_to_record(metrics_csv: Path, eval_seed: int, min_steps: int = MIN_VIDE
         row, why = max(rows, key=lambda r: int(r["steps"])), "the longest test match (the team won none)"
     return (eval_seed + int(row["epoch"]) - 1,
             f"{why}: test match {row['epoch']}, {row['outcome']} after {row['steps']} steps")
+
+
+def zoo_pair_versions() -> dict[str, str]:
+    """The shipped Ant and Spider trained on another env version than this one: ``{"zoo:ant": "v1", ...}``."""
+    from triplesumo.agents.policy_file import load_json
+    from triplesumo.agents.zoo import ZOO_DIR
+
+    versions = {f"zoo:{n}": str(load_json(ZOO_DIR / f"{n}.json").get("env_version", "v0")) for n in ("ant", "spider")}
+    return {name: v for name, v in versions.items() if v != ENV_VERSION}
 
 
 @dataclass(frozen=True)
@@ -107,6 +117,11 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     if holds_run(out / "bug") or (out / "evaluation").exists():
         raise FileExistsError(f"{out} already holds an earlier demo's results; nothing was changed: choose another "
                               "--out (or delete that folder)")
+    older = zoo_pair_versions()
+    if older:
+        print(f"note: the shipped {' and '.join(older)} were trained on env {', '.join(sorted(set(older.values())))}, "
+              f"not {ENV_VERSION}, and the v2 pair is not built yet: this team is expected to lose "
+              "(docs/CONTEST.md)")
     print(f"[1/3] training Bug with DDPG (paper preset) in the shipped ongoing match -> {out / 'bug'}")
     train_cfg = TrainConfig(name="bug", out=str(out), epochs=cfg.train_epochs, max_minutes=cfg.max_minutes,
                             steps_per_epoch=cfg.steps_per_epoch,
