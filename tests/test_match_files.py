@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -188,3 +189,81 @@ def test_a_failed_write_keeps_the_earlier_match_file_and_names_it(recorded: tupl
     monkeypatch.undo()
     assert path.read_bytes() == before and MatchFile.load(path).steps == match.steps
     assert [p.name for p in tmp_path.iterdir()] == ["match.npz"]  # no temp file left behind
+
+
+@pytest.mark.parametrize(("damage", "reason"), [
+    (lambda old: [1, 2], "expected a JSON object, got list"),
+    (lambda old: {k: v for k, v in old.items() if k != "seed"}, "seed must be an integer, got None"),
+    (lambda old: {**old, "seed": None}, "seed must be an integer, got None"),
+    (lambda old: {**old, "outcomes": 5}, "outcomes must be a JSON object, got 5"),
+], ids=["list", "no-seed", "null-seed", "outcomes-5"])
+def test_damaged_metadata_is_a_clear_error(recorded: tuple[Path, MatchFile], tmp_path: Path, damage: Any,
+                                           reason: str) -> None:
+    """Issue 39, item 16 T: a list as meta, a missing or null seed, ``outcomes: 5`` were raw tracebacks."""
+    path, _ = recorded
+    good = _arrays(path)
+    meta = damage(json.loads(str(good["meta"])))
+    bad = _write(tmp_path / "meta.npz", **{**good, "meta": np.array(json.dumps(meta))})
+    with pytest.raises(MatchFileError, match=f"{bad}: corrupt metadata: {reason}"):
+        MatchFile.load(bad)
+
+
+def test_lying_headers_zip_bombs_and_broken_deflate_are_refused_before_reading(
+        recorded: tuple[Path, MatchFile], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 39, item 16 T: a header claiming 31 PiB raised MemoryError, a 2 MB zip bomb allocated 2.3 GB before
+    it was refused, and a broken deflate stream was a zlib traceback. Sizes are read from the headers first."""
+    import io
+    import zipfile
+
+    from triplesumo.evaluation import recording
+
+    path, _ = recorded
+    good = _arrays(path)
+    # a lying npy header: (2**50,) float64 declared, 8 bytes of data
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": (2**50,)})
+    lying = tmp_path / "lying.npz"
+    with zipfile.ZipFile(lying, "w") as zf:
+        for key, value in good.items():
+            if key == "states":
+                zf.writestr("states.npy", buf.getvalue() + b"\0" * 8)
+            else:
+                one = io.BytesIO()
+                np.save(one, value)
+                zf.writestr(f"{key}.npy", one.getvalue())
+    with pytest.raises(MatchFileError, match=r"states.npy's header declares 9,007,199,254,740,992 bytes"):
+        MatchFile.load(lying)
+    # a zip bomb: a member that unpacks past the limit (here lowered to 1 MiB for a 2 MiB array of zeros)
+    monkeypatch.setattr(recording, "MAX_MEMBER_BYTES", 1 << 20)
+    bomb = tmp_path / "bomb.npz"
+    with bomb.open("wb") as f:
+        np.savez_compressed(f, **{**good, "states": np.zeros((1 << 18,))})
+    assert bomb.stat().st_size < 100_000
+    with pytest.raises(MatchFileError, match=r"states.npy would unpack to 2,097,\d+ bytes"):
+        MatchFile.load(bomb)
+    monkeypatch.undo()
+    # a broken deflate stream inside a compressed member
+    data = bytearray(path.read_bytes())
+    at = data.index(b"states.npy") + 200
+    data[at:at + 64] = bytes(64)
+    (tmp_path / "deflate.npz").write_bytes(bytes(data))
+    with pytest.raises(MatchFileError, match="not a readable .npz match file"):
+        MatchFile.load(tmp_path / "deflate.npz")
+
+
+def test_a_match_file_recorded_before_env_v2_replays_on_its_own_ring(tmp_path: Path) -> None:
+    """A v1 match file's config has no layout or rim shape: it reads back as v1's circle and cylinders (not v2's
+    defaults), so its recorded states still replay bit for bit."""
+    from triplesumo.model import V1_PHYSICS
+
+    config = MatchConfig(physics=V1_PHYSICS, max_steps=12)
+    played = play_match({}, seed=4, config=config, record=tmp_path / "v1.npz")
+    assert played.steps == 12
+    good = _arrays(tmp_path / "v1.npz")
+    old = json.loads(str(good["config"]))
+    for key in ("layout", "start_edge", "rim_shape"):
+        del old["physics"][key]
+    path = _write(tmp_path / "old.npz", **{**good, "config": np.array(json.dumps(old))})
+    loaded = MatchFile.load(path)
+    assert loaded.config.physics == V1_PHYSICS
+    verify(loaded)

@@ -19,6 +19,7 @@ import io
 import json
 import typing
 import zipfile
+import zlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ import numpy as np
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.envs.match import Match
+from triplesumo.model.specs import PhysicsConfig, physics_record
 from triplesumo.rules.config import MatchConfig
 
 FORMAT = "triplesumo-match-1"
@@ -90,13 +92,14 @@ class MatchFile:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"no match file {path}")
+        _check_members(path)
         try:
             with np.load(path, allow_pickle=False) as npz:
                 missing = [k for k in _KEYS if k not in npz.files]
                 if missing:
                     raise MatchFileError(f"{path}: not a TripleSumo match file (missing {missing})")
                 arrays = {k: npz[k] for k in _KEYS}
-        except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError) as exc:
             if isinstance(exc, MatchFileError):
                 raise
             raise MatchFileError(f"{path}: not a readable .npz match file ({exc})") from None
@@ -109,6 +112,9 @@ class MatchFile:
             raise MatchFileError(f"{path}: corrupt config or metadata ({exc})") from None
         except ValueError as exc:
             raise MatchFileError(f"{path}: recorded config is not valid here: {exc}") from None
+        problem = _meta_problem(meta)
+        if problem is not None:
+            raise MatchFileError(f"{path}: corrupt metadata: {problem}")
         if meta.get("state_spec") != int(STATE_SPEC):
             raise MatchFileError(f"{path}: states were recorded with MuJoCo state spec {meta.get('state_spec')}, "
                                  f"this version records {int(STATE_SPEC)}")
@@ -229,10 +235,54 @@ def _same(got: np.ndarray, want: np.ndarray, step: int) -> None:
                              "recorded with another config, MuJoCo version or machine, or the file was altered")
 
 
+MAX_MEMBER_BYTES = 1 << 30
+"""Largest array a match file may hold (1 GiB: a 500-step match of 8 agents is a few MB); checked from the zip's
+and the arrays' headers before anything is read, so a zip bomb or a lying header allocates nothing."""
+
+
+def _check_members(path: Path) -> None:
+    """:class:`MatchFileError` unless every array of the npz at ``path`` declares a sane size: its uncompressed size
+    at most :data:`MAX_MEMBER_BYTES`, and its header's shape and dtype no larger than that."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                if info.file_size > MAX_MEMBER_BYTES:
+                    raise MatchFileError(f"{path}: {info.filename} would unpack to {info.file_size:,} bytes, more "
+                                         f"than a match file holds ({MAX_MEMBER_BYTES:,}); not read")
+                with zf.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                              else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = header(fh, max_header_size=10_000)
+                declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+                if declared > info.file_size:
+                    raise MatchFileError(f"{path}: {info.filename}'s header declares {declared:,} bytes of {dtype} "
+                                         f"{shape}, more than its {info.file_size:,}; not read")
+    except MatchFileError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, TypeError) as exc:
+        raise MatchFileError(f"{path}: not a readable .npz match file ({exc})") from None
+
+
+def _meta_problem(meta: Any) -> str | None:
+    """Why a match file's metadata is not what :meth:`MatchFile.save` writes (None if it is)."""
+    if not isinstance(meta, dict):
+        return f"expected a JSON object, got {type(meta).__name__}"
+    seed = meta.get("seed")
+    if not isinstance(seed, int) or isinstance(seed, bool):
+        return f"seed must be an integer, got {seed!r}"
+    for key in ("policies", "outcomes"):
+        if not isinstance(meta.get(key, {}), dict):
+            return f"{key} must be a JSON object, got {meta[key]!r}"
+    return None
+
+
 def _dataclass_from_json(cls: type, data: Any, where: str) -> Any:
     """Rebuild dataclass ``cls`` from ``dataclasses.asdict`` output; unknown fields are errors."""
     if not isinstance(data, dict):
         raise MatchFileError(f"{where} must be a JSON object, got {type(data).__name__}")
+    if cls is PhysicsConfig:  # recorded before a field existed: as those versions ran (v1's circle and cylinders)
+        data = physics_record(data)
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - names)
