@@ -30,10 +30,11 @@ still hold them all. An unfinished candidate that is not named again is left out
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -607,21 +608,37 @@ class RowAppender:
     what it finished)."""
 
     def __init__(self, path: Path, fresh: bool, columns: tuple[str, ...] = COLUMNS) -> None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = path.open("w" if fresh else "a", newline="", encoding="utf-8")
-        self._writer = csv.DictWriter(self._fh, columns, lineterminator="\n")
-        if fresh:
-            self._writer.writeheader()
+        self.path = path
+        with self._naming_the_file():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = path.open("w" if fresh else "a", newline="", encoding="utf-8")
+            self._writer = csv.DictWriter(self._fh, columns, lineterminator="\n")
+            if fresh:
+                self._writer.writeheader()
 
     def __call__(self, row: dict[str, Any]) -> None:
-        self._writer.writerow(row)
-        self._fh.flush()
+        with self._naming_the_file():
+            self._writer.writerow(row)
+            self._fh.flush()
+
+    @contextlib.contextmanager
+    def _naming_the_file(self) -> Iterator[None]:
+        """An ``OSError`` (a full disk) names the table; the rows written before it stay, and a resume cuts a
+        torn last one."""
+        try:
+            yield
+        except OSError as exc:
+            if str(self.path) in str(exc):
+                raise
+            raise OSError(exc.errno, f"{self.path}: a row was not written ({exc.strerror or exc}); the rows before "
+                                     "it are kept, --resume goes on from them") from exc
 
     def __enter__(self) -> RowAppender:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._fh.close()
+        with contextlib.suppress(OSError):  # (a full disk fails the close too; the error above names the file)
+            self._fh.close()
 
 
 def _record(cfg: EvaluateConfig, candidates: dict[str, str]) -> dict[str, Any]:
