@@ -8,8 +8,8 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import triplesumo
-from triplesumo.envs.batch import match_seeds
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import match_seeds
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.rules.rewards import REPORTED

@@ -38,8 +38,8 @@ if importlib.util.find_spec("mujoco_warp") is None or importlib.util.find_spec("
 import torch  # noqa: E402
 import warp as wp  # noqa: E402
 
-from triplesumo.envs.batch import match_seeds  # noqa: E402
 from triplesumo.envs.match import Match  # noqa: E402
+from triplesumo.envs.seeding import match_seeds  # noqa: E402
 from triplesumo.envs.warp import WarpMatchBatch, make_warp_vector_env  # noqa: E402
 from triplesumo.model import PhysicsConfig  # noqa: E402
 from triplesumo.rules import MatchConfig, ResetNoise  # noqa: E402

@@ -311,7 +311,7 @@ class _RawBatch(_Variant):
         self.lengths[k] = 0
 
     def start(self) -> None:
-        from triplesumo.envs.batch import match_seeds
+        from triplesumo.envs.seeding import match_seeds
 
         self.rngs = [np.random.default_rng(s) for s in match_seeds(self.seed, self.width)]
         self.lengths = np.zeros(self.width, np.int64)

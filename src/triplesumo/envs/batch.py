@@ -85,6 +85,7 @@ import numpy as np
 from gymnasium import spaces
 
 from triplesumo.envs.match import Match, StepResult, scale_actions
+from triplesumo.envs.seeding import match_seeds
 from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import REPORTED
@@ -94,11 +95,6 @@ from triplesumo.sim.physics import PhysicsError
 BACKENDS = ("mujoco", "threads")
 _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _NO_STAGE = int(mujoco.mjtStage.mjSTAGE_NONE)
-
-
-def match_seeds(seed: int, n_matches: int) -> list[int]:
-    """The reset seed of each match of ``MatchBatch.reset_all(seed)``, from ``SeedSequence(seed).spawn``."""
-    return [int(child.generate_state(1, np.uint64)[0]) for child in np.random.SeedSequence(seed).spawn(n_matches)]
 
 
 class MatchBatch:

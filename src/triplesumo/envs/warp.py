@@ -61,8 +61,8 @@ import torch
 import warp as wp
 from gymnasium import spaces
 
-from triplesumo.envs.batch import match_seeds
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import match_seeds
 from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import TERMS
