@@ -16,3 +16,20 @@ def report(table: str, result: dict[str, Any], json_path: str | None) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(result, indent=2) + "\n")
         print(f"wrote {path}")
+
+
+def versions(*extra: str) -> dict[str, str]:
+    """Versions of what a benchmark's figures depend on (``extra``: further installed packages)."""
+    import platform
+    from importlib import metadata
+
+    import mujoco
+    import numpy as np
+
+    found = {"python": platform.python_version(), "mujoco": mujoco.__version__, "numpy": np.__version__}
+    for package in ("triplesumo", "gymnasium", "pettingzoo", *extra):
+        try:
+            found[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            found[package] = "not installed"
+    return found

@@ -51,13 +51,12 @@ import argparse
 import os
 import platform
 import time
-from importlib import metadata
 from typing import Any
 
 import mujoco
 import numpy as np
 
-from triplesumo.benchmarks import report
+from triplesumo.benchmarks import report, versions
 from triplesumo.envs.batch import BACKENDS, MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.envs.parallel import TripleSumoParallelEnv
@@ -134,7 +133,7 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
             "rounds": rounds, "chunk": chunk, "seed": seed, "integrator": integrator, "obs_mode": obs_mode,
             "scenario": scenario,
             "timestep": config.physics.timestep, "frame_skip": config.physics.frame_skip,
-            "versions": _versions(), "cpu_count": os.cpu_count(),
+            "versions": versions(), "cpu_count": os.cpu_count(),
             "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
             "load_average_before": [round(x, 2) for x in load], "platform": platform.platform(),
         },
@@ -358,17 +357,6 @@ def _batch_variants(n_threads: int) -> list[tuple[str, int]]:
     """The same matches sequentially, then each backend on 1 and on ``n_threads`` threads."""
     variants = [("threads", 1), ("mujoco", 1)] + [(backend, n_threads) for backend in BACKENDS]
     return list(dict.fromkeys(variants))
-
-
-def _versions(*extra: str) -> dict[str, str]:
-    """Versions of what a benchmark's figures depend on (``extra``: further installed packages)."""
-    versions = {"python": platform.python_version(), "mujoco": mujoco.__version__, "numpy": np.__version__}
-    for package in ("triplesumo", "gymnasium", "pettingzoo", *extra):
-        try:
-            versions[package] = metadata.version(package)
-        except metadata.PackageNotFoundError:
-            versions[package] = "not installed"
-    return versions
 
 
 # --------------------------------------------------------------------- report

@@ -41,8 +41,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from triplesumo.benchmarks import report
-from triplesumo.benchmarks.env import _versions
+from triplesumo.benchmarks import report, versions
 
 OTHERS = {"ant": "zoo:ant", "spider": "zoo:spider"}
 
@@ -114,7 +113,7 @@ def run_ray_benchmark(epochs: int = 24, steps: int = 300, eval_epochs: int = 32,
     result: dict[str, Any] = {"config": {"epochs": epochs, "steps": steps, "eval_epochs": eval_epochs,
                                          "num_cpus": num_cpus, "cores": cores, "seed": seed},
                               "machine": {"cpus": os.cpu_count(), "load_avg": os.getloadavg()[0]},
-                              "versions": {**_versions(), "ray": ray.__version__}, "variants": {}}
+                              "versions": {**versions(), "ray": ray.__version__}, "variants": {}}
     with tempfile.TemporaryDirectory() as tmp, ray_tasks.session("", num_cpus):
         base = TrainConfig(out=tmp, epochs=epochs, steps_per_epoch=steps, n_envs=8, progress=False,
                            tensorboard=False, checkpoint_every=max(epochs, 1), save_replay=False, seed=seed)

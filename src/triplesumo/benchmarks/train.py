@@ -77,8 +77,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.benchmarks import report
-from triplesumo.benchmarks.env import _versions
+from triplesumo.benchmarks import report, versions
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer
 
@@ -384,7 +383,7 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
                   "policies": list(policies), "seed": seed, "learning_starts": learning_starts,
                   "paper_schedule": {"learn_every": 30, "gradient_steps": 1, "batch_size": 64, "hidden": [512, 256]},
                   "cpu_count": os.cpu_count(), "usable_cpus": len(os.sched_getaffinity(0)),
-                  "load_average_before": list(load_before), "versions": _versions(), "sb3": sb3_status,
+                  "load_average_before": list(load_before), "versions": versions(), "sb3": sb3_status,
                   "algo_steps": algo_steps,
                   "algo_schedule": {"offpolicy_learn_every": n_envs, "gradient_steps": 1,
                                     "ppo_rollout": PPO_ROLLOUT, "ppo_epochs": 10, "ppo_minibatches": 32,
@@ -464,7 +463,7 @@ def run_warp_train_benchmark(steps: int = 2048, n_envs: int = 1024, device: str 
                   "ddpg_schedule": {"learn_every": n_envs, "gradient_steps": gradient_steps, "batch_size": batch_size},
                   "ppo_schedule": {"n_steps": ppo_steps, "rollout": ppo_steps * n_envs, "n_minibatches": 4,
                                    "n_epochs": PPOConfig().n_epochs},
-                  "cpu_count": os.cpu_count(), "versions": _versions()},
+                  "cpu_count": os.cpu_count(), "versions": versions()},
         "rates": {name: float(np.median(r)) for name, r in per_round.items()},
         "updates_per_s": {name: float(np.median(r)) for name, r in update_rounds.items()},
     }

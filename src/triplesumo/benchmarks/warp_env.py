@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from triplesumo.benchmarks.env import _versions
+from triplesumo.benchmarks import versions
 from triplesumo.rules import MatchConfig
 
 DEFAULT_SIZES = (1, 16, 256, 1024, 4096, 16384)
@@ -53,7 +53,7 @@ def run_warp_benchmark(sizes: tuple[int, ...] = DEFAULT_SIZES, steps: int = 200,
         "setup": {"backend": "warp", "device": device, "device_name": _device_name(device), "sizes": list(sizes),
                   "steps": steps, "rounds": rounds, "warmup": warmup, "seed": seed, "integrator": integrator,
                   "obs_mode": obs_mode, "timestep": config.physics.timestep,
-                  "frame_skip": config.physics.frame_skip, "versions": _versions("mujoco-warp", "warp-lang", "torch"),
+                  "frame_skip": config.physics.frame_skip, "versions": versions("mujoco-warp", "warp-lang", "torch"),
                   "platform": platform.platform()},
         "rows": rows,
         "target": {"env_steps_per_s": TARGET_ENV_STEPS_PER_S, "env_vs_raw": TARGET_ENV_VS_RAW,
