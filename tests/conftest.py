@@ -3,6 +3,7 @@
 ``MUJOCO_GL`` must be chosen before anything imports mujoco, so it is set here, first.
 """
 
+import contextlib
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -123,6 +124,22 @@ def tiny(out: Path, name: str = "run", **fields: Any) -> TrainConfig:
     }
     values.update(fields)
     return TrainConfig(**values)
+
+
+@contextlib.contextmanager
+def small_disk(folder: Path, size: str) -> Iterator[Path]:
+    """A real tmpfs of ``size`` (``"16k"``) mounted at ``folder`` for a full-disk test, unmounted after; the test
+    is skipped where mounting needs rights this user lacks (CI runs as root)."""
+    import subprocess
+
+    folder.mkdir(parents=True, exist_ok=True)
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("a small tmpfs needs root and mount (CI runs as root)")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", str(folder)], check=True)
 
 
 def own_ray_workers(task: str) -> list[int]:

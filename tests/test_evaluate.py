@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 import triplesumo.agents.zoo
-from conftest import TinyZoo
+from conftest import TinyZoo, small_disk
 from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy
 from triplesumo.agents.policy_file import load_policy
 from triplesumo.evaluation.evaluate import (
@@ -559,19 +559,9 @@ def test_the_learner_cannot_have_a_fixed_policy() -> None:
 def test_a_full_disk_while_writing_rows_names_the_table(tmp_path: Path) -> None:
     """Issue 39, item 16: a full disk during evaluate (or a tournament, the same row appender) was an OSError
     naming no file. On a real 16 KiB tmpfs the error names the metrics CSV, and the rows before it stay."""
-    import os
-    import subprocess
-
-    small = tmp_path / "small"
-    small.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16k", "tmpfs", str(small)],
-                                           capture_output=True).returncode != 0:
-        pytest.skip("a small tmpfs needs root and mount (CI runs as root)")
-    try:
+    with small_disk(tmp_path / "small", "16k") as small:
         cfg = EvaluateConfig(policy=("passive",), policies=("ant=passive", "spider=passive"), baselines=(),
                              epochs=400, steps_per_epoch=2, n_envs=1, progress=False, out=str(small / "ev"))
         with pytest.raises(OSError, match=rf"{small / 'ev' / 'trained' / 'metrics.csv'}: a row was not written"):
             evaluate(cfg)
         assert (small / "ev" / "trained" / "metrics.csv").read_text().count("\n") > 10  # the rows before it
-    finally:
-        subprocess.run(["umount", str(small)], check=True)

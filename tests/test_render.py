@@ -92,24 +92,15 @@ def test_a_video_that_does_not_fit_on_the_disk_is_an_error_naming_the_file(tmp_p
     """Issue 39, item 16 S: on a full disk ``play --video`` exited 0 with a truncated mp4 (ffmpeg's "Error writing
     trailer" only on its stderr). Written on a real 64 KiB tmpfs: an OSError names the file, and an earlier video
     there is left whole; on a roomy disk the same frames write and decode back."""
-    import os
-    import subprocess
-
+    from conftest import small_disk
     from triplesumo.evaluation.video import count_frames, write_mp4
 
     rng = np.random.default_rng(0)
     frames = [rng.integers(0, 255, (96, 96, 3), dtype=np.uint8) for _ in range(40)]  # noise: ~ 300 KiB of H.264
     assert write_mp4(frames, tmp_path / "ok.mp4", fps=20) == 40 and count_frames(tmp_path / "ok.mp4") == 40
-    small = tmp_path / "small"
-    small.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(small)],
-                                           capture_output=True).returncode != 0:
-        pytest.skip("a small tmpfs needs root and mount (CI runs as root)")
-    try:
+    with small_disk(tmp_path / "small", "64k") as small:
         (small / "match.mp4").write_bytes(b"earlier video")
         with pytest.raises(OSError, match=rf"{small / 'match.mp4'}: the video was not written"):
             write_mp4(frames, small / "match.mp4", fps=20)
         assert (small / "match.mp4").read_bytes() == b"earlier video"
         assert [p.name for p in small.iterdir()] == ["match.mp4"]  # no temp file left
-    finally:
-        subprocess.run(["umount", str(small)], check=True)
