@@ -32,6 +32,7 @@ from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.scenarios import get_scenario
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import holds_run, train
+from triplesumo.zoo import older_pair
 
 MIN_VIDEO_STEPS = 100
 """A recorded match lasts at least this many steps (5 s at 20 frames per second) where a win that long exists."""
@@ -56,15 +57,6 @@ def match_to_record(metrics_csv: Path, eval_seed: int, min_steps: int = MIN_VIDE
         row, why = max(rows, key=lambda r: int(r["steps"])), "the longest test match (the team won none)"
     return (eval_seed + int(row["epoch"]) - 1,
             f"{why}: test match {row['epoch']}, {row['outcome']} after {row['steps']} steps")
-
-
-def zoo_pair_versions() -> dict[str, str]:
-    """The shipped Ant and Spider trained on another env version than this one: ``{"zoo:ant": "v1", ...}``."""
-    from triplesumo.agents.policy_file import load_json
-    from triplesumo.agents.zoo import ZOO_DIR
-
-    versions = {f"zoo:{n}": str(load_json(ZOO_DIR / f"{n}.json").get("env_version", "v0")) for n in ("ant", "spider")}
-    return {name: v for name, v in versions.items() if v != ENV_VERSION}
 
 
 @dataclass(frozen=True)
@@ -117,7 +109,7 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     if holds_run(out / "bug") or (out / "evaluation").exists():
         raise FileExistsError(f"{out} already holds an earlier demo's results; nothing was changed: choose another "
                               "--out (or delete that folder)")
-    older = zoo_pair_versions()
+    older = older_pair()
     if older:
         print(f"note: the shipped {' and '.join(older)} were trained on env {', '.join(sorted(set(older.values())))}, "
               f"not {ENV_VERSION}, and the v2 pair is not built yet: this team is expected to lose "

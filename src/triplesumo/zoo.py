@@ -36,18 +36,25 @@ def make_paper_vector_env(num_envs: int = 1, **kwargs: Any) -> Any:
     return TripleSumoVectorEnv(num_envs, policies=policies, **kwargs)
 
 
+def older_pair() -> dict[str, str]:
+    """The shipped Ant and Spider trained on another env version than this one (whose ring and start differ from
+    the ones they now play on), as ``{"zoo:ant": "v1", ...}``; empty once the zoo is this version's."""
+    from triplesumo import ENV_VERSION
+    from triplesumo.agents import zoo as shipped  # (its ZOO_DIR read now: tests point it at their own zoo)
+    from triplesumo.agents.policy_file import load_json
+
+    versions = {f"zoo:{n}": str(load_json(shipped.ZOO_DIR / f"{n}.json").get("env_version", "v0"))
+                for n in ("ant", "spider")}
+    return {name: v for name, v in versions.items() if v != ENV_VERSION}
+
+
 def _zoo_pair(obs_mode: str) -> dict[str, Any]:
-    """The zoo's Ant and Spider; a ``UserWarning`` names each one trained on an older env version (whose ring
-    and start differ from the one it now plays on)."""
+    """The zoo's Ant and Spider; a ``UserWarning`` names each one trained on an older env version
+    (:func:`older_pair`)."""
     from triplesumo import ENV_VERSION
 
-    pair = {}
-    for name in ("ant", "spider"):
-        policy, manifest = load(name, expect_obs_mode=obs_mode)
-        version = manifest.get("env_version", "v0")
-        if version != ENV_VERSION:
-            warnings.warn(f"zoo:{name} was trained on env {version}, not {ENV_VERSION} (another start layout or "
-                          f"rim); TripleSumo-Paper-{ENV_VERSION} plays it as it is until `triplesumo reproduce "
-                          f"--publish` rebuilds the zoo on {ENV_VERSION}", UserWarning, stacklevel=3)
-        pair[name] = policy
-    return pair
+    for name, version in older_pair().items():
+        warnings.warn(f"{name} was trained on env {version}, not {ENV_VERSION} (another start layout or rim); "
+                      f"TripleSumo-Paper-{ENV_VERSION} plays it as it is until `triplesumo reproduce --publish` "
+                      f"rebuilds the zoo on {ENV_VERSION}", UserWarning, stacklevel=3)
+    return {name: load(name, expect_obs_mode=obs_mode)[0] for name in ("ant", "spider")}
