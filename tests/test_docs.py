@@ -148,3 +148,8 @@ def test_site_builds_strict(tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stderr[-4000:]
     assert (tmp_path / "site" / "environments" / "paper.html").is_file()
     assert "TripleSumoParallelEnv" in (tmp_path / "site" / "api" / "envs.html").read_text()
+    # docs/hooks.py serves the linked files outside docs/ and under the excluded docs/runs/, and only those
+    assert 'src="repo/reproduction/compare/compare.png"' in (tmp_path / "site" / "index.html").read_text()
+    assert (tmp_path / "site" / "repo" / "reproduction" / "compare" / "compare.png").is_file()
+    assert (tmp_path / "site" / "runs" / "league" / "leaderboard.png").is_file()
+    assert not (tmp_path / "site" / "runs" / "league" / "matches.csv").exists()
