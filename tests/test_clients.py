@@ -1,9 +1,9 @@
-"""The README's examples with each real client library, run as a user would run them.
+"""The examples of the RL-libraries guide with each real client library, run as a user would run them.
 
-Each ``<!-- example: NAME -->`` code block of README.md runs in a fresh Python process
+Each ``<!-- example: NAME -->`` code block of docs/libraries.md runs in a fresh Python process
 (with a time limit, so a hang, like the old fork deadlock, fails instead of stalling CI),
 followed by checks of what it left behind. The blocks are the documentation: if an
-example breaks, the README is wrong.
+example breaks, the guide is wrong.
 """
 
 from __future__ import annotations
@@ -22,12 +22,12 @@ import pytest
 import triplesumo
 
 ROOT = Path(__file__).resolve().parents[1]
-README = ROOT / "README.md"
+GUIDE = ROOT / "docs" / "libraries.md"
 _BLOCK = re.compile(r"<!-- example: ([\w-]+) -->\s*```python\n(.*?)```", re.S)
 
 
-def readme_examples() -> dict[str, str]:
-    return {name: code for name, code in _BLOCK.findall(README.read_text())}
+def guide_examples() -> dict[str, str]:
+    return {name: code for name, code in _BLOCK.findall(GUIDE.read_text())}
 
 
 def run_python(code: str, timeout: float = 240.0) -> str:
@@ -72,13 +72,13 @@ CHECKS = {
 }
 
 
-def test_every_readme_example_is_checked() -> None:
-    assert set(readme_examples()) == set(CHECKS)
+def test_every_guide_example_is_checked() -> None:
+    assert set(guide_examples()) == set(CHECKS)
 
 
 @pytest.mark.parametrize("name", sorted(CHECKS))
-def test_readme_example_runs(name: str) -> None:
-    code = readme_examples()[name]
+def test_guide_example_runs(name: str) -> None:
+    code = guide_examples()[name]
     if name == "gymnasium-async":
         # The case that hung: the parent built the Paper env and ran torch before forking.
         code = textwrap.dedent("""

@@ -299,7 +299,7 @@ def test_learner_config_gives_one_learner_its_own_values(tmp_path: Path) -> None
 
 def test_a_schedule_that_would_mostly_update_is_warned_about_naming_the_gpu_setting(tmp_path: Path) -> None:
     """``learn_every`` counts transitions: 40 matches updating every transition, 2 gradient steps each, make
-    80 updates per step of all the matches; 40 matches at learn_every 40 make 2 (README "GPU training")."""
+    80 updates per step of all the matches; 40 matches at learn_every 40 make 2 (docs/gpu.md, "GPU training")."""
     heavy = tiny(tmp_path, "heavy", n_envs=40, learn=("bug=td3", "ant=ppo"), policies=("spider=random",),
                  learner_config=("bug.learn_every=1", "bug.gradient_steps=2"))
     with pytest.warns(UserWarning, match=r"learner bug: td3.learn_every=1 and gradient_steps=2 with 40 "

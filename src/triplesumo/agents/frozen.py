@@ -40,8 +40,9 @@ class FrozenPolicy:
     Args:
         weights: ``(out, in)`` matrices of the linear layers, first to last.
         biases: ``(out,)`` vectors, one per layer.
-        obs_mean, obs_var: a frozen observation normaliser's statistics (both or neither):
+        obs_mean: a frozen observation normaliser's mean (give ``obs_var`` too, or neither):
             observations become ``clip((obs - mean) / sqrt(var + eps))`` first.
+        obs_var: that normaliser's variance.
     """
 
     def __init__(self, weights: list[np.ndarray], biases: list[np.ndarray],

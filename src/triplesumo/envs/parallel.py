@@ -73,10 +73,17 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     and at every step, so tensor-based clients (TorchRL) can stack them.
 
     ## Starting State
-    Agents evenly spaced on a circle of radius 1.4 around the centre (Ant at angle 0, Bug at
-    120 degrees, Spider at 240), facing the centre, torso at height 1.25 so they drop onto
-    the tatami. Seeded noise: uniform +-0.1 m on x and y, +-0.1 rad on yaw, +-0.1 rad on
-    every leg joint, Gaussian 0.1 on every qvel. Zero noise gives an identical start.
+    The fair layout (env v2, ``PhysicsConfig.layout="fair"``): every torso starts
+    ``start_edge`` (1.0 m) from its nearest edge of the ring and as far from the edge behind
+    it. Up to four agents stand on the ring's diagonals (Ant at (-1, -1), Bug at (1, 1),
+    Spider at (1, -1)), facing the centre turned by one common angle so that no leg rests on
+    the rim; rosters that fit no fair start (five or more quadrupeds) keep the circle below
+    (:mod:`triplesumo.model.layout`). Torso at height 1.25 so they drop onto the tatami.
+    Seeded noise (``ResetNoise(position=0.02, yaw=0.05)``): uniform +-0.02 m on x and y,
+    +-0.05 rad on yaw, +-0.1 rad on every leg joint, Gaussian 0.1 on every qvel. Zero noise
+    gives an identical start. v1's circle (``layout="circle"``, ``triplesumo.model.V1_PHYSICS``):
+    agents evenly spaced on a circle of radius 1.4 around the centre (Ant at angle 0, Bug at
+    120 degrees, Spider at 240), facing the centre, noise +-0.1 m on x and y and +-0.1 rad on yaw.
 
     ## Episode End
     Termination: on the step the torso centre (free-joint position, current after the

@@ -344,7 +344,7 @@ class WarpMatchBatch:
         """Continue from :meth:`snapshot` and the observations ``(num_envs, n_agents, obs_dim)``
         returned with it (the last trustworthy observation of a match that meets physics trouble
         next): the next :meth:`step` is the one the snapshotted batch would have made, bit for
-        bit on a deterministic device (Warp's CPU device; see the README on CUDA's contact order)."""
+        bit on a deterministic device (Warp's CPU device; see docs/gpu.md on CUDA's contact order)."""
         if len(snapshots) != self.num_envs:
             raise ValueError(f"need {self.num_envs} match snapshots, got {len(snapshots)}")
         physics = np.stack([np.asarray(s["physics"], dtype=np.float32) for s in snapshots])

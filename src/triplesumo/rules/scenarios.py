@@ -277,7 +277,7 @@ def scenario_config(name: str, **overrides: Any) -> MatchConfig:
 
 
 def scenarios_doc() -> str:
-    """Every scenario's documentation, one ``### name`` section each (for docstrings and the README)."""
+    """Every scenario's documentation, one ``### name`` section each (appended to the ParallelEnv docstring)."""
     parts = []
     for sc in SCENARIOS.values():
         body = sc.doc.replace("## ", "#### ")

@@ -149,7 +149,7 @@ class TrainConfig:
     backend: str = "cpu"
     """Where the matches run: cpu (MuJoCo, numpy; the exact reference) or warp (MuJoCo Warp on
     device, first-out rules and one body kind; observations, actions, replay and rollouts stay
-    torch tensors on the device). See the README's "GPU training"."""
+    torch tensors on the device). See "GPU training" in docs/gpu.md."""
     device: str | None = None
     """Torch/Warp device of backend warp: cuda, or cpu (Warp's CPU device: tests, no speed);
     default cuda when Warp sees a GPU. backend cpu runs on the CPU (None or cpu)."""

@@ -334,7 +334,7 @@ HEAVY_SCHEDULE = 64
 def warn_heavy_schedule(cfg: TrainConfig, specs: Sequence[LearnerSpec]) -> None:
     """Warn when an off-policy learner's schedule makes more than :data:`HEAVY_SCHEDULE` gradient steps per
     step of all the matches: ``learn_every`` counts transitions, so a CPU schedule (``learn_every 5``) kept
-    for thousands of GPU matches makes thousands of updates per step and collects almost nothing (README
+    for thousands of GPU matches makes thousands of updates per step and collects almost nothing (docs/gpu.md,
     "GPU training": ``learn_every N_ENVS``)."""
     for spec in specs:
         if spec.algo == "ppo":
@@ -347,7 +347,7 @@ def warn_heavy_schedule(cfg: TrainConfig, specs: Sequence[LearnerSpec]) -> None:
                           f"{c.gradient_steps} with {transitions:,} transitions per step of the {cfg.n_envs:,} "
                           f"matches make {per_step:,.0f} gradient steps per step, so the run will mostly update "
                           f"and barely collect; for G updates per step of all the matches set learn_every to "
-                          f"{transitions} and gradient_steps to G (README \"GPU training\")", UserWarning,
+                          f"{transitions} and gradient_steps to G (docs/gpu.md, \"GPU training\")", UserWarning,
                           stacklevel=3)
 
 
@@ -526,7 +526,7 @@ class Trainer:
 
     # ------------------------------------------------------------------ self-play
     def _setup_league(self, pairs: tuple[str, ...], resume: bool = False) -> None:
-        """Sides, roles and seeds of the league (README "Self-play"); errors name the config field.
+        """Sides, roles and seeds of the league (docs/self-play.md); errors name the config field.
 
         A side is a team of the roster (paper: ``team`` = Ant and Bug, ``spider``); in a free-for-all
         (every team one agent) one side ``ffa`` whose one role takes any seat. A side learns as a

@@ -1,0 +1,155 @@
+"""The README as a front door and the documentation site under docs/ (built by MkDocs from mkdocs.yml).
+
+The README stays short and starts with the two commands; every relative link of the README and the
+site's pages resolves to a file of the repository; every page of the nav exists and every page is
+in the nav; the environment pages are what docs/gen_env_pages.py writes from the code; the API
+reference covers every public module; and, where MkDocs is installed (the ``docs`` extra),
+``mkdocs build --strict`` passes.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import subprocess
+import sys
+from functools import cache
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+DOCS = ROOT / "docs"
+README_LIMIT = 15_000
+COMMANDS = (
+    "python3 -m venv .venv && . .venv/bin/activate && pip install -e . && triplesumo demo\n"
+    "python3 -m venv .venv && . .venv/bin/activate && pip install -e \".[test]\" && pytest -n 2 -q\n"
+)
+_LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)|\bsrc=\"([^\"]+)\"")
+_FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+
+
+def site_pages() -> list[Path]:
+    """The Markdown pages of the site: docs/ less the run outputs under docs/runs/."""
+    return sorted(p for p in DOCS.rglob("*.md") if "runs" not in p.relative_to(DOCS).parts)
+
+
+@cache
+def tracked() -> frozenset[str]:
+    """Paths git tracks (a sparse checkout lacks some of them on disk); empty outside a git checkout."""
+    try:
+        out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return frozenset()
+    return frozenset(out.splitlines())
+
+
+def relative_links(page: Path) -> list[str]:
+    """Targets of the page's Markdown links and images and of its HTML ``src=`` outside code blocks,
+    less web addresses and anchors."""
+    text = _FENCE.sub("", page.read_text())
+    text = re.sub(r"`[^`\n]*`", "", text)  # inline code
+    targets = [a or b for a, b in _LINK.findall(text)]
+    return [t for t in targets if not re.match(r"[a-z]+:", t) and not t.startswith("#")]
+
+
+def test_readme_is_a_short_front_door_starting_with_the_two_commands() -> None:
+    text = README.read_text()
+    assert len(text) <= README_LIMIT, f"README.md: {len(text)} characters, at most {README_LIMIT} (guides go to docs/)"
+    first = re.search(r"^```\w*\n(.*?)^```", text, re.S | re.M)
+    assert first is not None and first.group(1) == COMMANDS, "README.md's first code block must be the two commands"
+    assert text.index("```") < text.index("\n## "), "the two commands come before any section"
+
+
+@pytest.mark.parametrize("page", [README, *site_pages()], ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_relative_link_resolves(page: Path) -> None:
+    broken = []
+    for target in relative_links(page):
+        path = (page.parent / target.split("#")[0]).resolve()
+        rel = path.relative_to(ROOT).as_posix() if path.is_relative_to(ROOT) else None
+        if not path.exists() and (rel is None or not any(t == rel or t.startswith(rel + "/") for t in tracked())):
+            broken.append(target)
+    assert not broken, f"{page.relative_to(ROOT)}: links to missing files: {broken}"
+
+
+def test_relative_links_are_found() -> None:
+    links = relative_links(README)
+    assert "docs/CONTEST.md" in links and "docs/figures/bodies.png" in links, links
+    assert "../scenario_paper.mp4" in relative_links(DOCS / "environments" / "paper.md")
+
+
+def nav_pages() -> list[str]:
+    """Every page named in mkdocs.yml's nav."""
+    nav = (ROOT / "mkdocs.yml").read_text().split("\nnav:\n", 1)[1]
+    return re.findall(r"^\s+- (?:[^:\n]+: )?(\S+\.md)\s*$", nav, re.M)
+
+
+def test_nav_pages_exist_and_every_page_is_in_the_nav() -> None:
+    nav = nav_pages()
+    assert "index.md" in nav and "environments/paper.md" in nav and "api/envs.md" in nav, nav
+    missing = [p for p in nav if not (DOCS / p).is_file()]
+    assert not missing, f"mkdocs.yml's nav names missing pages: {missing}"
+    left_out = [p.relative_to(DOCS).as_posix() for p in site_pages()
+                if p.relative_to(DOCS).parts[0] != "bench" and p.relative_to(DOCS).as_posix() not in nav]
+    assert not left_out, f"pages not in mkdocs.yml's nav: {left_out}"
+
+
+def _generator() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("gen_env_pages", DOCS / "gen_env_pages.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_environment_pages_are_in_sync_with_the_code() -> None:
+    from triplesumo.rules.scenarios import SCENARIOS
+
+    pages = _generator().pages()
+    assert {p.name for p in pages} == {"index.md", *(f"{name}.md" for name in SCENARIOS)}
+    stale = [p.relative_to(ROOT).as_posix() for p, text in pages.items() if not p.exists() or p.read_text() != text]
+    assert not stale, f"out of date: {stale}; run python docs/gen_env_pages.py"
+
+
+def test_environment_pages_document_each_scenario() -> None:
+    from triplesumo.rules.scenarios import SCENARIOS
+
+    pages = _generator().pages()
+    overview = pages[DOCS / "environments" / "index.md"]
+    for section in ("Description", "Action Space", "Observation Space", "Rewards", "Starting State", "Episode End",
+                    "Arguments", "Version History"):
+        assert f"### {section}\n" in overview, section
+    for name, sc in SCENARIOS.items():
+        page = pages[DOCS / "environments" / f"{name}.md"]
+        assert sc.gym_id in page and sc.pettingzoo_name in page
+        for section in ("Agents", "Rules", "Rewards", "Episode End"):
+            assert f"## {section}\n" in page, (name, section)
+
+
+def test_api_reference_covers_every_public_module() -> None:
+    documented = set(re.findall(r"^::: (triplesumo[\w.]*)", "".join(p.read_text() for p in (DOCS / "api").glob("*.md")),
+                                re.M))
+    package = ROOT / "src" / "triplesumo"
+    modules = {".".join(("triplesumo", *p.relative_to(package).with_suffix("").parts)).removesuffix(".__init__")
+               for p in package.rglob("*.py")}
+    public = {m for m in modules if not any(part.startswith("_") for part in m.split(".")[1:])
+              and not m.startswith("triplesumo.benchmarks")}
+    assert public - documented == set(), f"modules missing from docs/api/: {sorted(public - documented)}"
+
+
+@pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="needs the docs extra (mkdocs)")
+def test_site_builds_strict(tmp_path: Path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    assert (tmp_path / "site" / "environments" / "paper.html").is_file()
+    assert "TripleSumoParallelEnv" in (tmp_path / "site" / "api" / "envs.html").read_text()
+    # docs/hooks.py serves the linked files outside docs/ and under the excluded docs/runs/, and only those
+    assert 'src="repo/reproduction/compare/compare.png"' in (tmp_path / "site" / "index.html").read_text()
+    assert (tmp_path / "site" / "repo" / "reproduction" / "compare" / "compare.png").is_file()
+    assert (tmp_path / "site" / "runs" / "league" / "leaderboard.png").is_file()
+    assert not (tmp_path / "site" / "runs" / "league" / "matches.csv").exists()
