@@ -345,3 +345,25 @@ def test_rllibs_env_checker_passes_every_scenario_without_a_warning(obs_mode: st
     *_, infos = lean.step({a: lean.get_action_space(a).sample() for a in lean.get_agent_ids()})
     assert set(infos["bug"]) == {"outcome", "place", "eliminated"}
 
+
+@pytest.mark.usefixtures("local_ray")
+def test_bench_rllib_reports_each_layouts_rate_beside_the_raw_env(tmp_path: Any,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``triplesumo bench rllib --quick``: one row per layout, with RLlib's and the raw env's rates, their
+    ratio, the build time, and what RLlib held (the speed itself is for the benchmark, not for a test)."""
+    import json
+
+    from triplesumo.cli import main
+
+    out = tmp_path / "rllib.json"
+    assert main(["bench", "rllib", "--quick", "--layouts", "in_env_4", "modules_1", "--json", str(out)]) == 0
+    table = capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert list(result["layouts"]) == ["in_env_4", "modules_1"] and "ratio" in table and "in_env_4" in table
+    assert result["config"]["env_runners"] == 1 and result["machine"]["cpus"] >= 1 and "ray" in result["versions"]
+    for row in result["layouts"].values():
+        assert row["env_steps"] >= result["config"]["steps"] and row["seconds"] > 0 and row["build_s"] > 0
+        assert row["ratio"] == pytest.approx(row["env_steps_per_s"] / row["raw_env_steps_per_s"])
+    new, old = result["layouts"]["in_env_4"], result["layouts"]["modules_1"]
+    assert new["modules"] == new["agents_in_episodes"] == ["bug"] and new["matches_per_runner"] == 4
+    assert old["modules"] == old["agents_in_episodes"] == ["ant", "bug", "spider"] and old["matches_per_runner"] == 1
