@@ -3,7 +3,7 @@
 Two runs (see docs/RLLIB.md):
 
 - the paper's setup (default): Bug learns; Ant and Spider are the shipped zoo policies,
-  frozen (played by :class:`triplesumo.integrations.rllib.FrozenPolicyModule`)::
+  frozen (acting inside the env with the zoo's numpy policies: RLlib holds Bug only)::
 
       python examples/rllib_bug_ppo.py --iterations 50
 
