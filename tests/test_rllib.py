@@ -364,6 +364,7 @@ def test_bench_rllib_reports_each_layouts_rate_beside_the_raw_env(tmp_path: Any,
     for row in result["layouts"].values():
         assert row["env_steps"] >= result["config"]["steps"] and row["seconds"] > 0 and row["build_s"] > 0
         assert row["ratio"] == pytest.approx(row["env_steps_per_s"] / row["raw_env_steps_per_s"])
+        assert len(row["rounds_env_steps_per_s"]) == len(row["rounds_raw_env_steps_per_s"]) == 1  # --quick: 1 round
     new, old = result["layouts"]["in_env_4"], result["layouts"]["modules_1"]
     assert new["modules"] == new["agents_in_episodes"] == ["bug"] and new["matches_per_runner"] == 4
     assert old["modules"] == old["agents_in_episodes"] == ["ant", "bug", "spider"] and old["matches_per_runner"] == 1

@@ -3,12 +3,14 @@
 The paper's match (Bug learns, the zoo's Ant and Spider are frozen), built by
 :func:`~triplesumo.integrations.rllib.make_config` in each layout below with one remote env
 runner (``num_env_runners=1``). The runner samples ``warmup`` env steps untimed, then
-``steps`` env steps (``EnvRunner.sample``: RLlib's connectors, Bug's RLModule exploring,
-episodes), timed inside the runner's process, so Ray's transport of the episodes is not
-counted. Just before each layout the **raw env** is timed for ``steps`` steps in a Ray task
-(the same kind of single-threaded worker process): the PettingZoo env, one match, the zoo's
-numpy Ant and Spider acting, Bug's actions random. ``ratio`` is the layout's rate over that
-raw rate; ``build_s`` is ``build_algo``'s wall time (the env runner and the learner made).
+``repeats`` rounds of ``steps`` env steps (``EnvRunner.sample``: RLlib's connectors, Bug's
+RLModule exploring, episodes), each timed inside the runner's process, so Ray's transport
+of the episodes is not counted. Before each round the **raw env** is timed for ``steps``
+steps in a Ray task (the same kind of single-threaded worker process): the PettingZoo env,
+one match, the zoo's numpy Ant and Spider acting, Bug's actions random. Rates are the
+rounds' medians (on a shared box the load moves between rounds); ``ratio`` is the layout's
+median over the raw env's; ``build_s`` is ``build_algo``'s wall time (the env runner and the
+learner made).
 
 Layouts:
 
@@ -25,8 +27,11 @@ Layouts:
 from __future__ import annotations
 
 import argparse
+import functools
 import os
+import statistics
 import time
+from collections.abc import Callable
 from typing import Any
 
 from triplesumo.benchmarks import report, versions
@@ -79,8 +84,10 @@ def _sample(runner: Any, warmup: int, steps: int) -> dict[str, Any]:
             "matches_per_runner": int(runner.num_envs), "modules": sorted(str(m) for m in runner.module.keys())}
 
 
-def measure_layout(name: str, steps: int, warmup: int, max_steps: int, seed: int) -> dict[str, Any]:
-    """One row: build the layout's algorithm with one remote env runner, time its sampling."""
+def measure_layout(name: str, steps: int, warmup: int, max_steps: int, seed: int, repeats: int,
+                   raw: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """One row: build the layout's algorithm with one remote env runner, then ``repeats`` rounds of the raw
+    env (``raw()``) and the runner sampling, alternately; the row's rates are the rounds' medians."""
     from triplesumo.integrations.rllib import make_config
 
     layout = LAYOUTS[name]
@@ -92,18 +99,26 @@ def measure_layout(name: str, steps: int, warmup: int, max_steps: int, seed: int
     start = time.perf_counter()
     algo = config.build_algo()
     build = time.perf_counter() - start
+    rounds, raws = [], []
     try:
         group = algo.env_runner_group
         assert group is not None, "an algorithm with env runners"
-        row = group.foreach_env_runner(lambda r: _sample(r, warmup, steps), local_env_runner=False)[0]
+        for k in range(repeats):
+            raws.append(raw()["env_steps_per_s"])
+            sample = functools.partial(_sample, warmup=warmup if k == 0 else 0, steps=steps)
+            rounds.append(group.foreach_env_runner(sample, local_env_runner=False)[0])
     finally:
         algo.stop()
-    return {**row, "build_s": build, "what": layout["what"]}
+    rate, raw_rate = statistics.median(r["env_steps_per_s"] for r in rounds), statistics.median(raws)
+    return {**rounds[-1], "env_steps_per_s": rate, "raw_env_steps_per_s": raw_rate, "ratio": rate / raw_rate,
+            "rounds_env_steps_per_s": [r["env_steps_per_s"] for r in rounds], "rounds_raw_env_steps_per_s": raws,
+            "build_s": build, "what": layout["what"]}
 
 
 def run_rllib_benchmark(steps: int = 2000, warmup: int = 200, max_steps: int = 500, seed: int = 0,
-                        layouts: tuple[str, ...] = tuple(LAYOUTS), num_cpus: int = 2) -> dict[str, Any]:
-    """Measure the layouts of the module docstring, each beside a raw env measured just before it."""
+                        layouts: tuple[str, ...] = tuple(LAYOUTS), num_cpus: int = 2,
+                        repeats: int = 3) -> dict[str, Any]:
+    """Measure the layouts of the module docstring, each in ``repeats`` rounds alternating with the raw env."""
     import ray
 
     from triplesumo.integrations import ray_tasks
@@ -112,18 +127,18 @@ def run_rllib_benchmark(steps: int = 2000, warmup: int = 200, max_steps: int = 5
     if unknown:
         raise ValueError(f"layouts: unknown layout(s) {unknown}; known: {list(LAYOUTS)}")
     result: dict[str, Any] = {"config": {"steps": steps, "warmup": warmup, "max_steps": max_steps, "seed": seed,
-                                         "num_cpus": num_cpus, "env_runners": 1},
+                                         "num_cpus": num_cpus, "env_runners": 1, "repeats": repeats},
                               "machine": {"cpus": os.cpu_count(), "load_avg_start": os.getloadavg()[0]},
                               "versions": {**versions("torch"), "ray": ray.__version__}, "layouts": {}}
     with ray_tasks.session("", num_cpus):
         raw_task = ray.remote(num_cpus=1)(raw_env_rate)
         ray.get(raw_task.remote(min(steps, 50), max_steps, seed))  # a warm worker: imports untimed
+
+        def raw() -> dict[str, Any]:
+            return ray.get(raw_task.remote(steps, max_steps, seed))
+
         for name in layouts:
-            raw = ray.get(raw_task.remote(steps, max_steps, seed))
-            row = measure_layout(name, steps, warmup, max_steps, seed)
-            row["raw_env_steps_per_s"] = raw["env_steps_per_s"]
-            row["ratio"] = row["env_steps_per_s"] / raw["env_steps_per_s"]
-            result["layouts"][name] = row
+            result["layouts"][name] = measure_layout(name, steps, warmup, max_steps, seed, repeats, raw)
     result["machine"]["load_avg_end"] = os.getloadavg()[0]
     return result
 
@@ -132,8 +147,8 @@ def format_table(result: dict[str, Any]) -> str:
     """The readable table ``main`` prints."""
     c, m = result["config"], result["machine"]
     lines = [f"RLlib sampling, 1 env runner, paper match (Bug learns, zoo Ant + Spider frozen), {c['steps']} env steps "
-             f"after {c['warmup']} warm-up; machine: {m['cpus']} CPUs, load {m['load_avg_start']:.1f} -> "
-             f"{m['load_avg_end']:.1f}",
+             f"after {c['warmup']} warm-up, medians of {c['repeats']} rounds; machine: {m['cpus']} CPUs, load "
+             f"{m['load_avg_start']:.1f} -> {m['load_avg_end']:.1f}",
              f"{'layout':10s} {'RLlib env steps/s':>18s} {'raw env steps/s':>16s} {'ratio':>6s} {'build s':>8s}  what"]
     for name, row in result["layouts"].items():
         lines.append(f"{name:10s} {row['env_steps_per_s']:18.0f} {row['raw_env_steps_per_s']:16.0f} "
@@ -148,20 +163,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-steps", type=int, default=500, help="match step limit (default: the paper's 500)")
     parser.add_argument("--layouts", nargs="+", default=list(LAYOUTS), choices=list(LAYOUTS),
                         help="layouts to measure (default: all)")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="rounds of raw env then RLlib per layout; rates are their medians (default: 3)")
     parser.add_argument("--num-cpus", type=int, default=2, help="CPUs of the local Ray (default: 2)")
     parser.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
     args = parser.parse_args(argv)
     if args.quick:
-        args.steps, args.warmup, args.max_steps = 40, 8, 30
-    for name in ("steps", "max_steps", "num_cpus"):
+        args.steps, args.warmup, args.max_steps, args.repeats = 40, 8, 30, 1
+    for name in ("steps", "max_steps", "num_cpus", "repeats"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be >= 1")
     if args.warmup < 0:
         parser.error("--warmup must be >= 0")
     result = run_rllib_benchmark(args.steps, args.warmup, args.max_steps, args.seed, tuple(args.layouts),
-                                 args.num_cpus)
+                                 args.num_cpus, args.repeats)
     report(format_table(result), result, args.json)
     return 0
 
