@@ -61,7 +61,8 @@ def build(args: argparse.Namespace) -> Any:
     from triplesumo.integrations.rllib import make_config
 
     if args.self_play:
-        config = make_config("paper", share="team", policies_to_train=["team", "spider"], max_steps=args.max_steps)
+        config = make_config("paper", share="team", policies_to_train=["team", "spider"], max_steps=args.max_steps,
+                             obs_mode="egocentric")  # one network for two seats needs seat-own observations
     else:
         config = make_config("paper", policies_to_train=["bug"], frozen={"ant": "zoo:ant", "spider": "zoo:spider"},
                              max_steps=args.max_steps)
