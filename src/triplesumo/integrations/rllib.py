@@ -4,17 +4,20 @@ Works on RLlib's current API stack (RLModules, Learners, EnvRunners; Ray 2.54 to
 Needs the ``ray`` extra: ``pip install "triplesumo[ray]"``; ``import triplesumo`` never
 imports Ray.
 
-- :class:`TripleSumoMultiAgentEnv` is one match as an RLlib multi-agent env (the PettingZoo
-  env in RLlib's ``ParallelPettingZooEnv``), built from an ``env_config`` holding
-  :class:`~triplesumo.rules.MatchConfig` field overrides or a whole config under
-  ``"match_config"``; :func:`register_envs` registers every scenario by name
-  (``"triplesumo_paper_v2"``, ...).
+- :class:`TripleSumoMultiAgentEnv` is one match as an RLlib multi-agent env (around the
+  PettingZoo env), built from an ``env_config`` holding :class:`~triplesumo.rules.MatchConfig`
+  field overrides or a whole config under ``"match_config"``, and optionally ``"fixed"``:
+  agents that act inside the env with the project's numpy policies, unseen by RLlib;
+  :func:`register_envs` registers every scenario by name (``"triplesumo_paper_v2"``, ...).
 - :func:`make_config` returns an ``AlgorithmConfig`` (PPO by default) with one RLModule per
   agent (module ids = agent names) or per team (``share="team"``: module ids = team labels),
   the policy-mapping function, ``policies_to_train``, the project's observation and action
-  spaces, and :class:`OutcomeCallback` so that results carry win/loss/draw rates.
+  spaces, :data:`ENVS_PER_RUNNER` matches per env runner, and :class:`OutcomeCallback` so
+  that results carry win/loss/draw rates. Frozen modules' agents act inside the env
+  (``frozen_in_env=True``, the default), so RLlib's modules and episodes hold the learners only.
 - :class:`FrozenPolicyModule` plays any project policy (``"zoo:ant"``, a policy file,
-  ``"zero"``, ``"random"``) as a deterministic RLlib module that never learns.
+  ``"zero"``, ``"random"``) as a deterministic RLlib module that never learns
+  (``make_config(..., frozen_in_env=False)``).
 
 Example (the paper's setup: Bug learns, the zoo's Ant and Spider are frozen)::
 
