@@ -3,7 +3,7 @@
 Two runs (see docs/RLLIB.md):
 
 - the paper's setup (default): Bug learns; Ant and Spider are the shipped zoo policies,
-  frozen (played by :class:`triplesumo.integrations.rllib.FrozenPolicyModule`)::
+  frozen (acting inside the env with the zoo's numpy policies: RLlib holds Bug only)::
 
       python examples/rllib_bug_ppo.py --iterations 50
 
@@ -61,7 +61,8 @@ def build(args: argparse.Namespace) -> Any:
     from triplesumo.integrations.rllib import make_config
 
     if args.self_play:
-        config = make_config("paper", share="team", policies_to_train=["team", "spider"], max_steps=args.max_steps)
+        config = make_config("paper", share="team", policies_to_train=["team", "spider"], max_steps=args.max_steps,
+                             obs_mode="egocentric")  # one network for two seats needs seat-own observations
     else:
         config = make_config("paper", policies_to_train=["bug"], frozen={"ant": "zoo:ant", "spider": "zoo:spider"},
                              max_steps=args.max_steps)

@@ -14,7 +14,7 @@ import torch
 import triplesumo
 from triplesumo.agents.policy_file import load_policy
 from triplesumo.agents.zoo import ZOO_DIR
-from triplesumo.rules.outcome import DRAW_CODE
+from triplesumo.rules.outcome import DRAW_CODE, PLAYING
 
 ZOO_FROZEN = {"ant": "zoo:ant", "spider": "zoo:spider"}
 
@@ -49,11 +49,60 @@ def _changed(before: dict[str, torch.Tensor], after: dict[str, torch.Tensor]) ->
     return any(not torch.equal(before[k], after[k]) for k in before)
 
 
+def _check_outcomes(rllib: Any, result: dict[str, Any]) -> None:
+    """Every agent's outcome rates reported, and consistent between the sides of the paper's match."""
+    outcomes = result["env_runners"]["outcomes"]
+    for agent in ("ant", "bug", "spider"):
+        rates = outcomes[agent]
+        assert sum(rates[o] for o in rllib.OUTCOMES) == pytest.approx(1.0)
+    for o in rllib.OUTCOMES:
+        assert outcomes["ant"][o] == pytest.approx(outcomes["bug"][o]), "partners must share an outcome"
+    assert outcomes["spider"]["win"] == pytest.approx(outcomes["bug"]["loss"])
+    assert outcomes["spider"]["loss"] == pytest.approx(outcomes["bug"]["win"])
+    # 100-step matches against the zoo: some end by a ring-out, not all by the step limit.
+    assert outcomes["spider"]["win"] + outcomes["spider"]["loss"] > 0
+
+
 @pytest.mark.usefixtures("local_ray")
-def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any, tmp_path: Any) -> None:
+def test_bug_learns_while_the_zoo_ant_and_spider_act_inside_the_env(rllib: Any, tmp_path: Any) -> None:
+    """Issue 39, item 14: by default the frozen agents play inside the env, so RLlib's modules, episodes and
+    dicts hold Bug only, each env runner plays ENVS_PER_RUNNER matches, and every outcome is still reported."""
     from ray.rllib.algorithms.algorithm import Algorithm
 
     config = _tiny(rllib.make_config("paper", policies_to_train=["bug"], frozen=ZOO_FROZEN, max_steps=100))
+    assert config.num_envs_per_env_runner == rllib.ENVS_PER_RUNNER == 4
+    assert config.env_config["fixed"] == ZOO_FROZEN and config.env_config["info_level"] == "outcome"
+    algo = config.build_algo()
+    try:
+        before = _weights(algo)
+        assert set(before) == {"bug"} and set(algo.env_runner.module.keys()) == {"bug"}
+        assert algo.env_runner.env.num_envs == 4
+        for _ in range(2):
+            result = algo.train()
+        after = _weights(algo)
+        episodes = algo.env_runner.sample(num_timesteps=40)
+        algo.save_to_path(str(tmp_path / "ckpt"))
+    finally:
+        algo.stop()
+    restored = Algorithm.from_checkpoint(str(tmp_path / "ckpt"))
+    try:
+        again = _weights(restored)
+    finally:
+        restored.stop()
+    assert not _changed(after["bug"], again["bug"]), "Bug differs after restoring the checkpoint"
+    assert _changed(before["bug"], after["bug"]), "PPO did not update Bug"
+    assert {a for e in episodes for a in e.agent_ids} == {"bug"}
+    assert len({e.id_ for e in episodes}) >= 4  # one (partial) episode per match at least
+    assert result["env_runners"]["num_episodes_lifetime"] >= 4
+    _check_outcomes(rllib, result)
+
+
+@pytest.mark.usefixtures("local_ray")
+def test_bug_learns_while_the_zoo_ant_and_spider_modules_stay_frozen(rllib: Any) -> None:
+    """``frozen_in_env=False``: the old layout, the frozen agents as FrozenPolicyModules inside RLlib."""
+    config = _tiny(rllib.make_config("paper", policies_to_train=["bug"], frozen=ZOO_FROZEN, max_steps=100,
+                                     frozen_in_env=False))
+    assert "fixed" not in config.env_config
     algo = config.build_algo()
     try:
         before = _weights(algo)
@@ -65,17 +114,8 @@ def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any, tmp_pat
         sent = algo.learner_group.get_state(components="learner/rl_module/bug", inference_only=True)
         sent = sent["learner"]["rl_module"]["bug"]
         acting = algo.get_module("bug").state_dict()
-        algo.save_to_path(str(tmp_path / "ckpt"))
     finally:
         algo.stop()
-    restored = Algorithm.from_checkpoint(str(tmp_path / "ckpt"))
-    try:
-        again = _weights(restored)
-    finally:
-        restored.stop()
-    for module in after:
-        assert not _changed(after[module], again[module]), f"{module} differs after restoring the checkpoint"
-
     assert _changed(before["bug"], after["bug"]), "PPO did not update Bug"
     for agent in ("ant", "spider"):
         assert not _changed(before[agent], after[agent]), f"frozen {agent} changed"
@@ -84,19 +124,87 @@ def test_bug_learns_while_the_zoo_ant_and_spider_stay_frozen(rllib: Any, tmp_pat
             assert torch.equal(after[agent][f"actor.{key}"], value), f"{agent} is not the zoo's {key}"
     assert "pi.net.mlp.0.weight" in sent and not any(k.startswith("vf.") for k in sent)
     assert all(torch.equal(torch.as_tensor(v), acting[k]) for k, v in sent.items()), "env runner acts with stale Bug"
+    assert result["env_runners"]["num_episodes_lifetime"] >= 4
+    _check_outcomes(rllib, result)
 
-    runners = result["env_runners"]
-    assert runners["num_episodes_lifetime"] >= 4
-    outcomes = runners["outcomes"]
-    for agent in ("ant", "bug", "spider"):
-        rates = outcomes[agent]
-        assert sum(rates[o] for o in rllib.OUTCOMES) == pytest.approx(1.0)
-    for o in rllib.OUTCOMES:
-        assert outcomes["ant"][o] == pytest.approx(outcomes["bug"][o]), "partners must share an outcome"
-    assert outcomes["spider"]["win"] == pytest.approx(outcomes["bug"]["loss"])
-    assert outcomes["spider"]["loss"] == pytest.approx(outcomes["bug"]["win"])
-    # 100-step matches against the zoo: some end by a ring-out, not all by the step limit.
-    assert outcomes["spider"]["win"] + outcomes["spider"]["loss"] > 0
+
+def test_fixed_agents_act_exactly_as_the_zoos_numpy_policies(rllib: Any) -> None:
+    """The env's ``fixed`` agents play the zoo's numpy policies (``triplesumo.zoo.load``) from their own
+    observations: the same match, step for step, as the PettingZoo env driven by hand."""
+    from triplesumo import zoo
+
+    env = rllib.make_env({"max_steps": 60, "fixed": ZOO_FROZEN})
+    assert env.possible_agents == ["bug"] and set(env.observation_spaces) == set(env.action_spaces) == {"bug"}
+    reference = triplesumo.parallel_env(max_steps=60, info_level="full")
+    policies = {a: zoo.load(spec[4:])[0] for a, spec in ZOO_FROZEN.items()}
+    obs, infos = env.reset(seed=3)
+    ref_obs, _ = reference.reset(seed=3)
+    assert set(obs) == set(infos) == {"bug"}
+    rng = np.random.default_rng(0)
+    over, steps = False, 0
+    while not over:
+        bug = rng.uniform(-1, 1, 8).astype(np.float32)
+        actions = {a: p(ref_obs[a]) for a, p in policies.items()}
+        ref_obs, ref_rewards, ref_terms, ref_truncs, ref_infos = reference.step({**actions, "bug": bug})
+        obs, rewards, terms, truncs, infos = env.step({"bug": bug})
+        np.testing.assert_array_equal(obs["bug"], ref_obs["bug"])
+        assert set(obs) == set(rewards) == set(infos) == {"bug"} and rewards["bug"] == ref_rewards["bug"]
+        over, steps = terms["__all__"] or truncs["__all__"], steps + 1
+        assert over == (not reference.agents)
+    assert infos["bug"]["outcomes"] == {a: i["outcome"] for a, i in ref_infos.items()}
+    assert 0 < steps <= 60 and env.agents == []
+
+
+def test_an_episode_ends_once_no_rllib_agent_is_left_in_play(rllib: Any, place: Any) -> None:
+    """Elimination rules (ffa): a fixed agent out stops acting and the episode goes on; the RLlib agent out
+    ends the episode (terminated), reporting the outcomes so far, though the others still play."""
+    fixed = {"ant": "random", "spider": "zero", "beetle": "zero"}
+    env = rllib.make_env({"max_steps": 50, "n_agents": 4, "fixed": fixed}, scenario="ffa")
+    env.reset(seed=0)
+    match = env.par_env.match
+    place(match, "spider", x=3.0, y=0.0)
+    obs, _, terms, truncs, infos = env.step({"bug": np.zeros(8, np.float32)})
+    assert set(obs) == {"bug"} and not terms["__all__"] and not truncs["__all__"] and env.agents == ["bug"]
+    assert "spider" not in env.par_env.agents
+    place(match, "bug", x=3.0, y=0.0)
+    obs, _, terms, truncs, infos = env.step({"bug": np.zeros(8, np.float32)})
+    assert terms == {"bug": True, "__all__": True} and truncs == {"bug": False, "__all__": False}
+    assert env.par_env.agents == ["ant", "beetle"] and env.agents == []
+    codes = infos["bug"]["outcomes"]
+    assert set(codes) == {"ant", "bug", "spider", "beetle"} and codes["bug"] == infos["bug"]["outcome"] != PLAYING
+    assert codes["spider"] != PLAYING and codes["ant"] == codes["beetle"] == PLAYING  # these two play on
+
+
+def test_fixed_random_agents_are_reseeded_by_reset(rllib: Any) -> None:
+    env = rllib.make_env({"max_steps": 20, "fixed": {"ant": "random", "spider": "random"}})
+
+    def play(seed: int) -> list[np.ndarray]:
+        env.reset(seed=seed)
+        return [env.step({"bug": np.zeros(8, np.float32)})[0]["bug"] for _ in range(5)]
+
+    first, again, other = play(4), play(4), play(5)
+    assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
+    assert not all(np.array_equal(a, b) for a, b in zip(first, other, strict=True))
+
+
+@pytest.mark.parametrize(("fixed", "exc", "message"), [
+    ({"beetle": "zero"}, ValueError, r"fixed: unknown agent\(s\) \['beetle'\]; the match's agents are"),
+    ({"ant": "zero", "bug": "zero", "spider": "zero"}, ValueError, "leave at least one to RLlib"),
+    ({"ant": 3}, ValueError, r"fixed\['ant'\] must be a policy spec string"),
+    ({"ant": "zoo:beetle"}, FileNotFoundError, r"fixed\['ant'\]: no policy 'beetle' in the zoo"),
+    ({"ant": "no/such/policy"}, ValueError, r"fixed\['ant'\]: unknown policy 'no/such/policy'"),
+    (["ant"], ValueError, "fixed must map agent names to policy specs"),
+])
+def test_bad_fixed_entries_are_refused_naming_the_entry(rllib: Any, fixed: Any, exc: type, message: str) -> None:
+    with pytest.raises(exc, match=message):
+        rllib.make_env({"fixed": fixed})
+
+
+def test_a_fixed_policy_file_for_other_observations_is_refused(rllib: Any) -> None:
+    with pytest.raises(ValueError, match=r"fixed\['ant'\]: .*trained with obs_mode 'paper'"):
+        rllib.make_env({"fixed": {"ant": "zoo:ant"}, "obs_mode": "egocentric"})
+    with pytest.raises(ValueError, match=r"fixed\['ant'\]: .*trained with obs_mode 'paper'"):
+        rllib.make_config("paper", frozen={"ant": "zoo:ant"}, obs_mode="egocentric")
 
 
 @pytest.mark.usefixtures("local_ray")
@@ -120,7 +228,12 @@ def test_policy_mapping_per_agent_and_per_team(rllib: Any) -> None:
     per_team = rllib.make_config("paper", share="team", policies_to_train=["team"], frozen={"spider": "zero"},
                                  obs_mode="egocentric")
     assert [per_agent.policy_mapping_fn(a, None) for a in ("ant", "bug", "spider")] == ["ant", "bug", "spider"]
-    assert [per_team.policy_mapping_fn(a, None) for a in ("ant", "bug", "spider")] == ["team", "team", "spider"]
+    assert [per_team.policy_mapping_fn(a, None) for a in ("ant", "bug")] == ["team", "team"]
+    assert per_team.env_config["fixed"] == {"spider": "zero"} and set(per_team.policies) == {"team"}
+    old = rllib.make_config("paper", share="team", policies_to_train=["team"], frozen={"spider": "zero"},
+                            obs_mode="egocentric", frozen_in_env=False)
+    assert [old.policy_mapping_fn(a, None) for a in ("ant", "bug", "spider")] == ["team", "team", "spider"]
+    assert "fixed" not in old.env_config and set(old.policies) == {"team", "spider"}
     spec = per_agent.get_multi_rl_module_spec()
     assert spec.rl_module_specs["bug"].observation_space.shape == (222,)
     assert spec.rl_module_specs["bug"].action_space.shape == (8,)
@@ -216,13 +329,42 @@ def test_rllibs_env_checker_passes_every_scenario_without_a_warning(obs_mode: st
     for scenario in triplesumo.scenarios():
         extra = {"evader_obs_noise": 0.5} if scenario == "pursuit" else {}
         env = rllib.make_env({"max_steps": 5, "obs_mode": obs_mode, **extra}, scenario=scenario)
-        with caplog.at_level(logging.WARNING):
-            check_multiagent_environments(env)
-        obs, _ = env.reset(seed=1)
-        for agent, o in obs.items():
-            assert o.dtype == np.float32 and env.observation_space[agent].contains(o), (scenario, agent)
+        agents = env.par_env.possible_agents
+        fixed = rllib.make_env({"max_steps": 5, "obs_mode": obs_mode, **extra, "info_level": "outcome",
+                                "fixed": dict.fromkeys(agents[1:], "random")}, scenario=scenario)
+        assert fixed.possible_agents == agents[:1]
+        for checked in (env, fixed):
+            with caplog.at_level(logging.WARNING):
+                check_multiagent_environments(checked)
+            obs, _ = checked.reset(seed=1)
+            for agent, o in obs.items():
+                assert o.dtype == np.float32 and checked.get_observation_space(agent).contains(o), (scenario, agent)
     assert not [r for r in caplog.records if r.levelno >= logging.WARNING], caplog.text
     lean = rllib.make_env({"max_steps": 5, "info_level": "outcome"})
     lean.reset(seed=0)
     *_, infos = lean.step({a: lean.get_action_space(a).sample() for a in lean.get_agent_ids()})
     assert set(infos["bug"]) == {"outcome", "place", "eliminated"}
+
+
+@pytest.mark.usefixtures("local_ray")
+def test_bench_rllib_reports_each_layouts_rate_beside_the_raw_env(tmp_path: Any,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``triplesumo bench rllib --quick``: one row per layout, with RLlib's and the raw env's rates, their
+    ratio, the build time, and what RLlib held (the speed itself is for the benchmark, not for a test)."""
+    import json
+
+    from triplesumo.cli import main
+
+    out = tmp_path / "rllib.json"
+    assert main(["bench", "rllib", "--quick", "--layouts", "in_env_4", "modules_1", "--json", str(out)]) == 0
+    table = capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert list(result["layouts"]) == ["in_env_4", "modules_1"] and "ratio" in table and "in_env_4" in table
+    assert result["config"]["env_runners"] == 1 and result["machine"]["cpus"] >= 1 and "ray" in result["versions"]
+    for row in result["layouts"].values():
+        assert row["env_steps"] >= result["config"]["steps"] and row["seconds"] > 0 and row["build_s"] > 0
+        assert row["ratio"] == pytest.approx(row["env_steps_per_s"] / row["raw_env_steps_per_s"])
+        assert len(row["rounds_env_steps_per_s"]) == len(row["rounds_raw_env_steps_per_s"]) == 1  # --quick: 1 round
+    new, old = result["layouts"]["in_env_4"], result["layouts"]["modules_1"]
+    assert new["modules"] == new["agents_in_episodes"] == ["bug"] and new["matches_per_runner"] == 4
+    assert old["modules"] == old["agents_in_episodes"] == ["ant", "bug", "spider"] and old["matches_per_runner"] == 1

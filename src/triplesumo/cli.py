@@ -99,9 +99,10 @@ def _parser() -> argparse.ArgumentParser:
                                            "checking it re-simulates bit for bit")
     replay.add_argument("file", help="match file (.npz)")
     _dcargs.add_arguments(replay, ReplayConfig)
-    bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train', 'bench ray' or 'bench skill' "
-                                         "(time to skill per algorithm) (--help for each)")
-    bench.add_argument("which", choices=["env", "train", "ray", "skill"])
+    bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train', 'bench ray', 'bench rllib' "
+                                         "(RLlib's env steps/s per env runner) or 'bench skill' (time to skill per "
+                                         "algorithm) (--help for each)")
+    bench.add_argument("which", choices=["env", "train", "ray", "rllib", "skill"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
     return parser
 
@@ -255,6 +256,10 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.skill import main as bench_skill
 
                 bench_skill(args.rest)
+            elif args.which == "rllib":
+                from triplesumo.benchmarks.rllib import main as bench_rllib
+
+                bench_rllib(args.rest)
             else:
                 from triplesumo.benchmarks.ray import main as bench_ray
 

@@ -1,5 +1,6 @@
-"""Speed measurements (never timed tests): ``triplesumo bench env`` (:mod:`.env`) and
-``triplesumo bench train`` (:mod:`.train`)."""
+"""Speed measurements (never timed tests): ``triplesumo bench env`` (:mod:`.env`),
+``triplesumo bench train`` (:mod:`.train`), ``bench ray`` (:mod:`.ray`), ``bench rllib``
+(:mod:`.rllib`) and ``bench skill`` (:mod:`.skill`)."""
 
 from __future__ import annotations
 

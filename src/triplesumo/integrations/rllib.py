@@ -4,17 +4,20 @@ Works on RLlib's current API stack (RLModules, Learners, EnvRunners; Ray 2.54 to
 Needs the ``ray`` extra: ``pip install "triplesumo[ray]"``; ``import triplesumo`` never
 imports Ray.
 
-- :class:`TripleSumoMultiAgentEnv` is one match as an RLlib multi-agent env (the PettingZoo
-  env in RLlib's ``ParallelPettingZooEnv``), built from an ``env_config`` holding
-  :class:`~triplesumo.rules.MatchConfig` field overrides or a whole config under
-  ``"match_config"``; :func:`register_envs` registers every scenario by name
-  (``"triplesumo_paper_v2"``, ...).
+- :class:`TripleSumoMultiAgentEnv` is one match as an RLlib multi-agent env (around the
+  PettingZoo env), built from an ``env_config`` holding :class:`~triplesumo.rules.MatchConfig`
+  field overrides or a whole config under ``"match_config"``, and optionally ``"fixed"``:
+  agents that act inside the env with the project's numpy policies, unseen by RLlib;
+  :func:`register_envs` registers every scenario by name (``"triplesumo_paper_v2"``, ...).
 - :func:`make_config` returns an ``AlgorithmConfig`` (PPO by default) with one RLModule per
   agent (module ids = agent names) or per team (``share="team"``: module ids = team labels),
   the policy-mapping function, ``policies_to_train``, the project's observation and action
-  spaces, and :class:`OutcomeCallback` so that results carry win/loss/draw rates.
+  spaces, :data:`ENVS_PER_RUNNER` matches per env runner, and :class:`OutcomeCallback` so
+  that results carry win/loss/draw rates. Frozen modules' agents act inside the env
+  (``frozen_in_env=True``, the default), so RLlib's modules and episodes hold the learners only.
 - :class:`FrozenPolicyModule` plays any project policy (``"zoo:ant"``, a policy file,
-  ``"zero"``, ``"random"``) as a deterministic RLlib module that never learns.
+  ``"zero"``, ``"random"``) as a deterministic RLlib module that never learns
+  (``make_config(..., frozen_in_env=False)``).
 
 Example (the paper's setup: Bug learns, the zoo's Ant and Spider are frozen)::
 
@@ -35,6 +38,7 @@ import dataclasses
 from collections.abc import Collection, Mapping
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 try:
@@ -44,7 +48,7 @@ try:
     from ray.rllib.core.rl_module.multi_rl_module import MultiRLModuleSpec
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
     from ray.rllib.core.rl_module.torch.torch_rl_module import TorchRLModule
-    from ray.rllib.env.wrappers.pettingzoo_env import ParallelPettingZooEnv
+    from ray.rllib.env.multi_agent_env import MultiAgentEnv
     from ray.rllib.policy.policy import PolicySpec
     from ray.tune.registry import get_trainable_cls, register_env
 except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
@@ -58,16 +62,17 @@ import torch
 from triplesumo import ENV_VERSION
 from triplesumo.agents.builtin import BUILTIN, act_batch
 from triplesumo.agents.networks import ActorPolicy
-from triplesumo.agents.zoo import make_policy
+from triplesumo.agents.policy_file import load_fixed_policy
+from triplesumo.agents.zoo import find_policy_file, make_policy
 from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.rules.config import MatchConfig, check_shared_network
 from triplesumo.rules.outcome import PLAYING, outcome_name
 from triplesumo.rules.scenarios import scenario_config as named_scenario_config
 from triplesumo.rules.scenarios import scenarios
 
-__all__ = ["OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback",
-           "TripleSumoMultiAgentEnv", "env_id", "make_config", "make_env", "match_config_from", "module_of_agent",
-           "register_envs", "scenario_config"]
+__all__ = ["ENVS_PER_RUNNER", "OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback",
+           "TripleSumoMultiAgentEnv", "env_id", "fixed_policies", "make_config", "make_env", "match_config_from",
+           "module_of_agent", "register_envs", "scenario_config"]
 
 SCENARIOS: tuple[str, ...] = scenarios()
 """Named scenarios (``triplesumo.scenarios()``); each is registered as ``triplesumo_{name}_v2`` by
@@ -119,27 +124,142 @@ def match_config_from(env_config: Mapping[str, Any] | None = None, scenario: str
     return match_config
 
 
-class TripleSumoMultiAgentEnv(ParallelPettingZooEnv):
-    """One TripleSumo match as an RLlib ``MultiAgentEnv``: RLlib's ``ParallelPettingZooEnv``
-    around :class:`~triplesumo.envs.parallel.TripleSumoParallelEnv`.
+class TripleSumoMultiAgentEnv(MultiAgentEnv):
+    """One TripleSumo match as an RLlib ``MultiAgentEnv`` around
+    :class:`~triplesumo.envs.parallel.TripleSumoParallelEnv` (``env.par_env``).
 
     Built from an ``env_config`` (see :func:`match_config_from`), so RLlib can make it in
     any process from the class alone (remote env runners, restored checkpoints) without
-    a registry entry.
+    a registry entry. Two more entries:
+
+    - ``"info_level"``: ``"full"`` (default) or ``"outcome"`` (infos hold only ``outcome``,
+      ``place`` and ``eliminated``), as ``TripleSumoParallelEnv``'s.
+    - ``"fixed"``: agent -> policy spec (``"zoo:ant"``, a policy file, ``"zero"``/``"passive"``,
+      ``"random"``). These agents act inside the env, each from its own observation, with the
+      project's numpy policy (trained ones as :func:`~triplesumo.agents.policy_file.load_fixed_policy`
+      loads them, the way the Gymnasium ids play the zoo); RLlib never sees them: its observation,
+      reward, termination and info dicts, and so its episodes and modules, hold the other agents
+      only. The outcome of every agent of the match is still reported: on the step that ends the
+      episode each RLlib agent's info gets ``"outcomes"`` (agent -> outcome code, the last one the
+      match gave it). The episode ends with the match, or (elimination rules) once no RLlib agent
+      is left in play, as the Gymnasium view does for its learner. ``reset(seed=s)`` reseeds the
+      fixed ``"random"`` policies from ``s``.
+
+    Without ``"fixed"`` every agent is RLlib's, as in RLlib's ``ParallelPettingZooEnv``.
     """
 
     def __init__(self, env_config: Mapping[str, Any] | None = None) -> None:
+        super().__init__()
         cfg = dict(env_config or {})
-        info_level = cfg.pop("info_level", "full")  # "outcome": lean infos (outcome, place, eliminated)
-        super().__init__(TripleSumoParallelEnv(match_config_from(cfg), info_level=info_level))
+        info_level = cfg.pop("info_level", "full")
+        fixed = cfg.pop("fixed", None) or {}
+        self.par_env = TripleSumoParallelEnv(match_config_from(cfg), info_level=info_level)
+        self.fixed: dict[str, Any] = fixed_policies(self.par_env, fixed)
+        """The agents that act inside the env: agent -> numpy policy (``obs -> action``)."""
+        self._rllib_agents = [a for a in self.par_env.possible_agents if a not in self.fixed]
+        self._in_play = list(self._rllib_agents)
+        self.possible_agents = list(self._rllib_agents)
+        self.agents = list(self._rllib_agents)
+        obs_spaces: dict[str, gym.Space] = {a: self.par_env.observation_space(a) for a in self._rllib_agents}
+        act_spaces: dict[str, gym.Space] = {a: self.par_env.action_space(a) for a in self._rllib_agents}
+        self.observation_spaces, self.action_spaces = dict(obs_spaces), dict(act_spaces)  # type: ignore[assignment]
+        self.observation_space = gym.spaces.Dict(obs_spaces)
+        self.action_space = gym.spaces.Dict(act_spaces)
+        self._fixed_obs: dict[str, np.ndarray] = {}
+        self._codes: dict[str, int] = {}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
+        if seed is not None and self.fixed:
+            children = np.random.SeedSequence(seed).spawn(len(self.fixed))
+            for child, policy in zip(children, self.fixed.values(), strict=True):
+                reset = getattr(policy, "reset", None)
+                if callable(reset):
+                    reset(seed=int(child.generate_state(1, np.uint64)[0]))
+        obs, infos = self.par_env.reset(seed=seed, options=options)
+        self._in_play = list(self._rllib_agents)
+        self.agents = list(self._in_play)
+        if not self.fixed:
+            return obs, infos
+        self._fixed_obs = {a: obs[a] for a in self.fixed}
+        self._codes = {}
+        return {a: obs[a] for a in self._in_play}, {a: infos[a] for a in self._in_play}
+
+    def step(self, action_dict: dict[Any, Any]) -> tuple[dict, dict, dict, dict, dict]:  # type: ignore[override]
+        if not self.fixed:
+            obs, rewards, terms, truncs, infos = self.par_env.step(action_dict)
+            terms["__all__"] = all(terms.values())
+            truncs["__all__"] = all(truncs.values())
+            return obs, rewards, terms, truncs, infos
+        actions = dict(action_dict)
+        for agent, policy in self.fixed.items():
+            if agent in self._fixed_obs:  # in play
+                actions[agent] = policy(self._fixed_obs[agent])
+        obs, rewards, terms, truncs, infos = self.par_env.step(actions)
+        self._fixed_obs = {a: obs[a] for a in self.fixed if a in self.par_env.agents}  # those still in play
+        for agent, info in infos.items():
+            self._codes[agent] = int(info["outcome"])
+        mine = [a for a in self._in_play if a in obs]
+        self._in_play = [a for a in mine if a in self.par_env.agents]
+        self.agents = list(self._in_play)
+        over = not self._in_play  # the match ended, or every RLlib agent has left it
+        obs, rewards = {a: obs[a] for a in mine}, {a: rewards[a] for a in mine}
+        terms, truncs = {a: terms[a] for a in mine}, {a: truncs[a] for a in mine}
+        infos = {a: infos[a] for a in mine}
+        if over:
+            for agent in mine:
+                infos[agent] = {**infos[agent], "outcomes": dict(self._codes)}
+        truncs["__all__"] = over and all(truncs.values())
+        terms["__all__"] = over and not truncs["__all__"]
+        return obs, rewards, terms, truncs, infos
+
+    def close(self) -> None:
+        self.par_env.close()
+
+    def render(self) -> Any:
+        return self.par_env.render()
+
+    @property
+    def get_sub_environments(self) -> TripleSumoParallelEnv:
+        return self.par_env
+
+
+def fixed_policies(env: TripleSumoParallelEnv, fixed: Mapping[str, str]) -> dict[str, Any]:
+    """The numpy policies of the env's ``fixed`` agents (agent -> spec), checked against the match:
+    errors name the ``fixed`` entry (an unknown agent, every agent fixed, a spec that is not a string,
+    an unknown policy, a policy file made for other observations)."""
+    if not isinstance(fixed, Mapping):
+        raise ValueError(f"fixed must map agent names to policy specs, got {type(fixed).__name__}")
+    agents = env.possible_agents
+    unknown = sorted(set(fixed) - set(agents))
+    if unknown:
+        raise ValueError(f"fixed: unknown agent(s) {unknown}; the match's agents are {agents}")
+    if set(fixed) == set(agents):
+        raise ValueError(f"fixed: every agent {agents} would act inside the env; leave at least one to RLlib")
+    out: dict[str, Any] = {}
+    for agent, spec in fixed.items():
+        if not isinstance(spec, str):
+            raise ValueError(f"fixed[{agent!r}] must be a policy spec string ('zoo:NAME', a policy file, "
+                             f"{sorted(BUILTIN)}), got {spec!r}")
+        size = int(env.action_space(agent).shape[0])
+        if spec in BUILTIN:
+            out[agent] = make_policy(spec, seed=0, action_size=size)
+            continue
+        obs_dim = int(env.observation_space(agent).shape[0])
+        try:
+            out[agent] = load_fixed_policy(find_policy_file(spec), expect_obs_mode=env.config.obs_mode,
+                                           expect_obs_dim=obs_dim)[0]
+        except (ValueError, FileNotFoundError) as exc:
+            raise type(exc)(f"fixed[{agent!r}]: {exc}") from exc
+    return out
 
 
 def make_env(env_config: Mapping[str, Any] | None = None, scenario: str = "paper") -> TripleSumoMultiAgentEnv:
     """An RLlib multi-agent env of one match of ``scenario`` (see :func:`match_config_from`); an ``info_level``
-    entry (``"full"``, ``"outcome"``) sets how much its infos say (``TripleSumoParallelEnv``)."""
+    entry (``"full"``, ``"outcome"``) sets how much its infos say (``TripleSumoParallelEnv``), a ``fixed`` entry
+    (agent -> policy spec) which agents act inside the env (:class:`TripleSumoMultiAgentEnv`)."""
     cfg = dict(env_config or {})
-    info_level = cfg.pop("info_level", "full")
-    return TripleSumoMultiAgentEnv({"match_config": match_config_from(cfg, scenario), "info_level": info_level})
+    extra: dict[str, Any] = {key: cfg.pop(key) for key in ("info_level", "fixed") if key in cfg}
+    return TripleSumoMultiAgentEnv({"match_config": match_config_from(cfg, scenario), **extra})
 
 
 def _creator(scenario: str) -> Any:
@@ -207,7 +327,8 @@ class OutcomeCallback(RLlibCallback):
 
     Results get ``result["env_runners"]["outcomes"][agent][o]`` for ``o`` in
     :data:`OUTCOMES`: the fraction of recent episodes (window 100) that ended so for that
-    agent's side, read from ``info[agent]["outcome"]`` on the last step.
+    agent's side, read from ``info[agent]["outcome"]`` on the last step, and for the agents that
+    act inside the env (``fixed``) from the ``"outcomes"`` the env adds to that last info.
     """
 
     window = 100
@@ -215,9 +336,12 @@ class OutcomeCallback(RLlibCallback):
     def on_episode_end(self, *, episode: Any, metrics_logger: Any = None, **kwargs: Any) -> None:
         if metrics_logger is None:
             return
-        last = episode.get_infos(-1)
-        for agent, info in last.items():
-            code = info.get("outcome") if isinstance(info, Mapping) else None
+        codes: dict[str, Any] = {}
+        for agent, info in episode.get_infos(-1).items():
+            if isinstance(info, Mapping):
+                codes.update(info.get("outcomes", {}))
+                codes[agent] = info.get("outcome")
+        for agent, code in codes.items():
             if code is None or int(code) == PLAYING:  # the episode was cut (not ended by the game)
                 continue
             outcome = outcome_name(int(code))
@@ -244,9 +368,14 @@ class _PolicyMapping:
         return self.modules[agent_id]
 
 
+ENVS_PER_RUNNER = 4
+"""Matches each env runner plays at once (RLlib's ``num_envs_per_env_runner``) in :func:`make_config`'s
+configs: RLlib then runs its connectors and modules on batches of this many observations per step."""
+
+
 def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collection[str] | None = None,
                 algo: str = "PPO", share: str | None = None, frozen: Mapping[str, str] | None = None,
-                **overrides: Any) -> AlgorithmConfig:
+                frozen_in_env: bool = True, **overrides: Any) -> AlgorithmConfig:
     """An RLlib ``AlgorithmConfig`` for a TripleSumo match, on the new API stack.
 
     Args:
@@ -256,12 +385,20 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
         share: ``None``: one module per agent (ids = agent names); ``"team"``: one per team
             (ids = team labels, e.g. ``"team"`` for Ant and Bug, ``"spider"``).
         frozen: Module id -> policy spec (``"zoo:ant"``, a policy-file path, ``"zero"``,
-            ``"random"``) played by a :class:`FrozenPolicyModule`. Modules that are neither
+            ``"random"``) of the modules that never learn. Modules that are neither
             frozen nor trained are RLlib's default modules left as initialised.
+        frozen_in_env: ``True`` (default): the frozen modules' agents act inside the env
+            (its ``fixed`` entry) with the project's numpy policies, and RLlib's modules,
+            multi-agent dicts and episodes hold only the other agents (1.8 to 3.5 times the
+            env steps/s of ``False`` per env runner on a loaded 2-core box, ``triplesumo bench
+            rllib``); their outcomes are still reported. ``False``: every agent is RLlib's, the frozen ones
+            played by :class:`FrozenPolicyModule` (the torch actor) as RLlib modules.
         **overrides: :class:`MatchConfig` fields (``max_steps=200``, ``obs_mode=...``).
 
-    The rest (batch sizes, learning rate, env runners, seeds) is set on the returned config
-    the RLlib way: ``make_config(...).training(lr=1e-4).env_runners(num_env_runners=2)``.
+    The env reports lean infos (``info_level="outcome"``: outcome, place, eliminated) and each
+    env runner plays :data:`ENVS_PER_RUNNER` matches at once. The rest (batch sizes, learning
+    rate, env runners, seeds) is set on the returned config the RLlib way:
+    ``make_config(...).training(lr=1e-4).env_runners(num_env_runners=2)``.
     """
     match_config = scenario_config(scenario, **overrides)
     modules = module_of_agent(match_config, share)
@@ -290,11 +427,16 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
             check_shared_network(match_config.obs_mode, [a for a, m in modules.items() if m == module],
                                  f"share={share!r} (module {module!r})")
 
-    env = TripleSumoParallelEnv(match_config)
+    env_config: dict[str, Any] = {"match_config": match_config, "info_level": "outcome"}
+    if frozen_in_env and frozen:
+        env_config["fixed"] = {agent: frozen[m] for agent, m in modules.items() if m in frozen}
+        modules = {agent: m for agent, m in modules.items() if m not in frozen}
+        module_ids = [m for m in module_ids if m not in frozen]
+    env = TripleSumoMultiAgentEnv(env_config)  # loads the fixed policies: a bad spec fails here
     try:
         spaces: dict[str, tuple[Any, Any]] = {}
         for agent, module in modules.items():
-            pair = (env.observation_space(agent), env.action_space(agent))
+            pair = (env.par_env.observation_space(agent), env.par_env.action_space(agent))
             if module in spaces and spaces[module] != pair:
                 raise ValueError(f"share={share!r}: agents mapped to module {module!r} have different spaces")
             spaces[module] = pair
@@ -320,7 +462,8 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
     config: AlgorithmConfig = (
         algo_cls.get_default_config()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
-        .environment(env=TripleSumoMultiAgentEnv, env_config={"match_config": match_config})
+        .environment(env=TripleSumoMultiAgentEnv, env_config=env_config)
+        .env_runners(num_envs_per_env_runner=ENVS_PER_RUNNER)
         # Spaces given per module: RLlib's own inference from an env failed intermittently
         # ("observation_space not provided in PolicySpec") for per-team modules.
         .multi_agent(policies={m: PolicySpec(observation_space=spaces[m][0], action_space=spaces[m][1])
