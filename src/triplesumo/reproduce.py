@@ -67,8 +67,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import triplesumo
-from triplesumo import ENV_VERSION
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import policy_fingerprint
 from triplesumo.algos.ddpg import DDPGConfig
@@ -83,6 +81,7 @@ from triplesumo.train import legs, sweep
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
+from triplesumo.version import ENV_VERSION, __version__
 
 RECORD_FILE = "reproduce.json"
 REPORT_FILE = "REPRODUCTION.md"
@@ -524,7 +523,7 @@ def code_version() -> str:
     code = legs.code_version()
     if code is not None:
         return f"git {code['commit'][:7]}{'-dirty' if code['dirty'] else ''}"
-    return f"triplesumo {triplesumo.__version__}"
+    return f"triplesumo {__version__}"
 
 
 def contest_verdict(counts: dict[str, dict[str, int]], ant: str, spider: str) -> dict[str, Any]:

@@ -55,7 +55,6 @@ except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
 
 import torch
 
-from triplesumo import ENV_VERSION
 from triplesumo.agents.builtin import BUILTIN, act_batch
 from triplesumo.agents.networks import ActorPolicy
 from triplesumo.agents.zoo import make_policy
@@ -64,6 +63,7 @@ from triplesumo.rules.config import MatchConfig, check_shared_network
 from triplesumo.rules.outcome import PLAYING, outcome_name
 from triplesumo.rules.scenarios import scenario_config as named_scenario_config
 from triplesumo.rules.scenarios import scenarios
+from triplesumo.version import ENV_VERSION
 
 __all__ = ["OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback",
            "TripleSumoMultiAgentEnv", "env_id", "make_config", "make_env", "match_config_from", "module_of_agent",
