@@ -54,13 +54,13 @@ from triplesumo.agents.zoo import (
 )
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
+from triplesumo.evaluation.metrics_csv import COLUMNS, repair_metrics_csv
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import mean_interval
 from triplesumo.evaluation.video import check_writable
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config
-from triplesumo.train.logger import COLUMNS, repair_metrics_csv
 
 
 @dataclass(frozen=True)
@@ -580,7 +580,7 @@ def finished_rows(path: Path, epochs: int, columns: tuple[str, ...] = COLUMNS,
     """How many rows (numbered 1, 2, ...) ``path`` holds, in order from row 1.
 
     A run killed while writing leaves a partial last line, and the file is cut back to
-    its last complete, valid row by :func:`~triplesumo.train.logger.repair_metrics_csv`
+    its last complete, valid row by :func:`~triplesumo.evaluation.metrics_csv.repair_metrics_csv`
     (the one routine training's resume uses too; rewritten atomically). ``ValueError`` if
     the file does not have the header ``columns``, has an invalid row before its last, or
     holds more than ``epochs`` rows. By default the file is a candidate's metrics CSV; other
