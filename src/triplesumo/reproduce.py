@@ -405,8 +405,13 @@ class Protocol:
 
         resume = (Path(ecfg.out) / "evaluation.json").exists()
         if self.cfg.ray:  # the same rows, played as Ray tasks
+            from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
+
             ecfg = dataclasses.replace(ecfg, ray=True, ray_address=self.cfg.ray_address)
-        evaluate(dataclasses.replace(ecfg, resume=resume))
+            with ray_tasks.ray_runner(ecfg.ray_address) as runner:
+                evaluate(dataclasses.replace(ecfg, resume=resume), runner)
+        else:
+            evaluate(dataclasses.replace(ecfg, resume=resume))
         return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]
 
     def contest_configs(self) -> dict[str, EvaluateConfig]:
