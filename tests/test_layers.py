@@ -1,95 +1,119 @@
-"""Data flows one way: a module imports only what stands to its left (STYLE.md).
+"""Data flows one way (STYLE.md): the import-linter contracts in ``pyproject.toml`` hold, cover every module,
+and fail on a planted upward import and a planted import circle.
 
-    model -> sim -> rules -> envs -> agents / algos -> evaluation / train / benchmarks / integrations -> cli
-
-Checked on the source with ``ast`` (imports inside functions count too), plus the
-third-party imports each layer must not make (torch below agents, gymnasium and
-pettingzoo in the game rules).
+    cli -> reproduce | demo | benchmarks -> integrations -> train -> evaluation -> algos | zoo -> agents
+        -> envs -> registration -> rules -> sim -> model | version | _gl | _dcargs
 """
 
 from __future__ import annotations
 
-import ast
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
 from pathlib import Path
 
 import pytest
 
-SRC = Path(__file__).resolve().parents[1] / "src" / "triplesumo"
+pytest.importorskip("importlinter", reason='import-linter comes with the "test" extra')
 
-LEVEL = {
-    "_gl": 0, "model": 0, "sim": 1, "rules": 2, "envs": 3, "registration": 3,
-    "agents": 4, "algos": 4, "evaluation": 5, "train": 5, "benchmarks": 5, "integrations": 5,
-    "zoo": 6, "demo": 6, "reproduce": 6, "cli": 7, "_dcargs": 7,
-}
-FORBIDDEN_THIRD_PARTY = {
-    "model": {"torch", "gymnasium", "pettingzoo"},
-    "sim": {"torch", "gymnasium", "pettingzoo"},
-    "rules": {"torch", "gymnasium", "pettingzoo"},
-    "envs": {"torch"},
-    "evaluation/metrics.py": {"torch", "gymnasium", "pettingzoo", "mujoco"},
-    "evaluation/stats.py": {"torch", "gymnasium", "pettingzoo", "mujoco"},
-}
-
-EXCEPTIONS = {
-    # The MuJoCo Warp backend hands out torch tensors that share memory with the GPU
-    # simulator (the batched API's contract); it is imported only for backend="warp".
-    "envs/warp.py": {"torch"},
-}
-"""Single modules allowed one of their layer's forbidden imports, each with its reason."""
+ROOT = Path(__file__).resolve().parents[1]
+SRC = ROOT / "src" / "triplesumo"
+CONFIG = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["importlinter"]
+CONTRACTS = {c["id"]: c for c in CONFIG["contracts"]}
 
 
-def _part(path: Path) -> str:
-    rel = path.relative_to(SRC)
-    return rel.parts[0].removesuffix(".py")
+def lint_imports(root: Path, *contracts: str) -> subprocess.CompletedProcess[str]:
+    """``lint-imports`` on the package under ``root/src`` with the contracts of ``root/pyproject.toml``."""
+    script = shutil.which("lint-imports", path=str(Path(sys.executable).parent)) or shutil.which("lint-imports")
+    assert script, "lint-imports is not installed (the test extra has import-linter)"
+    args = [script, "--no-cache", "--no-logo", *(a for c in contracts for a in ("--contract", c))]
+    return subprocess.run(args, cwd=root, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, "PYTHONPATH": str(root / "src")})
 
 
-def _imports(path: Path) -> list[str]:
-    names: list[str] = []
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            names += [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names.append(node.module)
-    return names
+def layer_names(contract: dict) -> set[str]:
+    return {name.strip().strip("()") for layer in contract["layers"] for name in re.split(r"[|:]", layer)}
 
 
-MODULES = sorted(p for p in SRC.rglob("*.py") if p.name != "__init__.py" or p.parent != SRC)
+def test_the_contracts_are_kept() -> None:
+    result = lint_imports(ROOT)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert f"Contracts: {len(CONTRACTS)} kept, 0 broken." in result.stdout
 
 
-@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(SRC)))
-def test_module_imports_only_leftwards(path: Path) -> None:
-    here = _part(path)
-    assert here in LEVEL, f"{here} has no place in the layer map of this test"
-    for name in _imports(path):
-        if not name.startswith("triplesumo."):
-            continue
-        target = name.split(".")[1]
-        if target in ("_gl",):
-            continue
-        assert LEVEL[target] <= LEVEL[here], f"{path.relative_to(SRC)} imports {name} (a layer to its right)"
+def test_no_contract_ignores_an_import() -> None:
+    assert {"layers", "acyclic"} <= CONTRACTS.keys()
+    assert not [c["id"] for c in CONTRACTS.values() if "ignore_imports" in c]
 
 
-@pytest.mark.parametrize("where", sorted(FORBIDDEN_THIRD_PARTY))
-def test_layers_do_not_import_frameworks_they_must_not_know(where: str) -> None:
-    target = SRC / where
-    files = [target] if target.suffix == ".py" else sorted(target.rglob("*.py"))
-    for path in files:
-        used = {name.split(".")[0] for name in _imports(path)}
-        bad = used & FORBIDDEN_THIRD_PARTY[where] - EXCEPTIONS.get(str(path.relative_to(SRC)), set())
-        assert not bad, f"{path.relative_to(SRC)} imports {sorted(bad)}"
+def test_every_module_belongs_to_a_layer() -> None:
+    layers = CONTRACTS["layers"]
+    assert layers["containers"] == ["triplesumo"] and layers["exhaustive"]
+    names = layer_names(layers)
+    modules = [p for p in SRC.rglob("*.py") if p != SRC / "__init__.py"]  # (the package root is the container)
+    assert len(modules) > 50
+    homeless = sorted(str(p.relative_to(SRC)) for p in modules if p.relative_to(SRC).parts[0].removesuffix(".py")
+                      not in names)
+    assert not homeless, f"modules in no layer of the contract: {homeless}"
+    assert all((SRC / name).is_dir() or (SRC / f"{name}.py").is_file() for name in names), names
 
 
-@pytest.mark.parametrize("where", ["agents", "algos"])
-def test_agents_and_algorithms_take_array_sizes_not_envs(where: str) -> None:
-    for path in sorted((SRC / where).rglob("*.py")):
-        for name in _imports(path):
-            parts = name.split(".")
-            below = ("envs", "sim", "rules", "model")
-            assert not (parts[0] == "triplesumo" and len(parts) > 1 and parts[1] in below), (
-                f"{path.relative_to(SRC)} imports {name}")
+def test_the_envs_without_torch_are_every_env_module_but_the_warp_backend() -> None:
+    listed = set(CONTRACTS["envs-without-torch"]["source_modules"])
+    every = {"triplesumo.envs." + p.stem for p in (SRC / "envs").glob("*.py") if p.stem != "__init__"}
+    assert listed == {"triplesumo.envs"} | every - {"triplesumo.envs.warp"}
 
 
-def test_the_layer_check_can_fail(tmp_path: Path) -> None:
-    bad = tmp_path / "x.py"
-    bad.write_text("def f():\n    from triplesumo.train.loop import Trainer\n")
-    assert "triplesumo.train.loop" in _imports(bad)
+def _planted_copy(tmp_path: Path) -> Path:
+    shutil.copytree(SRC, tmp_path / "src" / "triplesumo", ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    shutil.copy(ROOT / "pyproject.toml", tmp_path)
+    return tmp_path
+
+
+def _plant(root: Path, module: str, line: str) -> None:
+    path = root / "src" / "triplesumo" / f"{module}.py"
+    path.write_text(path.read_text(encoding="utf-8") + f"\n\ndef _planted() -> None:\n    {line}\n", encoding="utf-8")
+
+
+def test_a_planted_upward_import_breaks_the_layers(tmp_path: Path) -> None:
+    root = _planted_copy(tmp_path)
+    _plant(root, "rules/config", "from triplesumo.train.loop import Trainer  # noqa")  # inside a function: counted
+    result = lint_imports(root, "layers")
+    assert result.returncode != 0
+    assert "BROKEN" in result.stdout and "triplesumo.rules is not allowed to import triplesumo.train" in result.stdout
+    assert "triplesumo.rules.config -> triplesumo.train.loop" in result.stdout
+
+
+def test_a_planted_circle_breaks_the_acyclic_contract(tmp_path: Path) -> None:
+    root = _planted_copy(tmp_path)
+    # two modules of one layer (the layers contract allows it), where train.loop already imports train.checkpoint
+    _plant(root, "train/checkpoint", "import triplesumo.train.loop  # noqa")
+    assert lint_imports(root, "layers").returncode == 0
+    result = lint_imports(root, "acyclic")
+    assert result.returncode != 0
+    assert "No cycles are allowed in triplesumo.train." in result.stdout
+
+
+def test_evaluation_and_train_import_neither_ray_nor_the_integrations() -> None:
+    """Parallel execution is handed down (a task runner): importing every module of evaluation and train, and
+    running a tiny evaluation on a thread runner, imports neither Ray nor triplesumo.integrations."""
+    names = sorted(f"triplesumo.{p.relative_to(SRC).with_suffix('').as_posix().replace('/', '.')}"
+                   for folder in ("evaluation", "train") for p in (SRC / folder).rglob("*.py"))
+    script = (
+        "import importlib, sys, tempfile\n"
+        f"for name in {names!r}:\n"
+        "    importlib.import_module(name.removesuffix('.__init__'))\n"
+        "from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate\n"
+        "from triplesumo.evaluation.parallel import ThreadRunner\n"
+        "with tempfile.TemporaryDirectory() as out:\n"
+        "    evaluate(EvaluateConfig(policy=('random',), baselines=(), epochs=2, steps_per_epoch=10, n_envs=2,\n"
+        "                            progress=False, out=out, ray_chunk=1), ThreadRunner(2))\n"
+        "bad = sorted(m for m in sys.modules if m.split('.')[0] == 'ray' or m.startswith('triplesumo.integrations'))\n"
+        "assert not bad, bad\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600,
+                            env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+    assert result.returncode == 0, result.stderr

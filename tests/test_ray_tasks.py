@@ -77,8 +77,8 @@ def test_evaluate_on_ray_writes_the_bytes_of_a_local_run_and_resumes(ray_tasks: 
                           baselines=("passive",), out=str(tmp_path / "local"))
     local = evaluate(base)
     on_ray = dataclasses.replace(base, out=str(tmp_path / "ray"), ray=True, ray_chunk=4, epochs=3)
-    evaluate(on_ray)  # a first part, as if killed after 3 epochs, then resumed to 6 on Ray
-    summary = evaluate(dataclasses.replace(on_ray, epochs=6, resume=True))
+    evaluate(on_ray, ray_tasks.RayRunner())  # a first part, as if killed after 3 epochs, then resumed to 6 on Ray
+    summary = evaluate(dataclasses.replace(on_ray, epochs=6, resume=True), ray_tasks.RayRunner())
     for label in ("trained", "passive"):
         ray_rows = _csv_rows(tmp_path / "ray" / label / "metrics.csv")
         assert len(ray_rows) == 7
@@ -95,8 +95,8 @@ def test_tournament_on_ray_writes_the_rows_of_a_local_run_and_resumes(ray_tasks:
                             n_envs=4, n_threads=1, progress=False, out=str(tmp_path / "local"))
     run_tournament(base, duel)
     on_ray = dataclasses.replace(base, out=str(tmp_path / "ray"), ray=True, ray_chunk=2, rounds=2)
-    run_tournament(on_ray, duel)
-    run_tournament(dataclasses.replace(on_ray, rounds=3, resume=True), duel)
+    run_tournament(on_ray, duel, ray_tasks.RayRunner())
+    run_tournament(dataclasses.replace(on_ray, rounds=3, resume=True), duel, ray_tasks.RayRunner())
     ray_rows = _csv_rows(tmp_path / "ray" / "matches.csv")
     assert len(ray_rows) == 7  # header + 3 rounds of 2 lineups
     assert ray_rows == _csv_rows(tmp_path / "local" / "matches.csv")

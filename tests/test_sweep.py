@@ -56,6 +56,13 @@ def test_bad_grids_name_the_field(grid: tuple[str, ...], message: str, tmp_path:
         trials(SweepConfig(grid=grid, out=str(tmp_path)), TINY)
 
 
+def _on_ray() -> Any:
+    """The runner ``triplesumo sweep`` hands down (imported here: Ray is an extra; the tests using it need it)."""
+    from triplesumo.integrations.ray_tasks import RayRunner
+
+    return RayRunner()
+
+
 def _rows(path: Path) -> list[dict[str, str]]:
     with path.open(newline="") as fh:
         return list(csv.DictReader(fh))
@@ -64,7 +71,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
 def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_session: Any,
                                                                            tmp_path: Path) -> None:
     cfg = SweepConfig(grid=("seed=0,1", "ddpg.actor_lr=1e-3"), out=str(tmp_path / "sweep"), evaluate_epochs=2)
-    summary = run_sweep(cfg, TINY)
+    summary = run_sweep(cfg, TINY, _on_ray())
     rows = summary["trials"]
     names = ["seed=0,ddpg.actor_lr=1e-3", "seed=1,ddpg.actor_lr=1e-3"]
     assert [r["trial"] for r in rows] == names
@@ -84,11 +91,11 @@ def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_
         assert [r["trial"] for r in csv.DictReader(fh)] == names
     # Run again: both trials are finished, nothing is trained; other options are refused.
     before = {r["trial"]: (tmp_path / "sweep" / r["trial"] / "metrics.csv").read_bytes() for r in rows}
-    again = run_sweep(cfg, TINY)
+    again = run_sweep(cfg, TINY, _on_ray())
     assert [r["test_mwr"] for r in again["trials"]] == [r["test_mwr"] for r in rows]
     assert {t: (tmp_path / "sweep" / t / "metrics.csv").read_bytes() for t in before} == before
     with pytest.raises(ValueError, match="holds a sweep with other fixed train options"):
-        run_sweep(cfg, TINY.__class__(**{**TINY.__dict__, "steps_per_epoch": 31}))
+        run_sweep(cfg, TINY.__class__(**{**TINY.__dict__, "steps_per_epoch": 31}), _on_ray())
 
 
 def _latest_epoch(latest: Path) -> int:
@@ -105,14 +112,14 @@ def test_a_trial_whose_worker_is_killed_resumes_from_its_checkpoint(ray_session:
     cfg = SweepConfig(grid=("seed=3",), out=str(tmp_path / "sweep"))
     run = tmp_path / "sweep" / "seed=3"
     result: dict[str, Any] = {}
-    thread = threading.Thread(target=lambda: result.update(summary=run_sweep(cfg, base)))
+    thread = threading.Thread(target=lambda: result.update(summary=run_sweep(cfg, base, _on_ray())))
     thread.start()
     killed = None
     deadline = time.monotonic() + 120
     while killed is None and thread.is_alive() and time.monotonic() < deadline:
         # latest.json is written (atomically) once a checkpoint is whole; a checkpoint folder alone may be half written
         latest = run / "checkpoints" / "latest.json"
-        if latest.is_file() and _latest_epoch(latest) < 60 and (pids := own_ray_workers("_run_trial")):
+        if latest.is_file() and _latest_epoch(latest) < 60 and (pids := own_ray_workers("run_trial")):
             killed = pids[0]
             os.kill(killed, signal.SIGKILL)
         time.sleep(0.05)

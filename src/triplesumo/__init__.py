@@ -14,13 +14,9 @@ import importlib
 from typing import Any
 
 from triplesumo._gl import ensure_headless_gl
+from triplesumo.version import ENV_VERSION, __version__
 
 ensure_headless_gl()
-
-__version__ = "0.1.0"
-ENV_VERSION = "v2"
-"""Version of the envs' behaviour, in every id (``TripleSumo-v2``, ``triplesumo_v2``); the history is in
-:class:`triplesumo.envs.parallel.TripleSumoParallelEnv`."""
 
 _LAZY = {
     "Match": "triplesumo.envs.match",

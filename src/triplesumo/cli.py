@@ -3,11 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib.util
 import shlex
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from triplesumo import _dcargs
+
+if TYPE_CHECKING:
+    from triplesumo.evaluation.parallel import TaskRunner
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -107,6 +114,19 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def _runner(ray: bool, address: str) -> Iterator[TaskRunner | None]:
+    """The task runner a command hands down: Ray's for ``--ray`` (connected inside the block), else none (the
+    matches are played in this process). Ray is imported only here, and only for ``--ray``."""
+    if not ray:
+        yield None
+        return
+    from triplesumo.integrations.ray_tasks import ray_runner
+
+    with ray_runner(address) as runner:
+        yield runner
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = _parser()
@@ -169,14 +189,16 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 
             cfg = _dcargs.build(EvaluateConfig, args)
-            summary = evaluate(cfg)
+            with _runner(cfg.ray, cfg.ray_address) as runner:
+                summary = evaluate(cfg, runner)
             print(format_summary(summary))
             print(f"report: {cfg.out}/summary.json; plots: {cfg.out}/compare_mwr.png, {cfg.out}/*/plots/")
         elif args.command == "tournament":
             from triplesumo.evaluation.tournament import TournamentConfig, format_leaderboard, run_tournament
 
             tcfg = _dcargs.build(TournamentConfig, args)
-            print(format_leaderboard(run_tournament(tcfg)))
+            with _runner(tcfg.ray, tcfg.ray_address) as runner:
+                print(format_leaderboard(run_tournament(tcfg, runner=runner)))
             tag = "" if tcfg.rate_by == "policy" else "_by_seat"
             ladder = f", ladder{tag}.png" if (Path(tcfg.out) / f"ladder{tag}.png").exists() else ""
             print(f"tables: {tcfg.out}/leaderboard{tag}.csv, crossplay{tag}.csv, results{tag}.json; "
@@ -193,7 +215,13 @@ def main(argv: list[str] | None = None) -> int:
 
             scfg = _dcargs.build(SweepConfig, args)
             base = _dcargs.build(TrainConfig, argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "out"}))
-            print(format_sweep(run_sweep(scfg, base)))
+            if importlib.util.find_spec("ray") is None:
+                raise ValueError('triplesumo sweep runs its trials on Ray, which is not installed: '
+                                 'pip install "triplesumo[ray]"')
+            from triplesumo.integrations.ray_tasks import ray_runner
+
+            with ray_runner(scfg.address, scfg.num_cpus or None, scfg.max_retries) as ray_tasks:
+                print(format_sweep(run_sweep(scfg, base, ray_tasks)))
             print(f"summary: {scfg.out}/summary.csv, summary.json" + (f"; compare: {scfg.out}/compare/"
                                                                       if scfg.evaluate_epochs else ""))
         elif args.command == "reproduce":

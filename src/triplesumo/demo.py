@@ -24,7 +24,6 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from triplesumo import ENV_VERSION
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 from triplesumo.evaluation.play import PlayConfig, run_play
@@ -32,6 +31,7 @@ from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.scenarios import get_scenario
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import holds_run, train
+from triplesumo.version import ENV_VERSION
 from triplesumo.zoo import older_pair
 
 MIN_VIDEO_STEPS = 100

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import gymnasium as gym
 
-from triplesumo import ENV_VERSION
+from triplesumo.version import ENV_VERSION
 
 BASE_ID = f"TripleSumo-{ENV_VERSION}"
 """The paper's match, the others passive unless given."""

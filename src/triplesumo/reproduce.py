@@ -67,8 +67,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import triplesumo
-from triplesumo import ENV_VERSION
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import policy_fingerprint
 from triplesumo.algos.ddpg import DDPGConfig
@@ -83,6 +81,7 @@ from triplesumo.train import legs, sweep
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
+from triplesumo.version import ENV_VERSION, __version__
 
 RECORD_FILE = "reproduce.json"
 REPORT_FILE = "REPRODUCTION.md"
@@ -406,8 +405,13 @@ class Protocol:
 
         resume = (Path(ecfg.out) / "evaluation.json").exists()
         if self.cfg.ray:  # the same rows, played as Ray tasks
+            from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
+
             ecfg = dataclasses.replace(ecfg, ray=True, ray_address=self.cfg.ray_address)
-        evaluate(dataclasses.replace(ecfg, resume=resume))
+            with ray_tasks.ray_runner(ecfg.ray_address) as runner:
+                evaluate(dataclasses.replace(ecfg, resume=resume), runner)
+        else:
+            evaluate(dataclasses.replace(ecfg, resume=resume))
         return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]
 
     def contest_configs(self) -> dict[str, EvaluateConfig]:
@@ -524,7 +528,7 @@ def code_version() -> str:
     code = legs.code_version()
     if code is not None:
         return f"git {code['commit'][:7]}{'-dirty' if code['dirty'] else ''}"
-    return f"triplesumo {triplesumo.__version__}"
+    return f"triplesumo {__version__}"
 
 
 def contest_verdict(counts: dict[str, dict[str, int]], ant: str, spider: str) -> dict[str, Any]:

@@ -39,9 +39,9 @@ def make_paper_vector_env(num_envs: int = 1, **kwargs: Any) -> Any:
 def older_pair() -> dict[str, str]:
     """The shipped Ant and Spider trained on another env version than this one (whose ring and start differ from
     the ones they now play on), as ``{"zoo:ant": "v1", ...}``; empty once the zoo is this version's."""
-    from triplesumo import ENV_VERSION
     from triplesumo.agents import zoo as shipped  # (its ZOO_DIR read now: tests point it at their own zoo)
     from triplesumo.agents.policy_file import load_json
+    from triplesumo.version import ENV_VERSION
 
     versions = {f"zoo:{n}": str(load_json(shipped.ZOO_DIR / f"{n}.json").get("env_version", "v0"))
                 for n in ("ant", "spider")}
@@ -51,7 +51,7 @@ def older_pair() -> dict[str, str]:
 def _zoo_pair(obs_mode: str) -> dict[str, Any]:
     """The zoo's Ant and Spider; a ``UserWarning`` names each one trained on an older env version
     (:func:`older_pair`)."""
-    from triplesumo import ENV_VERSION
+    from triplesumo.version import ENV_VERSION
 
     for name, version in older_pair().items():
         warnings.warn(f"{name} was trained on env {version}, not {ENV_VERSION} (another start layout or rim); "

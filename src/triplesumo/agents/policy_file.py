@@ -11,10 +11,14 @@ unchecked). Loading never unpickles anything.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
+import re
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,6 +43,30 @@ REQUIRED = ("format", "agent", "obs_mode", "obs_dim", "act_dim", "hidden")
 
 class PolicyFileError(ValueError):
     """A policy or checkpoint file is missing, truncated, corrupt or incompatible."""
+
+
+class CheckpointWriteError(OSError):
+    """Writing a run file failed (disk full, read-only, no permission); names the file and cause."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+@contextmanager
+def writing(path: Path | str, last_good: str = "") -> Iterator[None]:
+    """Turn a failed write of ``path`` into a :class:`CheckpointWriteError` naming it and the cause."""
+    try:
+        yield
+    except CheckpointWriteError:
+        raise
+    except (OSError, SafetensorError) as exc:
+        code = getattr(exc, "errno", None)
+        if code is None:  # safetensors reports io errors as text: "IoError(Os { code: 28, ..." or "(os error 28)"
+            found = re.search(r"code: (\d+)|os error (\d+)", str(exc))
+            code = int(found.group(1) or found.group(2)) if found else None
+        cause = os.strerror(code) if code else str(exc)
+        detail = "" if code is None or cause in str(exc) else f" ({exc})"
+        raise CheckpointWriteError(code or errno.EIO, f"cannot write {path}: {cause}{detail}{last_good}") from exc
 
 
 def atomic_write_bytes(path: Path, payload: bytes) -> None:

@@ -8,11 +8,11 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from triplesumo import ENV_VERSION
 from triplesumo.envs.match import Match
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.scenarios import get_scenario, scenarios_doc
+from triplesumo.version import ENV_VERSION
 
 
 class TripleSumoParallelEnv(MatchAccess, ParallelEnv):

@@ -34,7 +34,7 @@ import contextlib
 import csv
 import json
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -54,13 +54,14 @@ from triplesumo.agents.zoo import (
 )
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
+from triplesumo.evaluation.metrics_csv import COLUMNS, repair_metrics_csv
+from triplesumo.evaluation.parallel import TaskRunner, check_counts, play_chunks, portable_spec
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import mean_interval
 from triplesumo.evaluation.video import check_writable
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config
-from triplesumo.train.logger import COLUMNS, repair_metrics_csv
 
 
 @dataclass(frozen=True)
@@ -110,12 +111,12 @@ class EvaluateConfig:
     """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
     for every other agent. Under elimination rules a test epoch ends when the learner is out."""
     ray: bool = False
-    """Play the test epochs as Ray tasks (chunks of ray_chunk epochs; the same rows as a local run).
-    Needs pip install "triplesumo[ray]"."""
+    """Play the test epochs as Ray tasks (chunks of ray_chunk epochs; the same rows as a local run): the
+    command line hands evaluate a Ray runner. Needs pip install "triplesumo[ray]"."""
     ray_address: str = ""
     """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray."""
     ray_chunk: int = 50
-    """With ray or workers > 1: test epochs per task."""
+    """With ray (or any runner handed to evaluate) or workers > 1: test epochs per task."""
     workers: int = 1
     """Processes playing the test epochs at once on this machine (no Ray needed), one MuJoCo thread
     each: every candidate's epochs are cut into tasks of ray_chunk epochs in one queue, the first
@@ -224,6 +225,28 @@ def play_test_chunk(learner_spec: str, other_specs: dict[str, str], learner: str
                             policy_names=policy_names or {**other_specs, learner: learner_spec})
 
 
+def play_test_epochs_on(runner: TaskRunner, learner_spec: str, other_specs: Mapping[str, str], learner: str,
+                        epochs: int, seed: int, match_cfg: MatchConfig | None = None, first: int = 0, chunk: int = 50,
+                        n_envs: int = 8, on_row: Callable[[dict[str, Any]], None] | None = None, record: int = 0,
+                        record_dir: Path | None = None, policy_names: dict[str, str] | None = None,
+                        progress: str | None = None) -> list[dict[str, Any]]:
+    """Rows of test epochs ``first .. epochs - 1``, played by ``runner`` as tasks of ``chunk`` epochs each
+    (:func:`play_test_chunk`, through :func:`~triplesumo.evaluation.parallel.play_chunks`).
+
+    The same rows as ``play_test_epochs`` with the same policies and seeds, in epoch order
+    (``on_row`` gets each as soon as it and every earlier one are in). Match files of epochs
+    ``< record`` are written by the tasks into ``record_dir`` (a folder every task can reach), with
+    ``policy_names`` (default: the specs) stored in them.
+    """
+    check_counts(epochs=epochs, chunk=chunk, n_envs=n_envs)
+    if not 0 <= first < epochs:
+        raise ValueError(f"first must be in [0, epochs={epochs}), got {first}")
+    specs = {a: portable_spec(s) for a, s in other_specs.items()}
+    args = (portable_spec(learner_spec), specs, learner, seed, match_cfg or MatchConfig(), n_envs, record,
+            None if record_dir is None else str(Path(record_dir).resolve()), policy_names)
+    return play_chunks(runner, play_test_chunk, args, epochs, first, chunk, on_row, progress)
+
+
 ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 """Variables set to 1 for worker processes (unless set already): each plays on one core."""
 
@@ -313,12 +336,21 @@ ROW_FIELDS = ("learner", "policies", "seed", "steps_per_epoch", "obs_mode")
 """The :class:`EvaluateConfig` fields a test epoch's row depends on, besides the candidate's policy."""
 
 
-def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
+def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str, Any]:
     """Run every candidate, write CSVs, plots and ``summary.json``; returns the summary.
 
+    With a ``runner`` (:mod:`triplesumo.evaluation.parallel`) every candidate's test epochs are
+    played by it as tasks of ``cfg.ray_chunk`` epochs (the same rows); ``cfg.ray`` asks for one
+    (the command line hands down a :class:`~triplesumo.integrations.ray_tasks.RayRunner`).
+    Without, they are played here (``cfg.workers`` > 1: in worker processes).
     With ``cfg.resume`` the rows already in ``out`` are kept (see the module docstring);
     ``ValueError`` names what changed if they no longer fit the config.
     """
+    if cfg.ray and runner is None:
+        raise ValueError("EvaluateConfig.ray: evaluate plays on the runner it is handed; pass one, e.g. "
+                         "triplesumo.integrations.ray_tasks.RayRunner() inside ray_tasks.session() (as --ray does)")
+    if runner is not None and cfg.workers > 1:
+        raise ValueError("EvaluateConfig.workers and a runner both spread the test epochs: choose one")
     from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
 
     trained, expanded = expand_policies(cfg.policy), expand_policies(cfg.compare, "compare")
@@ -377,12 +409,6 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
     baselines = _baselines_in(candidates)
     summary: dict[str, Any] = {"config": {**asdict(cfg), "baselines": baselines}, "candidates": {}}
     with ExitStack() as stack:
-        ray_tasks: Any = None
-        if cfg.ray:
-            from triplesumo.integrations import ray_tasks as ray_module  # only here: the core never imports Ray
-
-            ray_tasks = ray_module
-            stack.enter_context(ray_tasks.session(cfg.ray_address))
         other_specs = dict(p.split("=", 1) for p in pairs)
         firsts = {label: finished_rows(out / label / "metrics.csv", cfg.epochs) if label in kept else 0
                   for label in candidates}
@@ -400,9 +426,9 @@ def evaluate(cfg: EvaluateConfig) -> dict[str, Any]:
             spec, done = candidates[label], firsts[label]
             seat_names: dict[str, str] = {**other_specs, cfg.learner: spec}
             with RowAppender(out / label / "metrics.csv", fresh=done == 0) as append:
-                if ray_tasks is not None:
-                    ray_tasks.play_test_epochs_on_ray(
-                        spec, other_specs, cfg.learner, cfg.epochs, cfg.seed, match_cfg, first=done,
+                if runner is not None:
+                    play_test_epochs_on(
+                        runner, spec, other_specs, cfg.learner, cfg.epochs, cfg.seed, match_cfg, first=done,
                         chunk=cfg.ray_chunk, n_envs=cfg.n_envs, on_row=append, record=cfg.record,
                         record_dir=out / label / "matches", policy_names=seat_names,
                         progress=f"evaluate {cfg.learner}={spec}" if cfg.progress else None)
@@ -580,7 +606,7 @@ def finished_rows(path: Path, epochs: int, columns: tuple[str, ...] = COLUMNS,
     """How many rows (numbered 1, 2, ...) ``path`` holds, in order from row 1.
 
     A run killed while writing leaves a partial last line, and the file is cut back to
-    its last complete, valid row by :func:`~triplesumo.train.logger.repair_metrics_csv`
+    its last complete, valid row by :func:`~triplesumo.evaluation.metrics_csv.repair_metrics_csv`
     (the one routine training's resume uses too; rewritten atomically). ``ValueError`` if
     the file does not have the header ``columns``, has an invalid row before its last, or
     holds more than ``epochs`` rows. By default the file is a candidate's metrics CSV; other

@@ -79,6 +79,7 @@ from triplesumo.agents.zoo import find_policy_file, make_policy, policy_fingerpr
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
+from triplesumo.evaluation.parallel import TaskRunner, play_chunks, portable_spec
 from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Elo, RatingTable, check_tau
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import wilson_interval
@@ -142,12 +143,12 @@ class TournamentConfig:
     resume: bool = False
     """Continue the tournament in ``out`` (killed, or to more rounds/matches): finished matches are kept."""
     ray: bool = False
-    """Play the matches as Ray tasks (chunks of ray_chunk matches; the same rows as a local run).
-    Needs pip install "triplesumo[ray]"."""
+    """Play the matches as Ray tasks (chunks of ray_chunk matches; the same rows as a local run): the
+    command line hands run_tournament a Ray runner. Needs pip install "triplesumo[ray]"."""
     ray_address: str = ""
     """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray."""
     ray_chunk: int = 50
-    """With ray: matches per Ray task."""
+    """With ray (or any runner handed to run_tournament): matches per task."""
     league: str = ""
     """A self-play run folder: its own league snapshots join the entries (named by member id)."""
     league_snapshots: int = 8
@@ -394,12 +395,20 @@ class Tournament:
                             for n, s in self.entries.items()}}
 
 
-def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) -> dict[str, Any]:
+def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None,
+                   runner: TaskRunner | None = None) -> dict[str, Any]:
     """Play (or resume) the tournament, write its tables and plots; returns the results.
+
+    With a ``runner`` (:mod:`triplesumo.evaluation.parallel`) the matches are played by it as
+    tasks of ``cfg.ray_chunk`` matches (the same rows); ``cfg.ray`` asks for one (the command
+    line hands down a :class:`~triplesumo.integrations.ray_tasks.RayRunner`).
 
     ``match_cfg`` replaces the scenario's match (a roster of any teams), for tests and
     scenarios not yet named.
     """
+    if cfg.ray and runner is None:
+        raise ValueError("TournamentConfig.ray: run_tournament plays on the runner it is handed; pass one, e.g. "
+                         "triplesumo.integrations.ray_tasks.RayRunner() inside ray_tasks.session() (as --ray does)")
     out = check_writable(Path(cfg.out), folder=True)
     cfg = cfg.resolved()
     t = Tournament(cfg, match_cfg)
@@ -422,12 +431,9 @@ def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) 
     if done < t.n_matches:
         progress = "tournament" if cfg.progress else None
         with RowAppender(rows_path, fresh=done == 0, columns=t.columns) as append:
-            if cfg.ray:
-                from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
-
-                with ray_tasks.session(cfg.ray_address):
-                    ray_tasks.play_tournament_on_ray(cfg, match_cfg, done, t.n_matches, cfg.ray_chunk, on_row=append,
-                                                     progress=progress)
+            if runner is not None:
+                play_tournament_on(runner, cfg, match_cfg, done, t.n_matches, cfg.ray_chunk, on_row=append,
+                                   progress=progress)
             else:
                 t.play(policies, done, t.n_matches, cfg.n_envs, cfg.n_threads, on_row=append, progress=progress)
     rows = read_rows(rows_path)
@@ -440,10 +446,24 @@ def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None) 
 def play_schedule(cfg: TournamentConfig, match_cfg: MatchConfig | None, first: int, end: int,
                   n_envs: int | None = None) -> list[dict[str, Any]]:
     """The ``matches.csv`` rows of matches ``first .. end - 1`` of ``cfg``'s tournament, played here on
-    one MuJoCo thread (a chunk of a tournament played elsewhere, e.g. as a Ray task)."""
+    one MuJoCo thread (a chunk of a tournament played by a runner, e.g. as a Ray task)."""
     t = Tournament(cfg, match_cfg)
     policies = {n: make_policy(s, seed=cfg.seed, expect_obs_mode=t.match_cfg.obs_mode) for n, s in t.entries.items()}
     return t.play(policies, first, end, min(n_envs or cfg.n_envs, end - first), 1)
+
+
+def play_tournament_on(runner: TaskRunner, cfg: TournamentConfig, match_cfg: MatchConfig | None = None,
+                       first: int = 0, n: int | None = None, chunk: int = 50,
+                       on_row: Callable[[dict[str, Any]], None] | None = None,
+                       progress: str | None = None) -> list[dict[str, Any]]:
+    """Rows of matches ``first .. n - 1`` of the tournament of ``cfg`` (``n``: its whole schedule), played by
+    ``runner`` as tasks of ``chunk`` matches (:func:`play_schedule`): the rows of ``matches.csv`` a local run
+    writes."""
+    if n is None:
+        n = Tournament(cfg, match_cfg).n_matches
+    portable = dataclasses.replace(cfg, policies=tuple(f"{k}={portable_spec(v)}"
+                                                       for k, v in parse_entries(cfg.policies).items()))
+    return play_chunks(runner, play_schedule, (portable, match_cfg), n, first, chunk, on_row, progress)
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:

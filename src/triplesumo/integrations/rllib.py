@@ -59,7 +59,6 @@ except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
 
 import torch
 
-from triplesumo import ENV_VERSION
 from triplesumo.agents.builtin import BUILTIN, act_batch
 from triplesumo.agents.networks import ActorPolicy
 from triplesumo.agents.policy_file import load_fixed_policy
@@ -69,6 +68,7 @@ from triplesumo.rules.config import MatchConfig, check_shared_network
 from triplesumo.rules.outcome import PLAYING, outcome_name
 from triplesumo.rules.scenarios import scenario_config as named_scenario_config
 from triplesumo.rules.scenarios import scenarios
+from triplesumo.version import ENV_VERSION
 
 __all__ = ["ENVS_PER_RUNNER", "OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback",
            "TripleSumoMultiAgentEnv", "env_id", "fixed_policies", "make_config", "make_env", "match_config_from",

@@ -16,9 +16,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from triplesumo import ENV_VERSION
 from triplesumo.model.specs import BLUE, BODIES_AGENTS, GREEN, RED, AgentSpec
 from triplesumo.rules.config import MatchConfig
+from triplesumo.version import ENV_VERSION
 
 NAMES = ("ant", "bug", "spider", "beetle", "mantis", "wasp", "moth", "flea")
 """Agent names in roster order; agents past these are ``agent_<k>``."""

@@ -22,28 +22,27 @@ Nothing is ever unpickled (``np.load`` with ``allow_pickle=False``, safetensors 
 
 from __future__ import annotations
 
-import errno
 import json
 import os
-import re
 import shutil
 import zipfile
 from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from safetensors import SafetensorError
 
+# CheckpointWriteError and writing stand beside the other file writers (evaluation's tables use them too)
 from triplesumo.agents.policy_file import (
+    CheckpointWriteError,
     PolicyFileError,
     atomic_save_tensors,
     atomic_write_bytes,
     file_sha256,
     load_json,
     load_tensors,
+    writing,
 )
 
 CHECKPOINT_FORMAT = "triplesumo-checkpoint/1"
@@ -53,30 +52,6 @@ MANIFEST = "manifest.json"
 
 class CheckpointError(PolicyFileError):
     """A checkpoint is missing, truncated, corrupt or incompatible (the message names the file)."""
-
-
-class CheckpointWriteError(OSError):
-    """Writing a run file failed (disk full, read-only, no permission); names the file and cause."""
-
-    def __str__(self) -> str:
-        return str(self.strerror)
-
-
-@contextmanager
-def writing(path: Path | str, last_good: str = "") -> Iterator[None]:
-    """Turn a failed write of ``path`` into a :class:`CheckpointWriteError` naming it and the cause."""
-    try:
-        yield
-    except CheckpointWriteError:
-        raise
-    except (OSError, SafetensorError) as exc:
-        code = getattr(exc, "errno", None)
-        if code is None:  # safetensors reports io errors as text: "IoError(Os { code: 28, ..." or "(os error 28)"
-            found = re.search(r"code: (\d+)|os error (\d+)", str(exc))
-            code = int(found.group(1) or found.group(2)) if found else None
-        cause = os.strerror(code) if code else str(exc)
-        detail = "" if code is None or cause in str(exc) else f" ({exc})"
-        raise CheckpointWriteError(code or errno.EIO, f"cannot write {path}: {cause}{detail}{last_good}") from exc
 
 
 def _fsync_dir(path: Path) -> None:

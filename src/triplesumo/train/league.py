@@ -91,8 +91,8 @@ from triplesumo.agents.policy_file import (
     policy_paths,
 )
 from triplesumo.agents.zoo import find_policy_file, policy_stem
+from triplesumo.evaluation.metrics_csv import repair_metrics_csv
 from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Rating, RatingTable
-from triplesumo.train.logger import repair_metrics_csv
 
 SAMPLING = ("uniform", "latest", "pfsp")
 """Opponent sampling rules (see the module docstring)."""
@@ -682,7 +682,8 @@ class League:
     def truncate_log(self, epoch: int) -> None:
         """Drop ``league.csv`` rows of epochs after ``epoch`` (written before a resume point) and a torn last line
         (a kill while writing it, which the next row would be glued onto): the repair routine of the metrics CSVs
-        (:func:`~triplesumo.train.logger.repair_metrics_csv`), which names the file and line of a damaged row."""
+        (:func:`~triplesumo.evaluation.metrics_csv.repair_metrics_csv`), which names the file and line of a damaged
+        row."""
         log = self.root / LOG_FILE
         if not log.exists():
             return

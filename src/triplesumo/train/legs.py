@@ -35,7 +35,7 @@ from typing import Any
 import mujoco
 import torch
 
-import triplesumo
+import triplesumo.version
 from triplesumo.agents.policy_file import PolicyFileError, atomic_write_bytes, load_json
 
 LEGS_FILE = "legs.json"
@@ -60,7 +60,7 @@ def code_version(package: Path | str | None = None) -> dict[str, Any] | None:
     imported ``triplesumo`` package's folder), or None when the folder's files are not tracked by git
     (an installed wheel, a copy, no git). ``dirty``: a tracked file under ``package`` differs from the
     commit (staged or not); untracked files and changes elsewhere in the checkout do not count."""
-    package = Path(package) if package is not None else Path(triplesumo.__file__).parent
+    package = Path(package) if package is not None else Path(triplesumo.version.__file__).parent
     if _git(package, "ls-files", "--error-unmatch", "__init__.py") is None:
         return None
     commit = _git(package, "rev-parse", "HEAD")
@@ -72,7 +72,7 @@ def code_version(package: Path | str | None = None) -> dict[str, Any] | None:
 
 def versions() -> dict[str, str]:
     """The versions of triplesumo, MuJoCo and torch this process runs."""
-    return {"triplesumo": triplesumo.__version__, "mujoco": mujoco.__version__, "torch": torch.__version__}
+    return {"triplesumo": triplesumo.version.__version__, "mujoco": mujoco.__version__, "torch": torch.__version__}
 
 
 def make_leg(kind: str, epoch: int, env_steps: int, run_id: str | None, budget: dict[str, Any],

@@ -53,7 +53,6 @@ import mujoco
 import numpy as np
 import torch
 
-from triplesumo import ENV_VERSION, __version__
 from triplesumo.agents.builtin import BUILTIN, RandomPolicy, ZeroPolicy, act_batch
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.policy_file import atomic_write_bytes, load_fixed_policy, load_json, save_policy
@@ -85,6 +84,7 @@ from triplesumo.train.learners import (
 )
 from triplesumo.train.legs import LEGS_FILE, legs_before, make_leg, read_legs, write_legs
 from triplesumo.train.logger import COLUMNS, LEARNING_COLUMNS, MetricsLog, intact_rows, learning_row_problem, run_file
+from triplesumo.version import ENV_VERSION, __version__
 
 
 @dataclass

@@ -1,4 +1,5 @@
-"""``triplesumo sweep``: a grid of ``triplesumo train`` runs as Ray tasks, resumable, with one summary.
+"""``triplesumo sweep``: a grid of ``triplesumo train`` runs as tasks (on Ray from the command line), resumable,
+with one summary.
 
 The grid names any :class:`~triplesumo.train.config.TrainConfig` field by its dotted
 name with its values (``seed=0,1,2``, ``ddpg.actor_lr=1e-4,1e-3``, ``scenario=paper,2v2``);
@@ -7,7 +8,8 @@ options and the trial's values, in the run folder ``OUT/NAME`` where NAME joins 
 trial's values (``seed=0,ddpg.actor_lr=1e-4``). Values are read with the field's type;
 a tuple field takes its items separated by spaces (``policies=ant=zoo:ant spider=random``).
 
-Trials run as Ray tasks (:func:`triplesumo.integrations.ray_tasks.run_trials_on_ray`),
+Trials run as tasks of the runner :func:`run_sweep` is handed (:func:`run_trials`; the command
+line hands down :class:`triplesumo.integrations.ray_tasks.RayRunner`, so trials are Ray tasks),
 not Ray Tune trials: recovery is the project's own. A trial is :func:`run_trial`: it
 resumes its run folder from the last checkpoint when one exists
 (``train(..., resume_dir=...)``), else it starts the run. So a trial whose worker dies is
@@ -33,6 +35,8 @@ import itertools
 import json
 import math
 import typing
+from collections.abc import Callable, Sequence
+from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -41,6 +45,7 @@ import numpy as np
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.metrics import moving_winning_rate
+from triplesumo.evaluation.parallel import TaskRunner, check_counts
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig, typed_value
 from triplesumo.train.loop import config_to_json, holds_run, train, training_done
@@ -66,7 +71,8 @@ class SweepConfig:
     cpus_per_trial: int = 1
     """CPUs Ray reserves for each trial (a trial trains on one MuJoCo thread plus its update thread)."""
     max_retries: int = 3
-    """Times Ray runs a trial again whose worker died (each resumes from the last checkpoint)."""
+    """Times Ray runs a task again whose worker died (a trial resumes from its last checkpoint; a chunk of the
+    evaluation after training replays exactly)."""
     evaluate_epochs: int = 0
     """Test epochs per trial's policy after training (0: no evaluation and no compare table)."""
     eval_seed: int = 10_000
@@ -179,6 +185,29 @@ def run_trial(cfg: TrainConfig) -> dict[str, Any]:
             "seconds": round(result.seconds, 3), "env_steps_here": result.env_steps}
 
 
+def run_trials(runner: TaskRunner, configs: Sequence[TrainConfig],
+               on_done: Callable[[int, dict[str, Any]], None] | None = None,
+               cpus_per_trial: int = 1) -> list[dict[str, Any]]:
+    """Train every config of ``configs`` as a task of ``runner`` (:func:`run_trial`); results in ``configs``
+    order, each handed to ``on_done(index, result)`` as it finishes. On Ray a task whose worker dies is run
+    again and resumes its run from the last checkpoint; a trial that fails for good gives
+    ``{"trial", "error"}`` and the others go on."""
+    check_counts(cpus_per_trial=cpus_per_trial)
+    results: dict[int, dict[str, Any]] = {}
+    with closing(runner(run_trial, [(cfg,) for cfg in configs], cpus=cpus_per_trial)) as finished:
+        for k, get in finished:
+            try:
+                results[k] = get()
+            except Exception as exc:  # the trial failed (or, on Ray, its retries ran out): the others go on
+                cause = getattr(exc, "cause", None) or exc  # (Ray's task error carries the trial's own)
+                last = str(cause).strip().splitlines()[-1:] or [""]
+                results[k] = {"trial": getattr(configs[k], "name", str(k)),
+                              "error": f"{type(cause).__name__}: {last[0]}"}
+            if on_done is not None:
+                on_done(k, results[k])
+    return [results[k] for k in range(len(configs))]
+
+
 def finished(trial: Trial) -> bool:
     """Whether the trial's run holds a checkpoint at its budget (epochs, or ``max_env_steps``)."""
     return training_done(trial.config, Path(trial.config.out) / trial.name)
@@ -207,15 +236,10 @@ def _check_record(out: Path, record: dict[str, Any]) -> None:
                              "re-running a sweep resumes it and needs the same options; choose another --out")
 
 
-def run_sweep(cfg: SweepConfig, base: TrainConfig | None = None) -> dict[str, Any]:
-    """Run (or resume) the sweep on Ray, evaluate and compare when asked, write the summary; returns it."""
-    import importlib.util
-
-    if importlib.util.find_spec("ray") is None:
-        raise ValueError('triplesumo sweep runs its trials on Ray, which is not installed: '
-                         'pip install "triplesumo[ray]"')
-    from triplesumo.integrations import ray_tasks  # the sweep is Ray's; the core install never imports it
-
+def run_sweep(cfg: SweepConfig, base: TrainConfig | None, runner: TaskRunner) -> dict[str, Any]:
+    """Run (or resume) the sweep's trials as tasks of ``runner`` (the command line hands down a
+    :class:`~triplesumo.integrations.ray_tasks.RayRunner` built from ``cfg.address``, ``num_cpus`` and
+    ``max_retries``), evaluate and compare when asked (on the same runner), write the summary; returns it."""
     base = base or TrainConfig()
     out = Path(cfg.out).resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -238,16 +262,16 @@ def run_sweep(cfg: SweepConfig, base: TrainConfig | None = None) -> dict[str, An
 
     evaluation: dict[str, dict[str, Any]] = {}
     compare_table = None
-    with ray_tasks.session(cfg.address, cfg.num_cpus or None):
-        ray_tasks.run_trials_on_ray([t.config for t in todo], done, cfg.cpus_per_trial, cfg.max_retries)
-        if cfg.evaluate_epochs:
-            evaluation, compare_table = _evaluate(cfg, out, [t for t in todo_all if finished(t)])
+    run_trials(runner, [t.config for t in todo], done, cfg.cpus_per_trial)
+    if cfg.evaluate_epochs:
+        evaluation, compare_table = _evaluate(cfg, out, [t for t in todo_all if finished(t)], runner)
     summary = _summary(cfg, out, todo_all, previous, evaluation, compare_table)
     return summary
 
 
-def _evaluate(cfg: SweepConfig, out: Path, done: list[Trial]) -> tuple[dict[str, dict[str, Any]], Any]:
-    """Each group's policies evaluated in one folder (on Ray); the compare table across seeds."""
+def _evaluate(cfg: SweepConfig, out: Path, done: list[Trial],
+              runner: TaskRunner) -> tuple[dict[str, dict[str, Any]], Any]:
+    """Each group's policies evaluated in one folder (by ``runner``); the compare table across seeds."""
     from triplesumo.evaluation.compare import CompareConfig, compare
     from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 
@@ -267,7 +291,7 @@ def _evaluate(cfg: SweepConfig, out: Path, done: list[Trial]) -> tuple[dict[str,
                               out=str(folder), n_threads=1, progress=False,
                               resume=(folder / "evaluation.json").exists(), ray=True,
                               ray_chunk=max(1, min(50, math.ceil(cfg.evaluate_epochs / 4))))
-        summary = evaluate(ecfg)
+        summary = evaluate(ecfg, runner)
         for c in summary["candidates"].values():
             test_mwr[policies[c["policy"]]] = {"test_mwr": c["mean_lwr"], "group": group}
         folders.append(str(folder))

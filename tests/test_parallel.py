@@ -1,0 +1,111 @@
+"""Parallel execution is handed down: evaluate, tournaments and sweeps run their chunks on the runner they are
+given, and a runner changes where the chunks run, never the rows."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+from triplesumo.evaluation.parallel import Finished, ThreadRunner, play_chunks
+from triplesumo.evaluation.tournament import TournamentConfig, run_tournament
+from triplesumo.model.specs import AgentSpec
+from triplesumo.rules.config import MatchConfig
+from triplesumo.train.sweep import run_trials
+
+
+def _span(tag: str, first: int, end: int) -> list[dict[str, Any]]:
+    if tag == "boom" and first >= 4:
+        raise RuntimeError(f"chunk {first}..{end} failed")
+    return [{"i": i, "tag": tag, "thread": threading.get_ident()} for i in range(first, end)]
+
+
+def test_play_chunks_hands_on_rows_in_schedule_order_from_any_runner() -> None:
+    seen: list[int] = []
+    rows = play_chunks(ThreadRunner(3), _span, ("ok",), 11, first=1, chunk=3, on_row=lambda r: seen.append(r["i"]))
+    assert [r["i"] for r in rows] == seen == list(range(1, 11))
+    with pytest.raises(ValueError, match="chunk must be an int >= 1"):
+        play_chunks(ThreadRunner(), _span, ("ok",), 4, chunk=0)
+    with pytest.raises(ValueError, match=r"first must be in \[0, n=4\)"):
+        play_chunks(ThreadRunner(), _span, ("ok",), 4, first=4)
+    with pytest.raises(ValueError, match="ThreadRunner.workers must be an int >= 1"):
+        ThreadRunner(0)
+
+
+def test_a_failing_chunk_raises_its_error_after_the_rows_before_it() -> None:
+    seen: list[int] = []
+    with pytest.raises(RuntimeError, match="chunk 4..6 failed"):
+        play_chunks(ThreadRunner(1), _span, ("boom",), 8, chunk=2, on_row=lambda r: seen.append(r["i"]))
+    assert seen == [0, 1, 2, 3]
+
+
+def _csv(path: Path) -> bytes:
+    return path.read_bytes()
+
+
+def test_evaluate_on_a_thread_runner_writes_the_bytes_of_a_local_run_and_resumes(tmp_path: Path) -> None:
+    base = EvaluateConfig(policy=("random",), epochs=6, steps_per_epoch=40, n_envs=4, n_threads=1, progress=False,
+                          baselines=("passive",), out=str(tmp_path / "local"))
+    local = evaluate(base)
+    spread = dataclasses.replace(base, out=str(tmp_path / "threads"), ray_chunk=2, epochs=3)
+    evaluate(spread, ThreadRunner(2))  # a first part, then resumed to 6 epochs
+    summary = evaluate(dataclasses.replace(spread, epochs=6, resume=True), ThreadRunner(2))
+    for label in ("trained", "passive"):
+        assert _csv(tmp_path / "threads" / label / "metrics.csv") == _csv(tmp_path / "local" / label / "metrics.csv")
+    assert summary["candidates"] == local["candidates"]
+
+
+def test_tournament_on_a_thread_runner_writes_the_rows_of_a_local_run(tmp_path: Path) -> None:
+    duel = MatchConfig(agents=(AgentSpec("a", "a", 0.2), AgentSpec("b", "b", 0.2)), max_steps=60)
+    base = TournamentConfig(policies=("passive=passive", "random=random"), rounds=3, steps_per_epoch=60,
+                            n_envs=4, n_threads=1, progress=False, out=str(tmp_path / "local"))
+    run_tournament(base, duel)
+    run_tournament(dataclasses.replace(base, out=str(tmp_path / "threads"), ray_chunk=2), duel, ThreadRunner(2))
+    for name in ("matches.csv", "leaderboard.csv"):
+        assert _csv(tmp_path / "threads" / name) == _csv(tmp_path / "local" / name)
+
+
+def test_ray_asked_for_without_a_runner_is_refused_before_anything_is_written(tmp_path: Path) -> None:
+    pytest.importorskip("ray", reason="ray=True is refused by the config itself without the extra")
+    with pytest.raises(ValueError, match="EvaluateConfig.ray: evaluate plays on the runner it is handed"):
+        evaluate(EvaluateConfig(ray=True, epochs=1, out=str(tmp_path / "e")))
+    with pytest.raises(ValueError, match="TournamentConfig.ray: run_tournament plays on the runner it is handed"):
+        run_tournament(TournamentConfig(ray=True, out=str(tmp_path / "t")))
+    with pytest.raises(ValueError, match="workers and a runner both spread"):
+        evaluate(EvaluateConfig(workers=2, epochs=1, out=str(tmp_path / "w")), ThreadRunner())
+    assert not list(tmp_path.iterdir())
+
+
+@dataclasses.dataclass
+class _Canned:
+    """A runner that hands back canned outcomes (a result, or an error to raise) instead of training."""
+
+    outcomes: list[Any]
+    cpus: list[int] = dataclasses.field(default_factory=list)
+
+    def __call__(self, fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], cpus: int = 1) -> Finished[Any]:
+        self.cpus.append(cpus)
+        assert len(tasks) == len(self.outcomes)
+        for k in reversed(range(len(tasks))):  # finishing out of order
+            outcome = self.outcomes[k]
+
+            def get(outcome: Any = outcome) -> Any:
+                if isinstance(outcome, BaseException):
+                    raise outcome
+                return outcome
+
+            yield k, get
+
+
+def test_a_failed_trial_gives_its_error_and_the_others_go_on() -> None:
+    configs = [type("Cfg", (), {"name": n})() for n in ("a", "b", "c")]
+    runner = _Canned([{"trial": "a"}, ValueError("first line\nlast line"), {"trial": "c"}])
+    done: list[int] = []
+    results = run_trials(runner, configs, lambda k, r: done.append(k), cpus_per_trial=2)
+    assert results == [{"trial": "a"}, {"trial": "b", "error": "ValueError: last line"}, {"trial": "c"}]
+    assert done == [2, 1, 0] and runner.cpus == [2]
