@@ -22,7 +22,7 @@ from test_train_selfplay import BOTH_COMMAND, both
 from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
 from triplesumo.cli import main
 from triplesumo.train.fork import added_seeds, check_fork, fork_run
-from triplesumo.train.league import LeagueConfig
+from triplesumo.train.league_config import LeagueConfig
 from triplesumo.train.loop import Trainer, config_from_json, train
 
 

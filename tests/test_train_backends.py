@@ -33,7 +33,7 @@ from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import LeagueConfig
+from triplesumo.train.league_config import LeagueConfig
 from triplesumo.train.loop import Trainer, train
 
 OLD_RUN = Path(__file__).parent / "data" / "old_trainer_run"

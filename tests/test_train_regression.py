@@ -24,7 +24,7 @@ import pytest
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import LeagueConfig
+from triplesumo.train.league_config import LeagueConfig
 from triplesumo.train.loop import train
 
 FIXTURE = Path(__file__).parent / "data" / "train_regression.json"

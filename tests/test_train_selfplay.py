@@ -27,7 +27,8 @@ from triplesumo.evaluation.tournament import TournamentConfig, league_entries, p
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import League, LeagueConfig
+from triplesumo.train.league import League
+from triplesumo.train.league_config import LeagueConfig
 from triplesumo.train.loop import Trainer, config_from_json, config_to_json, run_id_of, train
 
 SAC = SACConfig(hidden=(16, 16), buffer_size=4000, learning_starts=600, batch_size=16, learn_every=16)

@@ -55,7 +55,8 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
-from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, check_seeds, write_pool
+from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
+from triplesumo.train.league_config import check_seeds
 from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
 from triplesumo.train.loop import (
     FORK_FILE,

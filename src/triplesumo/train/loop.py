@@ -74,7 +74,9 @@ from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import League, LeagueConfig, check_seeds, plot_league
+from triplesumo.train.league import League
+from triplesumo.train.league_config import LeagueConfig, check_seeds
+from triplesumo.train.league_plots import plot_league
 from triplesumo.train.learners import (
     Learner,
     LearnerSpec,
