@@ -81,7 +81,7 @@ from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import RewardConfig
 from triplesumo.train import legs, sweep
 from triplesumo.train.config import ALGOS, TrainConfig
-from triplesumo.train.loop import command_for, training_done
+from triplesumo.train.run_folder import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
 
 RECORD_FILE = "reproduce.json"

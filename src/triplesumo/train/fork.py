@@ -58,7 +58,7 @@ from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
 from triplesumo.train.league_config import check_seeds
 from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
-from triplesumo.train.loop import (
+from triplesumo.train.run_folder import (
     FORK_FILE,
     RESUME_OVERRIDES,
     config_from_json,
