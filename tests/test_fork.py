@@ -22,8 +22,9 @@ from test_train_selfplay import BOTH_COMMAND, both
 from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
 from triplesumo.cli import main
 from triplesumo.train.fork import added_seeds, check_fork, fork_run
-from triplesumo.train.league import LeagueConfig
-from triplesumo.train.loop import Trainer, config_from_json, train
+from triplesumo.train.league_config import LeagueConfig
+from triplesumo.train.loop import Trainer, train
+from triplesumo.train.run_folder import config_from_json
 
 
 def rows(path: Path) -> list[dict[str, str]]:

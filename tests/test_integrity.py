@@ -42,7 +42,8 @@ from triplesumo.train import logger as logger_module
 from triplesumo.train.checkpoint import CheckpointError, CheckpointWriteError
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS, repair_metrics_csv
-from triplesumo.train.loop import DivergenceError, RunExistsError, Trainer, train
+from triplesumo.train.loop import DivergenceError, Trainer, train
+from triplesumo.train.run_folder import RunExistsError
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 

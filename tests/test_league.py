@@ -15,9 +15,9 @@ from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.networks import Actor
 from triplesumo.agents.policy_file import PolicyFileError, save_policy
 from triplesumo.evaluation.ratings import Rating, RatingTable
-from triplesumo.train.league import (
-    League,
-    LeagueConfig,
+from triplesumo.train.league import League
+from triplesumo.train.league_config import LeagueConfig
+from triplesumo.train.league_plots import (
     league_demo,
     league_figure,
     member_labels,

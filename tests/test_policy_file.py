@@ -245,7 +245,7 @@ def test_find_policy_file_is_the_one_answer_to_is_this_spec_a_policy_file(stem: 
     suffix) is one, a path where neither file is is an unknown policy, and weights without their
     manifest are a broken policy file named as such (the loader's words), not an unknown name."""
     from triplesumo.evaluation.tournament import _manifest
-    from triplesumo.train.league import check_seeds
+    from triplesumo.train.league_config import check_seeds
 
     for spec in (str(stem), str(stem.with_suffix(".json")), str(stem.with_suffix(".safetensors"))):
         assert find_policy_file(spec) == stem

@@ -195,7 +195,7 @@ def test_the_folder_is_compared_by_its_place_and_status_may_read_a_moved_one(
 
 def test_bug_trials_give_td3_and_sac_the_shared_schedule_and_keep_ddpg_at_the_paper_preset(tmp_path: Path) -> None:
     from triplesumo.reproduce import Protocol
-    from triplesumo.train.loop import command_for
+    from triplesumo.train.run_folder import command_for
 
     by_algo = {t.config.learn[0].split("=")[1]: t.config
                for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,))).bug_trials()}

@@ -135,7 +135,7 @@ def test_old_records_read_back_as_the_circle_and_the_cylinder() -> None:
     import dataclasses
 
     from triplesumo.train.config import TrainConfig
-    from triplesumo.train.loop import config_from_json, config_to_json
+    from triplesumo.train.run_folder import config_from_json, config_to_json
 
     saved = config_to_json(TrainConfig())
     assert saved["physics"]["layout"] == "fair" and saved["physics"]["rim_shape"] == "box"

@@ -35,7 +35,8 @@ from triplesumo.train import loop as train_loop
 from triplesumo.train.checkpoint import CheckpointError, recorded_epoch
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS
-from triplesumo.train.loop import Trainer, TrainResult, config_from_json, config_to_json, train
+from triplesumo.train.loop import Trainer, TrainResult, train
+from triplesumo.train.run_folder import config_from_json, config_to_json, run_id_of
 
 PLOTS = ("rewards.png", "reward_terms.png", "mwr.png", "steps_to_win.png")
 LWR = {"win": 1.0, "loss": -1.0, "draw": 0.0, "error": 0.0}
@@ -344,7 +345,7 @@ def test_a_resumed_run_keeps_the_run_id_its_checkpoint_records(uninterrupted: Tr
     assert load_policy(uninterrupted.run / "policy")[1]["run_id"] == uninterrupted.trainer.run_id
     state_path = _latest_file(run_copy, "state.json")
     state = json.loads(state_path.read_text())
-    assert state["run_id"] == uninterrupted.trainer.run_id == train_loop.run_id_of(uninterrupted.cfg)
+    assert state["run_id"] == uninterrupted.trainer.run_id == run_id_of(uninterrupted.cfg)
     state["run_id"] = "started-under-an-older-version"
     state_path.write_text(json.dumps(state))
     _reseal(state_path.parent)
@@ -621,7 +622,7 @@ def test_a_run_of_the_one_learner_trainer_resumes_exactly(uninterrupted: Trained
 def test_max_env_steps_stops_at_the_first_epoch_end_past_the_budget(tmp_path: Path) -> None:
     """An env-step budget ends the run at the first epoch end past it, with a checkpoint there,
     and ``training_done`` (what sweeps and ``reproduce`` skip on) sees the run as done."""
-    from triplesumo.train.loop import training_done
+    from triplesumo.train.run_folder import training_done
 
     cfg = TrainConfig(name="budget", out=str(tmp_path), policies=("spider=random", "ant=zero"), epochs=1000,
                       steps_per_epoch=20, n_envs=2, checkpoint_every=1000, max_env_steps=60, progress=False,

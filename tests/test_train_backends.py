@@ -33,7 +33,7 @@ from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.outcome import OUTCOME_CODES
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import LeagueConfig
+from triplesumo.train.league_config import LeagueConfig
 from triplesumo.train.loop import Trainer, train
 
 OLD_RUN = Path(__file__).parent / "data" / "old_trainer_run"
@@ -281,13 +281,13 @@ def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_ex
     assert (lg.root / f"{members['spider-0001'].policies['spider']}.safetensors").is_file()
     # the members' actions on the device are the host's: the network within float rounding, random draws alike
     seats = (([None, None, "spider-0001"], 0), (["team-0001", "team-0001", None], 5))
-    whole.seat_policies = [whole._policies_of(members, seed) for members, seed in seats]
-    whole._seat_groups = None
-    twins = [whole._policies_of(members, seed) for members, seed in seats]  # fresh generators, same seeds
+    whole.seats.policies = [whole.seats.policies_of(members, seed) for members, seed in seats]
+    whole.seats._groups = None
+    twins = [whole.seats.policies_of(members, seed) for members, seed in seats]  # fresh generators, same seeds
     host = [{i: act_batch(p, whole.obs[k, i][None].numpy())[0] for i, p in seated.items()}
             for k, seated in enumerate(twins)]
     actions = torch.zeros((2, 3, 8))
-    whole._seat_actions_on_device(actions)
+    whole.seats.act_on_device(actions, whole.obs)
     for k, seat, action in ((0, 2, host[0][2]), (1, 0, host[1][0]), (1, 1, host[1][1])):
         np.testing.assert_allclose(actions[k, seat].numpy(), action, rtol=0, atol=1e-6)
     assert not actions[0, :2].any() and not actions[1, 2].any()

@@ -27,8 +27,10 @@ from triplesumo.evaluation.tournament import TournamentConfig, league_entries, p
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.league import League, LeagueConfig
-from triplesumo.train.loop import Trainer, config_from_json, config_to_json, run_id_of, train
+from triplesumo.train.league import League
+from triplesumo.train.league_config import LeagueConfig
+from triplesumo.train.loop import Trainer, train
+from triplesumo.train.run_folder import config_from_json, config_to_json, run_id_of
 
 SAC = SACConfig(hidden=(16, 16), buffer_size=4000, learning_starts=600, batch_size=16, learn_every=16)
 LEAGUE = LeagueConfig(threshold=0.0, window=2, snapshot_every=2, max_size=3)

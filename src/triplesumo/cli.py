@@ -142,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
             run_play(_dcargs.build(PlayConfig, args))
         elif args.command == "train":
             from triplesumo.train.config import TrainConfig
-            from triplesumo.train.loop import RESUME_OVERRIDES, flag_list, train
+            from triplesumo.train.loop import train
+            from triplesumo.train.run_folder import RESUME_OVERRIDES, flag_list
 
             plain = ("command", "resume", "fork", "from_checkpoint", "start_over")
             typed = shlex.join(["triplesumo", *argv])  # this session's leg records it (RUN/legs.json)
@@ -242,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.out}: the mean of {len(args.policies)} {made['agent']} policies "
                   f"(epochs {[s['epochs'] for s in made['average']['sources']]})")
         elif args.command == "plot":
-            from triplesumo.train.loop import plot_metrics
+            from triplesumo.train.run_folder import plot_metrics
 
             print("\n".join(str(p) for p in plot_metrics(args.run_dir, args.window)))
         elif args.command == "zoo":

@@ -30,7 +30,8 @@ from triplesumo.evaluation.play import PlayConfig, run_play
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.scenarios import get_scenario
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.loop import holds_run, train
+from triplesumo.train.loop import train
+from triplesumo.train.run_folder import holds_run
 from triplesumo.version import ENV_VERSION
 from triplesumo.zoo import older_pair
 

@@ -41,7 +41,8 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.benchmarks import report
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
-from triplesumo.train.loop import holds_run, train
+from triplesumo.train.loop import train
+from triplesumo.train.run_folder import holds_run
 
 RECORD = "skill.json"
 """The bench's record and result in OUT (what ``triplesumo reproduce`` reads from ``OUT/skill``)."""

@@ -18,7 +18,7 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, RewardConfig
 from triplesumo.rules.scenarios import scenarios
-from triplesumo.train.league import LeagueConfig
+from triplesumo.train.league_config import LeagueConfig
 
 ALGOS = ("ddpg", "td3", "sac", "ppo")
 """Algorithms a learner can use (``--learn AGENT=ALGO``); each has its config field."""

@@ -55,9 +55,10 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
-from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, check_seeds, write_pool
+from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
+from triplesumo.train.league_config import check_seeds
 from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
-from triplesumo.train.loop import (
+from triplesumo.train.run_folder import (
     FORK_FILE,
     RESUME_OVERRIDES,
     config_from_json,

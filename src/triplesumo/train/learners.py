@@ -316,6 +316,11 @@ def make_learner(spec: LearnerSpec, index: list[int], position: int, cfg: TrainC
     return cls(spec, index, position, cfg, obs_dim, act_dim, device)
 
 
+def host(x: Any) -> np.ndarray:
+    """``x`` as a numpy array (a device tensor is copied to the host)."""
+    return x.cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+
+
 def _finite(x: Any) -> bool:
     """Whether every entry of ``x`` (a numpy array or a tensor) is finite."""
     return bool(torch.isfinite(x).all()) if isinstance(x, torch.Tensor) else bool(np.isfinite(x).all())

@@ -48,7 +48,8 @@ from triplesumo.evaluation.metrics import moving_winning_rate
 from triplesumo.evaluation.parallel import TaskRunner, check_counts
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig, typed_value
-from triplesumo.train.loop import config_to_json, holds_run, train, training_done
+from triplesumo.train.loop import train
+from triplesumo.train.run_folder import config_to_json, holds_run, training_done
 
 RECORD_FILE = "sweep.json"
 SUMMARY_COLUMNS = ("trial", "group", "epochs", "env_steps", "final_mwr", "resumed_from", "seconds", "test_mwr",

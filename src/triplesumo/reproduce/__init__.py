@@ -1,0 +1,77 @@
+"""``triplesumo reproduce``: the whole reproduction protocol from one command, resumable.
+
+The paper trains an Ant (3,000 epochs), then a second agent (20,000 epochs) to make "an ongoing
+game", then adds Bug. Built that way literally, the match was no contest (env v1, measured): an
+Ant trained against a random Spider learned nothing (a random Spider walks off the ring by itself
+in 28 of 32 matches, so a passive Ant already "wins" 87.5 %), and a Spider then trained for
+20,000 epochs against that frozen Ant won 82 % with Bug passive. The stages here build the
+ongoing match so that both sides learn to push, check that it is a contest, and only then train Bug:
+
+1. ``match``: Ant and Spider learn together from scratch (DDPG each; ``train --learn ant=ddpg
+   spider=ddpg``), Bug passive, for ``match_epochs`` (the paper's 20,000: its second agent's
+   budget, which the Ant now shares, so neither side faces an opponent that stopped learning or one
+   that leaves the ring by itself). Pre-training reward: the paper's terms with the still
+   punishment ``pretrain_still`` (default -1), so that losing costs more than surviving: with the
+   paper's -4 and gamma 0.99, still / (1 - gamma) = -400 = the loss reward, and being pushed out at
+   any step is worth as much as surviving without winning (``__post_init__`` refuses such a value).
+   ``pair`` skips the stage and checks a given pair instead (``--pair zoo:ant zoo:spider``).
+2. ``contest``: the pair on ``contest_epochs`` held-out starts (``contest_seed`` + i, apart from
+   the Bug's test starts), three evaluations (``OUT/contest``): the Ant against a passive Spider,
+   the Spider against a passive Ant (each must push its opponent out in at least
+   :data:`PUSH_MIN` of the matches), and the match with Bug passive, whose team MWR must lie in
+   :data:`CONTEST_BAND` (the team loses without Bug's help, but not hopelessly). ``contest.json``
+   holds each check and the verdict.
+3. ``bug``: Bug trained with each algorithm x seed in that match, as the trials of
+   :mod:`triplesumo.train.sweep` run here one after another (``OUT/bug/learn=bug=ALGO,seed=S``).
+   **It refuses to start on a pair that failed the contest rule** (:class:`ContestError`); with
+   ``tiny`` (2-epoch agents are no contest) the verdict is recorded and printed, not enforced.
+   With ``ablations`` (``--ablations noise=gaussian still=-1``), stage ``ablations`` then trains
+   the paper-preset DDPG Bug with each one change over the same seeds and env-step budget
+   (``OUT/ablations/learn=bug=ddpg,ddpg.noise=gaussian,seed=S``).
+4. ``evaluation``: every Bug (ablations included) plus the passive and random baselines on the
+   same seeded test matches (``OUT/evaluation``, ``per_seed.csv``).
+5. ``compare``: IQM with bootstrap intervals by trial (each algorithm, each ablation) and its
+   plot (``OUT/compare``).
+
+``--publish`` then ships the stage-1 Ant and Spider, the paper-preset DDPG Bug of the
+best seed as ``zoo:bug`` and the best Bug of any algorithm as ``zoo:bug-<algo>``, each manifest
+with its command, seed, env steps, the code version, its contest check and its test MWR with
+95 % interval.
+
+Time to skill comes from stage 3 itself: every Bug run evaluates its current policy every
+``bug_eval_every`` env steps on the first ``bug_eval_epochs`` test matches of stage 4
+(``train --eval-every``, ``eval.csv``), and the report gives, per algorithm and seed, the
+env steps and training wall time until its test MWR first reached +0.2, with the curves
+(``bug/test_mwr.png``).
+
+A stage whose outputs exist and are complete is skipped; a killed one goes on where it
+stopped (train runs resume from their last checkpoint, evaluations with ``resume``).
+``reproduce.json`` records the stages done, their commands and the code version, and
+``REPRODUCTION.md`` is written from the outputs each time. Redoing an earlier stage does
+not invalidate later ones: delete their folders to redo them too.
+"""
+
+from triplesumo.reproduce.config import (
+    ABLATION_ALIASES,
+    CONTEST_BAND,
+    PROTOCOL_FIELDS,
+    PUSH_MIN,
+    RECORD_FILE,
+    REPORT_FILE,
+    RUN_OPTIONS,
+    SKILL,
+    ContestError,
+    ReproduceConfig,
+    Stage,
+    ablation,
+)
+from triplesumo.reproduce.protocol import Protocol, contest_verdict, format_contest
+from triplesumo.reproduce.reporting import DOCS_BEGIN, DOCS_END, embed_report, format_status, report, status
+from triplesumo.reproduce.run import check_same_options, code_version, run_reproduce
+
+__all__ = [
+    "ABLATION_ALIASES", "CONTEST_BAND", "ContestError", "DOCS_BEGIN", "DOCS_END", "PROTOCOL_FIELDS", "PUSH_MIN",
+    "Protocol", "RECORD_FILE", "REPORT_FILE", "RUN_OPTIONS", "ReproduceConfig", "SKILL", "Stage", "ablation",
+    "check_same_options", "code_version", "contest_verdict", "embed_report", "format_contest", "format_status",
+    "report", "run_reproduce", "status"
+]

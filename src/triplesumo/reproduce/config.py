@@ -1,0 +1,202 @@
+"""The reproduction's config (:class:`ReproduceConfig`), its stages and the rules they are held to."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.evaluation.evaluate import check_ray
+from triplesumo.rules.config import RewardConfig
+from triplesumo.train import sweep
+from triplesumo.train.config import ALGOS, TrainConfig
+
+RECORD_FILE = "reproduce.json"
+REPORT_FILE = "REPRODUCTION.md"
+CONTEST_BAND = (-0.50, -0.10)
+"""The contest rule: with Bug passive, the team's MWR on the contest starts lies in this band (both ends
+included): the team loses without Bug's help, but not hopelessly."""
+PUSH_MIN = 0.5
+"""Each pre-trained side pushes a passive opponent out in at least this share of the contest starts."""
+
+
+class ContestError(RuntimeError):
+    """The Bug stage refused a pair that failed the contest rule (the message names each failed check)."""
+ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
+"""Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
+RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish", "docs")
+"""ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
+make: a folder resumes with other values."""
+PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
+"""TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
+SKILL = 0.2
+"""Time to skill: the test MWR Bug's team first reaches (the issue's +0.2)."""
+
+
+def ablation(item: str) -> tuple[str, str, Any]:
+    """``"noise=gaussian"`` -> ``("ddpg.noise", "gaussian", "gaussian")``: the TrainConfig field (aliases
+    :data:`ABLATION_ALIASES`), the value as given and as typed; ``ValueError`` names the problem."""
+    key, sep, raw = item.partition("=")
+    if not sep or not key or not raw or "," in raw:
+        raise ValueError(f"ReproduceConfig.ablations: expected FIELD=VALUE (one change, e.g. noise=gaussian, "
+                         f"still=-1, ddpg.noise_sigma=0.1), got {item!r}")
+    field_name = ABLATION_ALIASES.get(key, key)
+    if field_name.split(".")[0] in PROTOCOL_FIELDS:
+        raise ValueError(f"ReproduceConfig.ablations: {field_name} is set by the protocol for every Bug run, got "
+                         f"{item!r}")
+    try:
+        value = sweep.field_value(field_name, raw)
+        sweep.with_field(TrainConfig(), field_name, value)  # the field's own validation
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"ReproduceConfig.ablations: {item!r}: {exc}") from None
+    return field_name, raw, value
+
+
+@dataclass(frozen=True)
+class ReproduceConfig:
+    """The reproduction protocol: Ant, Spider, the contest check, Bug per algorithm x seed, evaluation, compare."""
+
+    out: str = "runs/reproduce"
+    """Folder for every stage's outputs, reproduce.json and REPRODUCTION.md."""
+    algos: tuple[str, ...] = ALGOS
+    """Algorithms Bug is trained with (ddpg is the paper preset)."""
+    seeds: tuple[int, ...] = (0, 1, 2)
+    """Training seeds of Bug, for every algorithm."""
+    match_epochs: int = 20_000
+    """Stage 1: epochs of Ant and Spider learning together (the paper's 20,000 for its second agent)."""
+    match_seed: int = 1
+    """Seed of the stage-1 run."""
+    pretrain_still: float = -1.0
+    """Stage 1: the still punishment of the pre-training reward (the paper's other terms as they are). It must
+    make losing cost more than surviving: still / (1 - gamma) > the loss reward (-1 / 0.01 = -100 > -400); the
+    paper's -4 gives exactly -400."""
+    pair: tuple[str, ...] = ()
+    """Skip stage 1 and check this Ant and Spider instead (two policy specs: ``zoo:ant zoo:spider``, files,
+    ``passive``); the contest rule and everything after it run on them."""
+    bug_epochs: int = 20_000
+    """Stage 3: at most this many epochs per Bug run (the paper's 20,000)."""
+    bug_env_steps: int = 1_000_000
+    """Stage 3: the env-step budget of every Bug run, the same for every algorithm whatever its matches
+    last (``train --max-env-steps``); a run stops at the first epoch end past it. 0: epochs only."""
+    bug_learn_every: int = 16
+    """Stage 3 (and the ablations): collected transitions per gradient step of the TD3 and SAC Bugs, one per step
+    of the 16 matches, the algorithm schedule of ``bench train``. Their library default, 1 (the papers' one update
+    per transition), costs 11-16 ms of CPU per update on a 2-core machine: 3-4 h per 1 M env steps and run.
+    0 keeps the algorithm's default. DDPG keeps the paper preset (30) and PPO its rollouts."""
+    bug_eval_every: int = 100_000
+    """Stage 3 (and the ablations): every this many env steps each Bug run evaluates its current policy on the
+    first bug_eval_epochs test matches of stage 4 (``train --eval-every``): the test-MWR curves and time to skill.
+    0: none."""
+    bug_eval_epochs: int = 200
+    """Test matches of each evaluation during stage 4."""
+    contest_epochs: int = 1000
+    """Stage 2: held-out starts of each contest check (Ant vs passive Spider, Spider vs passive Ant, the match
+    with Bug passive)."""
+    contest_seed: int = 20_000
+    """Contest start i resets with contest_seed + i: held out from training and from the Bug's test starts."""
+    eval_epochs: int = 2000
+    """Stage 4: test matches per Bug policy and per baseline (the same seeded matches for all)."""
+    eval_seed: int = 10_000
+    """Test match i resets with eval_seed + i (stage 4 and the Bug's evaluations while training), and seeds
+    the bootstrap."""
+    n_envs: int = 16
+    """Matches collected or played at once."""
+    border_rim: bool = True
+    """Train and evaluate on the paper's ring with its solid rim (``PhysicsConfig.border_rim``; env v2: a box rim
+    and the fair start); False: visual-only border markers, as env v0."""
+    save_replay: bool = True
+    """Checkpoints hold the replay buffer (an exact resume); False keeps them small enough to commit
+    (a resume then starts with an empty buffer)."""
+    tiny: bool = False
+    """Budgets of seconds (a smoke run, CI): 2 epochs of 20-step matches, tiny networks, 4 test matches;
+    overrides the budgets above."""
+    publish: bool = False
+    """After stage 6, publish the stage-1 Ant, stage-2 Spider and the best Bug (highest test MWR) into the zoo."""
+    progress: bool = True
+    """Show progress bars."""
+    ablations: tuple[str, ...] = ()
+    """FIELD=VALUE changes of the paper-preset DDPG Bug, each trained over the same seeds and env-step budget and
+    compared as its own group (noise=gaussian, still=-1, or any TrainConfig field: ddpg.noise_sigma=0.1)."""
+    docs: str = ""
+    """Also write the report into this Markdown file (e.g. docs/REPRODUCTION.md), between its lines
+    ``<!-- reproduce:begin -->`` and ``<!-- reproduce:end -->``: headings one level down, links to this folder's files
+    relative to that file; the rest of the file is kept."""
+    status: bool = False
+    """Run nothing: print where each stage and Bug run stands (env steps, the newest test MWR while training) and
+    regenerate REPRODUCTION.md from the outputs there are so far (a long reproduction, between sessions)."""
+    ray: bool = False
+    """Train the Bug runs of stage 4 and the ablations as Ray tasks, several at once (as ``triplesumo sweep``: a
+    task whose worker dies runs again and resumes its run), and play the test matches of stages 3 and 5 as Ray
+    tasks. The outputs are those of a run without Ray. Needs pip install "triplesumo[ray]"."""
+    ray_address: str = ""
+    """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray on this machine."""
+    num_cpus: int = 0
+    """With ray, local Ray only: the CPUs it may use (0: all)."""
+    cpus_per_trial: int = 1
+    """With ray: the CPUs Ray reserves for each Bug run (so at most num_cpus / cpus_per_trial train at once)."""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.ablations, list):
+            object.__setattr__(self, "ablations", tuple(self.ablations))
+        fields = [ablation(a)[0] + "=" + ablation(a)[1] for a in self.ablations]
+        if len(set(fields)) < len(fields):
+            raise ValueError(f"ReproduceConfig.ablations: a change given twice: {self.ablations}")
+        if self.ablations and "ddpg" not in self.algos:
+            raise ValueError("ReproduceConfig.ablations change the paper-preset DDPG Bug: algos must include ddpg")
+        for name in ("algos", "seeds"):
+            value = getattr(self, name)
+            if isinstance(value, list):
+                object.__setattr__(self, name, tuple(value))
+            if not getattr(self, name) or len(set(getattr(self, name))) < len(getattr(self, name)):
+                raise ValueError(f"ReproduceConfig.{name} must be non-empty and without repeats, got {value!r}")
+        bad = [a for a in self.algos if a not in ALGOS]
+        if bad:
+            raise ValueError(f"ReproduceConfig.algos must be among {ALGOS}, got {bad}")
+        for name in ("bug_env_steps", "bug_learn_every", "bug_eval_every"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise ValueError(f"ReproduceConfig.{name} must be an int >= 0, got {value!r}")
+        if isinstance(self.pair, list):
+            object.__setattr__(self, "pair", tuple(self.pair))
+        if self.pair and len(self.pair) != 2:
+            raise ValueError(f"ReproduceConfig.pair must be two policies (Ant, Spider), got {self.pair!r}")
+        gamma = DDPGConfig().gamma
+        if not (isinstance(self.pretrain_still, int | float) and math.isfinite(self.pretrain_still)
+                and self.pretrain_still <= 0):
+            raise ValueError(f"ReproduceConfig.pretrain_still must be a finite number <= 0, "
+                             f"got {self.pretrain_still!r}")
+        worth, loss = self.pretrain_still / (1 - gamma), RewardConfig().loss
+        if worth <= loss or math.isclose(worth, loss):  # (-4 / (1 - 0.99) is -399.99999999999966 in floats)
+            raise ValueError(f"ReproduceConfig.pretrain_still {self.pretrain_still}: surviving without a result would "
+                             f"be worth {worth:.0f} (still / (1 - gamma), gamma {gamma}), no more than losing "
+                             f"({loss:.0f}); the pre-trained sides would not learn to stay in. Use a value above "
+                             f"{loss * (1 - gamma):g}")
+        for name in ("match_epochs", "bug_epochs", "bug_eval_epochs", "contest_epochs", "eval_epochs",
+                     "n_envs"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"ReproduceConfig.{name} must be an int >= 1, got {value!r}")
+        if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in self.seeds):
+            raise ValueError(f"ReproduceConfig.seeds must be ints >= 0, got {self.seeds!r}")
+        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise ValueError(f"ReproduceConfig.{name} must be an int >= {low}, got {value!r}")
+        if (self.ray_address or self.num_cpus) and not self.ray:
+            raise ValueError("ReproduceConfig.ray_address and num_cpus are options of ray (--ray)")
+        check_ray("ReproduceConfig", self.ray, self.ray_address)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage of the protocol: what it writes, whether that is complete, how to make it."""
+
+    name: str
+    title: str
+    outputs: tuple[Path, ...]
+    complete: Callable[[], bool]
+    run: Callable[[], list[str]]
+    """Makes (or finishes) the outputs; returns the commands that do the same by hand."""

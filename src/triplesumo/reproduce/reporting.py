@@ -1,0 +1,299 @@
+"""What a reproduction folder says: ``REPRODUCTION.md`` (and its copy inside a docs page), the status table,
+the time-to-skill curves."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import shlex
+from pathlib import Path
+from typing import Any
+
+from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.evaluation.compare import trial_group
+from triplesumo.reproduce.config import REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
+from triplesumo.reproduce.protocol import Protocol, _read_csv
+from triplesumo.train.sweep import Trial, finished, run_facts
+
+DOCS_BEGIN, DOCS_END = "<!-- reproduce:begin -->", "<!-- reproduce:end -->"
+
+
+def _write_report(protocol: Protocol, record: dict[str, Any]) -> None:
+    """``OUT/REPRODUCTION.md``, and with ``--docs`` the same report inside that Markdown file."""
+    text = report(protocol, record)
+    atomic_write_bytes(protocol.out / REPORT_FILE, text.encode())
+    if protocol.cfg.docs:
+        docs = Path(protocol.cfg.docs)
+        atomic_write_bytes(docs, embed_report(text, protocol.out, docs.read_text(), docs.parent).encode())
+        print(f"report written into {docs}")
+
+
+def _docs_markers(lines: list[str]) -> tuple[int, int]:
+    """Where a docs page's two marker lines are; ``ValueError`` unless both are there, in order."""
+    if DOCS_BEGIN not in lines or DOCS_END not in lines or lines.index(DOCS_BEGIN) > lines.index(DOCS_END):
+        raise ValueError(f"--docs file needs a line {DOCS_BEGIN} and, after it, a line {DOCS_END}: the report goes "
+                         "between them")
+    return lines.index(DOCS_BEGIN), lines.index(DOCS_END)
+
+
+def embed_report(text: str, out: Path, page: str, page_dir: Path) -> str:
+    """``page`` with the report ``text`` (of the folder ``out``) between its two marker lines: the report's title
+    left out, its headings one level down, its links to files of ``out`` made relative to ``page_dir``."""
+    lines = page.splitlines()
+    start, end = _docs_markers(lines)
+    prefix = os.path.relpath(out.resolve(), page_dir.resolve())
+    body, fenced = [], False
+    for line in text.splitlines()[1:]:
+        fenced ^= line.startswith("```")
+        if not fenced and line.startswith("#"):
+            line = "#" + line
+        elif not fenced:
+            line = re.sub(r"\]\((?![a-z]+:|/|#)([^)]+)\)", lambda m: f"]({prefix}/{m.group(1)})", line)
+        body.append(line)
+    return "\n".join([*lines[:start + 1], *body, *lines[end:]]) + "\n"
+
+
+def status(protocol: Protocol) -> list[dict[str, Any]]:
+    """Where each stage and each Bug run of the folder stands: rows of stage, run, state (``complete``, ``running
+    or stopped``, ``not started``), env steps and the newest test MWR of the run's evaluations while training."""
+    trials = {"bug": protocol.bug_trials(), "ablations": protocol.ablation_trials()}
+    rows: list[dict[str, Any]] = []
+    for stage in protocol.stages:
+        if stage.name in trials:  # one row per Bug run
+            runs = [(t.name, Path(t.config.out) / t.name, finished(t)) for t in trials[stage.name]]
+        else:  # one row for the stage; a training stage's run folder is named after it
+            runs = [(stage.name, protocol.out / stage.name, stage.complete())]
+        for name, folder, done in runs:
+            csv_name = "metrics-ant.csv" if stage.name == "match" else "metrics.csv"  # stage 1: two learners
+            started = (folder / csv_name).exists()
+            evals = _evals(folder)
+            rows.append({"stage": stage.name, "run": name,
+                         "state": "complete" if done else "running or stopped" if started else "not started",
+                         "env_steps": run_facts(folder, 200, csv_name)["env_steps"] if started else None,
+                         "test_mwr": float(evals[-1]["test_mwr"]) if evals else None})
+    return rows
+
+
+def format_status(protocol: Protocol) -> str:
+    """:func:`status` as a table."""
+    lines = [f"{'stage':<11} {'run':<44} {'state':<19} {'env steps':>11} {'test MWR':>9}"]
+    for r in status(protocol):
+        steps = "-" if r["env_steps"] is None else f"{r['env_steps']:,}"
+        mwr = "-" if r["test_mwr"] is None else f"{r['test_mwr']:+.3f}"
+        lines.append(f"{r['stage']:<11} {r['run']:<44} {r['state']:<19} {steps:>11} {mwr:>9}")
+    return "\n".join(lines)
+
+
+def _run_row(protocol: Protocol, name: str, learner: str = "") -> str:
+    """A table row of a run's training; ``learner`` names one learner of a run with several."""
+    run = protocol.out / name
+    csv_name = f"metrics-{learner}.csv" if learner else "metrics.csv"
+    if learner:
+        name = f"{name} ({learner})"
+    if not (run / csv_name).exists():
+        return f"| {name} | - | - | - |"
+    facts = run_facts(run, 200, csv_name)
+    return f"| {name} | {facts['epochs']:,} | {facts['env_steps']:,} | {facts['final_mwr']:+.3f} |"
+
+
+def _trial_group(trial: Trial) -> str:
+    """The compare group of a trial's policy (``ddpg``, ``ddpg,ddpg.noise=gaussian``)."""
+    return trial_group({"group": "trained", "algo": "", "policy": str(Path(trial.config.out) / trial.name / "policy")})
+
+
+def _ci(x: float, lo: float, hi: float) -> str:
+    return f"{x:+.3f} [{lo:+.3f}, {hi:+.3f}]"
+
+
+def report(protocol: Protocol, record: dict[str, Any]) -> str:
+    """``REPRODUCTION.md`` of a reproduction folder, every number read from the files it wrote."""
+    out, cfg = protocol.out, protocol.cfg
+    ring = ("`border_rim=True`: the paper's ring with its solid 3 cm rim (env v2: four boxes), agents starting "
+            "fair (each 1.0 m from its nearest edge and from the edge behind it)" if cfg.border_rim
+            else "`border_rim=False`: visual-only border markers (the ring of the first shipped zoo)")
+    lines = [f"# Reproduction report ({out.name})", "",
+             f"Written by `triplesumo reproduce` (code version {record['runs'][-1]['version']}) from the files in "
+             f"`{out.name}/`." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
+                                                    if cfg.tiny else ""), "",
+             f"Ring: {ring}; every stage trained and was evaluated on it.", "",
+             "## Stage 1: the ongoing match (Ant and Spider learn together, Bug passive)", "",
+             *([f"Skipped: the pair was given (`--pair {' '.join(cfg.pair)}`).", ""] if cfg.pair else [
+                 f"Pre-training reward: the paper's terms with still = {cfg.pretrain_still:g} (losing costs more than "
+                 "surviving).", "",
+                 "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |",
+                 _run_row(protocol, "match", "ant"), _run_row(protocol, "match", "spider"), ""])]
+    contest_path = out / "contest" / "contest.json"
+    lines += ["## Stage 2: is it a contest?", ""]
+    if contest_path.exists():
+        c = json.loads(contest_path.read_text())
+        lo, hi = c["band"]
+        verdict = "a contest" if c["contest"] else "**not a contest**: the Bug stage refuses it"
+        lines += [f"On {c['matches']:,} held-out starts each (seed {cfg.contest_seed}): each side must push a passive "
+                  f"opponent out in at least {c['push_min']:.0%} of them, and with Bug passive the team's MWR must lie "
+                  f"in [{lo:+.2f}, {hi:+.2f}].", "",
+                  "| check | value | bound | |", "| --- | ---: | ---: | --- |",
+                  f"| Ant pushes a passive Spider out | {c['ant_pushes']:.1%} | >= {c['push_min']:.0%} | "
+                  f"{'ok' if c['ant_pushes'] >= c['push_min'] else 'failed'} |",
+                  f"| Spider pushes a passive Ant out | {c['spider_pushes']:.1%} | >= {c['push_min']:.0%} | "
+                  f"{'ok' if c['spider_pushes'] >= c['push_min'] else 'failed'} |",
+                  f"| team MWR, Bug passive (wins {c['team_wins']:.1%}, losses {c['team_losses']:.1%}, draws "
+                  f"{c['draws']:.1%}) | {c['team_mwr']:+.3f} | [{lo:+.2f}, {hi:+.2f}] | "
+                  f"{'ok' if lo <= c['team_mwr'] <= hi else 'failed'} |", "", f"Verdict: {verdict}.", ""]
+    budget = "" if cfg.tiny else f" (budget {cfg.bug_env_steps:,} env steps per run)"
+    schedule = [] if cfg.tiny else [
+        "DDPG: the paper preset (one gradient step per 30 transitions); TD3 and SAC: one gradient step per "
+        + (f"{cfg.bug_learn_every} transitions (`--bug-learn-every`)" if cfg.bug_learn_every
+           else "transition (their default)") + "; PPO: its rollouts. The exact commands are at the end.", ""]
+    lines += [f"## Stage 3: Bug per algorithm and seed (training){budget}", "", *schedule,
+              "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |"]
+    lines += [_run_row(protocol, f"bug/{t.name}") for t in protocol.bug_trials()]
+    lines += [_run_row(protocol, f"ablations/{t.name}") for t in protocol.ablation_trials()] + [""]
+    rows = _read_csv(out / "evaluation" / "per_seed.csv")
+    epochs = rows[0]["epochs"] if rows else "-"
+    lines += [f"## Stage 4: test MWR per seed ({epochs} seeded test matches each, the same for all)", "",
+              "| run | train seed | test MWR [95% CI] | wins | losses | draws |",
+              "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        lines.append(f"| {trial_group(r)} | {r['train_seed'] or '-'} | "
+                     f"{_ci(float(r['test_mwr']), float(r['test_mwr_lo']), float(r['test_mwr_hi']))} | "
+                     f"{r['n_win']} | {r['n_loss']} | {r['n_draw']} |")
+    lines.append("")
+    ablated = {_trial_group(t): t.name for t in protocol.ablation_trials()}
+    cmp_path = out / "compare" / "compare.json"
+    if cmp_path.exists():
+        table = json.loads(cmp_path.read_text())
+        pct = round(100 * table["confidence"])
+        lines += ["## Stage 5: per algorithm across seeds (IQM, stratified bootstrap)", "",
+                  f"| algorithm | seeds | per-seed test MWR | IQM [{pct}% CI] |", "| --- | ---: | --- | ---: |"]
+        for g in table["groups"]:
+            if g["group"] in ablated:
+                continue
+            kind = " (baseline)" if g["group"] in ("passive", "random") else ""
+            lines.append(f"| {g['group']}{kind} | {g['n_seeds']} | {' '.join(f'{s:+.3f}' for s in g['scores'])} | "
+                         f"{_ci(g['iqm'], g['lo'], g['hi'])} |")
+        lines += ["", "Plots: `compare/compare.png` (IQM by group), `evaluation/compare_mwr.png` (test curves), "
+                  "`*/plots/` (training curves).", ""]
+        lines += _ablation_section(table, ablated, pct)
+    lines += _skill_section(protocol)
+    if record.get("published"):
+        lines += ["## Published into the zoo", "", "| zoo name | algorithm | train seed | test MWR [95% CI] | file |",
+                  "| --- | --- | ---: | ---: | --- |"]
+        for p in record["published"]:
+            if isinstance(p, str):  # a record written before the table
+                lines.append(f"| - | - | - | - | `{p}` |")
+                continue
+            mwr = _ci(p["test_mwr"], p["test_mwr_lo"], p["test_mwr_hi"]) if "test_mwr" in p else "-"
+            lines.append(f"| `zoo:{p['name']}` | {p.get('algo', '-')} | {p.get('train_seed', '-')} | {mwr} | "
+                         f"`{p['file']}` |")
+        lines.append("")
+    lines += ["## Commands", "", "The whole protocol: `triplesumo reproduce "
+              + " ".join(shlex.quote(a) for a in _argv(cfg)) + "`. Stage by stage:", "", "```bash"]
+    for name, stage in record["stages"].items():
+        lines.append(f"# {name} ({stage['seconds']:.0f} s, {stage['version']}, done {stage['done']})")
+        lines += stage["commands"]
+    lines += ["```", ""]
+    return "\n".join(lines)
+
+
+def _ablation_section(table: dict[str, Any], ablated: dict[str, str], pct: int) -> list[str]:
+    """The ablations of the paper preset against it: IQM per change and P(change > preset)."""
+    if not ablated:
+        return []
+    lines = ["## Ablations of the paper preset (DDPG Bug, one change each, same seeds and budget)", "",
+             "Why: with a still punishment of -4 per step and gamma 0.99 the discounted cost of surviving is about the "
+             "loss penalty, and OU noise reset per match stays small early in each match. The paper preset is kept "
+             "as it is; these runs measure whether the choices matter.", "",
+             f"| change | seeds | per-seed test MWR | IQM [{pct}% CI] | P(change > preset) [{pct}% CI] |",
+             "| --- | ---: | --- | ---: | ---: |"]
+    poi = {(p["x"], p["y"]): p for p in table["improvement"]}
+    for g in table["groups"]:
+        if g["group"] not in ablated:
+            continue
+        p = poi.get((g["group"], "ddpg"))
+        vs = "-" if p is None else f"{p['poi']:.2f} [{p['lo']:.2f}, {p['hi']:.2f}]"
+        change = g["group"].removeprefix("ddpg,")
+        lines.append(f"| {change} | {g['n_seeds']} | {' '.join(f'{s:+.3f}' for s in g['scores'])} | "
+                     f"{_ci(g['iqm'], g['lo'], g['hi'])} | {vs} |")
+    return [*lines, ""]
+
+
+def _evals(run: Path) -> list[dict[str, str]]:
+    return _read_csv(run / "eval.csv")
+
+
+def _skill_section(protocol: Protocol) -> list[str]:
+    """Time to skill per algorithm and seed, from the evaluations the stage-4 runs made while training."""
+    cfg, out = protocol.cfg, protocol.out
+    if not cfg.bug_eval_every:
+        return []
+    runs = [(t, Path(t.config.out) / t.name) for t in protocol.bug_trials()]
+    if not any(_evals(run) for _, run in runs):
+        return []
+    first = runs[0][0].config
+    lines = ["## Time to skill", "",
+             f"Env steps and training wall time (collection, learning, checkpoints; the evaluations apart) until "
+             f"Bug's test MWR first reached {SKILL:+.2f}, from the evaluations stage 4 made while training: every "
+             f"{first.eval_every:,} env steps, the current policy frozen on the first {first.eval_epochs} test "
+             "matches of stage 5. Measured on the machine that ran each run, never projected; a run resumed "
+             "across sessions adds its sessions' training times, and restarts with an empty replay buffer.", "",
+             "| run | reached | env steps | training wall time | evaluations | best test MWR (at env steps) |",
+             "| --- | --- | ---: | ---: | ---: | ---: |"]
+    for trial, run in runs:
+        rows = _evals(run)
+        if not rows:
+            lines.append(f"| {trial.name} | not yet | - | - | 0 | - |")
+            continue
+        hit = next((r for r in rows if float(r["test_mwr"]) >= SKILL), None)
+        best = max(rows, key=lambda r: float(r["test_mwr"]))
+        top = f"{float(best['test_mwr']):+.3f} ({int(best['env_steps']):,})"
+        if hit is None:  # not within the env steps and training time so far
+            last = rows[-1]
+            lines.append(f"| {trial.name} | {'no' if finished(trial) else 'not yet'} | > {int(last['env_steps']):,} | "
+                         f"> {_duration(float(last['train_seconds']))} | {len(rows)} | {top} |")
+        else:
+            lines.append(f"| {trial.name} | yes | {int(hit['env_steps']):,} | "
+                         f"{_duration(float(hit['train_seconds']))} | {len(rows)} | {top} |")
+    plot = _plot_curves(runs, out / "bug" / "test_mwr.png")
+    return [*lines, "", f"![test MWR while training]({plot.relative_to(out)})", ""]
+
+
+def _duration(seconds: float) -> str:
+    minutes = round(seconds / 60)
+    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{seconds / 60:.1f} min"
+
+
+def _plot_curves(runs: list[tuple[Trial, Path]], path: Path) -> Path:
+    """Test MWR against env steps of every stage-4 run, one colour per algorithm, the +0.2 line dashed."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.5, 4.2))
+    ax = fig.subplots()
+    colours: dict[str, Any] = {}
+    for trial, run in runs:
+        rows = _evals(run)
+        if not rows:
+            continue
+        algo = trial.config.learners()["bug"]
+        first = algo not in colours
+        colours.setdefault(algo, f"C{len(colours)}")
+        ax.plot([int(r["env_steps"]) for r in rows], [float(r["test_mwr"]) for r in rows], marker=".",
+                color=colours[algo], alpha=0.8, label=algo if first else None)
+    ax.axhline(SKILL, linestyle="--", color="grey", label=f"{SKILL:+.1f}")
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("test MWR (seeded test matches)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Bug's test MWR while training, one line per seed")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def _argv(cfg: ReproduceConfig) -> list[str]:
+    """The command-line options that make ``cfg``'s outputs (how it ran, :data:`RUN_OPTIONS`, left out)."""
+    from triplesumo import _dcargs
+
+    return _dcargs.to_argv(dataclasses.replace(cfg, **{k: getattr(ReproduceConfig(), k) for k in RUN_OPTIONS}))

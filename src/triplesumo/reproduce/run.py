@@ -1,0 +1,137 @@
+"""Running the protocol from one command, resumable (:func:`run_reproduce`), and publishing its policies."""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.model.specs import PhysicsConfig
+from triplesumo.reproduce.config import RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig
+from triplesumo.reproduce.protocol import Protocol, _read_csv
+from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status
+from triplesumo.train import legs
+from triplesumo.version import ENV_VERSION, __version__
+
+
+def code_version() -> str:
+    """``git SHORT-SHA`` (``-dirty`` when the package's tracked files differ from it) of the checkout the
+    package was imported from (:func:`triplesumo.train.legs.code_version`), else the package version."""
+    code = legs.code_version()
+    if code is not None:
+        return f"git {code['commit'][:7]}{'-dirty' if code['dirty'] else ''}"
+    return f"triplesumo {__version__}"
+
+
+def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:
+    """``ValueError`` unless the reproduction recorded in ``out`` was made with ``cfg``'s options (:data:`RUN_OPTIONS`
+    aside);
+    an option added since the record was written counts as its default, what that run used."""
+    config = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
+    recorded = {**{k: v for k, v in defaults.items() if k not in recorded}, **recorded}
+    # the folder by its place, however it was written; --status only reads, so a moved folder may be read
+    config["out"], recorded["out"] = str(Path(config["out"]).resolve()), str(Path(recorded["out"]).resolve())
+    ignore = (*RUN_OPTIONS, "out") if cfg.status else RUN_OPTIONS
+    differ = sorted(k for k in {*config, *recorded} if k not in ignore and recorded.get(k) != config.get(k))
+    if differ:
+        raise ValueError(f"{out} holds a reproduction with other options ("
+                         + ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in differ)
+                         + "); re-running resumes it and needs the same options: choose another --out")
+
+
+def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
+    """Run (or finish) every stage in order, skipping complete ones; write reproduce.json and the report."""
+    protocol = Protocol(cfg)
+    out = protocol.out
+    if cfg.docs:  # before hours of training: the file and its markers are there
+        _docs_markers(Path(cfg.docs).read_text().splitlines())
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / RECORD_FILE
+    record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+    config = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    if record:
+        check_same_options(out, record["config"], cfg)
+    record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", []),
+              **{k: record[k] for k in ("published",) if k in record}}  # kept until a later --publish replaces it
+    run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
+    if cfg.status:
+        print(format_status(protocol))
+        _write_report(protocol, {**record, "runs": [*record["runs"], run_now]})
+        print(f"report (so far): {out / REPORT_FILE}")
+        return record
+    record["runs"].append(run_now)
+    n = len(protocol.stages)
+    for k, stage in enumerate(protocol.stages, 1):
+        if stage.complete():
+            print(f"[{k}/{n}] {stage.name}: complete, skipped ({stage.title})")
+            run_now["skipped"].append(stage.name)
+            continue
+        print(f"[{k}/{n}] {stage.name}: {stage.title}")
+        start = time.perf_counter()
+        commands = stage.run()
+        if not stage.complete():
+            raise RuntimeError(f"stage {stage.name} ran but its outputs are not complete: {stage.outputs}")
+        record["stages"][stage.name] = {"done": _now(), "seconds": round(time.perf_counter() - start, 3),
+                                        "version": run_now["version"], "commands": commands,
+                                        "outputs": [str(p.relative_to(out)) for p in stage.outputs]}
+        run_now["ran"].append(stage.name)
+        atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+    if cfg.publish:
+        record["published"] = _publish(protocol, run_now["version"])
+    atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+    _write_report(protocol, record)
+    print(f"report: {out / REPORT_FILE}; record: {path}")
+    return record
+
+
+def _now() -> str:
+    return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
+    """Ship Ant, Spider, the paper-preset DDPG Bug of the best seed (``bug``) and the best Bug of any algorithm
+    (``bug-<algo>``); each manifest with the code version and the Bug's test MWR with its 95 % interval."""
+    from triplesumo.agents import zoo
+
+    ours = {str(Path(t.config.out) / t.name / "policy") for t in protocol.bug_trials()}  # not the ablations
+    rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["policy"] in ours]
+    # the ring every stage trained on, and the env version whose default it is (the trainer wrote the one it ran under)
+    extra: dict[str, Any] = {"code_version": version, "reproduction": str(protocol.out),
+                             "physics": dataclasses.asdict(protocol.physics),
+                             **({"env_version": ENV_VERSION} if protocol.physics == PhysicsConfig() else {})}
+
+    def evaluation(row: dict[str, str]) -> dict[str, Any]:
+        return {"test_mwr": float(row["test_mwr"]), "test_mwr_lo": float(row["test_mwr_lo"]),
+                "test_mwr_hi": float(row["test_mwr_hi"]), "confidence": 0.95, "test_matches": int(row["epochs"]),
+                "eval_seed": int(row["eval_seed"]), "n_win": int(row["n_win"]), "n_loss": int(row["n_loss"]),
+                "n_draw": int(row["n_draw"]), "opponents": [f"ant={protocol.ant_policy}",
+                                                            f"spider={protocol.spider_policy}"]}
+
+    def mwr(row: dict[str, str]) -> float:
+        return float(row["test_mwr"])
+
+    # Ant and Spider: the stage-2 contest checks they passed (recomputable from contest/*/metrics.csv)
+    contest = {"contest": json.loads((protocol.out / "contest" / "contest.json").read_text())}
+    ship: list[tuple[Path, str, dict[str, Any] | None]] = [(Path(protocol.ant_policy), "ant", None),
+                                                           (Path(protocol.spider_policy), "spider", None)]
+    preset = [r for r in rows if r["algo"] == "ddpg"]
+    if preset:
+        top = max(preset, key=mwr)
+        ship.append((Path(top["policy"]), "bug", top))
+    else:
+        print("  publish: no paper-preset DDPG Bug (ddpg not in --algos): zoo:bug is left as it is")
+    best = max(rows, key=mwr)
+    ship.append((Path(best["policy"]), f"bug-{best['algo']}", best))
+    made = []
+    for stem, name, row in ship:
+        path = zoo.publish(stem, name, contest if row is None else evaluation(row), extra=extra)
+        made.append({"name": name, "file": str(path), "policy": str(stem),
+                     **({} if row is None else {"algo": row["algo"], "train_seed": row["train_seed"],
+                                                "test_mwr": mwr(row), "test_mwr_lo": float(row["test_mwr_lo"]),
+                                                "test_mwr_hi": float(row["test_mwr_hi"])})})
+    return made

@@ -1,0 +1,302 @@
+"""A run's folder: what makes a folder hold a run, its ``config.json`` (written, read back across versions),
+its id, whether its budget is reached, the command that makes it, its plots, and what a resume needs of its
+tables and older checkpoints (the newest checkpoint its intact rows reach, a one-learner checkpoint read in
+today's layout).
+
+Nothing here trains: the functions are what the CLI, sweeps, forks and the trainer ask of a run folder before and
+after training (a new run refuses a folder holding one; a resumed one reads its config back).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import shlex
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from triplesumo.agents.policy_file import atomic_write_bytes, load_json
+from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.ppo import PPOConfig
+from triplesumo.algos.sac import SACConfig
+from triplesumo.algos.td3 import TD3Config
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
+from triplesumo.rules.config import RewardConfig
+from triplesumo.train import checkpoint
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.league_config import LeagueConfig
+from triplesumo.train.league_plots import plot_league
+from triplesumo.train.logger import COLUMNS, LEARNING_COLUMNS, intact_rows, learning_row_problem, run_file
+
+RUN_FILES = ("config.json", "metrics.csv", "checkpoints", "policy.json", "policy.safetensors")
+"""What makes a folder hold a run: training never writes into such a folder afresh (with
+``metrics-*.csv`` and ``policy-*.json`` of runs with several learners)."""
+
+
+class RunExistsError(FileExistsError):
+    """The run folder already holds a run (the message offers ``--resume`` and ``--start-over``)."""
+
+
+def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
+    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+
+
+def write_run_config(run_dir: Path, cfg: TrainConfig) -> None:
+    """Write ``RUN/config.json`` (what ``--resume`` reads) atomically; a failed write names the file."""
+    with checkpoint.writing(Path(run_dir) / "config.json"):
+        atomic_write_bytes(Path(run_dir) / "config.json", (json.dumps(config_to_json(cfg), indent=2) + "\n").encode())
+
+
+FORK_FILE = "fork.json"
+"""In a run folder made by ``train --fork`` (:mod:`triplesumo.train.fork`): where it came from."""
+
+
+RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay", "n_threads")
+"""The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``): budgets, output,
+and ``n_threads``, the threads stepping the CPU physics, which advance every match alone and bit for bit
+whatever their number (``tests/test_batch.py``), so that a run started on a laptop goes on with the cores of a
+larger machine and trains exactly what it would have."""
+
+
+def flag_list(fields: Iterable[str]) -> str:
+    """``--epochs, --max-minutes, ...``: the command-line flags of TrainConfig ``fields``, for the errors that
+    say which may be given (a boolean's flag also has its ``--no-`` form)."""
+    return ", ".join("--" + f.replace("_", "-") for f in fields)
+
+
+def run_id_of(cfg: TrainConfig) -> str:
+    """``NAME-HASH``: the run's name and a hash of its config less what a resume may change
+    (:data:`RESUME_OVERRIDES`) or what only says where it is written (``out``). So a resumed run writes what
+    the uninterrupted one would, and two runs share an id only if they are the same experiment. Taken when a
+    run starts; its checkpoints keep it, whatever options later versions add."""
+    kept = {k: v for k, v in config_to_json(cfg).items() if k not in ("out", *RESUME_OVERRIDES)}
+    digest = hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()
+    return f"{cfg.name}-{digest[:12]}"
+
+
+def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]:
+    if not isinstance(data, dict):
+        raise ValueError(f"{source}: {where or 'the file'} must be a JSON object, got {type(data).__name__}")
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown, missing = sorted(set(data) - names), sorted(names - set(data))
+    if unknown or missing:
+        problems = [f"unknown key(s) {[where + k for k in unknown]}"] if unknown else []
+        problems += [f"missing key(s) {[where + k for k in missing]}"] if missing else []
+        raise ValueError(f"{source}: {' and '.join(problems)} (a {cls.__name__} has {sorted(names)})")
+    return dict(data)
+
+
+ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics", "backend",
+               "device", "eval_every", "eval_epochs", "eval_seed", "eval_target", "learner_config")
+"""TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
+budget, evaluations while training): a config.json without them gets their defaults; any other
+missing key is an error."""
+
+
+LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_threshold", "keep_zoo",
+                      "zoo_share")
+"""LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
+
+
+def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
+    """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
+    missing key (a config written by another version, or edited by hand)."""
+    if isinstance(data, dict):  # written before a field existed: that field's default, what the run used
+        defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
+        data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
+    data = _check_keys(data, TrainConfig, "", source)
+    data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
+    try:
+        data["physics"] = PhysicsConfig(**_check_keys(physics_record(data["physics"]), PhysicsConfig, "physics.",
+                                                      source))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: {exc}") from exc
+    for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
+        try:
+            data[name] = cls(**_check_keys(data[name], cls, f"{name}.", source))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: {exc}") from exc
+    data["policies"] = tuple(data["policies"])
+    data["learn"] = tuple(data["learn"])
+    if isinstance(data["league"], dict):
+        league_defaults = dataclasses.asdict(LeagueConfig())
+        data["league"] = {**{k: league_defaults[k] for k in LEAGUE_ADDED_LATER}, **data["league"]}
+    try:
+        league: dict[str, Any] = _check_keys(data["league"], LeagueConfig, "league.", source)
+        data["league"] = LeagueConfig(**league)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: {exc}") from exc
+    try:
+        return TrainConfig(**data)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{source}: {exc}") from exc
+
+
+def training_done(cfg: TrainConfig, run_dir: Path | None = None) -> bool:
+    """Whether the run of ``cfg`` (in ``run_dir``, default ``OUT/NAME``) has reached its budget (``epochs``,
+    or ``max_env_steps`` collected): its newest checkpoint says so, or, in a finished run whose
+    checkpoints were deleted to keep it small (a run folder committed to a repository), its policy
+    files do (each is written after the checkpoint it comes from, with that checkpoint's epochs and env steps)."""
+    run_dir = Path(run_dir) if run_dir is not None else Path(cfg.out) / cfg.name
+    saved = checkpoint.checkpoints(run_dir)
+    if saved:
+        epoch, folder = saved[-1]
+        done: dict[str, Any] = {"epochs": epoch, "env_steps": load_json(folder / "state.json").get("env_steps", 0)}
+    else:
+        manifests = [load_json(p) for p in sorted(run_dir.glob("policy*.json"))] if run_dir.is_dir() else []
+        if not manifests:
+            return False
+        done = {k: min(int(m.get(k, 0)) for m in manifests) for k in ("epochs", "env_steps")}
+    if int(done["epochs"]) >= cfg.epochs:
+        return True
+    return cfg.max_env_steps > 0 and int(done["env_steps"]) >= cfg.max_env_steps
+
+
+def command_for(cfg: TrainConfig) -> str:
+    """The ``triplesumo train`` command line that makes ``cfg`` (its non-default options)."""
+    from triplesumo import _dcargs
+
+    return " ".join(shlex.quote(a) for a in ["triplesumo", "train", *_dcargs.to_argv(cfg)])
+
+
+def holds_run(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds (part of) a training run."""
+    run_dir = Path(run_dir)
+    return (any((run_dir / name).exists() for name in RUN_FILES)
+            or any(run_dir.glob("metrics-*.csv")) or any(run_dir.glob("policy-*.json")))
+
+
+def refuse_existing_run(run_dir: Path, start_over: bool) -> Path | None:
+    """Refuse to train afresh into a folder holding a run; with ``start_over`` move it aside.
+
+    Returns where the old run went (``RUN.old-K``, the first free K), or None.
+    """
+    run_dir = Path(run_dir)
+    if not holds_run(run_dir):
+        return None
+    if not start_over:
+        raise RunExistsError(
+            f"run folder {run_dir} already holds a run ({', '.join(n for n in RUN_FILES if (run_dir / n).exists())}); "
+            f"nothing was changed. Continue it with `triplesumo train --resume {run_dir}` (add --epochs N for more), "
+            f"or start over with the same command plus --start-over (the old run is moved to {run_dir}.old-K), "
+            "or choose another --name")
+    k = 1
+    while (aside := run_dir.with_name(f"{run_dir.name}.old-{k}")).exists():
+        k += 1
+    with checkpoint.writing(aside):
+        os.replace(run_dir, aside)
+    print(f"start over: the earlier run in {run_dir} was moved to {aside}")
+    return aside
+
+
+def prepare_run_dir(run_dir: Path) -> Path:
+    """Create the run folder and prove it is writable now, not after hours."""
+    run_dir = Path(run_dir)
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        probe = run_dir / ".write-test"
+        probe.write_bytes(b"ok")
+        probe.unlink()
+    except OSError as exc:
+        raise PermissionError(f"run folder {run_dir} is not writable: {exc.strerror or exc}") from exc
+    return run_dir
+
+
+def plot_metrics(run_dir: Path, window: int) -> list[Path]:
+    """The paper's figures of every learning agent of a run: ``metrics.csv`` -> ``plots/``,
+    ``metrics-<agent>.csv`` -> ``plots/<agent>/`` (agents without a finished epoch are skipped)."""
+    from triplesumo.evaluation.plots import plot_run, read_metrics_csv
+
+    run_dir = Path(run_dir)
+    learner = "bug"
+    if (run_dir / "config.json").is_file():
+        learner = str(load_json(run_dir / "config.json").get("learner", learner))
+    paths: list[Path] = []
+    files = sorted(run_dir.glob("metrics-*.csv")) or [run_dir / "metrics.csv"]
+    for path in files:
+        agent = path.stem.removeprefix("metrics-") if path.name != "metrics.csv" else learner
+        metrics = read_metrics_csv(path)
+        if len(metrics["epoch"]):
+            out = run_dir / "plots" if path.name == "metrics.csv" else run_dir / "plots" / agent
+            paths += plot_run(metrics, out, window=window, title=f"{agent} training ({run_dir.name})",
+                              label=agent.capitalize())
+    if (run_dir / "league" / "league.csv").is_file():  # a self-play run: rating curves and pool members
+        paths.append(plot_league(run_dir))
+    return paths
+
+
+def checkpoint_within_rows(run_dir: Path, folder: Path, agents: list[str], learners: list[str]) -> Path:
+    """``folder`` (the latest checkpoint of ``run_dir``), or, where a kill tore the run's last rows at or before its
+    epoch, the newest checkpoint that the intact rows of the ``agents``' metrics and the ``learners``' learning
+    tables reach (the rows after it are cut and its epochs trained again, as the torn-row repair promises);
+    ``CheckpointError`` names ``--start-over`` when none does. (Self-play runs, whose agents may sit matches out,
+    keep the check of their own tables: the trainer does not ask.)"""
+    epoch = checkpoint.recorded_epoch(folder)
+    if epoch is None:
+        return folder
+    several = len(agents) > 1 or len(learners) > 1 or agents != learners
+    tables: list[tuple[Path, tuple[str, ...], Callable[[list[str], int], str | None] | None]] = [
+        (run_dir / run_file("metrics", a, several, ".csv"), COLUMNS, None) for a in agents]
+    tables += [(run_dir / run_file("learning", n, several, ".csv"), LEARNING_COLUMNS, learning_row_problem)
+               for n in learners]
+    rows = min(intact_rows(path, columns, problem) for path, columns, problem in tables if path.exists())
+    if rows >= epoch:
+        return folder
+    fits = [(e, f) for e, f in checkpoint.checkpoints(run_dir) if e <= rows]
+    if not fits:
+        raise checkpoint.CheckpointError(
+            f"{run_dir}: its tables hold the rows of epochs 1..{rows} only (a kill tore the rest), but every "
+            f"checkpoint is later (the newest at epoch {epoch}): nothing to resume from; `triplesumo train "
+            f"--resume {run_dir} --start-over` trains it again from the start")
+    e, chosen = fits[-1]
+    print(f"resume: the run's tables hold epochs 1..{rows} (a kill tore the rest) and the latest checkpoint is "
+          f"at epoch {epoch}; resuming from {chosen.name} (epoch {e}), the newest within them")
+    return chosen
+
+
+def match_parts(on_device: bool, arrays: Mapping[str, np.ndarray]) -> tuple[str, ...]:
+    """The arrays of each match (``match<k>.<part>``) a checkpoint of this backend holds: cpu every
+    ``Match.snapshot`` array; warp (``on_device``) the world's state, or none in a checkpoint written before warp
+    resumed exactly (its matches then restart)."""
+    if not on_device:
+        return ("physics", "last_obs", "warnings", "obs")
+    return ("physics", "obs") if "match0.physics" in arrays else ()
+
+
+def one_learner_checkpoint(name: str, n_envs: int, tensors: dict[str, torch.Tensor], state: dict[str, Any],
+                           arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> tuple[
+        dict[str, torch.Tensor], dict[str, Any], dict[str, np.ndarray], Mapping[str, np.ndarray] | None]:
+    """A checkpoint of the one-DDPG-learner trainer (before several learners) in today's layout, its learner
+    named ``name``."""
+    upgraded = {**state, "acc": {name: state["acc"]}, "final": {name: [None] * n_envs},
+                "learners": {name: {"optimizer": state["optimizer"], "sample_rng": state["sample_rng"],
+                                    "collected": state["env_steps"], "stats": [{}, {}]}}}
+    moved = {f"{name}.{k}" if k.startswith("noise.") else k: v for k, v in arrays.items() if k != "lwr"}
+    moved |= {f"lwr.{name}": arrays["lwr"], f"{name}.active": np.ones(n_envs, dtype=bool)}
+    if replay is not None:
+        replay = Prefixed(replay, f"{name}.")
+    return {f"{name}.{k}": v for k, v in tensors.items()}, upgraded, moved, replay
+
+
+class Prefixed(Mapping[str, np.ndarray]):
+    """``mapping`` with every key prefixed (members still read lazily, one at a time)."""
+
+    def __init__(self, mapping: Mapping[str, np.ndarray], prefix: str) -> None:
+        self.mapping, self.prefix = mapping, prefix
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        if not key.startswith(self.prefix):
+            raise KeyError(key)
+        return self.mapping[key.removeprefix(self.prefix)]
+
+    def __iter__(self) -> Iterator[str]:
+        return (self.prefix + k for k in self.mapping)
+
+    def __len__(self) -> int:
+        return len(self.mapping)
