@@ -181,6 +181,8 @@ def test_pursuit_roster_teams() -> None:
         (lambda: MatchConfig(on_physics_error="ignore"), "on_physics_error"),
         (lambda: RewardConfig(still=1.0), "still"),
         (lambda: RewardConfig(opponent_velocity=float("inf")), "opponent_velocity"),
+        (lambda: RewardConfig(axis_dead_zone=-0.1), "axis_dead_zone"),
+        (lambda: RewardConfig(axis_dead_zone=float("nan")), "axis_dead_zone"),
         (lambda: MatchConfig(agents=(PAPER_AGENTS[0], PAPER_AGENTS[0], PAPER_AGENTS[2])), "agents"),
         (lambda: MatchConfig(agents=(PAPER_AGENTS[0], PAPER_AGENTS[1])), "agents"),
     ],

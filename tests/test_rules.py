@@ -332,3 +332,49 @@ def test_outcome_term() -> None:
     assert RewardRule(teams, RewardConfig(draw=-2.0)).outcome(None, timed_out=True) == [-2] * 3
     assert rule.outcome([WIN, LOSS], timed_out=False) == [500, 500, -400]
     assert rule.outcome([DRAW, DRAW], timed_out=False) == [0, 0, 0]
+
+
+def _walk_at_pays(agents: list[str], pos: np.ndarray, rule: RewardRule, who: str, target: str,
+                  speed: float = 0.3) -> float:
+    """The self-velocity term of ``who`` walking straight at ``target`` at ``speed`` m/s, everyone else still."""
+    i, j = agents.index(who), agents.index(target)
+    direction = (pos[j] - pos[i]) / np.linalg.norm(pos[j] - pos[i])
+    vel = np.zeros((len(agents), 3))
+    vel[i, :2] = speed * direction
+    return rule.dense(pos.tolist(), vel.tolist())[i][1]
+
+
+def test_axis_dead_zone_pays_spider_for_walking_at_ant_on_every_fair_start() -> None:
+    """On env v2's fair start Spider stands level with Ant in y and with Bug in x, so with the paper's sign
+    the 2 cm reset noise decides whether walking at Ant pays Spider twice the one-opponent term or nothing
+    (the other opponent's axis sign); Ant is paid alike on every start. A dead zone wider than the noise pays
+    Spider half (its mean over two opponents) on every start."""
+    import triplesumo
+
+    env = triplesumo.parallel_env()
+    c2, speed = RewardConfig().self_velocity, 0.3
+    paid: dict[float, set[float]] = {0.0: set(), 0.25: set()}
+    ant_paid = set()
+    for seed in range(40):
+        env.reset(seed=seed)
+        match = env.match
+        agents = list(match.agents)
+        pos = match.sim.torso_positions()[:, :2].astype(np.float64)
+        for dead in paid:
+            rule = RewardRule(Teams.from_agents(PAPER_AGENTS), RewardConfig(axis_dead_zone=dead))
+            paid[dead].add(round(_walk_at_pays(agents, pos, rule, "spider", "ant", speed) / (c2 * speed), 1))
+            ant_paid.add(round(_walk_at_pays(agents, pos, rule, "ant", "spider", speed) / (c2 * speed), 1))
+    assert paid[0.0] == {0.0, 1.0}  # the coin flip of the paper's sign: nothing or double the half share
+    assert paid[0.25] == {0.5}  # half (two opponents), every start
+    assert ant_paid == {1.0}  # one opponent: the whole term, on every start, with or without the band
+
+
+def test_axis_dead_zone_zero_is_the_paper_sign_bit_for_bit() -> None:
+    rng = np.random.default_rng(3)
+    teams = Teams.from_agents(PAPER_AGENTS)
+    default, zero = RewardRule(teams, RewardConfig()), RewardRule(teams, RewardConfig(axis_dead_zone=0.0))
+    for _ in range(50):
+        pos, vel = rng.uniform(-2, 2, (3, 3)).tolist(), rng.normal(size=(3, 3)).tolist()
+        assert default.dense(pos, vel) == zero.dense(pos, vel)
+    wide = RewardRule(teams, RewardConfig(axis_dead_zone=10.0))  # every axis inside the band: no velocity terms
+    assert wide.dense(pos, vel) == [(0.0, 0.0, 0.0)] * 3

@@ -67,6 +67,8 @@ class BatchedRules:
     """Sparse reward of a win, a loss and a draw."""
     outcome_table: Any
     """``(5,)`` the sparse reward of each outcome code (0 for a match that goes on, and for an error)."""
+    axis_dead_zone: float = 0.0
+    """``RewardConfig.axis_dead_zone``: a per-axis direction within it counts as 0."""
 
     @classmethod
     def build(cls, config: MatchConfig, half_size: float) -> BatchedRules:
@@ -85,14 +87,14 @@ class BatchedRules:
         return cls(n, float(half_size), config.max_steps, float(config.contact_force_clip), onehot, opponents,
                    partners, opponents.sum(1), np.maximum(partners.sum(1), 1.0), others,
                    (float(r.opponent_velocity), float(r.self_velocity), float(r.partner_velocity), float(r.still)),
-                   (float(r.win), float(r.loss), float(r.draw)), table)
+                   (float(r.win), float(r.loss), float(r.draw)), table, float(r.axis_dead_zone))
 
     def to(self, convert: Any) -> BatchedRules:
         """The same rules with every matrix passed through ``convert`` (e.g. ``lambda a: torch.as_tensor(a, ...)``)."""
         return BatchedRules(self.n_agents, self.half_size, self.max_steps, self.force_clip,
                             convert(self.team_onehot), convert(self.opponents), convert(self.partners),
                             convert(self.n_opponents), convert(self.n_partners), convert(self.others),
-                            self.weights, self.outcome_values, convert(self.outcome_table))
+                            self.weights, self.outcome_values, convert(self.outcome_table), self.axis_dead_zone)
 
 
 # ------------------------------------------------------------------ outcome
@@ -157,7 +159,10 @@ def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRu
     """
     c1, c2, c3, still = rules.weights
     xy, v = pos[..., :2], vel[..., :2]
-    s = xp.sign(xy[:, None] - xy[:, :, None])  # (E, a, o, 2): the direction from a to o
+    d = xy[:, None] - xy[:, :, None]  # (E, a, o, 2): from a to o
+    s = xp.sign(d)  # the direction from a to o, per axis
+    if rules.axis_dead_zone > 0:  # 0 inside the band (at 0 the paper's sign, untouched)
+        s = xp.where(abs(d) > rules.axis_dead_zone, s, 0.0 * s)
     toward = (s * v[:, :, None]).sum(-1)  # (E, a, o): a moving toward o (a sum of two: exact in any order)
     away = (s * v[:, None]).sum(-1)  # (E, a, o): o moving away from a
     opp = rules.opponents

@@ -61,13 +61,25 @@ class RewardConfig:
     interpolated, :func:`triplesumo.rules.outcome.place_value`), so ``MatchConfig`` refuses a ``draw`` other than
     0 there rather than ignore it."""
 
+    axis_dead_zone: float = 0.0
+    """Half-width (m) of the band around 0 in which a per-axis direction sign of the velocity terms counts
+    as 0 (:mod:`triplesumo.rules.rewards`). 0 (the paper's sign) keeps env v2's reward exactly. On the fair
+    start Spider stands level with Ant in y and with Bug in x, so the sign of those axes is decided by 2 cm of
+    reset noise: with 0, walking straight at Ant pays Spider either twice the single-opponent term or nothing
+    (100 of 200 starts each, docs/CONTEST.md); a band wider than the noise (e.g. 0.25) pays it half, every
+    start, as Ant is paid for walking at Spider."""
+
     def __post_init__(self) -> None:
-        for name in ("opponent_velocity", "self_velocity", "partner_velocity", "still", "win", "loss", "draw"):
+        for name in ("opponent_velocity", "self_velocity", "partner_velocity", "still", "win", "loss", "draw",
+                     "axis_dead_zone"):
             value = getattr(self, name)
-            if not isinstance(value, int | float) or not math.isfinite(value):
+            if not isinstance(value, int | float) or isinstance(value, bool) or not math.isfinite(value):
                 raise ValueError(f"RewardConfig.{name} must be a finite number, got {value!r}")
         if self.still > 0:
             raise ValueError(f"RewardConfig.still is a punishment and must be <= 0, got {self.still}")
+        if self.axis_dead_zone < 0:
+            raise ValueError(f"RewardConfig.axis_dead_zone is a half-width in metres and must be >= 0, "
+                             f"got {self.axis_dead_zone}")
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """The paper's hybrid reward, as named terms, for every agent from its own side's view.
 
 With torso positions ``p`` and world-frame velocities ``v`` (x and y only) after the
-step, ``s(a, b) = sign(p_b - p_a)`` per axis (the direction from ``a`` to ``b``), ``O_i``
+step, ``s(a, b) = sign(p_b - p_a)`` per axis (the direction from ``a`` to ``b``; 0 where
+``|p_b - p_a| <= RewardConfig.axis_dead_zone`` on that axis, 0 m by default: the paper's sign), ``O_i``
 the opponents and ``P_i`` the partners of agent ``i``::
 
     opponent_velocity_i = C1 * mean_{o in O_i} sum_{k in x,y} s(i, o)_k * v_{o,k}
@@ -70,16 +71,18 @@ class RewardRule:
         self._team_of = [int(t) for t in teams.team_of]
         self._c = (float(cfg.opponent_velocity), float(cfg.self_velocity), float(cfg.partner_velocity))
         self._still = float(cfg.still)
+        self._dead = float(cfg.axis_dead_zone)
         self._value = {WIN: float(cfg.win), LOSS: float(cfg.loss), DRAW: float(cfg.draw)}
 
     def dense(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
         """Per agent: the (opponent, self, partner) velocity terms. Rows of ``pos`` and ``vel``
         (lists, e.g. an array's ``tolist()``) start with the x and y components."""
         toward, away = [], []  # per pair (a, o): a moving toward o; o moving away from a
+        e = self._dead
         for a, o in self._pairs:
             pa, po, va, vo = pos[a], pos[o], vel[a], vel[o]
             dx, dy = po[0] - pa[0], po[1] - pa[1]
-            sx, sy = (dx > 0) - (dx < 0), (dy > 0) - (dy < 0)
+            sx, sy = (dx > e) - (dx < -e), (dy > e) - (dy < -e)
             toward.append(sx * va[0] + sy * va[1])
             away.append(sx * vo[0] + sy * vo[1])
         c1, c2, c3 = self._c
@@ -108,10 +111,11 @@ class RewardRule:
             return self.dense(pos, vel)
         c1, c2, c3 = self._c
         team_of = self._team_of
+        e = self._dead
 
         def toward(a: int, o: int, mover: int) -> float:
             dx, dy = pos[o][0] - pos[a][0], pos[o][1] - pos[a][1]
-            return ((dx > 0) - (dx < 0)) * vel[mover][0] + ((dy > 0) - (dy < 0)) * vel[mover][1]
+            return ((dx > e) - (dx < -e)) * vel[mover][0] + ((dy > e) - (dy < -e)) * vel[mover][1]
 
         out = []
         for i in range(self.n_agents):
