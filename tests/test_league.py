@@ -424,13 +424,13 @@ def test_a_role_named_k_times_seeds_k_members_in_order_and_a_side_pairs_its_role
     from triplesumo.agents.zoo import load as zoo_load
 
     cfg = LeagueConfig(zoo=("spider=zoo:spider", "ant=random", "spider=passive", "bug=zero",
-                            "spider=zoo:spider-selfplay-v2", "ant=passive", "bug=random"))
+                            "spider=zoo:spider-selfplay", "ant=passive", "bug=random"))
     lg = League(tmp_path, cfg, SIDES)
     spiders, team = lg.pools["spider"].members, lg.pools["team"].members
     assert [m.id for m in spiders] == ["spider-0001", "spider-0002", "spider-0003"]
     assert [m.source for m in spiders] == ["zoo"] * 3 and spiders[1].policies == {"spider": "passive"}
     assert [m.policies for m in team] == [{"ant": "random", "bug": "zero"}, {"ant": "passive", "bug": "random"}]
-    for snap, name in ((spiders[0], "spider"), (spiders[2], "spider-selfplay-v2")):
+    for snap, name in ((spiders[0], "spider"), (spiders[2], "spider-selfplay")):
         ours, theirs = lg.policies(snap)["spider"], zoo_load(name)[0]
         obs = np.linspace(-1.0, 1.0, ours.obs_dim).astype(np.float32)
         np.testing.assert_array_equal(ours(obs), theirs(obs))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +24,12 @@ PENDING_REBUILD = ("v1",)
 
 
 def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
-    assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay", "spider-selfplay-v1", "spider-selfplay-v2",
-                                     "spider-selfplay-v3", "spider-selfplay-v4", "spider-selfplay-v5", "ffa-selfplay",
-                                     "ant-selfplay"}
+    assert set(zoo.available()) >= {*SHIPPED, "spider-selfplay", "ffa-selfplay", "ant-selfplay"}
+
+
+def test_the_zoo_ships_one_self_play_spider() -> None:
+    spiders = [n for n in zoo.available() if json.loads((zoo.ZOO_DIR / f"{n}.json").read_text())["agent"] == "spider"]
+    assert spiders == ["spider", "spider-selfplay"]
 
 
 @pytest.mark.parametrize("name", zoo.available())
@@ -94,7 +98,57 @@ HEAD_TO_HEAD = [n for n in zoo.available()
 
 
 def test_some_shipped_policy_is_published_with_head_to_head_claims() -> None:
-    assert {"ant-selfplay", "spider-selfplay-v3", "spider-selfplay-v4", "spider-selfplay-v5"} <= set(HEAD_TO_HEAD)
+    assert {"ant-selfplay", "spider-selfplay"} <= set(HEAD_TO_HEAD)
+
+
+# ------------------------------------------------------------------ the one self-play Spider and its history
+HISTORY = ROOT / zoo.HISTORY
+V5_SHA256 = "4f8fd1c0269514d8132cdaa2cdd54b066ed6bd4c3b84220d3a25cee26b15db34"
+"""The weights' sha256 that ``spider-selfplay-v5.json`` recorded while it shipped under that name (commit 34c8bfd)."""
+
+
+def test_the_self_play_spider_is_the_former_v5_bit_for_bit() -> None:
+    from triplesumo.agents.policy_file import file_sha256
+
+    manifest = json.loads((zoo.ZOO_DIR / "spider-selfplay.json").read_text())
+    assert manifest["renamed_from"] == "spider-selfplay-v5" and manifest["zoo_name"] == "spider-selfplay"
+    assert manifest["sha256"] == V5_SHA256 == file_sha256(zoo.ZOO_DIR / "spider-selfplay.safetensors")
+    _, loaded = zoo.load("spider-selfplay")  # (the loader checks the weights against the manifest's sha256)
+    assert loaded["league_member"] == "spider-0082" and loaded["epochs"] == 41000
+    assert all(json.loads(p.read_text())["sha256"] != V5_SHA256 for p in HISTORY.glob("*.json"))
+
+
+@pytest.mark.parametrize("name", sorted(zoo.RETIRED))
+def test_a_retired_zoo_name_says_where_its_policy_went(name: str) -> None:
+    where = zoo.RETIRED[name]
+    with pytest.raises(FileNotFoundError, match=rf"zoo:{name} is no longer shipped: it is {re.escape(where)} "):
+        zoo.make_policy(f"zoo:{name}")
+    if where.startswith("zoo:"):
+        assert where[4:] in zoo.available()
+    else:
+        assert (ROOT / f"{where}.json").is_file() and (ROOT / f"{where}.safetensors").is_file()
+        assert json.loads((ROOT / f"{where}.json").read_text())["zoo_name"] == name  # its manifest, unchanged
+
+
+def test_the_history_holds_the_retired_spiders_and_the_first_self_play_spider() -> None:
+    assert sorted(p.stem for p in HISTORY.glob("*.json")) == [f"spider-selfplay-v{n}" for n in range(5)]
+    first = json.loads((HISTORY / "spider-selfplay-v0.json").read_text())
+    assert first["zoo_name"] == "spider-selfplay" and first["env_version"] == "v0"  # the first zoo:spider-selfplay
+    assert (HISTORY / "README.md").is_file()
+
+
+@pytest.mark.parametrize("name", [f"spider-selfplay-v{n}" for n in range(5)])
+def test_a_history_policy_loads_by_path_without_a_suffix(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(ROOT)
+    spec = f"{zoo.HISTORY}/{name}"  # as a command line gives it: relative, no suffix
+    assert zoo.find_policy_file(spec) == Path(spec)
+    from triplesumo.agents.policy_file import load_policy
+
+    _, manifest = load_policy(Path(spec))  # (checks the weights against the manifest's sha256)
+    assert manifest["agent"] == "spider" and manifest["command"].startswith("triplesumo train")
+    obs = np.linspace(-1.0, 1.0, manifest["obs_dim"]).astype(np.float32)
+    action = zoo.make_policy(spec, expect_obs_mode="paper")(obs)
+    assert np.asarray(action).shape == (8,) and np.all(np.isfinite(action))
 
 
 def _lwr(candidate: Path) -> np.ndarray:

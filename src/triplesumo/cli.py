@@ -259,8 +259,9 @@ def main(argv: list[str] | None = None) -> int:
                     ev = meta.get("evaluation", {})
                     mwr = (f" test_mwr={ev['test_mwr']:+.3f} [{ev['test_mwr_lo']:+.3f}, {ev['test_mwr_hi']:+.3f}]"
                            if "test_mwr" in ev else "")
+                    was = f" (was zoo:{meta['renamed_from']})" if "renamed_from" in meta else ""
                     print(f"{name:{width}s} agent={meta['agent']} env={meta.get('env_version', 'v0')} "
-                          f"obs_mode={meta['obs_mode']} epochs={meta.get('epochs')} seed={meta.get('seed')}{mwr}  "
+                          f"obs_mode={meta['obs_mode']} epochs={meta.get('epochs')} seed={meta.get('seed')}{mwr}{was}  "
                           f"made by: {meta.get('command')}")
             else:
                 if not args.policy or not args.name:

@@ -127,7 +127,7 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
       paper's budgets (Ant 3,000 and Spider 20,000 epochs; ``triplesumo reproduce``). Ids and
       names end in ``-v1`` / ``_v1``; making a ``-v0`` id raises Gymnasium's ``DeprecatedEnv``.
       ``PhysicsConfig(border_rim=False)`` (``triplesumo.model.V0_PHYSICS``) is v0's
-      simulation; the v0 zoo policy ``zoo:spider-selfplay`` was trained on it.
+      simulation; the first self-play Spider (``docs/runs/zoo-history/spider-selfplay-v0``) was trained on it.
     - v2: a fair start and a rim both engines collide alike. Every torso starts as far from
       its nearest edge and from the edge behind it (``PhysicsConfig.layout="fair"``: up to four
       agents on the ring's diagonals, 1.0 m from two edges as in the paper's code, turned so

@@ -29,22 +29,42 @@ from triplesumo.agents.policy_file import (
 
 ZOO_DIR = Path(str(resources.files("triplesumo.agents.zoo")))
 
+HISTORY = "docs/runs/zoo-history"
+"""Where retired zoo policies live in the repository (not in the installed package), as policy files."""
+RETIRED: dict[str, str] = {
+    **{f"spider-selfplay-v{n}": f"{HISTORY}/spider-selfplay-v{n}" for n in (1, 2, 3, 4)},
+    "spider-selfplay-v5": "zoo:spider-selfplay",
+}
+"""Zoo names no longer shipped -> the spec that now names the same weights: the zoo keeps one self-play Spider,
+``zoo:spider-selfplay`` (the former ``spider-selfplay-v5``); the others, and the first ``zoo:spider-selfplay`` (now
+``spider-selfplay-v0``), are policy files under :data:`HISTORY` (its README says what each was)."""
+
 
 def available() -> list[str]:
     """Names of the shipped policies."""
     return sorted(p.stem for p in ZOO_DIR.glob("*.json"))
 
 
+def retired_error(name: str) -> FileNotFoundError:
+    """The error for ``zoo:NAME`` of a retired policy (:data:`RETIRED`): it names where the policy went."""
+    where = RETIRED[name]
+    hint = ("(a policy file in the TripleSumo repository, not in the installed package)"
+            if not where.startswith("zoo:") else "(the same weights under the zoo's one self-play Spider name)")
+    return FileNotFoundError(f"zoo:{name} is no longer shipped: it is {where} {hint}; see {HISTORY}/README.md")
+
+
 def policy_stem(spec: str | Path) -> Path:
     """The policy-file stem (the path without ``.json``/``.safetensors``) that ``spec`` names:
     ``zoo:NAME`` a shipped policy (``FileNotFoundError`` naming the shipped ones when there is no
-    ``NAME``), anything else a policy-file path, given with or without a suffix. Built-in policies
-    (``passive``, ``random``, ...) have no file: ``ValueError``. Whether a path's files exist is
-    for the loader to say."""
+    ``NAME``; for a retired ``NAME``, :data:`RETIRED`, one naming where it went), anything else a policy-file
+    path, given with or without a suffix. Built-in policies (``passive``, ``random``, ...) have no file:
+    ``ValueError``. Whether a path's files exist is for the loader to say."""
     if isinstance(spec, str) and spec in BUILTIN:
         raise ValueError(f"{spec!r} is a built-in policy: it has no policy file")
     if isinstance(spec, str) and spec.startswith("zoo:"):
         name = spec[4:]
+        if name in RETIRED and name not in available():
+            raise retired_error(name)
         if name not in available():
             raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
         return ZOO_DIR / name
