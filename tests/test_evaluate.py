@@ -31,10 +31,11 @@ from triplesumo.evaluation.evaluate import (
     evaluate,
     finished_rows,
     format_summary,
-    play_candidates_on_workers,
+    play_candidates_on,
     play_test_epochs,
 )
 from triplesumo.evaluation.metrics import OUTCOMES, summarize
+from triplesumo.evaluation.parallel import ProcessRunner
 from triplesumo.model.specs import V0_PHYSICS, V1_PHYSICS
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import DENSE_TERMS
@@ -328,19 +329,19 @@ def test_workers_write_the_bytes_of_one_process_and_resume(tiny_zoo: TinyZoo, tm
         assert got.count(b"\n") == 6
 
 
-def test_workers_hand_on_each_candidates_rows_in_order_and_raise_a_tasks_error(tiny_zoo: TinyZoo,
-                                                                                tmp_path: Path) -> None:
+def test_candidates_on_worker_processes_hand_on_each_ones_rows_in_order_and_raise_a_tasks_error(
+        tiny_zoo: TinyZoo, tmp_path: Path) -> None:
     others = {"ant": str(tiny_zoo.zoo_dir / "ant"), "spider": str(tiny_zoo.zoo_dir / "spider")}
     seen: list[tuple[str, int]] = []
-    play_candidates_on_workers({"z": "zero", "r": "random"}, {"r": 2}, others, "bug", 7, 100,
-                               MatchConfig(max_steps=STEPS), workers=2, chunk=2, n_envs=2,
-                               on_row=lambda label, row: seen.append((label, row["epoch"])))
+    rows = play_candidates_on(ProcessRunner(2), {"z": "zero", "r": "random"}, others, "bug", 7, 100,
+                              MatchConfig(max_steps=STEPS), firsts={"r": 2}, chunk=2, n_envs=2,
+                              on_row=lambda label, row: seen.append((label, row["epoch"])))
     assert [e for label, e in seen if label == "z"] == [1, 2, 3, 4, 5, 6, 7]
     assert [e for label, e in seen if label == "r"] == [3, 4, 5, 6, 7]  # from firsts["r"] on
+    assert [r["epoch"] for r in rows["r"]] == [3, 4, 5, 6, 7]
     with pytest.raises(Exception, match="nowhere"):
-        play_candidates_on_workers({"z": "zero", "x": str(tmp_path / "nowhere" / "bug")}, {}, others, "bug", 4, 100,
-                                   MatchConfig(max_steps=STEPS), workers=2, chunk=2, n_envs=2,
-                                   on_row=lambda label, row: None)
+        play_candidates_on(ProcessRunner(2), {"z": "zero", "x": str(tmp_path / "nowhere" / "bug")}, others, "bug",
+                           4, 100, MatchConfig(max_steps=STEPS), chunk=2, n_envs=2)
 
 
 def test_resume_refuses_what_would_change_the_rows(

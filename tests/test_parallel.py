@@ -4,7 +4,7 @@ given, and a runner changes where the chunks run, never the rows."""
 from __future__ import annotations
 
 import dataclasses
-import threading
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -12,7 +12,15 @@ from typing import Any
 import pytest
 
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
-from triplesumo.evaluation.parallel import Finished, ThreadRunner, play_chunks
+from triplesumo.evaluation.parallel import (
+    ONE_THREAD,
+    Finished,
+    ProcessRunner,
+    TaskRunner,
+    ThreadRunner,
+    play_chunks,
+    play_schedules,
+)
 from triplesumo.evaluation.tournament import TournamentConfig, run_tournament
 from triplesumo.model.specs import AgentSpec
 from triplesumo.rules.config import MatchConfig
@@ -22,7 +30,11 @@ from triplesumo.train.sweep import run_trials
 def _span(tag: str, first: int, end: int) -> list[dict[str, Any]]:
     if tag == "boom" and first >= 4:
         raise RuntimeError(f"chunk {first}..{end} failed")
-    return [{"i": i, "tag": tag, "thread": threading.get_ident()} for i in range(first, end)]
+    return [{"i": i, "tag": tag} for i in range(first, end)]
+
+
+def _threads_env() -> dict[str, str | None]:
+    return {name: os.environ.get(name) for name in ONE_THREAD}
 
 
 def test_play_chunks_hands_on_rows_in_schedule_order_from_any_runner() -> None:
@@ -41,6 +53,60 @@ def test_a_failing_chunk_raises_its_error_after_the_rows_before_it() -> None:
     seen: list[int] = []
     with pytest.raises(RuntimeError, match="chunk 4..6 failed"):
         play_chunks(ThreadRunner(1), _span, ("boom",), 8, chunk=2, on_row=lambda r: seen.append(r["i"]))
+    assert seen == [0, 1, 2, 3]
+
+
+@dataclasses.dataclass
+class _Recording:
+    """A runner that notes the tasks it is given and hands them to ``runner``."""
+
+    runner: TaskRunner
+    tasks: list[tuple[Any, ...]] = dataclasses.field(default_factory=list)
+
+    def __call__(self, fn: Callable[..., Any], tasks: Sequence[tuple[Any, ...]], cpus: int = 1) -> Finished[Any]:
+        self.tasks.extend(tasks)
+        yield from self.runner(fn, tasks, cpus)
+
+
+def test_play_schedules_queues_chunk_major_and_hands_on_each_schedules_rows_in_order() -> None:
+    runner = _Recording(ThreadRunner(3))
+    seen: list[tuple[str, int]] = []
+    rows = play_schedules(runner, _span, {"a": ("a",), "b": ("b",), "c": ("c",)}, 7, {"b": 2, "c": 6}, chunk=2,
+                          on_row=lambda key, r: seen.append((key, r["i"])))
+    assert runner.tasks == [("a", 0, 2), ("b", 2, 4), ("c", 6, 7), ("a", 2, 4), ("b", 4, 6), ("a", 4, 6),
+                            ("b", 6, 7), ("a", 6, 7)]  # the first chunk of every schedule before the second of any
+    assert {key: [r["i"] for r in got] for key, got in rows.items()} == {"a": list(range(7)), "b": [2, 3, 4, 5, 6],
+                                                                         "c": [6]}
+    assert [(key, i) for key, i in seen if key == "b"] == [("b", i) for i in range(2, 7)]
+    assert sorted(seen) == sorted((key, r["i"]) for key, got in rows.items() for r in got)
+    assert play_schedules(runner, _span, {}, 7) == {}
+    with pytest.raises(ValueError, match=r"first must be in \[0, n=7\), got 7 \('c'\)"):
+        play_schedules(runner, _span, {"a": ("a",), "c": ("c",)}, 7, {"c": 7})
+
+
+def test_a_process_runner_plays_the_rows_of_a_thread_runner_in_order(monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ONE_THREAD:
+        monkeypatch.delenv(name, raising=False)
+    schedules = {"a": ("ok",), "b": ("ok2",)}
+    seen: list[tuple[str, int]] = []
+    in_processes = play_schedules(ProcessRunner(2), _span, schedules, 11, {"b": 4}, chunk=3,
+                                  on_row=lambda key, r: seen.append((key, r["i"])))
+    assert in_processes == play_schedules(ThreadRunner(2), _span, schedules, 11, {"b": 4}, chunk=3)
+    assert [i for key, i in seen if key == "a"] == list(range(11))
+    assert [i for key, i in seen if key == "b"] == list(range(4, 11))
+    assert play_chunks(ProcessRunner(1), _span, ("ok",), 5, first=1, chunk=2) == [
+        {"i": i, "tag": "ok"} for i in range(1, 5)]
+    # each worker process on one core, this process's variables as they were
+    assert [get() for _, get in ProcessRunner(1)(_threads_env, [()])] == [dict.fromkeys(ONE_THREAD, "1")]
+    assert _threads_env() == dict.fromkeys(ONE_THREAD)
+    with pytest.raises(ValueError, match="ProcessRunner.workers must be an int >= 1"):
+        ProcessRunner(0)
+
+
+def test_a_failing_chunk_in_a_process_raises_its_error_after_the_rows_before_it() -> None:
+    seen: list[int] = []
+    with pytest.raises(RuntimeError, match="chunk 4..6 failed"):
+        play_chunks(ProcessRunner(1), _span, ("boom",), 8, chunk=2, on_row=lambda r: seen.append(r["i"]))
     assert seen == [0, 1, 2, 3]
 
 

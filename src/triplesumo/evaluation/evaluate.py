@@ -55,7 +55,15 @@ from triplesumo.agents.zoo import (
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.metrics_csv import COLUMNS, repair_metrics_csv
-from triplesumo.evaluation.parallel import TaskRunner, check_counts, play_chunks, portable_spec
+from triplesumo.evaluation.parallel import (
+    ProcessRunner,
+    Row,
+    TaskRunner,
+    check_counts,
+    play_chunks,
+    play_schedules,
+    portable_spec,
+)
 from triplesumo.evaluation.runner import SeatedResult, play_matches
 from triplesumo.evaluation.stats import mean_interval
 from triplesumo.evaluation.video import check_writable
@@ -116,12 +124,13 @@ class EvaluateConfig:
     ray_address: str = ""
     """With ray: the Ray cluster to use (e.g. auto, ray://HOST:10001); empty: start a local Ray."""
     ray_chunk: int = 50
-    """With ray (or any runner handed to evaluate) or workers > 1: test epochs per task."""
+    """With ray (or any runner handed to evaluate) or workers > 1: test epochs per task. Every candidate's
+    epochs are cut into such tasks in one queue, the first task of every candidate before the second of
+    any, so a stopped run leaves them about equally far."""
     workers: int = 1
     """Processes playing the test epochs at once on this machine (no Ray needed), one MuJoCo thread
-    each: every candidate's epochs are cut into tasks of ray_chunk epochs in one queue, the first
-    task of every candidate before the second of any, so a stopped run leaves them about equally far.
-    The same rows as one process. 1: played here, on n_threads threads."""
+    each: evaluate plays on a ProcessRunner(workers), in tasks of ray_chunk epochs. The same rows as
+    one process. 1: played here, on n_threads threads."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
@@ -241,78 +250,38 @@ def play_test_epochs_on(runner: TaskRunner, learner_spec: str, other_specs: Mapp
     check_counts(epochs=epochs, chunk=chunk, n_envs=n_envs)
     if not 0 <= first < epochs:
         raise ValueError(f"first must be in [0, epochs={epochs}), got {first}")
-    specs = {a: portable_spec(s) for a, s in other_specs.items()}
-    args = (portable_spec(learner_spec), specs, learner, seed, match_cfg or MatchConfig(), n_envs, record,
-            None if record_dir is None else str(Path(record_dir).resolve()), policy_names)
+    args = _chunk_args(learner_spec, other_specs, learner, seed, match_cfg, n_envs, record, record_dir, policy_names)
     return play_chunks(runner, play_test_chunk, args, epochs, first, chunk, on_row, progress)
 
 
-ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-"""Variables set to 1 for worker processes (unless set already): each plays on one core."""
+def play_candidates_on(runner: TaskRunner, candidates: Mapping[str, str], other_specs: Mapping[str, str],
+                       learner: str, epochs: int, seed: int, match_cfg: MatchConfig | None = None,
+                       firsts: Mapping[str, int] | None = None, chunk: int = 50, n_envs: int = 8,
+                       on_row: Callable[[str, Row], None] | None = None, record: int = 0,
+                       record_dirs: Mapping[str, Path] | None = None,
+                       progress: str | None = None) -> dict[str, list[Row]]:
+    """Rows of test epochs ``firsts[label] .. epochs - 1`` (default from 0) of every candidate (label ->
+    learner spec), played by ``runner`` as tasks of ``chunk`` epochs in one queue, chunk-major (the first
+    chunk of every candidate before the second of any: :func:`~triplesumo.evaluation.parallel.play_schedules`).
+
+    Each candidate's rows are those of :func:`play_test_epochs_on` for it; ``on_row(label, row)`` gets them
+    in epoch order, each as soon as it and every earlier one of that candidate are in. A failing task
+    raises after the rows handed on before it (they stay valid: a resume plays the others). Match files of
+    epochs ``< record`` go to ``record_dirs[label]``, with the specs as given stored in them."""
+    check_counts(epochs=epochs, chunk=chunk, n_envs=n_envs)
+    args = {label: _chunk_args(spec, other_specs, learner, seed, match_cfg, n_envs, record,
+                               None if record_dirs is None else record_dirs[label], {**other_specs, learner: spec})
+            for label, spec in candidates.items()}
+    return play_schedules(runner, play_test_chunk, args, epochs, firsts, chunk, on_row, progress)
 
 
-def play_candidates_on_workers(candidates: dict[str, str], firsts: dict[str, int], other_specs: dict[str, str],
-                               learner: str, epochs: int, seed: int, match_cfg: MatchConfig, workers: int,
-                               chunk: int, n_envs: int, on_row: Callable[[str, dict[str, Any]], None],
-                               record: int = 0, record_dirs: dict[str, Path] | None = None,
-                               progress: str | None = None) -> None:
-    """Test epochs ``firsts[label] .. epochs - 1`` of every candidate (label -> learner spec) in ``workers``
-    processes: tasks of ``chunk`` epochs in one queue, chunk-major (the first chunk of every candidate before
-    the second of any). ``on_row(label, row)`` gets each candidate's rows in epoch order, each as soon as
-    it and every earlier one of that candidate are in. A failing task stops the rest and raises; the rows
-    handed on before stay valid (a resume plays the others)."""
-    import multiprocessing
-    import os
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-    bounds = {label: [(a, min(a + chunk, epochs)) for a in range(firsts.get(label, 0), epochs, chunk)]
-              for label in candidates}
-    order = sorted(((k, i, label) for i, label in enumerate(candidates) for k in range(len(bounds[label]))))
-    if not order:
-        return
-    bar = None
-    if progress is not None:
-        from tqdm import tqdm
-
-        bar = tqdm(total=sum(b - a for spans in bounds.values() for a, b in spans), unit="epoch", desc=progress,
-                   dynamic_ncols=True)
-    done: dict[str, dict[int, list[dict[str, Any]]]] = {label: {} for label in candidates}
-    next_chunk = dict.fromkeys(candidates, 0)
-    saved = {name: os.environ.get(name) for name in ONE_THREAD}
-    os.environ.update({name: os.environ.get(name) or "1" for name in ONE_THREAD})  # inherited by the workers
-    try:
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            pending = {}
-            for k, _, label in order:
-                a, b = bounds[label][k]
-                rec_dir = None if record_dirs is None else str(record_dirs[label])
-                future = pool.submit(play_test_chunk, candidates[label], other_specs, learner, seed, match_cfg,
-                                     n_envs, record, rec_dir, None, a, b)
-                pending[future] = (label, k)
-            try:
-                while pending:
-                    finished, _ = wait(list(pending), return_when=FIRST_COMPLETED)
-                    for future in finished:
-                        label, k = pending.pop(future)
-                        done[label][k] = future.result()
-                        if bar is not None:
-                            bar.update(len(done[label][k]))
-                        while next_chunk[label] in done[label]:
-                            for row in done[label].pop(next_chunk[label]):
-                                on_row(label, row)
-                            next_chunk[label] += 1
-            except BaseException:
-                for future in pending:
-                    future.cancel()
-                raise
-    finally:
-        for name, value in saved.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
-        if bar is not None:
-            bar.close()
+def _chunk_args(learner_spec: str, other_specs: Mapping[str, str], learner: str, seed: int,
+                match_cfg: MatchConfig | None, n_envs: int, record: int, record_dir: Path | None,
+                policy_names: dict[str, str] | None) -> tuple[Any, ...]:
+    """The arguments of :func:`play_test_chunk` before ``first, end``, as plain data any process can use."""
+    specs = {a: portable_spec(s) for a, s in other_specs.items()}
+    return (portable_spec(learner_spec), specs, learner, seed, match_cfg or MatchConfig(), n_envs, record,
+            None if record_dir is None else str(Path(record_dir).resolve()), policy_names)
 
 
 def _clean(value: Any) -> Any:
@@ -339,10 +308,12 @@ ROW_FIELDS = ("learner", "policies", "seed", "steps_per_epoch", "obs_mode")
 def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str, Any]:
     """Run every candidate, write CSVs, plots and ``summary.json``; returns the summary.
 
-    With a ``runner`` (:mod:`triplesumo.evaluation.parallel`) every candidate's test epochs are
-    played by it as tasks of ``cfg.ray_chunk`` epochs (the same rows); ``cfg.ray`` asks for one
-    (the command line hands down a :class:`~triplesumo.integrations.ray_tasks.RayRunner`).
-    Without, they are played here (``cfg.workers`` > 1: in worker processes).
+    With a ``runner`` (:mod:`triplesumo.evaluation.parallel`) the candidates' test epochs are
+    played by it as tasks of ``cfg.ray_chunk`` epochs in one queue (:func:`play_candidates_on`; the
+    same rows); ``cfg.ray`` asks for one (the command line hands down a
+    :class:`~triplesumo.integrations.ray_tasks.RayRunner`), ``cfg.workers`` > 1 plays on a
+    :class:`~triplesumo.evaluation.parallel.ProcessRunner` of that many processes. Without either,
+    they are played here, on ``cfg.n_threads`` MuJoCo threads.
     With ``cfg.resume`` the rows already in ``out`` are kept (see the module docstring);
     ``ValueError`` names what changed if they no longer fit the config.
     """
@@ -351,6 +322,8 @@ def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str,
                          "triplesumo.integrations.ray_tasks.RayRunner() inside ray_tasks.session() (as --ray does)")
     if runner is not None and cfg.workers > 1:
         raise ValueError("EvaluateConfig.workers and a runner both spread the test epochs: choose one")
+    if cfg.workers > 1:
+        runner = ProcessRunner(cfg.workers)
     from triplesumo.evaluation.plots import plot_comparison, plot_run, read_metrics_csv
 
     trained, expanded = expand_policies(cfg.policy), expand_policies(cfg.compare, "compare")
@@ -413,30 +386,22 @@ def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str,
         firsts = {label: finished_rows(out / label / "metrics.csv", cfg.epochs) if label in kept else 0
                   for label in candidates}
         todo = [label for label in candidates if firsts[label] < cfg.epochs]
-        if cfg.workers > 1:
+        if runner is not None:
             appenders = {label: stack.enter_context(RowAppender(out / label / "metrics.csv", fresh=firsts[label] == 0))
                          for label in todo}
-            play_candidates_on_workers(
-                {label: candidates[label] for label in todo}, firsts, other_specs, cfg.learner, cfg.epochs,
-                cfg.seed, match_cfg, cfg.workers, cfg.ray_chunk, cfg.n_envs, lambda label, row: appenders[label](row),
+            play_candidates_on(
+                runner, {label: candidates[label] for label in todo}, other_specs, cfg.learner, cfg.epochs, cfg.seed,
+                match_cfg, firsts, cfg.ray_chunk, cfg.n_envs, lambda label, row: appenders[label](row),
                 record=cfg.record, record_dirs={label: out / label / "matches" for label in todo},
-                progress=f"evaluate {len(todo)} candidates on {cfg.workers} workers" if cfg.progress else None)
+                progress=f"evaluate {len(todo)} candidates" if cfg.progress else None)
             todo = []
         for label in todo:
             spec, done = candidates[label], firsts[label]
-            seat_names: dict[str, str] = {**other_specs, cfg.learner: spec}
             with RowAppender(out / label / "metrics.csv", fresh=done == 0) as append:
-                if runner is not None:
-                    play_test_epochs_on(
-                        runner, spec, other_specs, cfg.learner, cfg.epochs, cfg.seed, match_cfg, first=done,
-                        chunk=cfg.ray_chunk, n_envs=cfg.n_envs, on_row=append, record=cfg.record,
-                        record_dir=out / label / "matches", policy_names=seat_names,
-                        progress=f"evaluate {cfg.learner}={spec}" if cfg.progress else None)
-                else:
-                    play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg,
-                                     cfg.n_envs, cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress,
-                                     first=done, on_row=append, record=cfg.record,
-                                     record_dir=out / label / "matches", policy_names=seat_names)
+                play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.n_envs,
+                                 cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress, first=done,
+                                 on_row=append, record=cfg.record, record_dir=out / label / "matches",
+                                 policy_names={**other_specs, cfg.learner: spec})
     curves, lwr = {}, {}
     for label, spec in candidates.items():
         path = out / label / "metrics.csv"

@@ -3,7 +3,8 @@
 :func:`~triplesumo.evaluation.evaluate.evaluate`, :func:`~triplesumo.evaluation.tournament.run_tournament`
 and :func:`~triplesumo.train.sweep.run_sweep` are given a :class:`TaskRunner`: a map-like
 callable that runs ``fn(*task)`` for every task and hands back each result as its task
-finishes. :class:`ThreadRunner` runs the tasks on threads of this process; Ray's runner is
+finishes. :class:`ThreadRunner` runs the tasks on threads of this process, :class:`ProcessRunner` in
+worker processes of this machine (what ``evaluate --workers N`` plays on); Ray's runner is
 :class:`triplesumo.integrations.ray_tasks.RayRunner`, which the command line builds for
 ``--ray``. So nothing in :mod:`triplesumo.evaluation` or :mod:`triplesumo.train` imports Ray
 or :mod:`triplesumo.integrations`: the layers stay one-way (STYLE.md).
@@ -13,13 +14,18 @@ are cut into chunks, each chunk is a task that plays its matches with the same c
 local run, and the rows come back in schedule order, handed to ``on_row`` as soon as a
 chunk and every earlier one are done (so a killed run keeps its finished rows and
 ``--resume`` continues it). Match ``i`` depends on its seed and lineup alone, so the rows
-equal a local run's for the same seeds, whichever runner played them.
+equal a local run's for the same seeds, whichever runner played them. :func:`play_schedules`
+does the same for several schedules at once (an evaluation's candidates): their tasks go to the
+runner in one queue, chunk-major (the first chunk of every schedule before the second of any),
+so a stopped run leaves them about equally far.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+import multiprocessing
+import os
+from collections.abc import Callable, Generator, Hashable, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,9 +33,11 @@ from typing import Any, Protocol, TypeVar
 
 from triplesumo.agents.builtin import BUILTIN
 
-__all__ = ["Finished", "Row", "TaskRunner", "ThreadRunner", "check_counts", "play_chunks", "portable_spec"]
+__all__ = ["ONE_THREAD", "Finished", "ProcessRunner", "Row", "TaskRunner", "ThreadRunner", "check_counts",
+           "play_chunks", "play_schedules", "portable_spec"]
 
 T = TypeVar("T")
+K = TypeVar("K", bound=Hashable)
 Row = dict[str, Any]
 Finished = Generator[tuple[int, Callable[[], T]], None, None]
 """What a runner yields: ``(k, get)`` for task ``k`` as it finishes (in any order); ``get()`` returns the task's
@@ -58,15 +66,53 @@ class ThreadRunner:
     def __call__(self, fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], cpus: int = 1) -> Finished[T]:
         check_counts(cpus=cpus)
         with ThreadPoolExecutor(self.workers) as pool:
-            pending: dict[Future[T], int] = {pool.submit(fn, *args): k for k, args in enumerate(tasks)}
-            try:
-                while pending:
-                    done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
-                    for future in sorted(done, key=pending.__getitem__):
-                        yield pending.pop(future), future.result
-            finally:
-                for future in pending:
-                    future.cancel()
+            yield from _finished(pool, fn, tasks)
+
+
+ONE_THREAD = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+"""Variables a :class:`ProcessRunner` sets to 1 for its worker processes (unless set already)."""
+
+
+@dataclass(frozen=True)
+class ProcessRunner:
+    """A :class:`TaskRunner` on ``workers`` processes of this machine, each on one core (:data:`ONE_THREAD`).
+
+    The processes are started with ``spawn``, never ``fork``: a child forked after torch ran its
+    thread pool can hang in its next torch call (see :mod:`triplesumo.agents.frozen`). So ``fn``
+    and the tasks' arguments are pickled, and ``fn`` must be importable by module and name."""
+
+    workers: int = 1
+    """Tasks run at once."""
+
+    def __post_init__(self) -> None:
+        check_counts(**{"ProcessRunner.workers": self.workers})
+
+    def __call__(self, fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]], cpus: int = 1) -> Finished[T]:
+        check_counts(cpus=cpus)
+        saved = {name: os.environ.get(name) for name in ONE_THREAD}
+        os.environ.update({name: os.environ.get(name) or "1" for name in ONE_THREAD})  # inherited by the workers
+        try:
+            with ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+                yield from _finished(pool, fn, tasks)
+        finally:
+            for name, value in saved.items():
+                if value is None:
+                    os.environ.pop(name, None)
+                else:
+                    os.environ[name] = value
+
+
+def _finished(pool: Executor, fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]]) -> Finished[T]:
+    """The tasks submitted to ``pool`` in order, yielded as they finish (:data:`Finished`); closing cancels the rest."""
+    pending: dict[Future[T], int] = {pool.submit(fn, *args): k for k, args in enumerate(tasks)}
+    try:
+        while pending:
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            for future in sorted(done, key=pending.__getitem__):
+                yield pending.pop(future), future.result
+    finally:
+        for future in pending:
+            future.cancel()
 
 
 def check_counts(**values: int) -> None:
@@ -87,31 +133,58 @@ def play_chunks(runner: TaskRunner, play: Callable[..., list[Row]], args: Sequen
                 chunk: int = 50, on_row: Callable[[Row], None] | None = None, progress: str | None = None) -> list[Row]:
     """Rows of matches ``first .. n - 1``: ``play(*args, a, b)`` (the rows of matches ``a .. b - 1``) run by
     ``runner`` as one task per chunk of ``chunk`` matches; rows in schedule order, each handed to ``on_row``
-    once it and every earlier row are in. ``play`` must be a module-level function."""
+    once it and every earlier row are in. ``play`` must be a module-level function. (:func:`play_schedules`
+    with one schedule.)"""
+
+    def hand_on(_: int, row: Row) -> None:
+        if on_row is not None:
+            on_row(row)
+
+    return play_schedules(runner, play, {0: args}, n, {0: first}, chunk, hand_on, progress)[0]
+
+
+def play_schedules(runner: TaskRunner, play: Callable[..., list[Row]], args: Mapping[K, Sequence[Any]], n: int,
+                   firsts: Mapping[K, int] | None = None, chunk: int = 50,
+                   on_row: Callable[[K, Row], None] | None = None, progress: str | None = None) -> dict[K, list[Row]]:
+    """Rows of several schedules of ``n`` matches: schedule ``key`` plays matches ``firsts[key] .. n - 1``
+    (default from 0) as ``play(*args[key], a, b)`` (the rows of matches ``a .. b - 1``), in chunks of ``chunk``.
+
+    All the chunks go to ``runner`` as tasks in one queue, chunk-major: the first chunk of every schedule
+    before the second of any. Each schedule's rows come back in its order, each handed to ``on_row(key, row)``
+    once it and every earlier row of its schedule are in. A failing task raises its error after the rows
+    handed on before it. ``play`` must be a module-level function."""
     check_counts(n=n, chunk=chunk)
-    if not 0 <= first < n:
-        raise ValueError(f"first must be in [0, n={n}), got {first}")
-    bounds = [(a, min(a + chunk, n)) for a in range(first, n, chunk)]
-    done: dict[int, list[Row]] = {}
-    rows: list[Row] = []
-    next_chunk = 0
+    starts = {key: 0 if firsts is None else firsts.get(key, 0) for key in args}
+    for key, first in starts.items():
+        if not 0 <= first < n:
+            raise ValueError(f"first must be in [0, n={n}), got {first}" + ("" if len(args) == 1 else f" ({key!r})"))
+    bounds = {key: [(a, min(a + chunk, n)) for a in range(first, n, chunk)] for key, first in starts.items()}
+    order = [(key, k) for k in range(max(map(len, bounds.values()), default=0)) for key in bounds
+             if k < len(bounds[key])]
+    done: dict[K, dict[int, list[Row]]] = {key: {} for key in args}
+    rows: dict[K, list[Row]] = {key: [] for key in args}
+    next_chunk = dict.fromkeys(args, 0)
+    if not order:
+        return rows
     bar = None
     if progress is not None:
         from tqdm import tqdm
 
-        bar = tqdm(total=n, initial=first, unit="match", desc=progress, dynamic_ncols=True)
+        bar = tqdm(total=n * len(args), initial=sum(starts.values()), unit="match", desc=progress,
+                   dynamic_ncols=True)
     try:
-        with closing(runner(play, [(*args, a, b) for a, b in bounds])) as finished:
-            for k, get in finished:
-                done[k] = get()
+        with closing(runner(play, [(*args[key], *bounds[key][k]) for key, k in order])) as finished:
+            for t, get in finished:
+                key, k = order[t]
+                done[key][k] = get()
                 if bar is not None:
-                    bar.update(bounds[k][1] - bounds[k][0])
-                while next_chunk in done:
-                    for row in done.pop(next_chunk):
-                        rows.append(row)
+                    bar.update(bounds[key][k][1] - bounds[key][k][0])
+                while next_chunk[key] in done[key]:
+                    for row in done[key].pop(next_chunk[key]):
+                        rows[key].append(row)
                         if on_row is not None:
-                            on_row(row)
-                    next_chunk += 1
+                            on_row(key, row)
+                    next_chunk[key] += 1
     finally:
         if bar is not None:
             bar.close()
