@@ -31,12 +31,12 @@ from triplesumo.cli import main
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig
 from triplesumo.rules.rewards import DENSE_TERMS
 from triplesumo.train import checkpoint
-from triplesumo.train import loop as train_loop
+from triplesumo.train import collect as train_collect
 from triplesumo.train.checkpoint import CheckpointError, recorded_epoch
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.logger import COLUMNS
 from triplesumo.train.loop import Trainer, TrainResult, train
-from triplesumo.train.run_folder import config_from_json, config_to_json, run_id_of
+from triplesumo.train.run_folder import RunExistsError, config_from_json, config_to_json, run_id_of
 
 PLOTS = ("rewards.png", "reward_terms.png", "mwr.png", "steps_to_win.png")
 LWR = {"win": 1.0, "loss": -1.0, "draw": 0.0, "error": 0.0}
@@ -428,31 +428,83 @@ def test_incompatible_checkpoint_names_the_field(run_copy: Path, field: str, cha
         train(TrainConfig(), resume_dir=run_copy)
 
 
-# ------------------------------------------------------------ unwritable folder
+# ---------------------------------------------- run folder and matches at start
 
 
-def _no_env(*args: Any, **kwargs: Any) -> None:
-    raise AssertionError("the trainer built its matches before checking the run folder")
+class _BuildFailed(Exception):
+    """Stands for building the run's matches failing (a model MuJoCo refuses, too little memory)."""
 
 
-def test_run_folder_under_a_file_fails_at_start(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    blocker = tmp_path / "a-file"
-    blocker.write_text("not a folder")
-    monkeypatch.setattr(train_loop, "MatchBatch", _no_env)
-    with pytest.raises(PermissionError, match=re.escape(str(blocker / "sub" / "run"))):
-        Trainer(tiny(blocker / "sub"))
+def _matches_fail(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make building the matches raise :class:`_BuildFailed`. The trainer builds them with ``make_env``, which
+    calls ``VectorMatches`` of :mod:`triplesumo.train.collect` (a cpu run); the tests below that expect
+    ``_BuildFailed`` fail, rather than pass unseen, should that ever stop being the path."""
+    def fails(*args: Any, **kwargs: Any) -> None:
+        raise _BuildFailed("building the matches failed on purpose")
+
+    monkeypatch.setattr(train_collect, "VectorMatches", fails)
 
 
-def test_read_only_run_folder_fails_at_start(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def _files(folder: Path) -> dict[str, bytes | None]:
+    """Everything under ``folder``: a file's bytes, None for a folder."""
+    return {str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None for p in sorted(folder.rglob("*"))}
+
+
+def test_a_failed_match_build_leaves_no_run_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The trainer builds its matches before it creates the run folder: a failure leaves nothing behind."""
+    _matches_fail(monkeypatch)
+    with pytest.raises(_BuildFailed):
+        Trainer(tiny(tmp_path / "out"))
+    assert _files(tmp_path) == {}  # neither --out nor the run folder was made
+
+
+def test_a_run_folder_holding_a_run_is_refused_before_the_matches_are_built(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    run = tmp_path / "out" / "run"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text("{}")
+    before = _files(tmp_path)
+    _matches_fail(monkeypatch)
+    with pytest.raises(RunExistsError, match=f"run folder {re.escape(str(run))} already holds a run"):
+        Trainer(tiny(tmp_path / "out"))
+    assert _files(tmp_path) == before
+    with pytest.raises(_BuildFailed):  # the same build, for a free name: it is on the path the refusal came before
+        Trainer(tiny(tmp_path / "out", "free"))
+
+
+def _under_a_file(tmp_path: Path) -> tuple[Path, Path]:
+    (tmp_path / "a-file").write_text("not a folder")
+    return tmp_path / "a-file" / "sub", tmp_path / "a-file" / "sub" / "run"
+
+
+def _run_is_a_file(tmp_path: Path) -> tuple[Path, Path]:
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "run").write_text("not a folder")
+    return tmp_path / "out", tmp_path / "out" / "run"
+
+
+@pytest.mark.parametrize("place", [_under_a_file, _run_is_a_file], ids=["under-a-file", "run-is-a-file"])
+def test_a_run_folder_that_cannot_be_made_fails_at_start(tmp_path: Path, place: Any) -> None:
+    """A path no mkdir can make, even as root: refused when the trainer is made, naming the folder, nothing
+    written."""
+    out, run = place(tmp_path)
+    before = _files(tmp_path)
+    with pytest.raises(PermissionError, match=f"run folder {re.escape(str(run))} is not writable"):
+        Trainer(tiny(out))
+    assert _files(tmp_path) == before
+
+
+def test_read_only_run_folder_fails_at_start(tmp_path: Path) -> None:
+    """chmod 500 on --out (skipped as root, who writes anyway: the test above holds for root too)."""
     locked = tmp_path / "locked"
     locked.mkdir()
     locked.chmod(0o500)
     try:
         if os.access(locked, os.W_OK):
             pytest.skip("chmod does not stop this user (root) from writing")
-        monkeypatch.setattr(train_loop, "MatchBatch", _no_env)
-        with pytest.raises(PermissionError, match=re.escape(str(locked / "run"))):
+        with pytest.raises(PermissionError, match=f"run folder {re.escape(str(locked / 'run'))} is not writable"):
             Trainer(tiny(locked))
+        assert not list(locked.iterdir())
     finally:
         locked.chmod(0o700)
 
