@@ -691,3 +691,19 @@ def test_max_env_steps_stops_at_the_first_epoch_end_past_the_budget(tmp_path: Pa
     assert not training_done(cfg)
     with pytest.raises(ValueError, match="TrainConfig.max_env_steps must be an int >= 0"):
         TrainConfig(max_env_steps=-1)
+
+
+def test_a_config_written_before_the_axis_dead_zone_reads_with_the_paper_sign() -> None:
+    """Run folders written before ``RewardConfig.axis_dead_zone`` existed (e.g. the committed contest run) resume
+    with 0, the sign they were trained under; any other missing reward key is still an error naming it."""
+    import json
+
+    from triplesumo.train.run_folder import config_from_json
+
+    data = json.loads((Path(__file__).resolve().parents[1] / "docs/runs/contest-v2/contest-co-draw200/config.json")
+                      .read_text())
+    assert "axis_dead_zone" not in data["reward"]
+    assert config_from_json(data).reward.axis_dead_zone == 0.0
+    del data["reward"]["still"]
+    with pytest.raises(ValueError, match=r"missing key\(s\) \['reward.still'\]"):
+        config_from_json(data)

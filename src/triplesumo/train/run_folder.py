@@ -103,6 +103,10 @@ LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_thres
                       "zoo_share")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
+REWARD_ADDED_LATER = ("axis_dead_zone",)
+"""RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs, whose
+default is the sign every earlier run was paid by), likewise."""
+
 
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
@@ -111,6 +115,9 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
     data = _check_keys(data, TrainConfig, "", source)
+    if isinstance(data["reward"], dict):
+        reward_defaults = dataclasses.asdict(RewardConfig())
+        data["reward"] = {**{k: reward_defaults[k] for k in REWARD_ADDED_LATER}, **data["reward"]}
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
     try:
         data["physics"] = PhysicsConfig(**_check_keys(physics_record(data["physics"]), PhysicsConfig, "physics.",
