@@ -44,7 +44,9 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument("--from", dest="from_checkpoint", metavar="epoch-N", default=None,
                        help="with --resume: continue from this checkpoint of the run instead of the latest (e.g. "
                             "when the latest is damaged: the error names the newest intact one); later epochs are "
-                            "trained again. With --fork: the checkpoint the fork starts from")
+                            "trained again. The run folder becomes that checkpoint's first, even with --epochs not "
+                            "past it: metrics cut back, policy files from it, latest.json naming it, later "
+                            "checkpoints removed. With --fork: the checkpoint the fork starts from")
     train.add_argument("--start-over", action="store_true",
                        help="train afresh although OUT/NAME already holds a run: that run is first moved aside to "
                             "OUT/NAME.old-K (without this, training refuses such a folder and changes nothing)")

@@ -142,9 +142,17 @@ def prune(run_dir: Path, current: int) -> None:
     and are removed too; folders that record no epoch are left alone.
     """
     older = [f for e, f in checkpoints(run_dir) if e < current]
-    newer = [f for e, f in checkpoints(run_dir) if e > current]
-    for old in older[:max(len(older) - (KEEP - 1), 0)] + newer:
+    for old in older[:max(len(older) - (KEEP - 1), 0)]:
         shutil.rmtree(old, ignore_errors=True)
+    drop_after(run_dir, current)
+
+
+def drop_after(run_dir: Path, epoch: int) -> None:
+    """Remove the checkpoint folders of ``run_dir`` that record an epoch later than ``epoch``: a history
+    abandoned by ``--resume --from`` (its rows are cut; the epochs are trained again). Folders that record
+    no epoch are left alone."""
+    for _, newer in [(e, f) for e, f in checkpoints(run_dir) if e > epoch]:
+        shutil.rmtree(newer, ignore_errors=True)
 
 
 def _json_bytes(value: dict[str, Any]) -> bytes:

@@ -173,6 +173,8 @@ class Trainer:
         self.collector = Collector(cfg, probe, env, self.device, self.learners, others, on_device, self.seats,
                                    self.rng, self.diverged)
         self.collector.on_match_end = self._league_match
+        self.restored: Path | None = None
+        """The checkpoint folder this resume restored (None for a new run)."""
         if resume:
             self._restore(from_checkpoint)
         else:
@@ -294,6 +296,7 @@ class Trainer:
     def run(self) -> TrainResult:
         cfg = self.cfg
         self.start_leg()
+        self.adopt_restored()
         start = time.perf_counter()
         start_steps = self.env_steps
         trained_before, evals_before = self.train_seconds, self.evaluations.seconds
@@ -404,11 +407,42 @@ class Trainer:
         keep_replay = self.cfg.save_replay and bool(replay)
         folder = checkpoint.save(self.run_dir, c.epochs_done, tensors, state, arrays,
                                  replay if keep_replay else None)
+        self._write_policies(folder)
+        return folder
+
+    def _write_policies(self, folder: Path) -> None:
+        """Every learner's policy files (``RUN/policy*``) from its actor as it is now (checkpoint ``folder``'s)."""
         for learner in self.learners:
             stem = self.policy_stem(learner)
             with checkpoint.writing(f"{stem}.safetensors/.json", f"; the last good checkpoint {folder} is intact"):
                 save_policy(stem, learner.algo.export_actor(), self.manifest(learner), obs_norm=learner.algo.obs_norm)
-        return folder
+
+    def adopt_restored(self) -> None:
+        """Make the run folder that of the checkpoint this resume restored, before any epoch is trained.
+
+        A resume from another checkpoint than the one ``latest.json`` names (``--from epoch-N``, or the newest
+        checkpoint within torn rows) has cut the tables back to its epoch; so that the folder never contradicts
+        itself, even when no epoch is left to train (``--epochs`` not past it), the policy files are written
+        from the restored learners, then ``latest.json`` names the restored checkpoint, then the checkpoints of
+        later epochs are removed (the rows no longer reach them; the epochs trained next re-create them, as
+        the first checkpoint after a ``--from`` always pruned them). In that order, a kill in between leaves
+        ``latest.json`` beyond the rows, which the next plain ``--resume`` steps back from and adopts again.
+        """
+        folder = self.restored
+        if folder is None:
+            return
+        try:
+            named: Path | None = checkpoint.latest(self.run_dir)
+        except checkpoint.CheckpointError:
+            named = None
+        if named is not None and named.resolve() == folder.resolve():
+            return
+        epoch = checkpoint.recorded_epoch(folder)
+        epoch = self.epochs_done if epoch is None else epoch
+        self._write_policies(folder)
+        with checkpoint.writing(self.run_dir / "checkpoints" / "latest.json"):
+            checkpoint.point_latest(self.run_dir, folder, epoch)
+        checkpoint.drop_after(self.run_dir, epoch)
 
     def _needs_replay(self) -> bool:
         return self.cfg.save_replay and any(isinstance(lr, OffPolicyLearner) for lr in self.learners)
@@ -432,6 +466,7 @@ class Trainer:
                     f"{exc} -- the latest checkpoint is damaged or missing; the newest intact one is {intact.name} "
                     f"(epoch {checkpoint.recorded_epoch(intact)}): `triplesumo train --resume {self.run_dir} "
                     f"--from {intact.name}` continues from it (later epochs are trained again)") from exc
+        self.restored = folder
         tensors, state, arrays, lazy_replay = loaded
         replay: Mapping[str, np.ndarray] | None = lazy_replay
         if "learners" not in state and "optimizer" in state:
