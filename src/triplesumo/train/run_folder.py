@@ -108,6 +108,15 @@ REWARD_ADDED_LATER = ("axis_dead_zone",)
 default is the sign every earlier run was paid by), likewise."""
 
 
+def _with_added_later(data: Any, cls: type, added_later: tuple[str, ...]) -> Any:
+    """``data`` (a saved config section) with the defaults of the ``cls`` fields in ``added_later`` that it lacks;
+    anything but a dict as it is, for :func:`_check_keys` to name."""
+    if not isinstance(data, dict):
+        return data
+    defaults = dataclasses.asdict(cls())
+    return {**{k: defaults[k] for k in added_later}, **data}
+
+
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
@@ -115,9 +124,7 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
     data = _check_keys(data, TrainConfig, "", source)
-    if isinstance(data["reward"], dict):
-        reward_defaults = dataclasses.asdict(RewardConfig())
-        data["reward"] = {**{k: reward_defaults[k] for k in REWARD_ADDED_LATER}, **data["reward"]}
+    data["reward"] = _with_added_later(data["reward"], RewardConfig, REWARD_ADDED_LATER)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
     try:
         data["physics"] = PhysicsConfig(**_check_keys(physics_record(data["physics"]), PhysicsConfig, "physics.",
@@ -131,9 +138,7 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
             raise ValueError(f"{source}: {exc}") from exc
     data["policies"] = tuple(data["policies"])
     data["learn"] = tuple(data["learn"])
-    if isinstance(data["league"], dict):
-        league_defaults = dataclasses.asdict(LeagueConfig())
-        data["league"] = {**{k: league_defaults[k] for k in LEAGUE_ADDED_LATER}, **data["league"]}
+    data["league"] = _with_added_later(data["league"], LeagueConfig, LEAGUE_ADDED_LATER)
     try:
         league: dict[str, Any] = _check_keys(data["league"], LeagueConfig, "league.", source)
         data["league"] = LeagueConfig(**league)
