@@ -206,7 +206,6 @@ def test_resume_through_train_and_config_round_trip(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("fields", "message"), [
-    ({"learn": ("bug=sac",)}, "side 'team' has learning agents ['bug'] and fixed ones ['ant']"),
     ({"scenario": "ffa", "learn": ("ant=sac", "bug=sac")}, "free-for-all"),
     ({"scenario": "ffa", "learn": ("ant=sac",)}, "cannot tell which body it drives; use obs_mode 'egocentric'"),
     ({"learn": ("spider=sac",), "league": LeagueConfig(zoo=("ant=random",))},
@@ -290,6 +289,49 @@ def test_both_sides_learn_against_each_other_and_each_others_pools(both_run: Tra
     log = rows(league.root / "league.csv")
     assert [(int(r["epoch"]), r["side"]) for r in log] == [(e, s) for e in range(1, 17) for s in ("team", "spider")]
     assert (run / "plots" / "league.png").stat().st_size > 10_000
+
+
+def test_a_side_with_a_fixed_agent_learns_and_sits_out_only_its_learners_seats(tmp_path: Path) -> None:
+    """The contest's stage 1 (docs/CONTEST.md): Ant and Spider learn, Bug stays passive, and each learner meets
+    a still opponent (its pool's seed) in part of its matches. The team's pool holds Ant's role only; when the
+    team sits a match out its member takes Ant's seat and Bug keeps its fixed policy; a learner writes metrics
+    rows only for the matches it played, and a snapshot of the team is Ant's actor."""
+    league = LeagueConfig(threshold=0.0, window=2, snapshot_every=4, max_size=3, live_share=0.25, draw_score=0.5,
+                          zoo=("ant=passive", "spider=passive"), keep_zoo=True, zoo_share=1.0)
+    cfg = TrainConfig(name="stage1", out=str(tmp_path), epochs=16, steps_per_epoch=20, n_envs=2, checkpoint_every=8,
+                      seed=5, ddpg=DDPG, progress=False, tensorboard=False, self_play=True, league=league,
+                      learn=("ant=ddpg", "spider=ddpg"), policies=("bug=passive",))
+    trainer = Trainer(cfg)
+    assert trainer.seats.sides == {"team": ["ant"], "spider": ["spider"]}
+    assert trainer.seats.learning_sides == ["team", "spider"] and trainer.seats.opponent_sides == []
+    seen: list[list[str | None]] = []
+    draw = trainer.seats.draw
+
+    def spy(k: int) -> None:
+        draw(k)
+        seen.append(list(trainer.seats.members[k]))
+    trainer.seats.draw = spy  # type: ignore[method-assign]
+    trainer.run()
+    roster = list(trainer.seats.probe.agents)
+    ant, bug, spider = (roster.index(a) for a in ("ant", "bug", "spider"))
+    assert seen and all(m[bug] is None for m in seen)  # Bug is never a member's seat: it plays passive throughout
+    pool_ant = [m for m in seen if m[ant] is not None]
+    pool_spider = [m for m in seen if m[spider] is not None]
+    assert pool_ant and pool_spider and all(m[spider] is None for m in pool_ant)  # one side sits out at a time
+    assert {m[ant] for m in pool_ant} <= {"team-0001"} and {m[spider] for m in pool_spider} <= {"spider-0001"}
+    run = trainer.run_dir
+    ant_rows, spider_rows = (rows(run / f"metrics-{a}.csv") for a in ("ant", "spider"))
+    assert trainer.league is not None
+    pools = trainer.league.pools
+    pool_matches = sum(m.games for p in pools.values() for m in (*p.members, *p.evicted))
+    assert 0 < pool_matches < 16 and len(ant_rows) + len(spider_rows) == 16 + (16 - pool_matches)
+    assert len(ant_rows) < 16 and len(spider_rows) < 16
+    team = pools["team"]
+    assert team.roles == ("ant",) and pools["spider"].roles == ("spider",)
+    snapshots = [m for m in team.members if m.source == "self"]
+    assert snapshots and set(snapshots[0].policies) == {"ant"}
+    _, manifest = load_policy(trainer.league.root / snapshots[0].policies["ant"])  # (a snapshot: no zoo seeds)
+    assert manifest["role"] == "ant" and manifest["side"] == "team"
 
 
 def test_live_or_pool_draws_follow_live_share(tmp_path: Path) -> None:

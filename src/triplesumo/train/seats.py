@@ -60,9 +60,12 @@ class Seats:
         """Sides, roles and seeds of the league (docs/self-play.md); errors name the config field.
 
         A side is a team of the roster (paper: ``team`` = Ant and Bug, ``spider``); in a free-for-all
-        (every team one agent) one side ``ffa`` whose one role takes any seat. A side learns as a
-        whole or not at all; the seats of sides that do not learn are drawn from their pools, each
-        pool seeded by ``league.zoo`` or else by those seats' ``policies`` (passive when not named).
+        (every team one agent) one side ``ffa`` whose one role takes any seat. The seats of sides that do not
+        learn are drawn from their pools, each pool seeded by ``league.zoo`` or else by those seats'
+        ``policies`` (passive when not named). A side with learning and fixed agents (the paper's stage 1: Ant
+        learns, Bug passive) is a learning side whose roles are its learners': its fixed agents play their
+        ``policies`` in every match, and when the side sits a match out only its learners' seats go to a
+        member of its pool.
         """
         cfg, probe = self.cfg, self.probe
         roster = list(probe.agents)
@@ -86,17 +89,15 @@ class Seats:
             for a in roster:
                 sides.setdefault(teams[a], []).append(a)
             self.side_of, self.role_of = dict(teams), {a: a for a in roster}
-            for side, members in sides.items():
+            for side, members in list(sides.items()):
                 learning = [a for a in members if a in self.agents]
-                if learning and len(learning) != len(members):
-                    raise ValueError(
-                        f"TrainConfig.self_play: side {side!r} has learning agents {learning} and fixed ones "
-                        f"{[a for a in members if a not in learning]}; a side learns as a whole (e.g. "
-                        f"--learn {' '.join(f'{a}=sac' for a in members)} --share team) or not at all")
+                if learning:  # a side's fixed agents (paper: Bug passive beside a learning Ant) keep their
+                    sides[side] = learning  # policies in every match; its pool's members hold the learners' roles
         self.learning_sides = list(dict.fromkeys(self.side_of[a] for a in self.agents))
         """Sides whose learners learn; with several, each match is live or one plays the others' pools."""
-        self.opponent_sides = list(dict.fromkeys(self.side_of[a] for a in fixed))
-        if not fixed and len(self.learning_sides) < 2:
+        self.opponent_sides = list(dict.fromkeys(self.side_of[a] for a in fixed  # (free-for-all: the other seats)
+                                                 if self.ffa or self.side_of[a] not in self.learning_sides))
+        if not self.opponent_sides and len(self.learning_sides) < 2:
             raise ValueError(f"TrainConfig.self_play: every agent learns ({roster}) in one side; self-play draws "
                              "the seats of the agents that do not learn from pools, so leave a side out of learn")
         spec_of = dict(p.split("=", 1) for p in pairs)
@@ -107,6 +108,9 @@ class Seats:
             if not any(r in seeded for r in roles):
                 extra += [f"{r}={spec_of.get(a, 'passive')}" for r, a in
                           zip(roles, [a for a in fixed if self.side_of[a] == side], strict=False)]
+        self.sides = sides
+        """Side -> its roles in the league: every agent of a side that does not learn, the learning agents of
+        one that does."""
         lcfg = dataclasses.replace(cfg.league, zoo=(*cfg.league.zoo, *extra))
         try:
             # (resuming: the checkpoint's league state holds the seeded members, so seeding would only rewrite them)
@@ -124,8 +128,8 @@ class Seats:
         members: list[str | None] = [None] * len(roster)
         live = league.draw_live(self.learning_sides)
         for side in (*self.opponent_sides, *(s for s in self.learning_sides if s not in live)):
-            seats = [i for i, a in enumerate(roster)
-                     if self.side_of[a] == side and not (a in self.agents and side in live)]
+            seats = [i for i, a in enumerate(roster) if self.side_of[a] == side and self.role_of[a] in
+                     self.sides[side] and not (a in self.agents and side in live)]
             picks = league.sample(side, len(seats) if self.ffa else 1)
             for j, i in enumerate(seats):
                 members[i] = picks[j if self.ffa else 0].id
@@ -165,8 +169,10 @@ class Seats:
         league = self.league
         assert league is not None
         if not (outcomes == ERROR_CODE).any():
-            players = [self.members[k][i] or League.learner(self.side_of[a])
-                       for i, a in enumerate(self.probe.agents)]
+            # a learning side's fixed agent (Bug passive beside Ant) plays for whoever holds its side's seats
+            sat_out = {self.side_of[a]: m for a, m in zip(self.probe.agents, self.members[k], strict=True) if m}
+            players = [self.members[k][i] or (None if a in self.agents or self.ffa else sat_out.get(self.side_of[a]))
+                       or League.learner(self.side_of[a]) for i, a in enumerate(self.probe.agents)]
             league.record_seats(players, [float(p) if int(p) > 0 else 1.0 for p in places],
                                 [a.team for a in self.match_cfg.agents])
         for side in self.learning_sides:
