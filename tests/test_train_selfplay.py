@@ -294,13 +294,14 @@ def test_both_sides_learn_against_each_other_and_each_others_pools(both_run: Tra
 def test_a_side_with_a_fixed_agent_learns_and_sits_out_only_its_learners_seats(tmp_path: Path) -> None:
     """The contest's stage 1 (docs/CONTEST.md): Ant and Spider learn, Bug stays passive, and each learner meets
     a still opponent (its pool's seed) in part of its matches. The team's pool holds Ant's role only; when the
-    team sits a match out its member takes Ant's seat and Bug keeps its fixed policy; a learner writes metrics
+    team sits a match out its member takes Ant's seat and Bug keeps its fixed policy (random here, so that it
+    shows); a learner writes metrics
     rows only for the matches it played, and a snapshot of the team is Ant's actor."""
     league = LeagueConfig(threshold=0.0, window=2, snapshot_every=4, max_size=3, live_share=0.25, draw_score=0.5,
                           zoo=("ant=passive", "spider=passive"), keep_zoo=True, zoo_share=1.0)
     cfg = TrainConfig(name="stage1", out=str(tmp_path), epochs=16, steps_per_epoch=20, n_envs=2, checkpoint_every=8,
                       seed=5, ddpg=DDPG, progress=False, tensorboard=False, self_play=True, league=league,
-                      learn=("ant=ddpg", "spider=ddpg"), policies=("bug=passive",))
+                      learn=("ant=ddpg", "spider=ddpg"), policies=("bug=random",))
     trainer = Trainer(cfg)
     assert trainer.seats.sides == {"team": ["ant"], "spider": ["spider"]}
     assert trainer.seats.learning_sides == ["team", "spider"] and trainer.seats.opponent_sides == []
@@ -311,10 +312,19 @@ def test_a_side_with_a_fixed_agent_learns_and_sits_out_only_its_learners_seats(t
         draw(k)
         seen.append(list(trainer.seats.members[k]))
     trainer.seats.draw = spy  # type: ignore[method-assign]
-    trainer.run()
     roster = list(trainer.seats.probe.agents)
     ant, bug, spider = (roster.index(a) for a in ("ant", "bug", "spider"))
-    assert seen and all(m[bug] is None for m in seen)  # Bug is never a member's seat: it plays passive throughout
+    bug_acts: list[np.ndarray] = []
+    env = trainer.collector.env
+    step = env.step
+
+    def record(actions: np.ndarray) -> Any:
+        bug_acts.append(np.array(actions[:, bug]))
+        return step(actions)
+    env.step = record  # type: ignore[method-assign]
+    trainer.run()
+    assert seen and all(m[bug] is None for m in seen)  # Bug is never a member's seat: it plays its own policy
+    assert all(np.abs(a).max() > 0.1 for a in bug_acts)  # (random, in every match: the league does not silence it)
     pool_ant = [m for m in seen if m[ant] is not None]
     pool_spider = [m for m in seen if m[spider] is not None]
     assert pool_ant and pool_spider and all(m[spider] is None for m in pool_ant)  # one side sits out at a time

@@ -214,7 +214,7 @@ class Collector:
             seen.append(obs)
             acted.append(act)
         for i, policy in self.others:
-            if self.seats.league is not None or (self.device is not None and isinstance(policy, ZeroPolicy)):
+            if i in self.seats.league_seats or (self.device is not None and isinstance(policy, ZeroPolicy)):
                 continue
             if i in self.on_device:
                 actions[:, i, :probe.action_sizes[i]] = self.on_device[i](self.obs[:, i])

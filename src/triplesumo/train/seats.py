@@ -52,6 +52,9 @@ class Seats:
         self._groups: tuple[list[tuple[int, Any, torch.Tensor]], list[tuple[int, int, Any]]] | None = None
         """warp: the seats' trained members with the matches each plays, and the random seats (None: stale)."""
         self._device_policies: dict[int, tuple[FrozenPolicy, Any]] = {}
+        self.league_seats: frozenset[int] = frozenset()
+        """Seats whose player the league draws (the sides that do not learn); a fixed agent of a learning side
+        plays its own policy in every match."""
         if cfg.self_play:
             self._setup_league(pairs, run_dir, league_seed, resume)
 
@@ -100,6 +103,7 @@ class Seats:
         if not self.opponent_sides and len(self.learning_sides) < 2:
             raise ValueError(f"TrainConfig.self_play: every agent learns ({roster}) in one side; self-play draws "
                              "the seats of the agents that do not learn from pools, so leave a side out of learn")
+        self.league_seats = frozenset(i for i, a in enumerate(roster) if self.side_of[a] in self.opponent_sides)
         spec_of = dict(p.split("=", 1) for p in pairs)
         seeded = {e.split("=", 1)[0] for e in cfg.league.zoo}
         extra: list[str] = []
