@@ -3,7 +3,8 @@
 The README stays short and starts with the two commands; every relative link of the README and the
 site's pages resolves to a file of the repository; every page of the nav exists and every page is
 in the nav; the environment pages are what docs/gen_env_pages.py writes from the code; the API
-reference covers every public module; and, where MkDocs is installed (the ``docs`` extra),
+reference covers every public module and shows the docstrings' Sphinx roles as code (and links), not
+literally (docs/griffe_roles.py); and, where MkDocs is installed (the ``docs`` extra),
 ``mkdocs build --strict`` passes.
 """
 
@@ -97,12 +98,17 @@ def test_nav_pages_exist_and_every_page_is_in_the_nav() -> None:
     assert not left_out, f"pages not in mkdocs.yml's nav: {left_out}"
 
 
-def _generator() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("gen_env_pages", DOCS / "gen_env_pages.py")
+def _docs_module(name: str) -> ModuleType:
+    """A Python file of docs/ (not a package) as a module."""
+    spec = importlib.util.spec_from_file_location(name, DOCS / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _generator() -> ModuleType:
+    return _docs_module("gen_env_pages")
 
 
 def test_environment_pages_are_in_sync_with_the_code() -> None:
@@ -140,6 +146,32 @@ def test_api_reference_covers_every_public_module() -> None:
     assert public - documented == set(), f"modules missing from docs/api/: {sorted(public - documented)}"
 
 
+LITERAL_ROLE = re.compile(r":(?:py:)?(?:class|meth|func|data|mod|attr|obj|exc|const):`")
+
+
+def test_sphinx_roles_become_optional_cross_references_shown_as_code() -> None:
+    convert = _docs_module("griffe_roles").convert_roles
+    ref = '<autoref identifier="{}" optional>`{}`</autoref>'.format
+    assert convert("a :class:`~triplesumo.algos.replay.ReplayBuffer`.") == \
+        f"a {ref('triplesumo.algos.replay.ReplayBuffer', 'ReplayBuffer')}."
+    assert convert(":func:`triplesumo.rules.outcome.place_value`") == \
+        ref("triplesumo.rules.outcome.place_value", "triplesumo.rules.outcome.place_value")
+    # a relative target shows as written, under the path the resolver gives (none: the target itself)
+    assert convert("see :meth:`DDPG.update`") == f"see {ref('DDPG.update', 'DDPG.update')}"
+    paths = {("DDPG.update", "meth"): "triplesumo.algos.ddpg.DDPG.update"}
+    assert convert("see :meth:`DDPG.update`", lambda t, r: paths.get((t, r))) == \
+        f"see {ref('triplesumo.algos.ddpg.DDPG.update', 'DDPG.update')}"
+    assert convert(":meth:`MatchBatch.step_arrays <triplesumo.envs.batch.MatchBatch.step_arrays>`") == \
+        ref("triplesumo.envs.batch.MatchBatch.step_arrays", "MatchBatch.step_arrays")
+    assert convert(":mod:`.rewards`, :py:data:`~.OUTCOMES`") == \
+        f"{ref('rewards', 'rewards')}, {ref('OUTCOMES', 'OUTCOMES')}"
+    for role in ("attr", "data", "mod", "exc", "obj", "const"):
+        assert not LITERAL_ROLE.search(convert(f"x :{role}:`a.b` y")), role
+    # inline code keeps a role literally (a docstring may show one), and text without roles is unchanged
+    assert convert("``:class:`X` `` and :class:`X`") == f"``:class:`X` `` and {ref('X', 'X')}"
+    assert convert("no roles: `code`, a: b") == "no roles: `code`, a: b"
+
+
 @pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="needs the docs extra (mkdocs)")
 def test_site_builds_strict(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
@@ -153,3 +185,8 @@ def test_site_builds_strict(tmp_path: Path) -> None:
     assert (tmp_path / "site" / "repo" / "reproduction" / "compare" / "compare.png").is_file()
     assert (tmp_path / "site" / "runs" / "league" / "leaderboard.png").is_file()
     assert not (tmp_path / "site" / "runs" / "league" / "matches.csv").exists()
+    # docs/griffe_roles.py: no Sphinx role is left literally in the API reference; a resolved one is a link
+    api = {p.name: p.read_text() for p in (tmp_path / "site" / "api").glob("*.html")}
+    literal = {name: LITERAL_ROLE.findall(text)[:3] for name, text in api.items() if LITERAL_ROLE.search(text)}
+    assert not literal, f"Sphinx roles shown literally: {literal}"
+    assert 'href="#triplesumo.algos.base.Algorithm"><code>Algorithm</code></a>' in api["algos.html"]

@@ -64,7 +64,9 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     - ``reward_still``: the still punishment, a negative constant every step
     - ``reward_outcome``: +500 win, -400 loss, 0 draw, on the final step
 
-    Means are over opponents ``o`` (Spider has two: Ant and Bug). Defaults C1 = C2 = C3 = 5,
+    Means are over opponents ``o`` (Spider has two: Ant and Bug). Each ``sign`` (per axis ``k``)
+    counts 0 where the two torsos' ``k`` coordinates differ by at most
+    ``RewardConfig.axis_dead_zone`` metres (default 0: the paper's sign). Defaults C1 = C2 = C3 = 5,
     still -4 (the paper's code); see :class:`triplesumo.rules.RewardConfig`. ``info`` also
     has ``dense_reward``, ``sparse_reward``, ``outcome`` (an int code for the agent's side:
     0 while playing, 1 win, 2 loss, 3 draw, 4 physics error;
@@ -77,7 +79,8 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     ``start_edge`` (1.0 m) from its nearest edge of the ring and as far from the edge behind
     it. Up to four agents stand on the ring's diagonals (Ant at (-1, -1), Bug at (1, 1),
     Spider at (1, -1)), facing the centre turned by one common angle so that no leg rests on
-    the rim; rosters that fit no fair start (five or more quadrupeds) keep the circle below
+    the rim; rosters that fit no fair start (five or six agents, or some custom rosters of
+    mixed bodies) keep the circle below
     (:mod:`triplesumo.model.layout`). Torso at height 1.25 so they drop onto the tatami.
     Seeded noise (``ResetNoise(position=0.02, yaw=0.05)``): uniform +-0.02 m on x and y,
     +-0.05 rad on yaw, +-0.1 rad on every leg joint, Gaussian 0.1 on every qvel. Zero noise

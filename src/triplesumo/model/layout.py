@@ -22,8 +22,9 @@ together in 5 cm steps, first inwards, then outwards.
 
 Not every roster fits: five quadrupeds stand clear of each other only 0.3 m from the edges with legs
 0.7 m over the rim, and six not at all (their legs span 2.4 m in a 4 m ring). Such a roster starts
-on the circle layout below, which is not fair; :func:`fair_layout` returns ``None`` for it and the
-match's ``info``/docs say which layout a roster got (every roster of up to four agents is fair).
+on the circle layout below, which is not fair; :func:`fair_layout` returns ``None`` for it. Every
+scenario's roster of up to four agents is fair (tests/test_start_layout.py); a custom roster of mixed
+bodies may not be (ant, spider and bug in that order fit no turn).
 
 **Circle (env v0 and v1).** Agents evenly spaced on a circle around the ring's centre, the first at
 angle 0, each facing the centre, kept whenever bodies stand at least :data:`CLEARANCE` apart;
