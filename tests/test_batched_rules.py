@@ -28,10 +28,12 @@ ROSTERS = {
 }
 
 
-@pytest.mark.parametrize("dead_zone", [0.0, 0.3], ids=["sign", "dead-zone"])
+@pytest.mark.parametrize(("dead_zone", "opponents"), [(0.0, "mean"), (0.3, "mean"), (0.0, "sum")],
+                         ids=["sign", "dead-zone", "sum"])
 @pytest.mark.parametrize("roster", ROSTERS.values(), ids=list(ROSTERS))
-def test_outcomes_and_reward_terms_equal_the_per_match_rules(roster, dead_zone: float) -> None:
-    cfg = MatchConfig(agents=roster, reward=RewardConfig(win=500.0, loss=-400.0, draw=-7.0, axis_dead_zone=dead_zone))
+def test_outcomes_and_reward_terms_equal_the_per_match_rules(roster, dead_zone: float, opponents: str) -> None:
+    cfg = MatchConfig(agents=roster, reward=RewardConfig(win=500.0, loss=-400.0, draw=-7.0, axis_dead_zone=dead_zone,
+                                                         opponents=opponents))
     rules = B.BatchedRules.build(cfg, half_size=2.0)
     teams = Teams.from_agents(roster)
     rule = RewardRule(teams, cfg.reward)

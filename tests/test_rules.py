@@ -378,3 +378,26 @@ def test_axis_dead_zone_zero_is_the_paper_sign_bit_for_bit() -> None:
         assert default.dense(pos, vel) == zero.dense(pos, vel)
     wide = RewardRule(teams, RewardConfig(axis_dead_zone=10.0))  # every axis inside the band: no velocity terms
     assert wide.dense(pos, vel) == [(0.0, 0.0, 0.0)] * 3
+
+
+def test_opponents_sum_pays_spider_each_opponent_at_full_weight() -> None:
+    """``RewardConfig.opponents``: ``mean`` (default) averages Spider's per-opponent velocity terms over Ant and
+    Bug, ``sum`` adds them, so Spider's terms double and Ant's and Bug's (one opponent each) stay bit for bit."""
+    rng = np.random.default_rng(5)
+    teams = Teams.from_agents(PAPER_AGENTS)
+    mean, total = RewardRule(teams, RewardConfig()), RewardRule(teams, RewardConfig(opponents="sum"))
+    spider = [a.name for a in PAPER_AGENTS].index("spider")
+    for _ in range(50):
+        pos, vel = rng.uniform(-2, 2, (3, 3)).tolist(), rng.normal(size=(3, 3)).tolist()
+        m, t = mean.dense(pos, vel), total.dense(pos, vel)
+        for i in range(3):
+            if i == spider:
+                assert t[i][:2] == pytest.approx((2 * m[i][0], 2 * m[i][1])) and t[i][2] == m[i][2] == 0.0
+            else:
+                assert t[i] == m[i]
+        assert total.dense_in_play(pos, vel, [True] * 3) == t
+        alive = [True] * 3
+        alive[int(rng.integers(3))] = False  # one out: nobody has two opponents in play, so sum is mean
+        assert total.dense_in_play(pos, vel, alive) == mean.dense_in_play(pos, vel, alive)
+    with pytest.raises(ValueError, match=r"RewardConfig.opponents must be one of \('mean', 'sum'\), got 'max'"):
+        RewardConfig(opponents="max")

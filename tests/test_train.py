@@ -702,8 +702,9 @@ def test_a_config_written_before_the_axis_dead_zone_reads_with_the_paper_sign() 
 
     data = json.loads((Path(__file__).resolve().parents[1] / "docs/runs/contest-v2/contest-co-draw200/config.json")
                       .read_text())
-    assert "axis_dead_zone" not in data["reward"]
-    assert config_from_json(data).reward.axis_dead_zone == 0.0
+    assert "axis_dead_zone" not in data["reward"] and "opponents" not in data["reward"]
+    read = config_from_json(data).reward
+    assert read.axis_dead_zone == 0.0 and read.opponents == "mean"  # (and the mean over opponents, likewise)
     del data["reward"]["still"]
     with pytest.raises(ValueError, match=r"missing key\(s\) \['reward.still'\]"):
         config_from_json(data)

@@ -64,7 +64,8 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     - ``reward_still``: the still punishment, a negative constant every step
     - ``reward_outcome``: +500 win, -400 loss, 0 draw, on the final step
 
-    Means are over opponents ``o`` (Spider has two: Ant and Bug). Each ``sign`` (per axis ``k``)
+    Means are over opponents ``o`` (Spider has two: Ant and Bug; ``RewardConfig.opponents="sum"``
+    sums over them instead). Each ``sign`` (per axis ``k``)
     counts 0 where the two torsos' ``k`` coordinates differ by at most
     ``RewardConfig.axis_dead_zone`` metres (default 0: the paper's sign). Defaults C1 = C2 = C3 = 5,
     still -4 (the paper's code); see :class:`triplesumo.rules.RewardConfig`. ``info`` also

@@ -55,7 +55,8 @@ class BatchedRules:
     partners: Any
     """``(n_agents, n_agents)`` 1.0 where ``j`` is a partner of ``i`` (row ``i``)."""
     n_opponents: Any
-    """``(n_agents,)`` how many opponents each agent has (at least one in a valid roster)."""
+    """``(n_agents,)`` how many opponents each agent has (at least one in a valid roster): the divisor of the
+    per-opponent sums, 1 with ``RewardConfig.opponents="sum"``."""
     n_partners: Any
     """``(n_agents,)`` how many partners, or 1 where there are none (the partner term is 0 then)."""
     others: Any
@@ -85,7 +86,8 @@ class BatchedRules:
         table = np.zeros(max(GOES_ON, WIN_CODE, LOSS_CODE, DRAW_CODE, ERROR_CODE) + 1)
         table[[WIN_CODE, LOSS_CODE, DRAW_CODE]] = r.win, r.loss, r.draw
         return cls(n, float(half_size), config.max_steps, float(config.contact_force_clip), onehot, opponents,
-                   partners, opponents.sum(1), np.maximum(partners.sum(1), 1.0), others,
+                   partners, opponents.sum(1) if r.opponents == "mean" else np.ones(n),
+                   np.maximum(partners.sum(1), 1.0), others,
                    (float(r.opponent_velocity), float(r.self_velocity), float(r.partner_velocity), float(r.still)),
                    (float(r.win), float(r.loss), float(r.draw)), table, float(r.axis_dead_zone))
 

@@ -69,7 +69,17 @@ class RewardConfig:
     (measured on 200 starts: nothing in 106, double in 94; docs/CONTEST.md); a band wider than the noise (e.g.
     0.25) pays it half on every start, as Ant is paid the whole term for walking at Spider."""
 
+    opponents: str = "mean"
+    """How an agent with several opponents combines its per-opponent velocity terms: ``mean`` (the default; env
+    v2's reward unchanged) or ``sum``. With one opponent (Ant, Bug in the paper's match) both are the same. With
+    ``mean`` Spider, whose two opponents are Ant and Bug, is paid half for approaching or shoving one of them what
+    Ant is paid for approaching or shoving Spider; in the contest's stage 1, where Bug stands still, that halves
+    Spider's only signal toward the opponent that fights back (docs/CONTEST.md). ``sum`` pays each opponent at
+    full weight."""
+
     def __post_init__(self) -> None:
+        if self.opponents not in OPPONENT_REDUCTIONS:
+            raise ValueError(f"RewardConfig.opponents must be one of {OPPONENT_REDUCTIONS}, got {self.opponents!r}")
         for name in ("opponent_velocity", "self_velocity", "partner_velocity", "still", "win", "loss", "draw",
                      "axis_dead_zone"):
             value = getattr(self, name)
@@ -80,6 +90,10 @@ class RewardConfig:
         if self.axis_dead_zone < 0:
             raise ValueError(f"RewardConfig.axis_dead_zone is a half-width in metres and must be >= 0, "
                              f"got {self.axis_dead_zone}")
+
+
+OPPONENT_REDUCTIONS = ("mean", "sum")
+"""How :attr:`RewardConfig.opponents` combines an agent's per-opponent velocity terms."""
 
 
 @dataclass(frozen=True)

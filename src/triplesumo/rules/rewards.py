@@ -8,6 +8,8 @@ the opponents and ``P_i`` the partners of agent ``i``::
     opponent_velocity_i = C1 * mean_{o in O_i} sum_{k in x,y} s(i, o)_k * v_{o,k}
     self_velocity_i     = C2 * mean_{o in O_i} sum_{k in x,y} s(i, o)_k * v_{i,k}
     partner_velocity_i  = C3 * mean_{j in P_i} mean_{o in O_i} sum_k s(j, o)_k * v_{j,k}
+
+(``RewardConfig.opponents="sum"`` sums over ``O_i`` instead of averaging: the same for one opponent.)
     still_i             = still punishment (a negative constant, every step)
     outcome_i           = win / loss / draw reward on the step the match ends, else 0
 
@@ -72,6 +74,7 @@ class RewardRule:
         self._c = (float(cfg.opponent_velocity), float(cfg.self_velocity), float(cfg.partner_velocity))
         self._still = float(cfg.still)
         self._dead = float(cfg.axis_dead_zone)
+        self._mean = cfg.opponents == "mean"
         self._value = {WIN: float(cfg.win), LOSS: float(cfg.loss), DRAW: float(cfg.draw)}
 
     def dense(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
@@ -88,7 +91,7 @@ class RewardRule:
         c1, c2, c3 = self._c
         out = []
         for opponent_pairs, partner_pairs in zip(self._opponent_pairs, self._partner_pairs, strict=True):
-            n_opp = len(opponent_pairs)
+            n_opp = len(opponent_pairs) if self._mean else 1
             sum_away = sum_toward = 0.0
             for k in opponent_pairs:
                 sum_away += away[k]
@@ -124,7 +127,7 @@ class RewardRule:
                 out.append((0.0, 0.0, 0.0))
                 continue
             partners = [j for j in range(self.n_agents) if alive[j] and j != i and team_of[j] == team_of[i]]
-            n_opp = len(opponents)
+            n_opp = len(opponents) if self._mean else 1
             opp = c1 * sum(toward(i, o, o) for o in opponents) / n_opp
             slf = c2 * sum(toward(i, o, i) for o in opponents) / n_opp
             par = 0.0

@@ -103,9 +103,9 @@ LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_thres
                       "zoo_share")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
-REWARD_ADDED_LATER = ("axis_dead_zone",)
-"""RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs, whose
-default is the sign every earlier run was paid by), likewise."""
+REWARD_ADDED_LATER = ("axis_dead_zone", "opponents")
+"""RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs; how several
+opponents' terms combine), whose defaults are what every earlier run was paid by, likewise."""
 
 
 def _with_added_later(data: Any, cls: type, added_later: tuple[str, ...]) -> Any:
