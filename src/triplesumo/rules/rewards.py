@@ -8,10 +8,10 @@ the opponents and ``P_i`` the partners of agent ``i``::
     opponent_velocity_i = C1 * mean_{o in O_i} sum_{k in x,y} s(i, o)_k * v_{o,k}
     self_velocity_i     = C2 * mean_{o in O_i} sum_{k in x,y} s(i, o)_k * v_{i,k}
     partner_velocity_i  = C3 * mean_{j in P_i} mean_{o in O_i} sum_k s(j, o)_k * v_{j,k}
-
-(``RewardConfig.opponents="sum"`` sums over ``O_i`` instead of averaging: the same for one opponent.)
     still_i             = still punishment (a negative constant, every step)
     outcome_i           = win / loss / draw reward on the step the match ends, else 0
+
+(``RewardConfig.opponents="sum"`` sums over ``O_i`` instead of averaging: the same for one opponent.)
 
 The opponent term is positive when the opponent moves away from the agent along an
 axis; the self and partner terms are positive when that agent moves toward the

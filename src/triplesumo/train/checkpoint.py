@@ -151,8 +151,9 @@ def drop_after(run_dir: Path, epoch: int) -> None:
     """Remove the checkpoint folders of ``run_dir`` that record an epoch later than ``epoch``: a history
     abandoned by ``--resume --from`` (its rows are cut; the epochs are trained again). Folders that record
     no epoch are left alone."""
-    for _, newer in [(e, f) for e, f in checkpoints(run_dir) if e > epoch]:
-        shutil.rmtree(newer, ignore_errors=True)
+    for e, folder in checkpoints(run_dir):
+        if e > epoch:
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def _json_bytes(value: dict[str, Any]) -> bytes:

@@ -173,9 +173,11 @@ class Seats:
         league = self.league
         assert league is not None
         if not (outcomes == ERROR_CODE).any():
-            # a learning side's fixed agent (Bug passive beside Ant) plays for whoever holds its side's seats
+            # an agent outside its side's league roles (Bug passive beside a learning Ant) plays for whoever holds
+            # its side's seats this match: the member that sat the side out, else the side's learner
             sat_out = {self.side_of[a]: m for a, m in zip(self.probe.agents, self.members[k], strict=True) if m}
-            players = [self.members[k][i] or (None if a in self.agents or self.ffa else sat_out.get(self.side_of[a]))
+            players = [self.members[k][i] or (sat_out.get(self.side_of[a]) if self.role_of[a] not in
+                                              self.sides[self.side_of[a]] else None)
                        or League.learner(self.side_of[a]) for i, a in enumerate(self.probe.agents)]
             league.record_seats(players, [float(p) if int(p) > 0 else 1.0 for p in places],
                                 [a.team for a in self.match_cfg.agents])
