@@ -61,7 +61,7 @@ def contest_verdict(counts: dict[str, dict[str, int]], ant: str, spider: str) ->
     if ant_push < PUSH_MIN:
         failed.append(f"the Ant pushes a passive Spider out in {ant_push:.1%} of the starts (at least {PUSH_MIN:.0%})")
     if spider_push < PUSH_MIN:
-        failed.append(f"the Spider pushes a passive Ant out in {spider_push:.1%} of the starts "
+        failed.append(f"the Spider pushes a passive Ant or Bug out (its win) in {spider_push:.1%} of the starts "
                       f"(at least {PUSH_MIN:.0%})")
     if not lo <= team_mwr <= hi:
         failed.append(f"with Bug passive the team's MWR is {team_mwr:+.3f} (the band is [{lo:+.2f}, {hi:+.2f}])")
@@ -76,7 +76,7 @@ def format_contest(facts: dict[str, Any]) -> str:
     lo, hi = facts["band"]
     return "\n".join([
         f"  Ant pushes a passive Spider out: {facts['ant_pushes']:.1%} (at least {facts['push_min']:.0%})",
-        f"  Spider pushes a passive Ant out: {facts['spider_pushes']:.1%} (at least {facts['push_min']:.0%})",
+        f"  Spider pushes a passive Ant or Bug out: {facts['spider_pushes']:.1%} (at least {facts['push_min']:.0%})",
         f"  Bug passive: team wins {facts['team_wins']:.1%}, loses {facts['team_losses']:.1%}, draws "
         f"{facts['draws']:.1%}; team MWR {facts['team_mwr']:+.3f} (band [{lo:+.2f}, {hi:+.2f}])",
         f"  verdict: {'a contest' if facts['contest'] else 'NOT a contest'} ({facts['matches']:,} starts each)"])

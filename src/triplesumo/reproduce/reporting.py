@@ -136,7 +136,7 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
                   "| check | value | bound | |", "| --- | ---: | ---: | --- |",
                   f"| Ant pushes a passive Spider out | {c['ant_pushes']:.1%} | >= {c['push_min']:.0%} | "
                   f"{'ok' if c['ant_pushes'] >= c['push_min'] else 'failed'} |",
-                  f"| Spider pushes a passive Ant out | {c['spider_pushes']:.1%} | >= {c['push_min']:.0%} | "
+                  f"| Spider pushes a passive Ant or Bug out | {c['spider_pushes']:.1%} | >= {c['push_min']:.0%} | "
                   f"{'ok' if c['spider_pushes'] >= c['push_min'] else 'failed'} |",
                   f"| team MWR, Bug passive (wins {c['team_wins']:.1%}, losses {c['team_losses']:.1%}, draws "
                   f"{c['draws']:.1%}) | {c['team_mwr']:+.3f} | [{lo:+.2f}, {hi:+.2f}] | "
