@@ -19,6 +19,7 @@ from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.evaluation.tournament import _manifest as tournament_manifest
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce import ReproduceConfig, check_same_options
+from triplesumo.rules.config import RewardConfig
 
 
 def _record(out: Path) -> dict:
@@ -33,16 +34,22 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "ppo", "--seeds", "0", "--no-progress",
             "--ablations", "noise=gaussian", "still=-1", "--publish"]
     assert main(argv) == 0
-    stages = ["match", "contest", "bug", "ablations", "evaluation", "compare"]
+    stages = ["ant", "spider", "contest", "bug", "ablations", "evaluation", "compare"]
     record = _record(out)
     assert record["runs"][-1]["ran"] == stages and record["runs"][-1]["version"]
     for name in stages:
         for rel in record["stages"][name]["outputs"]:
             assert (out / rel).exists(), rel
         assert record["stages"][name]["commands"]
-    match_cmd = record["stages"]["match"]["commands"][0]
-    assert match_cmd.startswith("triplesumo train --name match") and "--learn ant=ddpg spider=ddpg" in match_cmd
-    assert "--reward.still -1" in match_cmd  # the pre-training reward: losing costs more than surviving
+    for role, others in (("ant", "bug=passive spider=passive"), ("spider", "ant=passive bug=passive")):
+        cmd = record["stages"][role]["commands"][0]  # each side alone against still opponents
+        assert cmd.startswith(f"triplesumo train --name {role}") and f"--learn {role}=ddpg" in cmd
+        assert f"--policies {others}" in cmd
+        # the pre-training reward: losing costs more than surviving, a draw costs, the band, summed terms
+        for option in ("--reward.still -1", "--reward.draw -200", "--reward.axis-dead-zone 0.25",
+                       "--reward.opponents sum"):
+            assert option in cmd, (option, cmd)
+        assert json.loads((out / role / "config.json").read_text())["reward"]["opponents"] == "sum"
     assert (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.json").exists()
     contest = json.loads((out / "contest" / "contest.json").read_text())
     assert contest["matches"] == 4 and contest["team_wins"] + contest["team_losses"] + contest["draws"] == 1.0
@@ -159,8 +166,9 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     ({"ablations": ("noise=gaussian", "ddpg.noise=gaussian")}, "a change given twice"),
     ({"ablations": ("noise=gaussian",), "algos": ("sac",)}, "algos must include ddpg"),
     ({"cpus_per_trial": 0}, "ReproduceConfig.cpus_per_trial must be an int >= 1"),
-    ({"pretrain_still": -4.0}, r"pretrain_still -4.0: surviving without a result would be worth -400"),
-    ({"pretrain_still": 1.0}, "pretrain_still must be a finite number <= 0"),
+    ({"pretrain": RewardConfig(still=-4.0)}, r"pretrain.still -4.0: surviving without a result would be worth -400"),
+    ({"pretrain": RewardConfig(still=-3.0, loss=-250.0)}, r"pretrain.still -3.0: .*worth -300.*losing \(-250\)"),
+    ({"pretrain": "still=-1"}, "pretrain must be a RewardConfig"),
     ({"pair": ("zoo:ant",)}, "pair must be two policies"),
     ({"num_cpus": 2}, "options of ray"),
 ])
@@ -262,7 +270,7 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
     rows = {line.split()[1]: line.split()[2:] for line in capsys.readouterr().out.splitlines()[1:-1]}
     assert rows["learn=bug=ddpg,seed=0"][:2] == ["complete", _rows_env_steps(out / "bug" / "learn=bug=ddpg,seed=0")]
     assert rows["learn=bug=ddpg,seed=1"][:3] == ["running", "or", "stopped"]
-    assert rows["match"][0] == rows["contest"][0] == rows["compare"][0] == "complete"
+    assert rows["ant"][0] == rows["spider"][0] == rows["contest"][0] == rows["compare"][0] == "complete"
     assert _record(out) == record  # nothing ran, nothing recorded
     skill = (out / "REPRODUCTION.md").read_text().split("## Time to skill")[1]
     assert "| learn=bug=ddpg,seed=1 | not yet |" in skill and "| learn=bug=ddpg,seed=0 | not yet |" not in skill
@@ -279,7 +287,7 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
         "<!-- reproduce:end -->\n\n## History\n") and "\nold\n" not in text
     assert "\n### Time to skill\n" in text and "\n## Time to skill\n" in generated
     assert "](../rep/bug/test_mwr.png)" in text and "](bug/test_mwr.png)" in generated
-    assert "\n# match (" in text  # the commands block keeps its bash comments
+    assert "\n# spider (" in text  # the commands block keeps its bash comments
     page.write_text("# Ours, no markers\n")
     capsys.readouterr()
     assert main([*argv, "--status", "--docs", str(page)]) == 2
@@ -318,8 +326,9 @@ def test_the_bug_stage_refuses_a_pair_that_is_no_contest(tmp_path: Path) -> None
     cfg = ReproduceConfig(out=str(tmp_path / "rep"), pair=("passive", "passive"), contest_epochs=4, n_envs=2,
                           algos=("ddpg",), seeds=(0,), progress=False)
     with pytest.raises(ContestError, match=r"stage bug refused: the pair passive / passive failed the contest rule: "
-                                           r"the Ant pushes a passive Spider out in 0.0% .*the Spider pushes a passive "
-                                           r"Ant or Bug out \(its win\) in 0.0% .*team's MWR is \+0.000 .*contest.json"):
+                                           r"the Ant pushes a passive Spider out in 0.0% .*the Spider pushes a "
+                                           r"passive Ant or Bug out \(its win\) in 0.0% .*team's MWR is \+0.000 "
+                                           r".*contest.json"):
         run_reproduce(cfg)
     contest = json.loads((tmp_path / "rep" / "contest" / "contest.json").read_text())
     assert contest["contest"] is False and contest["draws"] == 1.0 and contest["matches"] == 4

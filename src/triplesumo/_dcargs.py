@@ -43,11 +43,12 @@ def _flag(prefix: str, name: str) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "",
-                  skip: tuple[str, ...] = ()) -> None:
-    """Add one option per field of dataclass ``cls`` (recursing into nested dataclasses)."""
+                  skip: tuple[str, ...] = (), defaults: Any = None) -> None:
+    """Add one option per field of dataclass ``cls`` (recursing into nested dataclasses). The help gives each
+    field's value in ``defaults`` (``cls()`` if None; a nested dataclass: its value in the outer default)."""
     hints = typing.get_type_hints(cls)
     docs = field_docs(cls)
-    defaults = cls()
+    defaults = cls() if defaults is None else defaults
     for f in dataclasses.fields(cls):
         if f.name in skip:
             continue
@@ -55,7 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser, cls: type, prefix: str = "",
         default = getattr(defaults, f.name)
         dest = (prefix + f.name).replace(".", "__")
         if dataclasses.is_dataclass(tp):
-            add_arguments(parser, typing.cast(type, tp), prefix=f"{prefix}{f.name}.")
+            add_arguments(parser, typing.cast(type, tp), prefix=f"{prefix}{f.name}.", defaults=default)
             continue
         help_text = f"{docs.get(f.name, '')} (default: {default!r})".strip()
         kwargs: dict[str, Any] = {"dest": dest, "default": argparse.SUPPRESS, "help": help_text}
@@ -94,16 +95,17 @@ def build(cls: type, namespace: argparse.Namespace, prefix: str = "", base: Any 
     return dataclasses.replace(base, **values)
 
 
-def to_argv(obj: Any, prefix: str = "") -> list[str]:
-    """The options that rebuild dataclass ``obj`` from its class defaults (inverse of :func:`build`)."""
+def to_argv(obj: Any, prefix: str = "", defaults: Any = None) -> list[str]:
+    """The options that rebuild dataclass ``obj`` from its class defaults (inverse of :func:`build`); ``defaults``:
+    the values to rebuild from instead (a nested dataclass: its value in the outer default)."""
     cls = type(obj)
     hints = typing.get_type_hints(cls)
-    defaults = cls()
+    defaults = cls() if defaults is None else defaults
     argv: list[str] = []
     for f in dataclasses.fields(cls):
         value, default = getattr(obj, f.name), getattr(defaults, f.name)
         if dataclasses.is_dataclass(hints[f.name]):
-            argv += to_argv(value, prefix=f"{prefix}{f.name}.")
+            argv += to_argv(value, prefix=f"{prefix}{f.name}.", defaults=default)
         elif value != default:
             flag = _flag(prefix, f.name)
             if hints[f.name] is bool:

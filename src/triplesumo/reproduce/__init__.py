@@ -4,20 +4,24 @@ The paper trains an Ant (3,000 epochs), then a second agent (20,000 epochs) to m
 game", then adds Bug. Built that way literally, the match was no contest (env v1, measured): an
 Ant trained against a random Spider learned nothing (a random Spider walks off the ring by itself
 in 28 of 32 matches, so a passive Ant already "wins" 87.5 %), and a Spider then trained for
-20,000 epochs against that frozen Ant won 82 % with Bug passive. The stages here build the
-ongoing match so that both sides learn to push, check that it is a contest, and only then train Bug:
+20,000 epochs against that frozen Ant won 82 % with Bug passive. Learning together from scratch
+(env v2) ended in a standoff, and with a draw penalty the Ant learned to push while its Spider, shoved
+back by it, never did (docs/CONTEST.md: seven attempts and what they measured). The stages here
+teach each side to push on its own, check that the pair is a contest, and only then train Bug:
 
-1. ``match``: Ant and Spider learn together from scratch (DDPG each; ``train --learn ant=ddpg
-   spider=ddpg``), Bug passive, for ``match_epochs`` (the paper's 20,000: its second agent's
-   budget, which the Ant now shares, so neither side faces an opponent that stopped learning or one
-   that leaves the ring by itself). Pre-training reward: the paper's terms with the still
-   punishment ``pretrain_still`` (default -1), so that losing costs more than surviving: with the
-   paper's -4 and gamma 0.99, still / (1 - gamma) = -400 = the loss reward, and being pushed out at
-   any step is worth as much as surviving without winning (``__post_init__`` refuses such a value).
-   ``pair`` skips the stage and checks a given pair instead (``--pair zoo:ant zoo:spider``).
+1. ``ant`` and ``spider``: each side alone learns (DDPG, ``train --learn ant=ddpg``) to push still
+   opponents: every other agent passive, a body that neither walks off the ring by itself (as a
+   random one does) nor shoves back (as a co-trained one does), for ``ant_epochs`` and
+   ``spider_epochs``, on the pre-training reward ``pretrain`` (:data:`PRETRAIN_REWARD`): still -1, so
+   that losing costs more than surviving (with the paper's -4 and gamma 0.99, still / (1 - gamma) =
+   -400 = the loss reward, and being pushed out at any step is worth as much as surviving without
+   winning; ``__post_init__`` refuses such a value), draw -200, so that a standoff costs more than
+   trying, a 0.25 m dead zone on the per-axis signs and the per-opponent terms summed, so that the
+   Spider, with two opponents, is paid for approaching and shoving as the Ant is. ``pair`` skips the
+   stages and checks a given pair instead (``--pair zoo:ant zoo:spider``).
 2. ``contest``: the pair on ``contest_epochs`` held-out starts (``contest_seed`` + i, apart from
    the Bug's test starts), three evaluations (``OUT/contest``): the Ant against a passive Spider,
-   the Spider against a passive Ant (each must push its opponent out in at least
+   the Spider against a passive Ant and Bug (each must push an opponent out in at least
    :data:`PUSH_MIN` of the matches), and the match with Bug passive, whose team MWR must lie in
    :data:`CONTEST_BAND` (the team loses without Bug's help, but not hopelessly). ``contest.json``
    holds each check and the verdict.
@@ -33,7 +37,7 @@ ongoing match so that both sides learn to push, check that it is a contest, and 
 5. ``compare``: IQM with bootstrap intervals by trial (each algorithm, each ablation) and its
    plot (``OUT/compare``).
 
-``--publish`` then ships the stage-1 Ant and Spider, the paper-preset DDPG Bug of the
+``--publish`` then ships the pre-trained Ant and Spider, the paper-preset DDPG Bug of the
 best seed as ``zoo:bug`` and the best Bug of any algorithm as ``zoo:bug-<algo>``, each manifest
 with its command, seed, env steps, the code version, its contest check and its test MWR with
 95 % interval.
@@ -54,6 +58,7 @@ not invalidate later ones: delete their folders to redo them too.
 from triplesumo.reproduce.config import (
     ABLATION_ALIASES,
     CONTEST_BAND,
+    PRETRAIN_REWARD,
     PROTOCOL_FIELDS,
     PUSH_MIN,
     RECORD_FILE,
@@ -70,8 +75,8 @@ from triplesumo.reproduce.reporting import DOCS_BEGIN, DOCS_END, embed_report, f
 from triplesumo.reproduce.run import check_same_options, code_version, run_reproduce
 
 __all__ = [
-    "ABLATION_ALIASES", "CONTEST_BAND", "ContestError", "DOCS_BEGIN", "DOCS_END", "PROTOCOL_FIELDS", "PUSH_MIN",
-    "Protocol", "RECORD_FILE", "REPORT_FILE", "RUN_OPTIONS", "ReproduceConfig", "SKILL", "Stage", "ablation",
-    "check_same_options", "code_version", "contest_verdict", "embed_report", "format_contest", "format_status",
-    "report", "run_reproduce", "status"
+    "ABLATION_ALIASES", "CONTEST_BAND", "ContestError", "DOCS_BEGIN", "DOCS_END", "PRETRAIN_REWARD",
+    "PROTOCOL_FIELDS", "PUSH_MIN", "Protocol", "RECORD_FILE", "REPORT_FILE", "RUN_OPTIONS", "ReproduceConfig",
+    "SKILL", "Stage", "ablation", "check_same_options", "code_version", "contest_verdict", "embed_report",
+    "format_contest", "format_status", "report", "run_reproduce", "status"
 ]

@@ -32,6 +32,16 @@ RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per
 make: a folder resumes with other values."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
 """TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
+PRETRAIN_REWARD = RewardConfig(still=-1.0, draw=-200.0, axis_dead_zone=0.25, opponents="sum")
+"""The pre-training reward (docs/CONTEST.md): the paper's terms and win and loss rewards, with
+
+* still = -1 (the paper's code: -4, which makes surviving without a result worth exactly a loss at gamma 0.99);
+* draw = -200, so that a standoff costs more than trying (co-training ended in standoffs without it);
+* a 0.25 m dead zone on the per-axis signs (on the fair start the paper's sign paid the Spider for approaching
+  an opponent by the coin of the reset noise);
+* the per-opponent velocity terms summed (a mean paid the Spider, with two opponents, half the Ant's signal).
+
+Bug's stage trains on the paper's reward (the env's default)."""
 SKILL = 0.2
 """Time to skill: the test MWR Bug's team first reaches (the issue's +0.2)."""
 
@@ -65,14 +75,16 @@ class ReproduceConfig:
     """Algorithms Bug is trained with (ddpg is the paper preset)."""
     seeds: tuple[int, ...] = (0, 1, 2)
     """Training seeds of Bug, for every algorithm."""
-    match_epochs: int = 20_000
-    """Stage 1: epochs of Ant and Spider learning together (the paper's 20,000 for its second agent)."""
-    match_seed: int = 1
-    """Seed of the stage-1 run."""
-    pretrain_still: float = -1.0
-    """Stage 1: the still punishment of the pre-training reward (the paper's other terms as they are). It must
-    make losing cost more than surviving: still / (1 - gamma) > the loss reward (-1 / 0.01 = -100 > -400); the
-    paper's -4 gives exactly -400."""
+    ant_epochs: int = 3_000
+    """Stage ``ant``: epochs of the Ant learning to push a still Spider, Bug still (the paper's 3,000 for its Ant)."""
+    spider_epochs: int = 3_000
+    """Stage ``spider``: epochs of the Spider learning to push a still Ant and Bug."""
+    pretrain_seed: int = 1
+    """Seed of both pre-training runs."""
+    pretrain: RewardConfig = PRETRAIN_REWARD
+    """The reward of both pre-training runs (:data:`PRETRAIN_REWARD`). Its still punishment must make losing cost
+    more than surviving: still / (1 - gamma) > the loss reward (-1 / 0.01 = -100 > -400); the paper's -4 gives
+    exactly -400."""
     pair: tuple[str, ...] = ()
     """Skip stage 1 and check this Ant and Spider instead (two policy specs: ``zoo:ant zoo:spider``, files,
     ``passive``); the contest rule and everything after it run on them."""
@@ -164,17 +176,17 @@ class ReproduceConfig:
         if self.pair and len(self.pair) != 2:
             raise ValueError(f"ReproduceConfig.pair must be two policies (Ant, Spider), got {self.pair!r}")
         gamma = DDPGConfig().gamma
-        if not (isinstance(self.pretrain_still, int | float) and math.isfinite(self.pretrain_still)
-                and self.pretrain_still <= 0):
-            raise ValueError(f"ReproduceConfig.pretrain_still must be a finite number <= 0, "
-                             f"got {self.pretrain_still!r}")
-        worth, loss = self.pretrain_still / (1 - gamma), RewardConfig().loss
+        if isinstance(self.pretrain, dict):  # a record's config, read back
+            object.__setattr__(self, "pretrain", RewardConfig(**self.pretrain))
+        if not isinstance(self.pretrain, RewardConfig):
+            raise ValueError(f"ReproduceConfig.pretrain must be a RewardConfig, got {self.pretrain!r}")
+        still, loss = self.pretrain.still, self.pretrain.loss
+        worth = still / (1 - gamma)
         if worth <= loss or math.isclose(worth, loss):  # (-4 / (1 - 0.99) is -399.99999999999966 in floats)
-            raise ValueError(f"ReproduceConfig.pretrain_still {self.pretrain_still}: surviving without a result would "
-                             f"be worth {worth:.0f} (still / (1 - gamma), gamma {gamma}), no more than losing "
-                             f"({loss:.0f}); the pre-trained sides would not learn to stay in. Use a value above "
-                             f"{loss * (1 - gamma):g}")
-        for name in ("match_epochs", "bug_epochs", "bug_eval_epochs", "contest_epochs", "eval_epochs",
+            raise ValueError(f"ReproduceConfig.pretrain.still {still}: surviving without a result would be worth "
+                             f"{worth:.0f} (still / (1 - gamma), gamma {gamma}), no more than losing ({loss:.0f}); the "
+                             f"pre-trained sides would not learn to stay in. Use a value above {loss * (1 - gamma):g}")
+        for name in ("ant_epochs", "spider_epochs", "bug_epochs", "bug_eval_epochs", "contest_epochs", "eval_epochs",
                      "n_envs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:

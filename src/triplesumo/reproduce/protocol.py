@@ -20,7 +20,6 @@ from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation
-from triplesumo.rules.config import RewardConfig
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.run_folder import command_for, training_done
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_trial, trials
@@ -91,17 +90,20 @@ class Protocol:
         tiny = cfg.tiny
         self.steps = 20 if tiny else 500
         self.n_envs = 2 if tiny else cfg.n_envs
-        self.epochs = {"match": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
-            "match": cfg.match_epochs, "bug": cfg.bug_epochs, "contest": cfg.contest_epochs, "eval": cfg.eval_epochs}
+        self.epochs = {"ant": 2, "spider": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
+            "ant": cfg.ant_epochs, "spider": cfg.spider_epochs, "bug": cfg.bug_epochs, "contest": cfg.contest_epochs,
+            "eval": cfg.eval_epochs}
         self.physics = PhysicsConfig(border_rim=cfg.border_rim)
-        match_dir = self.out / "match"
-        self.ant_policy, self.spider_policy = cfg.pair or (str(match_dir / "policy-ant"),
-                                                           str(match_dir / "policy-spider"))
+        self.ant_policy, self.spider_policy = cfg.pair or (str(self.out / "ant" / "policy"),
+                                                           str(self.out / "spider" / "policy"))
         self.stages = [
             *([] if cfg.pair else [
-                Stage("match", "Ant and Spider learn together, Bug passive",
-                      (match_dir / "policy-ant.json", match_dir / "policy-spider.json"),
-                      lambda: self._trained(self._match()), lambda: self._train(self._match()))]),
+                Stage("ant", "the Ant learns to push: against a still Spider, Bug still",
+                      (self.out / "ant" / "policy.json",),
+                      lambda: self._trained(self.pretrain("ant")), lambda: self._train(self.pretrain("ant"))),
+                Stage("spider", "the Spider learns to push: against a still Ant and Bug",
+                      (self.out / "spider" / "policy.json",),
+                      lambda: self._trained(self.pretrain("spider")), lambda: self._train(self.pretrain("spider")))]),
             Stage("contest", "is the pair a contest? (each side pushes; the team loses without Bug, not hopelessly)",
                   (self.out / "contest" / "contest.json",), self._contest_complete, self._contest),
             Stage("bug", "Bug per algorithm x seed in the stage-1 match", (self.out / "bug",),
@@ -129,18 +131,18 @@ class Protocol:
                            progress=self.cfg.progress, tensorboard=not self.cfg.tiny, physics=self.physics,
                            save_replay=self.cfg.save_replay, **extra, **kw)
 
-    def _match(self) -> TrainConfig:
-        """Stage 1: Ant and Spider learn together (DDPG each), Bug passive, on the pre-training reward."""
-        base = self._base(name="match", learn=("ant=ddpg", "spider=ddpg"), policies=("bug=passive",),
-                          epochs=self.epochs["match"], seed=self.cfg.match_seed,
-                          reward=RewardConfig(still=self.cfg.pretrain_still))
-        # one gradient step per 5 transitions of each learner, as the v1 pair learned (docs/REPRODUCTION.md)
+    def pretrain(self, role: str) -> TrainConfig:
+        """Stage ``ant`` or ``spider``: that side alone learns (DDPG) to push still opponents (every other agent
+        passive: a body that neither leaves the ring by itself nor pushes back), on the pre-training reward."""
+        others = tuple(f"{a}=passive" for a in ("ant", "bug", "spider") if a != role)
+        base = self._base(name=role, learn=(f"{role}=ddpg",), policies=others, epochs=self.epochs[role],
+                          seed=self.cfg.pretrain_seed, reward=self.cfg.pretrain)
+        # one gradient step per 5 transitions, as the v1 pair learned (docs/REPRODUCTION.md)
         return base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
-                                                              checkpoint_every=500)
+                                                              checkpoint_every=250)
 
     def _trained(self, cfg: TrainConfig) -> bool:
-        run = Path(cfg.out) / cfg.name
-        return training_done(cfg) and all((run / f"policy-{a.split('=')[0]}.json").exists() for a in cfg.learn)
+        return training_done(cfg) and (Path(cfg.out) / cfg.name / "policy.json").exists()
 
     def _train(self, cfg: TrainConfig) -> list[str]:
         run_trial(cfg)  # resumes the run from its last checkpoint when there is one

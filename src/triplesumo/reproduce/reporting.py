@@ -66,12 +66,11 @@ def status(protocol: Protocol) -> list[dict[str, Any]]:
         else:  # one row for the stage; a training stage's run folder is named after it
             runs = [(stage.name, protocol.out / stage.name, stage.complete())]
         for name, folder, done in runs:
-            csv_name = "metrics-ant.csv" if stage.name == "match" else "metrics.csv"  # stage 1: two learners
-            started = (folder / csv_name).exists()
+            started = (folder / "metrics.csv").exists()
             evals = _evals(folder)
             rows.append({"stage": stage.name, "run": name,
                          "state": "complete" if done else "running or stopped" if started else "not started",
-                         "env_steps": run_facts(folder, 200, csv_name)["env_steps"] if started else None,
+                         "env_steps": run_facts(folder, 200)["env_steps"] if started else None,
                          "test_mwr": float(evals[-1]["test_mwr"]) if evals else None})
     return rows
 
@@ -86,15 +85,12 @@ def format_status(protocol: Protocol) -> str:
     return "\n".join(lines)
 
 
-def _run_row(protocol: Protocol, name: str, learner: str = "") -> str:
-    """A table row of a run's training; ``learner`` names one learner of a run with several."""
+def _run_row(protocol: Protocol, name: str) -> str:
+    """A table row of a run's training."""
     run = protocol.out / name
-    csv_name = f"metrics-{learner}.csv" if learner else "metrics.csv"
-    if learner:
-        name = f"{name} ({learner})"
-    if not (run / csv_name).exists():
+    if not (run / "metrics.csv").exists():
         return f"| {name} | - | - | - |"
-    facts = run_facts(run, 200, csv_name)
+    facts = run_facts(run, 200)
     return f"| {name} | {facts['epochs']:,} | {facts['env_steps']:,} | {facts['final_mwr']:+.3f} |"
 
 
@@ -118,12 +114,13 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
              f"`{out.name}/`." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
                                                     if cfg.tiny else ""), "",
              f"Ring: {ring}; every stage trained and was evaluated on it.", "",
-             "## Stage 1: the ongoing match (Ant and Spider learn together, Bug passive)", "",
+             "## Stage 1: the pair (each side learns to push still opponents)", "",
              *([f"Skipped: the pair was given (`--pair {' '.join(cfg.pair)}`).", ""] if cfg.pair else [
-                 f"Pre-training reward: the paper's terms with still = {cfg.pretrain_still:g} (losing costs more than "
-                 "surviving).", "",
+                 f"Pre-training reward: the paper's terms with still = {cfg.pretrain.still:g} (losing costs more than "
+                 f"surviving), draw = {cfg.pretrain.draw:g}, per-axis dead zone {cfg.pretrain.axis_dead_zone:g} m, "
+                 f"per-opponent terms as a {cfg.pretrain.opponents}.", "",
                  "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |",
-                 _run_row(protocol, "match", "ant"), _run_row(protocol, "match", "spider"), ""])]
+                 _run_row(protocol, "ant"), _run_row(protocol, "spider"), ""])]
     contest_path = out / "contest" / "contest.json"
     lines += ["## Stage 2: is it a contest?", ""]
     if contest_path.exists():

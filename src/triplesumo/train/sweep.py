@@ -214,10 +214,9 @@ def finished(trial: Trial) -> bool:
     return training_done(trial.config, Path(trial.config.out) / trial.name)
 
 
-def run_facts(run_dir: Path, window: int, csv_name: str = "metrics.csv") -> dict[str, Any]:
-    """Epochs, env steps and the final MWR (last ``window`` epochs) of a run, from its metrics CSV (``csv_name``:
-    ``metrics-ant.csv`` for one learner of several)."""
-    with (run_dir / csv_name).open(newline="", encoding="utf-8") as fh:
+def run_facts(run_dir: Path, window: int) -> dict[str, Any]:
+    """Epochs, env steps and the final MWR (last ``window`` epochs) of a one-learner run, from its ``metrics.csv``."""
+    with (run_dir / "metrics.csv").open(newline="", encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     lwr = np.array([float(r["local_winning_rate"]) for r in rows])
     mwr = float(moving_winning_rate(lwr[-window:], window)[-1]) if len(lwr) else 0.0
