@@ -128,11 +128,11 @@ class Trainer:
         check_memory(cfg, [(spec.name, spec.algo, *dims[spec.name]) for spec in self.specs])
         self.probe = probe = sizing
         """A match of the run's config (never stepped): roster, observation and action sizes."""
-        self.run_dir = prepare_run_dir(run_dir)  # before the matches: a folder that cannot be written leaves none open
         env = make_env(cfg, self.match_cfg)
         """The matches, through the batched API (arrays ``(n_envs, n_agents, ...)``, autoreset)."""
         self.device: torch.device | None = getattr(env, "device", None) if cfg.backend == "warp" else None
         """Where a ``warp`` run keeps observations, actions, replay and rollouts (None: numpy on the host)."""
+        self.run_dir = prepare_run_dir(run_dir)
         fork = load_json(self.run_dir / FORK_FILE) if resume and (self.run_dir / FORK_FILE).is_file() else None
         self.forked_from: dict[str, Any] | None = None if fork is None else {
             "run": fork["parent"], "run_id": fork["parent_run_id"], "checkpoint": fork["checkpoint"],
