@@ -97,16 +97,12 @@ class Protocol:
         self.ant_policy, self.spider_policy = cfg.pair or (str(self.out / "ant" / "policy"),
                                                            str(self.out / "spider" / "policy"))
         self.stages = [
-            *([] if cfg.pair else [
-                Stage("ant", "the Ant learns to push: against a still Spider, Bug still",
-                      (self.out / "ant" / "policy.json",),
-                      lambda: self._trained(self.pretrain("ant")), lambda: self._train(self.pretrain("ant"))),
-                Stage("spider", "the Spider learns to push: against a still Ant and Bug",
-                      (self.out / "spider" / "policy.json",),
-                      lambda: self._trained(self.pretrain("spider")), lambda: self._train(self.pretrain("spider")))]),
+            *(self._pretrain_stage(role, against)
+              for role, against in (() if cfg.pair else (("ant", "a still Spider, Bug still"),
+                                                         ("spider", "a still Ant and Bug")))),
             Stage("contest", "is the pair a contest? (each side pushes; the team loses without Bug, not hopelessly)",
                   (self.out / "contest" / "contest.json",), self._contest_complete, self._contest),
-            Stage("bug", "Bug per algorithm x seed in the stage-1 match", (self.out / "bug",),
+            Stage("bug", "Bug per algorithm x seed in the pair's match (Ant and Spider frozen)", (self.out / "bug",),
                   lambda: all(finished(t) for t in self.bug_trials()), self._bug_stage),
             *([Stage("ablations", "paper-preset DDPG Bug with one change each, per seed", (self.out / "ablations",),
                      lambda: all(finished(t) for t in self.ablation_trials()),
@@ -118,6 +114,12 @@ class Protocol:
         ]
 
     # ------------------------------------------------------------ train stages
+    def _pretrain_stage(self, role: str, against: str) -> Stage:
+        """Stage ``ant`` or ``spider`` (:meth:`pretrain`): done when its run finished and wrote its policy."""
+        return Stage(role, f"the {role.capitalize()} learns to push: against {against}",
+                     (self.out / role / "policy.json",), lambda: self._trained(self.pretrain(role)),
+                     lambda: self._train(self.pretrain(role)))
+
     def _base(self, **kw: Any) -> TrainConfig:
         """A train config at the protocol's budgets; tiny networks and buffers when tiny."""
         extra: dict[str, Any] = {}
