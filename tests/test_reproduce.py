@@ -88,10 +88,12 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     g = groups["ddpg,reward.still=-1"]
     assert f"| reward.still=-1 | 1 | {g['scores'][0]:+.3f} | {g['iqm']:+.3f} [" in ablations
     assert "| ddpg,reward.still=-1 |" not in report.split("## Ablations")[0].split("## Stage 5")[1]
-    # published: the paper-preset DDPG Bug as zoo:bug, the best Bug of any algorithm (not an ablation) as bug-ALGO
+    # published: every algorithm's Bug as bug-ALGO, its seed picked by training MWR (the test starts pick nothing),
+    # and as zoo:bug that Bug of the algorithm with the higher IQM test MWR
     trained = [r for r in rows if "/bug/" in r["policy"]]
-    best = max(trained, key=lambda r: float(r["test_mwr"]))
-    assert sorted(p.stem for p in zoo.glob("*.json")) == sorted(["ant", "spider", "bug", f"bug-{best['algo']}"])
+    assert sorted(p.stem for p in zoo.glob("*.json")) == ["ant", "bug", "bug-ddpg", "bug-ppo", "spider"]
+    top = max(("ddpg", "ppo"), key=lambda a: (groups[a]["iqm"], a == "ddpg"))
+    best = next(r for r in trained if r["algo"] == top)  # one seed each
     shipped = json.loads((zoo / f"bug-{best['algo']}.json").read_text())
     assert shipped["algo"] == best["algo"] and shipped["code_version"] == _record(out)["runs"][-1]["version"]
     assert shipped["command"].startswith("triplesumo train") and shipped["seed"] == 0 and shipped["env_steps"] > 0
@@ -101,8 +103,13 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
         assert pair["physics"] == shipped["physics"] and pair["evaluation"]["contest"] == contest
     assert [shipped["evaluation"][k] for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")] == [
         float(best[k]) for k in ("test_mwr", "test_mwr_lo", "test_mwr_hi")]
-    assert json.loads((zoo / "bug.json").read_text())["algo"] == "ddpg"
-    assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 |" in report
+    with (out / "bug" / f"learn=bug={top},seed=0" / "metrics.csv").open() as fh:  # the pick, recomputed
+        lwr = [float(r["local_winning_rate"]) for r in csv.DictReader(fh)]
+    picked = shipped["evaluation"]["selection"]
+    assert picked["train_mwr"] == pytest.approx(sum(lwr[-200:]) / len(lwr[-200:]))
+    assert picked["algo_iqm_test_mwr"] == groups[top]["iqm"] and picked["seeds"] == 1
+    assert json.loads((zoo / "bug.json").read_text())["algo"] == top
+    assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 | {picked['train_mwr']:+.3f} |" in report
     # zoo:bug-ALGO resolves where a zoo spec is accepted: a policy, an evaluated candidate, a seat, a tournament entry
     assert make_policy(f"zoo:bug-{best['algo']}", expect_obs_mode="paper") is not None
     summary = evaluate(EvaluateConfig(policy=(f"zoo:bug-{best['algo']}",), policies=("ant=zoo:ant",
@@ -123,7 +130,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     # what was published stays in the record and the report of later runs and of --status
     assert main([a for a in argv if a != "--publish"] + ["--status"]) == 0
     assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 |" in (out / "REPRODUCTION.md").read_text()
-    assert [p["name"] for p in _record(out)["published"]] == ["ant", "spider", "bug", f"bug-{best['algo']}"]
+    assert [p["name"] for p in _record(out)["published"]] == ["ant", "spider", "bug", "bug-ddpg", "bug-ppo"]
 
     shutil.rmtree(out / "contest")
     shutil.rmtree(out / "compare")

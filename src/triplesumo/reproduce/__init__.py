@@ -37,10 +37,11 @@ teach each side to push on its own, check that the pair is a contest, and only t
 5. ``compare``: IQM with bootstrap intervals by trial (each algorithm, each ablation) and its
    plot (``OUT/compare``).
 
-``--publish`` then ships the pre-trained Ant and Spider, the paper-preset DDPG Bug of the
-best seed as ``zoo:bug`` and the best Bug of any algorithm as ``zoo:bug-<algo>``, each manifest
-with its command, seed, env steps, the code version, its contest check and its test MWR with
-95 % interval.
+``--publish`` then ships the pre-trained Ant and Spider (``zoo:ant``, ``zoo:spider``, each manifest with the
+contest check the pair passed), every algorithm's Bug as ``zoo:bug-<algo>`` (its seed with the highest training
+MWR over the last 200 training matches: the test starts pick nothing) and, as ``zoo:bug``, that Bug of the
+algorithm with the highest IQM test MWR across seeds; each Bug's manifest has its command, seed, env steps, the
+code version, its test MWR with 95 % interval and how it was picked.
 
 Time to skill comes from stage 3 itself: every Bug run evaluates its current policy every
 ``bug_eval_every`` env steps on the first ``bug_eval_epochs`` test matches of stage 4

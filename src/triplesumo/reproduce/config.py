@@ -129,7 +129,9 @@ class ReproduceConfig:
     """Budgets of seconds (a smoke run, CI): 2 epochs of 20-step matches, tiny networks, 4 test matches;
     overrides the budgets above."""
     publish: bool = False
-    """After stage 6, publish the stage-1 Ant, stage-2 Spider and the best Bug (highest test MWR) into the zoo."""
+    """After the last stage, publish into the zoo the pair (``ant``, ``spider``, with their contest check), each
+    algorithm's Bug (``bug-<algo>``: its seed with the highest training MWR over its last 200 training matches; the
+    test starts pick nothing) and ``bug``, that Bug of the algorithm with the highest IQM test MWR across seeds."""
     progress: bool = True
     """Show progress bars."""
     ablations: tuple[str, ...] = ()

@@ -93,45 +93,59 @@ def _now() -> str:
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
 
 
-def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
-    """Ship Ant, Spider, the paper-preset DDPG Bug of the best seed (``bug``) and the best Bug of any algorithm
-    (``bug-<algo>``); each manifest with the code version and the Bug's test MWR with its 95 % interval."""
-    from triplesumo.agents import zoo
+SELECT_WINDOW = 200
+"""The shipped Bug of each algorithm is its seed with the highest training MWR over its last this many training
+matches (training starts only: the test starts pick nothing; docs/CONTEST.md, the Bug stage's rules)."""
 
-    ours = {str(Path(t.config.out) / t.name / "policy") for t in protocol.bug_trials()}  # not the ablations
-    rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["policy"] in ours]
+
+def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
+    """Ship Ant and Spider (with the contest check they passed), ``bug-<algo>`` for every algorithm (its seed with
+    the highest training MWR over the last :data:`SELECT_WINDOW` training matches) and ``bug`` (that Bug of the
+    algorithm with the highest IQM test MWR across its seeds, the protocol's measure of an algorithm). Each manifest
+    carries the code version, the ring, and for a Bug its test MWR with its 95 % interval and how it was picked."""
+    from triplesumo.agents import zoo
+    from triplesumo.train.sweep import run_facts
+
+    by_policy = {str(Path(t.config.out) / t.name / "policy"): Path(t.config.out) / t.name
+                 for t in protocol.bug_trials()}  # not the ablations
+    rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["policy"] in by_policy]
     # the ring every stage trained on, and the env version whose default it is (the trainer wrote the one it ran under)
     extra: dict[str, Any] = {"code_version": version, "reproduction": str(protocol.out),
                              "physics": dataclasses.asdict(protocol.physics),
                              **({"env_version": ENV_VERSION} if protocol.physics == PhysicsConfig() else {})}
+    train_mwr = {r["policy"]: run_facts(by_policy[r["policy"]], SELECT_WINDOW)["final_mwr"] for r in rows}
+    groups = {g["group"]: g for g in json.loads((protocol.out / "compare" / "compare.json").read_text())["groups"]}
 
     def evaluation(row: dict[str, str]) -> dict[str, Any]:
         return {"test_mwr": float(row["test_mwr"]), "test_mwr_lo": float(row["test_mwr_lo"]),
                 "test_mwr_hi": float(row["test_mwr_hi"]), "confidence": 0.95, "test_matches": int(row["epochs"]),
                 "eval_seed": int(row["eval_seed"]), "n_win": int(row["n_win"]), "n_loss": int(row["n_loss"]),
                 "n_draw": int(row["n_draw"]), "opponents": [f"ant={protocol.ant_policy}",
-                                                            f"spider={protocol.spider_policy}"]}
-
-    def mwr(row: dict[str, str]) -> float:
-        return float(row["test_mwr"])
+                                                            f"spider={protocol.spider_policy}"],
+                "selection": {"rule": f"the seed with the highest training MWR over its last {SELECT_WINDOW} "
+                                      "training matches", "train_mwr": train_mwr[row["policy"]],
+                              "algo_iqm_test_mwr": groups[row["algo"]]["iqm"],
+                              "seeds": groups[row["algo"]]["n_seeds"]}}
 
     # Ant and Spider: the stage-2 contest checks they passed (recomputable from contest/*/metrics.csv)
     contest = {"contest": json.loads((protocol.out / "contest" / "contest.json").read_text())}
     ship: list[tuple[Path, str, dict[str, Any] | None]] = [(Path(protocol.ant_policy), "ant", None),
                                                            (Path(protocol.spider_policy), "spider", None)]
-    preset = [r for r in rows if r["algo"] == "ddpg"]
-    if preset:
-        top = max(preset, key=mwr)
-        ship.append((Path(top["policy"]), "bug", top))
-    else:
-        print("  publish: no paper-preset DDPG Bug (ddpg not in --algos): zoo:bug is left as it is")
-    best = max(rows, key=mwr)
-    ship.append((Path(best["policy"]), f"bug-{best['algo']}", best))
+    picks = {}
+    for algo in sorted({r["algo"] for r in rows}):  # per algorithm: its seed by training MWR, lower seed on a tie
+        mine = sorted((r for r in rows if r["algo"] == algo), key=lambda r: int(r["train_seed"]))
+        picks[algo] = max(mine, key=lambda r: train_mwr[r["policy"]])
+    if picks:
+        best = max(picks, key=lambda a: (groups[a]["iqm"], a == "ddpg"))  # the paper preset on a tie
+        ship.append((Path(picks[best]["policy"]), "bug", picks[best]))
+        ship += [(Path(row["policy"]), f"bug-{algo}", row) for algo, row in picks.items()]
     made = []
     for stem, name, row in ship:
         path = zoo.publish(stem, name, contest if row is None else evaluation(row), extra=extra)
         made.append({"name": name, "file": str(path), "policy": str(stem),
                      **({} if row is None else {"algo": row["algo"], "train_seed": row["train_seed"],
-                                                "test_mwr": mwr(row), "test_mwr_lo": float(row["test_mwr_lo"]),
+                                                "train_mwr": train_mwr[row["policy"]],
+                                                "test_mwr": float(row["test_mwr"]),
+                                                "test_mwr_lo": float(row["test_mwr_lo"]),
                                                 "test_mwr_hi": float(row["test_mwr_hi"])})})
     return made
