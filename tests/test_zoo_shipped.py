@@ -184,3 +184,30 @@ def test_shipped_head_to_head_claims_match_the_published_matches(name: str) -> N
             half = 1.959963984540054 * d.std(ddof=1) / np.sqrt(len(d))
             assert (claim["diff"], claim["lo"], claim["hi"]) == pytest.approx(
                 (d.mean(), d.mean() - half, d.mean() + half), abs=1e-9), (run["folder"], other)
+
+
+CONTEST = ROOT / "docs" / "runs" / "contest-v2" / "side-alone" / "contest"
+"""The contest record of env v2's pair (docs/CONTEST.md): ``contest.json`` and each check's per-match CSV."""
+
+
+def test_the_contest_record_is_recomputed_from_its_matches() -> None:
+    """Every count of the pair's contest record is the outcomes of its per-match ``metrics.csv`` (1,000 starts per
+    check), the verdict is the contest rule's on those counts, and a shipped Ant or Spider whose manifest carries a
+    contest check carries this one."""
+    from triplesumo.reproduce.protocol import contest_verdict
+
+    record = json.loads((CONTEST / "contest.json").read_text())
+    counts = {}
+    for check in ("ant-pushes", "spider-pushes", "match"):
+        with open(CONTEST / check / "metrics.csv", newline="") as fh:
+            outcomes = [r["outcome"] for r in csv.DictReader(fh)]
+        counts[check] = {"n": len(outcomes), **{f"n_{o}": outcomes.count(o) for o in ("win", "loss", "draw")}}
+        summary = json.loads((CONTEST / check / "summary.json").read_text())
+        assert summary["config"]["seed"] == 20_000 and summary["config"]["epochs"] == 1000
+    assert counts == record["counts"] and record["matches"] == 1000
+    assert contest_verdict(counts, record["ant"], record["spider"]) == record
+    assert record["contest"] and -0.50 <= record["team_mwr"] <= -0.10
+    for name in ("ant", "spider"):
+        manifest = zoo.load(name)[1]
+        if manifest["env_version"] == triplesumo.ENV_VERSION:  # the v2 pair (v1's carries v1's older check)
+            assert manifest["evaluation"]["contest"] == record
