@@ -130,14 +130,22 @@ def test_a_retired_zoo_name_says_where_its_policy_went(name: str) -> None:
         assert json.loads((ROOT / f"{where}.json").read_text())["zoo_name"] == name  # its manifest, unchanged
 
 
-def test_the_history_holds_the_retired_spiders_and_the_first_self_play_spider() -> None:
-    assert sorted(p.stem for p in HISTORY.glob("*.json")) == [f"spider-selfplay-v{n}" for n in range(5)]
+V1_ROSTER = ("ant", "spider", "bug", "bug-sac")
+"""Env v1's paper roster, shipped until the v2 contest's pair and Bugs replaced it (docs/CONTEST.md)."""
+
+
+def test_the_history_holds_the_retired_spiders_the_first_self_play_spider_and_v1s_roster() -> None:
+    assert sorted(p.stem for p in HISTORY.glob("*.json")) == sorted(
+        [f"spider-selfplay-v{n}" for n in range(5)] + [f"{n}-v1" for n in V1_ROSTER])
     first = json.loads((HISTORY / "spider-selfplay-v0.json").read_text())
     assert first["zoo_name"] == "spider-selfplay" and first["env_version"] == "v0"  # the first zoo:spider-selfplay
+    for name in V1_ROSTER:  # the manifest as it was shipped, under its zoo name
+        manifest = json.loads((HISTORY / f"{name}-v1.json").read_text())
+        assert manifest["env_version"] == "v1" and manifest.get("zoo_name", name) == name
     assert (HISTORY / "README.md").is_file()
 
 
-@pytest.mark.parametrize("name", [f"spider-selfplay-v{n}" for n in range(5)])
+@pytest.mark.parametrize("name", [f"spider-selfplay-v{n}" for n in range(5)] + [f"{n}-v1" for n in V1_ROSTER])
 def test_a_history_policy_loads_by_path_without_a_suffix(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(ROOT)
     spec = f"{zoo.HISTORY}/{name}"  # as a command line gives it: relative, no suffix
@@ -145,7 +153,7 @@ def test_a_history_policy_loads_by_path_without_a_suffix(name: str, monkeypatch:
     from triplesumo.agents.policy_file import load_policy
 
     _, manifest = load_policy(Path(spec))  # (checks the weights against the manifest's sha256)
-    assert manifest["agent"] == "spider" and manifest["command"].startswith("triplesumo train")
+    assert manifest["agent"] == name.split("-")[0] and manifest["command"].startswith("triplesumo train")
     obs = np.linspace(-1.0, 1.0, manifest["obs_dim"]).astype(np.float32)
     action = zoo.make_policy(spec, expect_obs_mode="paper")(obs)
     assert np.asarray(action).shape == (8,) and np.all(np.isfinite(action))
