@@ -194,8 +194,8 @@ def test_shipped_head_to_head_claims_match_the_published_matches(name: str) -> N
                 (d.mean(), d.mean() - half, d.mean() + half), abs=1e-9), (run["folder"], other)
 
 
-CONTEST = ROOT / "docs" / "runs" / "contest-v2" / "side-alone" / "contest"
-"""The contest record of env v2's pair (docs/CONTEST.md): ``contest.json`` and each check's per-match CSV."""
+CONTEST = ROOT / "docs" / "runs" / "contest-v2" / "reproduce" / "contest"
+"""The contest stage of env v2's reproduction (docs/CONTEST.md): ``contest.json`` and each check's per-match CSV."""
 
 
 def test_the_contest_record_is_recomputed_from_its_matches() -> None:
@@ -207,7 +207,7 @@ def test_the_contest_record_is_recomputed_from_its_matches() -> None:
     record = json.loads((CONTEST / "contest.json").read_text())
     counts = {}
     for check in ("ant-pushes", "spider-pushes", "match"):
-        with open(CONTEST / check / "metrics.csv", newline="") as fh:
+        with open(CONTEST / check / "trained" / "metrics.csv", newline="") as fh:
             outcomes = [r["outcome"] for r in csv.DictReader(fh)]
         counts[check] = {"n": len(outcomes), **{f"n_{o}": outcomes.count(o) for o in ("win", "loss", "draw")}}
         summary = json.loads((CONTEST / check / "summary.json").read_text())

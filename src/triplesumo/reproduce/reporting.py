@@ -175,7 +175,8 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
         lines += _ablation_section(table, ablated, pct)
     lines += _skill_section(protocol)
     if record.get("published"):
-        lines += ["## Published into the zoo", "", "| zoo name | algorithm | train seed | training MWR (picked by) | test MWR [95% CI] | file |",
+        lines += ["## Published into the zoo", "",
+                  "| zoo name | algorithm | train seed | training MWR (picked by) | test MWR [95% CI] | file |",
                   "| --- | --- | ---: | ---: | ---: | --- |"]
         for p in record["published"]:
             if isinstance(p, str):  # a record written before the table
@@ -183,8 +184,8 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
                 continue
             mwr = _ci(p["test_mwr"], p["test_mwr_lo"], p["test_mwr_hi"]) if "test_mwr" in p else "-"
             picked = f"{p['train_mwr']:+.3f}" if "train_mwr" in p else "-"
-            lines.append(f"| `zoo:{p['name']}` | {p.get('algo', '-')} | {p.get('train_seed', '-')} | {picked} | {mwr} | "
-                         f"`{p['file']}` |")
+            lines.append(f"| `zoo:{p['name']}` | {p.get('algo', '-')} | {p.get('train_seed', '-')} | {picked} | "
+                         f"{mwr} | `{p['file']}` |")
         lines.append("")
     lines += ["## Commands", "", "The whole protocol: `triplesumo reproduce "
               + " ".join(shlex.quote(a) for a in _argv(cfg)) + "`. Stage by stage:", "", "```bash"]
