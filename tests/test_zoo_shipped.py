@@ -200,8 +200,8 @@ CONTEST = ROOT / "docs" / "runs" / "contest-v2" / "reproduce" / "contest"
 
 def test_the_contest_record_is_recomputed_from_its_matches() -> None:
     """Every count of the pair's contest record is the outcomes of its per-match ``metrics.csv`` (1,000 starts per
-    check), the verdict is the contest rule's on those counts, and a shipped Ant or Spider whose manifest carries a
-    contest check carries this one."""
+    check), the verdict is the contest rule's on those counts, and a shipped Ant or Spider of this env version
+    carries this record in its manifest."""
     from triplesumo.reproduce.protocol import contest_verdict
 
     record = json.loads((CONTEST / "contest.json").read_text())
