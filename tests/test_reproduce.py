@@ -32,6 +32,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     out, zoo = tmp_path / "rep", tmp_path / "zoo"
     zoo.mkdir()
     monkeypatch.setattr(triplesumo.agents.zoo, "ZOO_DIR", zoo)
+    monkeypatch.chdir(tmp_path)  # the manifests name the folder from here
     argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "ppo", "--seeds", "0", "--no-progress",
             "--ablations", "noise=gaussian", "still=-1", "--publish"]
     assert main(argv) == 0
@@ -99,6 +100,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert shipped["algo"] == best["algo"] and shipped["code_version"] == _record(out)["runs"][-1]["version"]
     assert shipped["command"].startswith("triplesumo train") and shipped["seed"] == 0 and shipped["env_steps"] > 0
     assert shipped["physics"] == dataclasses.asdict(PhysicsConfig()) and shipped["env_version"] == ENV_VERSION
+    assert shipped["reproduction"] == "rep"  # relative to the working directory it lies in
     for name in ("ant", "spider"):  # every stage's ring, and the contest check of the pair
         pair = json.loads((zoo / f"{name}.json").read_text())
         assert pair["physics"] == shipped["physics"] and pair["evaluation"]["contest"] == contest

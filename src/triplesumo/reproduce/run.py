@@ -93,6 +93,13 @@ def _now() -> str:
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
 
 
+def _shown(path: Path) -> str:
+    """``path`` relative to the working directory when it lies inside it (a manifest that names
+    ``docs/runs/...`` stays true in every checkout), else absolute."""
+    here = Path.cwd().resolve()
+    return str(path.relative_to(here)) if path.is_relative_to(here) else str(path)
+
+
 SELECT_WINDOW = 200
 """The shipped Bug of each algorithm is its seed with the highest training MWR over its last this many training
 matches (training starts only: the test starts pick nothing; docs/CONTEST.md, the Bug stage's rules)."""
@@ -110,7 +117,7 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
                  for t in protocol.bug_trials()}  # not the ablations
     rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["policy"] in by_policy]
     # the ring every stage trained on, and the env version whose default it is (the trainer wrote the one it ran under)
-    extra: dict[str, Any] = {"code_version": version, "reproduction": str(protocol.out),
+    extra: dict[str, Any] = {"code_version": version, "reproduction": _shown(protocol.out),
                              "physics": dataclasses.asdict(protocol.physics),
                              **({"env_version": ENV_VERSION} if protocol.physics == PhysicsConfig() else {})}
     train_mwr = {r["policy"]: run_facts(by_policy[r["policy"]], SELECT_WINDOW)["final_mwr"] for r in rows}
