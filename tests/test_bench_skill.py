@@ -66,11 +66,13 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
     # the machine is named in the record and the table; a CPU-only run says its GPU figure is not measured
     import os
 
+    from triplesumo.benchmarks import cpu_name
     from triplesumo.benchmarks.skill import format_skill
 
     m = result["machine"]
     assert m["cores"] == os.cpu_count() and m["backend"] == "cpu" and m["device"] == "cpu" and m["gpu"] is None
-    assert f"measured on {os.cpu_count()} CPU cores" in format_skill(result)
+    assert m["cpu"] == cpu_name()  # the CPU model where the OS names one (/proc/cpuinfo), not only "x86_64"
+    assert f"measured on {os.cpu_count()} CPU cores ({m['cpu']})" in format_skill(result)
     assert "GPU: not measured" in format_skill(result)
 
 

@@ -38,7 +38,7 @@ from typing import Any
 
 from triplesumo import _dcargs
 from triplesumo.agents.policy_file import atomic_write_bytes
-from triplesumo.benchmarks import report
+from triplesumo.benchmarks import cpu_name, report
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import train
@@ -190,7 +190,6 @@ def machine(train_cfg: TrainConfig) -> dict[str, Any]:
     """Where the times were measured: the CPU (its cores), and the backend and device the matches stepped on
     (a GPU's own name where one did; none here means no GPU figure: "not measured")."""
     import os
-    import platform
 
     device = train_cfg.device or ("cpu" if train_cfg.backend == "cpu" else "cuda")
     gpu = None
@@ -198,7 +197,7 @@ def machine(train_cfg: TrainConfig) -> dict[str, Any]:
         import torch
 
         gpu = torch.cuda.get_device_name(torch.device(device)) if torch.cuda.is_available() else None
-    return {"cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(), "backend": train_cfg.backend,
+    return {"cpu": cpu_name(), "cores": os.cpu_count(), "backend": train_cfg.backend,
             "device": device, "gpu": gpu, "n_threads": train_cfg.n_threads, "torch_threads": train_cfg.torch_threads}
 
 

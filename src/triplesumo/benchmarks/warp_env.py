@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from triplesumo.benchmarks import versions
+from triplesumo.benchmarks import cpu_name, versions
 from triplesumo.rules import MatchConfig
 
 DEFAULT_SIZES = (1, 16, 256, 1024, 4096, 16384)
@@ -133,7 +133,7 @@ def _device_name(device: str) -> str:
 
     if device.startswith("cuda") and torch.cuda.is_available():
         return torch.cuda.get_device_name(torch.device(device))
-    return platform.processor() or platform.machine()
+    return cpu_name()
 
 
 def format_table(result: dict[str, Any]) -> str:
