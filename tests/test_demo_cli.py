@@ -55,6 +55,8 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
     printed = capsys.readouterr().out
     assert rc == 0
     assert "note: the shipped" not in printed  # the tiny zoo is this env version's: no word of an older pair
+    shipped = load_json(zoo.zoo_dir / "bug.json")  # the output says what the shipped Bug is, from its manifest
+    assert f"(zoo:bug: {shipped['algo'].upper()}, {shipped['env_steps']:,} env steps)" in printed
 
     # 1. training: Bug in the (tiny) shipped ongoing match, default networks
     with (out / "bug" / "metrics.csv").open(newline="") as fh:

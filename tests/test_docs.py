@@ -183,8 +183,12 @@ def test_site_builds_strict(tmp_path: Path) -> None:
     assert (tmp_path / "site" / "environments" / "paper.html").is_file()
     assert "TripleSumoParallelEnv" in (tmp_path / "site" / "api" / "envs.html").read_text()
     # docs/hooks.py serves the linked files outside docs/ and under the excluded docs/runs/, and only those
-    assert 'src="repo/reproduction/compare/compare.png"' in (tmp_path / "site" / "index.html").read_text()
+    assert 'src="repo/reproduction/compare/compare.png"' in (tmp_path / "site" / "REPRODUCTION.html").read_text()
     assert (tmp_path / "site" / "repo" / "reproduction" / "compare" / "compare.png").is_file()
+    assert 'src="runs/contest-v2/reproduce/bug/learn%3Dbug%3Dsac%2Cseed%3D0/plots/mwr.png"' in (
+        tmp_path / "site" / "index.html").read_text()  # the home page's figure, from docs/runs
+    assert (tmp_path / "site" / "runs" / "contest-v2" / "reproduce" / "bug" / "learn=bug=sac,seed=0" / "plots" /
+            "mwr.png").is_file()
     assert (tmp_path / "site" / "runs" / "league" / "leaderboard.png").is_file()
     assert not (tmp_path / "site" / "runs" / "league" / "matches.csv").exists()
     # docs/griffe_roles.py: no Sphinx role is left literally in the API reference; a resolved one is a link

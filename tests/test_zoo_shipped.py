@@ -18,9 +18,7 @@ from triplesumo.model.specs import physics_record
 from triplesumo.rules.scenarios import scenario_config
 
 SHIPPED = ("ant", "spider", "bug")
-PENDING_REBUILD = ("v1",)
-"""Env versions the shipped paper roster may still be from: v2's zoo is built by ``triplesumo reproduce`` (issue
-38); until then TripleSumo-Paper-v2 warns that it plays v1's pair (test_paper_env_names_a_pair_of_an_older_env)."""
+"""The paper roster that TripleSumo-Paper-v2 plays with: this env version's, built by ``triplesumo reproduce``."""
 
 
 def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
@@ -49,8 +47,8 @@ def test_shipped_policy_manifest_says_how_it_was_made(name: str) -> None:
     # the simulation it was trained on: that of its env version (a manifest without physics: v0's)
     physics = PhysicsConfig(**physics_record(manifest["physics"])) if "physics" in manifest else V0_PHYSICS
     assert (physics == PhysicsConfig()) == (manifest["env_version"] == triplesumo.ENV_VERSION)
-    if name in SHIPPED:  # the paper roster that TripleSumo-Paper-v2 plays with: v1's until reproduce rebuilds it
-        assert manifest["env_version"] in (triplesumo.ENV_VERSION, *PENDING_REBUILD)  # on v2 (issue 38)
+    if name in SHIPPED or name.startswith("bug-"):  # the paper roster of this env version (issue 38)
+        assert manifest["env_version"] == triplesumo.ENV_VERSION
     assert "evaluation" in manifest
 
 
@@ -69,14 +67,33 @@ def test_shipped_policy_loads_by_name_and_acts_deterministically(name: str) -> N
     assert manifest["obs_dim"] == obs[i].shape[0]
 
 
-def test_paper_env_names_a_pair_of_an_older_env() -> None:
+def test_paper_env_plays_the_shipped_pair_of_this_env_without_a_warning() -> None:
+    import warnings
+
     import gymnasium as gym
 
-    old = [n for n in ("ant", "spider") if zoo.load(n)[1].get("env_version") != triplesumo.ENV_VERSION]
-    if not old:
-        pytest.skip("the shipped pair is the current env version's")
-    with pytest.warns(UserWarning, match=rf"zoo:{old[0]} was trained on env v1, not {triplesumo.ENV_VERSION}"):
-        gym.make("TripleSumo-Paper-v2")
+    assert triplesumo.zoo.older_pair() == {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning here fails the test
+        gym.make("TripleSumo-Paper-v2").close()
+
+
+def test_paper_env_names_a_pair_of_an_older_env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A zoo whose Ant and Spider are env v1's (the history's copies): the env warns, naming each and its version."""
+    import shutil
+
+    import gymnasium as gym
+
+    for name in ("ant", "spider"):
+        for suffix in (".json", ".safetensors"):
+            shutil.copy(HISTORY / f"{name}-v1{suffix}", tmp_path / f"{name}{suffix}")
+    monkeypatch.setattr(zoo, "ZOO_DIR", tmp_path)
+    assert triplesumo.zoo.older_pair() == {"zoo:ant": "v1", "zoo:spider": "v1"}
+    with pytest.warns(UserWarning) as caught:
+        gym.make("TripleSumo-Paper-v2").close()
+    said = [str(w.message) for w in caught]
+    for name in ("ant", "spider"):  # one warning each, naming the policy and both versions
+        assert sum(f"zoo:{name} was trained on env v1, not {triplesumo.ENV_VERSION}" in m for m in said) == 1, said
 
 
 def test_paper_env_uses_the_shipped_ant_and_spider() -> None:
@@ -217,5 +234,60 @@ def test_the_contest_record_is_recomputed_from_its_matches() -> None:
     assert record["contest"] and -0.50 <= record["team_mwr"] <= -0.10
     for name in ("ant", "spider"):
         manifest = zoo.load(name)[1]
-        if manifest["env_version"] == triplesumo.ENV_VERSION:  # the v2 pair (v1's carries v1's older check)
-            assert manifest["evaluation"]["contest"] == record
+        assert manifest["evaluation"]["contest"] == record
+
+
+REPRODUCE = ROOT / "docs" / "runs" / "contest-v2" / "reproduce"
+"""Env v2's reproduction (docs/CONTEST.md): the Bug trials' ``metrics.csv`` and the 2,000-start test's per-match
+CSVs that the shipped Bugs' manifests are recomputed from."""
+BUGS = [n for n in zoo.available() if n == "bug" or n.startswith("bug-")]
+
+
+def _test_rows() -> list[dict[str, str]]:
+    with open(REPRODUCE / "evaluation" / "per_seed.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.mark.parametrize("name", BUGS)
+def test_a_shipped_bug_is_its_trial_and_its_figures_are_recomputed_from_the_matches(name: str) -> None:
+    """A shipped Bug's weights are its trial's final policy; its test MWR, interval and counts are the outcomes of its
+    2,000 test matches; its pick is the seed with the highest training MWR over its last 200 training matches, and
+    ``zoo:bug`` is that Bug of the algorithm with the highest IQM test MWR across seeds (the rules fixed beforehand in
+    docs/CONTEST.md), every figure read back from the CSVs."""
+    from triplesumo.agents.policy_file import file_sha256
+    from triplesumo.evaluation.compare import iqm
+    from triplesumo.evaluation.metrics import summarize
+
+    manifest = zoo.load(name)[1]
+    assert manifest["env_version"] == triplesumo.ENV_VERSION and manifest["reproduction"] == str(
+        REPRODUCE.relative_to(ROOT))
+    ev, algo = manifest["evaluation"], manifest["algo"]
+    trial = REPRODUCE / "bug" / f"learn=bug={algo},seed={manifest['seed']}"
+    assert manifest["sha256"] == file_sha256(trial / "policy.safetensors")
+    rows = [r for r in _test_rows() if "/bug/learn=bug=" in r["policy"]]
+    row = next(r for r in rows if r["algo"] == algo and int(r["train_seed"]) == manifest["seed"])
+    with open(REPRODUCE / "evaluation" / row["candidate"] / "metrics.csv", newline="") as fh:
+        matches = list(csv.DictReader(fh))
+    s = summarize([m["outcome"] for m in matches], [float(m["steps"]) for m in matches])
+    assert s["n"] == ev["test_matches"] == 2000 and ev["eval_seed"] == 10_000
+    assert (s["n_win"], s["n_loss"], s["n_draw"]) == (ev["n_win"], ev["n_loss"], ev["n_draw"])
+    assert (s["mean_lwr"], s["mean_lwr_lo"], s["mean_lwr_hi"]) == pytest.approx(
+        (ev["test_mwr"], ev["test_mwr_lo"], ev["test_mwr_hi"]), abs=1e-12)
+
+    def train_mwr(seed: str) -> float:
+        with open(REPRODUCE / "bug" / f"learn=bug={algo},seed={seed}" / "metrics.csv", newline="") as fh:
+            lwr = [float(r["local_winning_rate"]) for r in csv.DictReader(fh)][-200:]
+        return sum(lwr) / len(lwr)
+
+    mine = {r["train_seed"]: train_mwr(r["train_seed"]) for r in rows if r["algo"] == algo}
+    assert len(mine) == ev["selection"]["seeds"] == 3
+    assert ev["selection"]["train_mwr"] == pytest.approx(mine[str(manifest["seed"])], abs=1e-12)
+    assert max(mine, key=lambda k: (mine[k], -int(k))) == str(manifest["seed"])  # lower seed on a tie
+    algos = {r["algo"] for r in rows}
+    by_algo = {a: iqm(np.array([float(r["test_mwr"]) for r in rows if r["algo"] == a])) for a in algos}
+    assert ev["selection"]["algo_iqm_test_mwr"] == pytest.approx(by_algo[algo], abs=1e-12)
+    if name == "bug":
+        assert algo == max(by_algo, key=lambda a: (by_algo[a], a == "ddpg"))
+        assert file_sha256(zoo.ZOO_DIR / "bug.safetensors") == file_sha256(zoo.ZOO_DIR / f"bug-{algo}.safetensors")
+    else:
+        assert name == f"bug-{algo}"

@@ -2,9 +2,9 @@
 
 1. Train Bug with DDPG (the paper's preset) in the shipped ongoing match: the zoo's
    trained Ant and Spider play, Bug learns to cooperate with Ant.
-2. Evaluate the Bug it trained, the shipped Bug (``zoo:bug``, paper-preset DDPG, 1 M env steps)
-   and the passive and random Bug baselines, all in the same seeded test matches, with
-   no exploration noise.
+2. Evaluate the Bug it trained, the shipped Bug (``zoo:bug``: the reproduction's best, SAC after 1 M env steps,
+   docs/CONTEST.md) and the passive and random Bug baselines, all in the same seeded test matches, with
+   no exploration noise. A few minutes of DDPG do not turn the match; the shipped Bug does.
 3. Record one match of the shipped Bug with Ant against Spider as mp4: the first of the test
    matches of step 2 that the team won and that lasted at least :data:`MIN_VIDEO_STEPS` steps
    (long enough to watch), or, where it won none, its longest match; the output says which.
@@ -24,6 +24,8 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from triplesumo.agents import zoo as shipped_zoo
+from triplesumo.agents.policy_file import load_json
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 from triplesumo.evaluation.play import PlayConfig, run_play
@@ -125,7 +127,9 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     print(f"      {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates in "
           f"{result.seconds:.0f} s; training MWR {result.mwr:+.3f}")
     policy = str(result.run_dir / "policy")
-    print(f"[2/3] evaluating this Bug, the shipped Bug (zoo:bug), passive and random Bug "
+    shipped = load_json(shipped_zoo.ZOO_DIR / "bug.json")  # (read now: tests point ZOO_DIR at their own zoo)
+    print(f"[2/3] evaluating this Bug, the shipped Bug (zoo:bug: {str(shipped.get('algo', '?')).upper()}, "
+          f"{int(shipped.get('env_steps', 0)):,} env steps), passive and random Bug "
           f"({cfg.eval_epochs} test epochs each, the same matches)")
     eval_cfg = EvaluateConfig(policy=(policy,), compare=("zoo:bug",), epochs=cfg.eval_epochs,
                               out=str(out / "evaluation"), steps_per_epoch=cfg.steps_per_epoch,
