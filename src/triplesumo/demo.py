@@ -24,8 +24,8 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from triplesumo.agents import zoo as shipped_zoo
-from triplesumo.agents.policy_file import load_json
+from triplesumo.agents.policy_file import load_json, policy_paths
+from triplesumo.agents.zoo import policy_stem
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 from triplesumo.evaluation.play import PlayConfig, run_play
@@ -127,9 +127,9 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     print(f"      {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates in "
           f"{result.seconds:.0f} s; training MWR {result.mwr:+.3f}")
     policy = str(result.run_dir / "policy")
-    shipped = load_json(shipped_zoo.ZOO_DIR / "bug.json")  # (read now: tests point ZOO_DIR at their own zoo)
-    print(f"[2/3] evaluating this Bug, the shipped Bug (zoo:bug: {str(shipped.get('algo', '?')).upper()}, "
-          f"{int(shipped.get('env_steps', 0)):,} env steps), passive and random Bug "
+    shipped = load_json(policy_paths(policy_stem("zoo:bug"))[0])  # the manifest of the Bug step 2 plays
+    print(f"[2/3] evaluating this Bug, the shipped Bug (zoo:bug: {shipped['algo'].upper()}, "
+          f"{shipped['env_steps']:,} env steps), passive and random Bug "
           f"({cfg.eval_epochs} test epochs each, the same matches)")
     eval_cfg = EvaluateConfig(policy=(policy,), compare=("zoo:bug",), epochs=cfg.eval_epochs,
                               out=str(out / "evaluation"), steps_per_epoch=cfg.steps_per_epoch,
