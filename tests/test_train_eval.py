@@ -126,3 +126,39 @@ def test_a_run_stops_at_the_first_evaluation_at_its_target(tmp_path: Path) -> No
 def test_bad_evaluation_settings_name_the_field(tmp_path: Path, fields: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         tiny(tmp_path, **fields)
+
+
+def _figures(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    """An evaluation's rows less the wall times (what depends on the machine and on where it played)."""
+    return [{k: v for k, v in r.items() if k not in ("train_seconds", "eval_seconds")} for r in rows]
+
+
+def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) -> None:
+    """In a worker process the evaluations play the same frozen policies on the same matches: the same rows
+    (only the times differ), and the training is the same as without them."""
+    inline = train(tiny(tmp_path, "inline", eval_every=EVERY, eval_epochs=TESTS))
+    background = train(tiny(tmp_path, "background", eval_every=EVERY, eval_epochs=TESTS, eval_background=True))
+    rows = _evals(background.run_dir / "eval.csv")
+    assert len(rows) >= 3 and _figures(rows) == _figures(_evals(inline.run_dir / "eval.csv"))
+    assert _metrics(background.run_dir) == _metrics(inline.run_dir)
+    assert (background.run_dir / "policy.safetensors").read_bytes() == (
+        inline.run_dir / "policy.safetensors").read_bytes()
+    seconds = [float(r["train_seconds"]) for r in rows]
+    assert seconds == sorted(seconds)
+    last = sorted((background.run_dir / "checkpoints").glob("epoch-*"))[-1]
+    assert json.loads((last / "state.json").read_text())["pending_evaluations"] == []  # the end waited for them
+
+
+def test_an_evaluation_in_flight_at_a_checkpoint_is_played_by_the_resume(tmp_path: Path) -> None:
+    """The first checkpoint comes milliseconds after the first evaluation went to the worker (which takes
+    seconds to start): it holds that evaluation's frozen weights, and a resume from it writes the rows of the
+    uninterrupted run."""
+    cfg = tiny(tmp_path, "cut", eval_every=EVERY, eval_epochs=TESTS, eval_background=True)
+    whole = train(cfg)
+    first = whole.run_dir / "checkpoints" / f"epoch-{E:06d}"
+    pending = json.loads((first / "state.json").read_text())["pending_evaluations"]
+    assert [p["number"] for p in pending] == [1] and pending[0]["learners"]["bug"]["agents"] == ["bug"]
+    made = _figures(_evals(whole.run_dir / "eval.csv"))
+    resumed = train(TrainConfig(), resume_dir=whole.run_dir, from_checkpoint=first.name,
+                    overrides={"eval_background": False})  # played by the worker all the same
+    assert _figures(_evals(resumed.run_dir / "eval.csv")) == made

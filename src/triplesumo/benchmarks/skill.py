@@ -11,9 +11,13 @@ into ``OUT/ALGO/eval.csv``. The run stops at the first evaluation whose test MWR
 ``>= target`` (*reached*, ``train --eval-target``) or at ``max_env_steps`` (*not reached*:
 reported as such, with the best test MWR seen).
 
-Times: ``train_seconds`` is the training's own wall time up to the evaluation (collection,
-learning and checkpoints; the trainer's clock, carried across resumes), ``eval_seconds`` the
-evaluations' and ``wall_seconds`` both. Measured on the machine at hand, never projected.
+Times: ``train_seconds`` is the training's own wall time up to the evaluation's row (collection,
+learning and checkpoints; the trainer's clock, carried across resumes), ``eval_seconds`` the time the
+training spent on evaluations and ``wall_seconds`` both: the run's wall time when the test MWR was
+known. With ``--train.eval-background`` the evaluations play in a worker process while Bug trains on
+(the same curve in env steps: the same frozen policies on the same matches); a row is then written
+when its evaluation is back, so the wall time to skill counts the training done meanwhile and none of
+the earlier evaluations. Measured on the machine at hand, never projected.
 
 Resumable: ``OUT/skill.json`` is rebuilt from each run's ``eval.csv``; a killed bench, run again
 with the same options, resumes each run from its last checkpoint (exactly: the checkpoints hold
@@ -105,7 +109,8 @@ class SkillConfig:
 
 def _depends(cfg: SkillConfig) -> dict[str, Any]:
     values: dict[str, Any] = json.loads(json.dumps({k: dataclasses.asdict(cfg)[k] for k in CURVE_DEPENDS_ON}))
-    for name in ("progress", "tensorboard", "out", "name"):  # (how it shows, or set per algorithm by the bench)
+    for name in ("progress", "tensorboard", "out", "name", "eval_background"):  # (how it shows or where it
+        # plays, or set per algorithm by the bench)
         values["train"].pop(name)
     return values
 

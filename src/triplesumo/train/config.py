@@ -131,6 +131,11 @@ class TrainConfig:
     with several learners) and TensorBoard; 0: never. The test matches run on the CPU and draw on none of
     the training's generators: a run trains the same with or without them. Not with self_play (its
     league rates the learners)."""
+    eval_background: bool = False
+    """Play each evaluation in a worker process while the training goes on (a spare core), its row written
+    when it is back: the same figures, with train_seconds the training's clock at that moment. An evaluation
+    in flight at a checkpoint is saved with it and played again by a resume; the run's end waits for the
+    last ones. Off: the training waits for each evaluation."""
     eval_epochs: int = 200
     """Test matches per evaluation (eval_every); test match i resets with eval_seed + i."""
     eval_seed: int = 10_000

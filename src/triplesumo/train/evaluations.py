@@ -1,87 +1,229 @@
 """Evaluation while training (``eval_every``), a piece beside the loop as SB3's ``EvalCallback`` is: every
 ``eval_every`` env steps each learner's current policy, frozen, plays the run's seeded test matches and a row
-goes to its eval CSV. It draws on none of the training's generators: a run trains the same with or without it."""
+goes to its eval CSV. It draws on none of the training's generators: a run trains the same with or without it.
+
+An evaluation plays inline (the training waits for it) or, with ``eval_background``, in a worker process
+while the training goes on: its row is written when it comes back, with the same figures (the frozen policy
+and the test matches are the same; only the times differ). An evaluation still in flight at a checkpoint is
+saved with it (the frozen weights it plays) and played again by a resume."""
 
 from __future__ import annotations
 
+import multiprocessing
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.zoo import policies_from_pairs
-from triplesumo.envs.match import Match
 from triplesumo.rules.config import MatchConfig
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.learners import Learner
 from triplesumo.train.logger import MetricsLog
 
+Frozen = dict[str, tuple[tuple[str, ...], dict[str, np.ndarray], bool]]
+"""Per learner: the agents it plays, its actor's tensors (``actor.*``, ``obs_norm.*``) as numpy, whether it
+normalises observations: what its policy file would hold now."""
+
+
+def frozen_tensors(learner: Learner) -> tuple[dict[str, np.ndarray], bool]:
+    """The learner's current deterministic policy as numpy tensors (``actor.*``, and ``obs_norm.*`` when it
+    normalises observations), copied: what its policy file would hold now."""
+    tensors = {f"actor.{k}": v.detach().cpu().numpy().copy()
+               for k, v in learner.algo.export_actor().state_dict().items()}
+    norm = learner.algo.obs_norm
+    if norm is not None:
+        tensors |= {f"obs_norm.{k}": v.detach().cpu().numpy().copy() for k, v in norm.state_dict().items()}
+    return tensors, norm is not None
+
+
+def frozen_policy(tensors: Mapping[str, np.ndarray], normalizes: bool) -> FrozenPolicy:
+    """The numpy :class:`FrozenPolicy` of :func:`frozen_tensors`."""
+    return FrozenPolicy.from_tensors(tensors, prefix="actor.", obs_norm_prefix="obs_norm." if normalizes else None)
+
 
 def frozen_copy(learner: Learner) -> FrozenPolicy:
     """The learner's current deterministic policy as a numpy :class:`FrozenPolicy` (with its observation
     normaliser, frozen), what its policy file would hold now."""
-    tensors = {f"actor.{k}": v.detach().cpu().numpy() for k, v in learner.algo.export_actor().state_dict().items()}
-    norm = learner.algo.obs_norm
-    if norm is not None:
-        tensors |= {f"obs_norm.{k}": v.detach().cpu().numpy() for k, v in norm.state_dict().items()}
-    return FrozenPolicy.from_tensors(tensors, prefix="actor.", obs_norm_prefix=None if norm is None else "obs_norm.")
+    return frozen_policy(*frozen_tensors(learner))
+
+
+def play_evaluation(frozen: Frozen, pairs: tuple[str, ...], match_cfg: MatchConfig, obs_mode: str,
+                    obs_dims: Mapping[str, int], action_sizes: Mapping[str, int], epochs: int, seed: int, n_envs: int,
+                    n_threads: int) -> tuple[list[tuple[str, dict[str, Any]]], float]:
+    """One evaluation: each learner's frozen policy on the ``epochs`` seeded test matches (test match ``i``
+    resets with ``seed + i``) against the fixed policies of ``pairs`` (built afresh from ``seed``) and the other
+    learners' frozen policies, rated in its first agent's seat. Returns each learner's summary and the seconds
+    it took. Depends on its arguments only, so a worker process plays it as the training process does."""
+    from triplesumo.evaluation.evaluate import play_test_epochs
+    from triplesumo.evaluation.metrics import summarize
+
+    t0 = time.perf_counter()
+    fixed = policies_from_pairs(pairs, seed, obs_mode, obs_dims=dict(obs_dims), action_sizes=dict(action_sizes))
+    policies = {name: frozen_policy(tensors, norm) for name, (_, tensors, norm) in frozen.items()}
+    seats = {agent: policies[name] for name, (agents, _, _) in frozen.items() for agent in agents}
+    done: list[tuple[str, dict[str, Any]]] = []
+    for name, (agents, _, _) in frozen.items():
+        agent = agents[0]
+        others = {**fixed, **{a: p for a, p in seats.items() if a != agent}}
+        rows = play_test_epochs(policies[name], others, agent, epochs, seed, match_cfg, n_envs, n_threads)
+        done.append((name, dict(summarize([r["outcome"] for r in rows], [r["steps"] for r in rows]))))
+    return done, time.perf_counter() - t0
+
+
+def _worker_init() -> None:
+    import torch
+
+    torch.set_num_threads(1)  # the worker plays numpy policies; its MuJoCo threads are the run's n_threads
+
+
+@dataclass
+class Pending:
+    """An evaluation handed to the worker, not yet written: its number, when it was made, what it plays."""
+
+    number: int
+    env_steps: int
+    epochs: int
+    frozen: Frozen
+    future: Future[tuple[list[tuple[str, dict[str, Any]]], float]] | None = None
 
 
 class Evaluations:
-    """The evaluations of a run: how many were made (:attr:`count`, the rows of each learner's eval CSV) and
-    their wall time (:attr:`seconds`), over every session of the run."""
+    """The evaluations of a run: how many were written (:attr:`count`, the rows of each learner's eval CSV),
+    those in flight (:attr:`pending`, ``eval_background``) and the wall time the training spent on them
+    (:attr:`seconds`), over every session of the run."""
 
-    def __init__(self, cfg: TrainConfig, match_cfg: MatchConfig, probe: Match, pairs: tuple[str, ...]) -> None:
-        self.cfg, self.match_cfg, self.probe, self.pairs = cfg, match_cfg, probe, pairs
+    def __init__(self, cfg: TrainConfig, match_cfg: MatchConfig, obs_dims: Mapping[str, int],
+                 action_sizes: Mapping[str, int], pairs: tuple[str, ...]) -> None:
+        self.cfg, self.match_cfg, self.pairs = cfg, match_cfg, pairs
+        self.obs_dims, self.action_sizes = dict(obs_dims), dict(action_sizes)
         self.count = 0
-        """Evaluations made so far (``eval_every``): the rows of each learner's eval CSV."""
+        """Evaluations written so far (``eval_every``): the rows of each learner's eval CSV."""
         self.seconds = 0.0
-        """Wall time of the evaluations, over every session of the run."""
+        """Wall time the training spent on evaluations, over every session of the run: all of an inline
+        evaluation's, only the waits for a background one (at the run's end)."""
+        self.played_seconds = 0.0
+        """Wall time the evaluations took to play (this session's), inline or in the worker."""
+        self.pending: list[Pending] = []
+        """Background evaluations handed to the worker and not yet written, oldest first."""
+        self._pool: ProcessPoolExecutor | None = None
 
     def due(self, steps_before: int, steps_now: int) -> bool:
         """Whether a step from ``steps_before`` to ``steps_now`` env steps crossed a multiple of ``eval_every``."""
         every = self.cfg.eval_every
         return bool(every) and steps_now // every > steps_before // every
 
+    def _args(self, frozen: Frozen) -> tuple[Any, ...]:
+        cfg = self.cfg
+        return (frozen, self.pairs, self.match_cfg, cfg.obs_mode, self.obs_dims, self.action_sizes,
+                cfg.eval_epochs, cfg.eval_seed, cfg.n_envs, cfg.n_threads)
+
+    def _submit(self, job: Pending) -> None:
+        if self._pool is None:  # spawned, not forked: the training process holds threads (torch, the learner's)
+            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_worker_init)
+        job.future = self._pool.submit(play_evaluation, *self._args(job.frozen))
+        self.pending.append(job)
+
     def __call__(self, learners: Sequence[Learner], log: MetricsLog, env_steps: int, epochs: int,
                  train_seconds: float) -> bool:
-        """Each learner's current policy, frozen (no exploration), on the run's seeded test matches
-        (``eval_epochs`` from ``eval_seed``, on the CPU): a row of its eval CSV. True when every
-        learner's test MWR reached ``eval_target``.
+        """Evaluate each learner's current policy, frozen (no exploration), on the run's seeded test matches
+        (``eval_epochs`` from ``eval_seed``, on the CPU; :func:`play_evaluation`). Inline: its row is written
+        now, and True means every learner's test MWR reached ``eval_target``. With ``eval_background`` it is
+        handed to the worker and False is returned: :meth:`collect` writes it when it is back.
 
         The other agents play the run's fixed policies, built afresh from ``eval_seed`` (so every
         evaluation meets the same matches), and the other learners their current policies, frozen;
         a learner that plays several agents (``share="team"``) is rated in its first agent's seat.
         Nothing of the training is touched: it trains the same with or without evaluations."""
-        from triplesumo.evaluation.evaluate import play_test_epochs
-        from triplesumo.evaluation.metrics import summarize
-
-        cfg, probe = self.cfg, self.probe
+        frozen: Frozen = {lr.name: (tuple(lr.spec.agents), *frozen_tensors(lr)) for lr in learners}
+        job = Pending(self.count + len(self.pending) + 1, env_steps, epochs, frozen)
+        if self.cfg.eval_background:
+            self._submit(job)
+            return False
+        reached = self.collect(log, train_seconds, wait=True)  # (ones a resume handed to the worker come first)
         t0 = time.perf_counter()
-        fixed = policies_from_pairs(self.pairs, cfg.eval_seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
-                                    action_sizes=dict(zip(probe.agents, probe.action_sizes, strict=True)))
-        frozen: dict[str, FrozenPolicy] = {}
-        for learner in learners:
-            policy = frozen_copy(learner)
-            frozen |= {agent: policy for agent in learner.spec.agents}
-        self.count += 1
-        done: list[tuple[str, Any]] = []
-        for learner in learners:
-            agent = learner.spec.agents[0]
-            others = {**fixed, **{a: p for a, p in frozen.items() if a != agent}}
-            rows = play_test_epochs(frozen[agent], others, agent, cfg.eval_epochs, cfg.eval_seed, self.match_cfg,
-                                    cfg.n_envs, cfg.n_threads)
-            done.append((learner.name, summarize([r["outcome"] for r in rows], [r["steps"] for r in rows])))
+        done, played = play_evaluation(*self._args(frozen))
         self.seconds += time.perf_counter() - t0
+        return self._write(job, done, played, log, train_seconds) or reached
+
+    def collect(self, log: MetricsLog, train_seconds: float, wait: bool = False) -> bool:
+        """Write the rows of the background evaluations that are back, in order (``wait``: all of them, the
+        wait counted in :attr:`seconds`). True when one of them reached ``eval_target``."""
+        reached = False
+        while self.pending:
+            job = self.pending[0]
+            assert job.future is not None
+            if not job.future.done():
+                if not wait:
+                    break
+                t0 = time.perf_counter()
+                job.future.result()
+                self.seconds += time.perf_counter() - t0  # the wait is the evaluations', not the training's
+            done, played = job.future.result()
+            self.pending.pop(0)
+            reached = self._write(job, done, played, log, train_seconds) or reached
+        return reached
+
+    def ready(self) -> bool:
+        """Whether the oldest background evaluation is back (:meth:`collect` would write it)."""
+        return bool(self.pending) and self.pending[0].future is not None and self.pending[0].future.done()
+
+    def _write(self, job: Pending, done: list[tuple[str, dict[str, Any]]], played: float, log: MetricsLog,
+               train_seconds: float) -> bool:
+        cfg = self.cfg
+        self.count += 1
+        assert job.number == self.count, (job.number, self.count)
+        self.played_seconds += played
         for name, stats in done:
             log.evaluated(name, {
-                "evaluation": self.count, "env_steps": env_steps, "epochs": epochs,
+                "evaluation": job.number, "env_steps": job.env_steps, "epochs": job.epochs,
                 "train_seconds": round(train_seconds, 3), "eval_seconds": round(self.seconds, 3),
                 "test_matches": cfg.eval_epochs, "test_mwr": float(stats["mean_lwr"]),
                 "test_mwr_lo": float(stats["mean_lwr_lo"]), "test_mwr_hi": float(stats["mean_lwr_hi"]),
                 "n_win": stats["n_win"], "n_loss": stats["n_loss"], "n_draw": stats["n_draw"]})
             if cfg.progress:
-                print(f"  evaluation {self.count} at {env_steps:,} env steps: {name} test MWR "
+                where = " (in the background)" if cfg.eval_background else ""
+                print(f"  evaluation {job.number} at {job.env_steps:,} env steps: {name} test MWR "
                       f"{float(stats['mean_lwr']):+.3f} [{float(stats['mean_lwr_lo']):+.3f}, "
-                      f"{float(stats['mean_lwr_hi']):+.3f}] over {cfg.eval_epochs} matches")
+                      f"{float(stats['mean_lwr_hi']):+.3f}] over {cfg.eval_epochs} matches, "
+                      f"played in {played:.0f} s{where}")
         return cfg.eval_target is not None and all(float(stats["mean_lwr"]) >= cfg.eval_target for _, stats in done)
+
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
+        """The evaluations in flight, for a checkpoint: their records (state.json) and frozen weights (arrays)."""
+        records: list[dict[str, Any]] = []
+        arrays: dict[str, np.ndarray] = {}
+        for job in self.pending:
+            learners = {}
+            for name, (agents, tensors, norm) in job.frozen.items():
+                learners[name] = {"agents": list(agents), "obs_norm": norm, "tensors": sorted(tensors)}
+                arrays |= {f"pending_eval{job.number}.{name}.{k}": v for k, v in tensors.items()}
+            records.append({"number": job.number, "env_steps": job.env_steps, "epochs": job.epochs,
+                            "learners": learners})
+        return records, arrays
+
+    def restore(self, records: Sequence[Mapping[str, Any]], arrays: Mapping[str, np.ndarray]) -> None:
+        """Hand the evaluations in flight at the checkpoint to the worker again (after :attr:`count` is set)."""
+        for record in records:
+            number = int(record["number"])
+            frozen: Frozen = {name: (tuple(entry["agents"]),
+                                     {k: np.asarray(arrays[f"pending_eval{number}.{name}.{k}"])
+                                      for k in entry["tensors"]}, bool(entry["obs_norm"]))
+                              for name, entry in record["learners"].items()}
+            job = Pending(number, int(record["env_steps"]), int(record["epochs"]), frozen)
+            if job.number != self.count + len(self.pending) + 1:
+                raise ValueError(f"checkpoint: pending evaluation {number} does not follow the "
+                                 f"{self.count} written")
+            self._submit(job)  # (in the worker even when the run goes on without eval_background)
+
+    def close(self) -> None:
+        """Stop the worker (evaluations still in flight are dropped: a checkpoint holds them)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None

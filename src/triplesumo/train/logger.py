@@ -53,8 +53,10 @@ def learning_row_problem(row: list[str], epoch: int) -> str | None:
 EVAL_COLUMNS = ("evaluation", "env_steps", "epochs", "train_seconds", "eval_seconds", "test_matches", "test_mwr",
                 "test_mwr_lo", "test_mwr_hi", "n_win", "n_loss", "n_draw")
 """Evaluation CSV schema (``TrainConfig.eval_every``): one row per evaluation of a learner, numbered from 1:
-the env steps and epochs trained, the training's wall time so far (evaluations excluded, checkpoints
-included) and the evaluations' own, and the test MWR with its 95 % interval over the test matches."""
+the env steps and epochs trained when its policy was frozen, the training's wall time when the row was
+written (evaluations excluded, checkpoints included; ``eval_background``: the training went on while it
+played) and the time the training spent on evaluations, and the test MWR with its 95 % interval over the
+test matches."""
 
 
 def _eval_row_problem(row: list[str], number: int) -> str | None:

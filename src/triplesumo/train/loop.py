@@ -167,7 +167,8 @@ class Trainer:
         self.train_seconds = 0.0
         """Wall time of training so far, over every session of the run: collection, learning and checkpoints,
         the evaluations excluded (as of the last evaluation or checkpoint)."""
-        self.evaluations = Evaluations(cfg, self.match_cfg, probe, pairs)
+        self.evaluations = Evaluations(cfg, self.match_cfg, probe.observer.sizes,
+                                       dict(zip(probe.agents, probe.action_sizes, strict=True)), pairs)
         self.seats = Seats(cfg, self.match_cfg, probe, self.specs, pairs, self.run_dir,
                            lambda: int(self.rng.integers(2**31 - 1)), resume, self.device)
         self.collector = Collector(cfg, probe, env, self.device, self.learners, others, on_device, self.seats,
@@ -319,6 +320,9 @@ class Trainer:
                 if self.evaluations.due(steps_before, self.env_steps):
                     clock()
                     reached = self.evaluate()
+                if self.evaluations.ready():  # a background evaluation is back: its row, at this moment
+                    clock()
+                    reached = self.evaluations.collect(self.log, self.train_seconds) or reached
                 if finished and bar is not None:
                     bar.update(min(self.epochs_done, cfg.epochs) - min(before, cfg.epochs))
                     rate = (self.env_steps - start_steps) / max(time.perf_counter() - start, 1e-9)
@@ -327,16 +331,21 @@ class Trainer:
                 crossed = finished and (self.epochs_done // cfg.checkpoint_every > before // cfg.checkpoint_every)
                 timed_out = ((cfg.max_minutes > 0 and (time.perf_counter() - start) > cfg.max_minutes * 60)
                              or 0 < cfg.max_env_steps <= self.env_steps)
-                if crossed or (timed_out and finished) or reached or self.epochs_done >= cfg.epochs:
+                stopping = (timed_out and finished) or self.epochs_done >= cfg.epochs
+                if stopping and self.evaluations.pending:  # the run's last evaluations are written before it ends
+                    clock()
+                    reached = self.evaluations.collect(self.log, self.train_seconds, wait=True) or reached
+                if crossed or stopping or reached:
                     clock()
                     self.save()
-                if (timed_out and finished) or reached:
+                if stopping or reached:
                     break
         except checkpoint.CheckpointWriteError as exc:
             if "last good checkpoint" in str(exc) or "no earlier checkpoint" in str(exc):
                 raise
             raise checkpoint.CheckpointWriteError(exc.errno, f"{exc.strerror}; {self.last_good()}") from exc
         finally:
+            self.evaluations.close()
             if bar is not None:
                 bar.close()
             self.log.close()
@@ -390,6 +399,8 @@ class Trainer:
         acc = host(c.acc).tolist()
         for agent, lwr in c.lwr.items():
             arrays[f"lwr.{agent}"] = np.array(lwr)
+        pending, frozen = self.evaluations.state()  # evaluations in flight: played again by a resume
+        arrays |= frozen
         state = {
             "config": config_to_json(self.cfg), "manifests": {lr.name: self.manifest(lr) for lr in self.learners},
             "epochs_done": c.epochs_done, "env_steps": c.env_steps, "rng": self.rng.bit_generator.state,
@@ -400,6 +411,7 @@ class Trainer:
                     for j, agent in enumerate(self.agents)},
             "final": c.final, "timers": c.timers, "train_seconds": self.train_seconds,
             "evaluations": self.evaluations.count, "eval_seconds": self.evaluations.seconds,
+            "pending_evaluations": pending,
             "policy_rngs": {a: p.rng.bit_generator.state for a, p in self.policies.items() if hasattr(p, "rng")},
         }
         if self.league is not None:
@@ -540,6 +552,7 @@ class Trainer:
         self.train_seconds = float(state.get("train_seconds", 0.0))
         self.evaluations.count = int(state.get("evaluations", 0))
         self.evaluations.seconds = float(state.get("eval_seconds", 0.0))
+        self.evaluations.restore(state.get("pending_evaluations", []), arrays)
         if self.league is not None:
             self.seats.restore(state, c.epochs_done)
 
