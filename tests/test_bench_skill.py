@@ -154,3 +154,21 @@ def test_the_stop_rule_on_a_curve() -> None:
 def test_bad_options_name_the_field(kw: dict[str, Any], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         SkillConfig(**kw)
+
+
+def test_background_evaluations_give_the_same_curve(tmp_path: Path,
+                                                   not_reached: tuple[Path, dict[str, Any]]) -> None:
+    """``--train.eval-background``: the evaluations play in a worker while Bug trains on; the curve in env
+    steps is the inline one, and the record goes on with or without it (where they play is not what it measures)."""
+    import dataclasses
+
+    _, inline = not_reached
+    cfg = _tiny(tmp_path / "bg", target=1.0, train=dataclasses.replace(TINY_TRAIN, eval_background=True))
+    background = run_skill(cfg)["algos"]["ddpg"]
+    keys = ("env_steps", "budget", "test_mwr", "test_mwr_lo", "test_mwr_hi", "n_win", "n_loss", "n_draw")
+    assert [{k: e[k] for k in keys} for e in background["evaluations"]] == [
+        {k: e[k] for k in keys} for e in inline["algos"]["ddpg"]["evaluations"]]
+    assert background["status"] == "not reached"
+    assert all(e["wall_seconds"] >= e["train_seconds"] for e in background["evaluations"])
+    more = run_skill(_tiny(tmp_path / "bg", target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]  # inline now
+    assert more["evaluations"][:3] == background["evaluations"] and len(more["evaluations"]) == 4
