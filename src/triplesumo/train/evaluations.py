@@ -75,10 +75,18 @@ def play_evaluation(frozen: Frozen, pairs: tuple[str, ...], match_cfg: MatchConf
     return done, time.perf_counter() - t0
 
 
+WORKER_NICE = 19
+"""The evaluation worker's niceness: on a busy machine the training keeps its cores and the evaluations take
+what is left (on one with cores to spare, nothing changes)."""
+
+
 def _worker_init() -> None:
+    import os
+
     import torch
 
     torch.set_num_threads(1)  # the worker plays numpy policies; its MuJoCo threads are the run's n_threads
+    os.nice(WORKER_NICE)
 
 
 @dataclass
