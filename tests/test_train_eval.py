@@ -147,6 +147,9 @@ def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) ->
     assert seconds == sorted(seconds)
     last = sorted((background.run_dir / "checkpoints").glob("epoch-*"))[-1]
     assert json.loads((last / "state.json").read_text())["pending_evaluations"] == []  # the end waited for them
+    import multiprocessing
+
+    assert multiprocessing.active_children() == []  # and the worker is gone with the run
 
 
 def test_an_evaluation_in_flight_at_a_checkpoint_is_played_by_the_resume(tmp_path: Path) -> None:

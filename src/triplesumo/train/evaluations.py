@@ -12,8 +12,8 @@ from __future__ import annotations
 import multiprocessing
 import time
 from collections.abc import Mapping, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
+from multiprocessing.pool import AsyncResult, Pool
 from typing import Any
 
 import numpy as np
@@ -97,7 +97,7 @@ class Pending:
     env_steps: int
     epochs: int
     frozen: Frozen
-    future: Future[tuple[list[tuple[str, dict[str, Any]]], float]] | None = None
+    future: AsyncResult[tuple[list[tuple[str, dict[str, Any]]], float]] | None = None
 
 
 class Evaluations:
@@ -118,7 +118,7 @@ class Evaluations:
         """Wall time the evaluations took to play (this session's), inline or in the worker."""
         self.pending: list[Pending] = []
         """Background evaluations handed to the worker and not yet written, oldest first."""
-        self._pool: ProcessPoolExecutor | None = None
+        self._pool: Pool | None = None
 
     def due(self, steps_before: int, steps_now: int) -> bool:
         """Whether a step from ``steps_before`` to ``steps_now`` env steps crossed a multiple of ``eval_every``."""
@@ -132,9 +132,8 @@ class Evaluations:
 
     def _submit(self, job: Pending) -> None:
         if self._pool is None:  # spawned, not forked: the training process holds threads (torch, the learner's)
-            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=_worker_init)
-        job.future = self._pool.submit(play_evaluation, *self._args(job.frozen))
+            self._pool = multiprocessing.get_context("spawn").Pool(1, initializer=_worker_init)
+        job.future = self._pool.apply_async(play_evaluation, self._args(job.frozen))
         self.pending.append(job)
 
     def __call__(self, learners: Sequence[Learner], log: MetricsLog, env_steps: int, epochs: int,
@@ -166,20 +165,20 @@ class Evaluations:
         while self.pending:
             job = self.pending[0]
             assert job.future is not None
-            if not job.future.done():
+            if not job.future.ready():
                 if not wait:
                     break
                 t0 = time.perf_counter()
-                job.future.result()
+                job.future.wait()
                 self.seconds += time.perf_counter() - t0  # the wait is the evaluations', not the training's
-            done, played = job.future.result()
+            done, played = job.future.get()  # (an error in the worker is raised here)
             self.pending.pop(0)
             reached = self._write(job, done, played, log, train_seconds) or reached
         return reached
 
     def ready(self) -> bool:
         """Whether the oldest background evaluation is back (:meth:`collect` would write it)."""
-        return bool(self.pending) and self.pending[0].future is not None and self.pending[0].future.done()
+        return bool(self.pending) and self.pending[0].future is not None and self.pending[0].future.ready()
 
     def _write(self, job: Pending, done: list[tuple[str, dict[str, Any]]], played: float, log: MetricsLog,
                train_seconds: float) -> bool:
@@ -231,7 +230,8 @@ class Evaluations:
             self._submit(job)  # (in the worker even when the run goes on without eval_background)
 
     def close(self) -> None:
-        """Stop the worker (evaluations still in flight are dropped: a checkpoint holds them)."""
+        """Stop the worker at once (evaluations still in flight are dropped: a checkpoint holds them)."""
         if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool.terminate()
+            self._pool.join()
             self._pool = None
