@@ -86,7 +86,8 @@ def _worker_init() -> None:
     import torch
 
     torch.set_num_threads(1)  # the worker plays numpy policies; its MuJoCo threads are the run's n_threads
-    os.nice(WORKER_NICE)
+    if hasattr(os, "nice"):  # (POSIX; Windows has no niceness)
+        os.nice(WORKER_NICE)
 
 
 @dataclass
