@@ -32,7 +32,8 @@ normalises observations: what its policy file would hold now."""
 
 def frozen_tensors(learner: Learner) -> tuple[dict[str, np.ndarray], bool]:
     """The learner's current deterministic policy as numpy tensors (``actor.*``, and ``obs_norm.*`` when it
-    normalises observations), copied: what its policy file would hold now."""
+    normalises observations), copied (the worker pickles them while the learner trains on): what its policy file
+    would hold now."""
     tensors = {f"actor.{k}": v.detach().cpu().numpy().copy()
                for k, v in learner.algo.export_actor().state_dict().items()}
     norm = learner.algo.obs_norm
@@ -44,12 +45,6 @@ def frozen_tensors(learner: Learner) -> tuple[dict[str, np.ndarray], bool]:
 def frozen_policy(tensors: Mapping[str, np.ndarray], normalizes: bool) -> FrozenPolicy:
     """The numpy :class:`FrozenPolicy` of :func:`frozen_tensors`."""
     return FrozenPolicy.from_tensors(tensors, prefix="actor.", obs_norm_prefix="obs_norm." if normalizes else None)
-
-
-def frozen_copy(learner: Learner) -> FrozenPolicy:
-    """The learner's current deterministic policy as a numpy :class:`FrozenPolicy` (with its observation
-    normaliser, frozen), what its policy file would hold now."""
-    return frozen_policy(*frozen_tensors(learner))
 
 
 def play_evaluation(frozen: Frozen, pairs: tuple[str, ...], match_cfg: MatchConfig, obs_mode: str,
@@ -115,8 +110,6 @@ class Evaluations:
         self.seconds = 0.0
         """Wall time the training spent on evaluations, over every session of the run: all of an inline
         evaluation's, only the waits for a background one (at the run's end)."""
-        self.played_seconds = 0.0
-        """Wall time the evaluations took to play (this session's), inline or in the worker."""
         self.pending: list[Pending] = []
         """Background evaluations handed to the worker and not yet written, oldest first."""
         self._pool: Pool | None = None
@@ -186,7 +179,6 @@ class Evaluations:
         cfg = self.cfg
         self.count += 1
         assert job.number == self.count, (job.number, self.count)
-        self.played_seconds += played
         for name, stats in done:
             log.evaluated(name, {
                 "evaluation": job.number, "env_steps": job.env_steps, "epochs": job.epochs,
