@@ -74,6 +74,15 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
     assert m["cpu"] == cpu_name()  # the CPU model where the OS names one (/proc/cpuinfo), not only "x86_64"
     assert f"measured on {os.cpu_count()} CPU cores ({m['cpu']})" in format_skill(result)
     assert "GPU: not measured" in format_skill(result)
+    # and its speed, before and after: the same seeded collection of the run's 2 matches (100 steps each)
+    from triplesumo.benchmarks.skill import REFERENCE_STEPS
+
+    assert set(m["reference"]) == {"before", "after"}
+    for when, ref in m["reference"].items():
+        assert ref["env_steps"] == REFERENCE_STEPS * 2 and ref["n_envs"] == 2 and ref["repeats"] == 3
+        assert 0 < ref["ms_per_env_step"] < 1000
+        assert f"reference collection {when} the bench: {ref['ms_per_env_step']:.3f} ms per env step" in (
+            format_skill(result))
 
 
 def test_resume_raised_budget_lost_evaluation_and_lower_target(not_reached: tuple[Path, dict[str, Any]]) -> None:

@@ -19,6 +19,12 @@ known. With ``--train.eval-background`` the evaluations play in a worker process
 when its evaluation is back, so the wall time to skill counts the training done meanwhile and none of
 the earlier evaluations. Measured on the machine at hand, never projected.
 
+The machine's speed goes with the times: ``machine.reference`` is the wall time per env step of a fixed
+seeded collection (the run's ``n_envs`` matches of its match, uniform random actions, its MuJoCo threads;
+:func:`reference_speed`), measured just before and just after the bench trains. Two boxes of the same name
+(a shared cloud machine, at different hours) can differ by a factor of two; the reference tells a reader
+which one a time came from.
+
 Resumable: ``OUT/skill.json`` is rebuilt from each run's ``eval.csv``; a killed bench, run again
 with the same options, resumes each run from its last checkpoint (exactly: the checkpoints hold
 the replay, and the evaluations past the checkpoint are played again). The test-MWR curve
@@ -43,6 +49,8 @@ from typing import Any
 from triplesumo import _dcargs
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.benchmarks import cpu_name, report
+from triplesumo.envs.batch import VectorMatches
+from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import train
@@ -180,12 +188,15 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
         "command": " ".join(["triplesumo", "bench", "skill", *_dcargs.to_argv(cfg)]),
         "target": cfg.target, "eval_every": cfg.eval_every, "eval_epochs": cfg.eval_epochs,
         "max_env_steps": cfg.max_env_steps, "machine": machine(cfg.train), "algos": {}}
+    result["machine"]["reference"] = {"before": reference_speed(cfg.train)}
 
     for algo in cfg.algos:
         print(f"bench skill: Bug with {algo}, target test MWR {cfg.target:+.2f}")
         evaluations = _bench_algo(cfg, algo)
         result["algos"][algo] = {"evaluations": evaluations, **outcome(cfg, evaluations), "run_dir": str(out / algo)}
         atomic_write_bytes(path, (json.dumps(result, indent=2) + "\n").encode())
+    result["machine"]["reference"]["after"] = reference_speed(cfg.train)
+    atomic_write_bytes(path, (json.dumps(result, indent=2) + "\n").encode())
     plot_skill(result, out / PLOT)
     report(format_skill(result), result, cfg.json or None)
     return result
@@ -204,6 +215,39 @@ def machine(train_cfg: TrainConfig) -> dict[str, Any]:
         gpu = torch.cuda.get_device_name(torch.device(device)) if torch.cuda.is_available() else None
     return {"cpu": cpu_name(), "cores": os.cpu_count(), "backend": train_cfg.backend,
             "device": device, "gpu": gpu, "n_threads": train_cfg.n_threads, "torch_threads": train_cfg.torch_threads}
+
+
+REFERENCE_STEPS = 100
+"""Steps of the reference collection (each steps all ``n_envs`` matches): 1,600 env steps for 16 matches."""
+
+
+def reference_speed(train_cfg: TrainConfig, repeats: int = 3, seed: int = 0) -> dict[str, Any]:
+    """The machine's speed on the bench's physics: milliseconds of wall time per env step of a fixed seeded
+    collection (``train_cfg``'s match and ``n_envs`` matches on its ``n_threads`` MuJoCo threads, uniform random
+    actions drawn from ``seed``, :data:`REFERENCE_STEPS` steps, no learner), the best of ``repeats``. The same
+    collection on every machine, so that times to skill measured on two machines can be set side by side."""
+    import time
+
+    import numpy as np
+
+    match_cfg = scenario_config(train_cfg.scenario, max_steps=train_cfg.steps_per_epoch, obs_mode=train_cfg.obs_mode,
+                                reward=train_cfg.reward, physics=train_cfg.physics)
+    env = VectorMatches(train_cfg.n_envs, match_cfg, train_cfg.n_threads)
+    shape = (REFERENCE_STEPS, env.num_envs, env.n_agents, env.act_dim)
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32)
+    times = []
+    try:
+        for _ in range(repeats):
+            env.reset(seed=seed)
+            t0 = time.perf_counter()
+            for step in actions:
+                env.step(step)
+            times.append(time.perf_counter() - t0)
+    finally:
+        env.close()
+    env_steps = REFERENCE_STEPS * train_cfg.n_envs
+    return {"ms_per_env_step": round(1000 * min(times) / env_steps, 4), "env_steps": env_steps,
+            "repeats": repeats, "n_envs": train_cfg.n_envs, "n_threads": train_cfg.n_threads}
 
 
 def plot_skill(result: dict[str, Any], path: Path) -> Path:
@@ -238,7 +282,10 @@ def format_skill(result: dict[str, Any]) -> str:
     where = ("" if m is None else
              f"measured on {m['cores']} CPU cores ({m['cpu']}), backend {m['backend']} on "
              f"{m['gpu'] or m['device']}, {m['n_threads']} MuJoCo / {m['torch_threads']} torch threads"
-             + ("" if m["gpu"] else "; GPU: not measured"))
+             + ("" if m["gpu"] else "; GPU: not measured")
+             + "".join(f"\nreference collection {when} the bench: {r['ms_per_env_step']:.3f} ms per env step "
+                       f"({r['env_steps']:,} env steps, best of {r['repeats']})"
+                       for when, r in m.get("reference", {}).items()))
     lines = [f"time to skill: first test MWR >= {result['target']:+.2f} ({result['eval_epochs']} seeded test "
              f"matches every {result['eval_every']:,} env steps, budget {result['max_env_steps']:,})",
              *([where] if where else []), "",
