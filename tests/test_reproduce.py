@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import gzip
 import json
 import shutil
 from pathlib import Path
@@ -16,6 +17,7 @@ from triplesumo import ENV_VERSION
 from triplesumo.agents.zoo import make_policy, policies_from_pairs
 from triplesumo.cli import main
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+from triplesumo.evaluation.metrics_csv import read_table_bytes
 from triplesumo.evaluation.tournament import _manifest as tournament_manifest
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce import ReproduceConfig, check_same_options
@@ -135,6 +137,14 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 |" in (out / "REPRODUCTION.md").read_text()
     assert [p["name"] for p in _record(out)["published"]] == ["ant", "spider", "bug", "bug-ddpg", "bug-ppo"]
 
+    # packed (triplesumo pack: every table gzipped, as a reproduction kept beside a docs page), it is the same
+    # reproduction: complete, nothing trained or played again, the same report
+    report = (out / "REPRODUCTION.md").read_text()
+    assert main(["pack", str(out), "--min-kb", "0"]) == 0
+    assert not list(out.rglob("*.csv")) and (out / "evaluation" / "per_seed.csv.gz").is_file()
+    assert main(argv) == 0
+    assert _record(out)["runs"][-1]["ran"] == [] and (out / "REPRODUCTION.md").read_text() == report
+
     shutil.rmtree(out / "contest")
     shutil.rmtree(out / "compare")
     assert main(argv) == 0
@@ -142,13 +152,14 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     assert json.loads((out / "contest" / "contest.json").read_text()) == contest
     assert (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.safetensors").stat().st_mtime_ns == policy
 
-    # a killed evaluation (its last rows lost) resumes: the same rows as before
+    # a killed evaluation (its last rows lost), packed, resumes: the same rows as before, in a plain table again
     metrics = out / "evaluation" / "random" / "metrics.csv"
-    whole = metrics.read_text()
-    metrics.write_text("".join(whole.splitlines(keepends=True)[:3]))
+    whole = read_table_bytes(metrics).decode()
+    (out / "evaluation" / "random" / "metrics.csv.gz").write_bytes(
+        gzip.compress("".join(whole.splitlines(keepends=True)[:3]).encode()))
     assert main(argv) == 0
     assert _record(out)["runs"][-1]["ran"] == ["evaluation"]
-    assert metrics.read_text() == whole
+    assert metrics.read_text() == whole and not (out / "evaluation" / "random" / "metrics.csv.gz").exists()
 
     # a Bug whose policy changed since its evaluation: the evaluation is not complete any more (and evaluate's
     # resume names the changed file rather than mixing rows of two policies)

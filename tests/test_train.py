@@ -196,15 +196,22 @@ def test_tiny_run_policy_file_acts_deterministically(uninterrupted: Trained) -> 
 # ------------------------------------------------------------------------ resume
 
 
-@pytest.mark.parametrize("rows_past_checkpoint", [False, True], ids=["clean", "rows-past-checkpoint"])
-def test_resume_equals_uninterrupted(uninterrupted: Trained, tmp_path: Path, rows_past_checkpoint: bool) -> None:
+@pytest.mark.parametrize("folder", ["clean", "rows-past-checkpoint", "packed"])
+def test_resume_equals_uninterrupted(uninterrupted: Trained, tmp_path: Path, folder: str) -> None:
     killed = train(tiny(tmp_path, name="B", epochs=E)).run_dir
     assert checkpoint.latest(killed).name == f"epoch-{E:06d}"
-    if rows_past_checkpoint:  # the killed run logged an epoch its checkpoint does not hold
+    if folder == "rows-past-checkpoint":  # the killed run logged an epoch its checkpoint does not hold
         bogus = read_rows(killed)[1][-1] | {"epoch": str(E + 1), "outcome": "win", "local_winning_rate": "1.0"}
         with (killed / "metrics.csv").open("a", newline="") as fh:
             csv.DictWriter(fh, COLUMNS).writerow(bogus)
+    if folder == "packed":  # its tables gzipped (triplesumo pack): the resume unpacks them and appends
+        from triplesumo.evaluation.metrics_csv import pack_tables
+
+        packed = {p.name for p in pack_tables(killed, min_bytes=0)}
+        assert {"metrics.csv.gz", "learning.csv.gz"} <= packed and not list(killed.glob("*.csv"))
     result = train(TrainConfig(), resume_dir=killed, overrides={"epochs": 2 * E})
+    if folder == "packed":
+        assert (killed / "metrics.csv").is_file() and not (killed / "metrics.csv.gz").exists()
     assert result.epochs == uninterrupted.result.epochs
     assert result.env_steps == uninterrupted.result.env_steps
     assert result.updates == uninterrupted.result.updates

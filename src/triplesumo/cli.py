@@ -89,6 +89,11 @@ def _parser() -> argparse.ArgumentParser:
                                              "committing it; the evicted members deleted are listed in "
                                              "league/pruned.json")
     compact.add_argument("run_dir", help="run folder (holds checkpoints/)")
+    pack = sub.add_parser("pack", help="gzip the large tables (*.csv) of a finished output folder into NAME.csv.gz, "
+                                       "e.g. before committing it beside a docs page; every command reads them as "
+                                       "before, and a resume unpacks a table it appends to")
+    pack.add_argument("folder", help="output folder (run, evaluation, tournament, reproduction), searched recursively")
+    pack.add_argument("--min-kb", type=int, default=64, help="pack tables of at least this many KiB (default: 64)")
     average = sub.add_parser("average", help="average the actor weights of snapshots of one run (stochastic weight "
                                              "averaging) into a new policy file that names its sources")
     average.add_argument("policies", nargs="+", help="policy files of one run (e.g. "
@@ -238,6 +243,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.run_dir}: removed {len(removed['checkpoints'])} older checkpoint(s) "
                   f"{removed['checkpoints']} and {len(removed['members'])} evicted league member(s) "
                   f"(listed in league/pruned.json); it resumes as before")
+        elif args.command == "pack":
+            from triplesumo.evaluation.metrics_csv import pack_tables
+
+            before = sum(p.stat().st_size for p in Path(args.folder).rglob("*.csv") if p.is_file())
+            packed = pack_tables(Path(args.folder), args.min_kb * 1024)
+            after = sum(p.stat().st_size for p in Path(args.folder).rglob("*.csv") if p.is_file()) + sum(
+                p.stat().st_size for p in packed)
+            print(f"{args.folder}: packed {len(packed)} table(s) (*.csv -> *.csv.gz); its tables take "
+                  f"{after / 1e6:.1f} MB instead of {before / 1e6:.1f} MB, and read as before")
         elif args.command == "average":
             from triplesumo.agents.average import average_policies
 

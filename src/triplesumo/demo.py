@@ -28,6 +28,7 @@ from triplesumo.agents.policy_file import load_json, policy_paths
 from triplesumo.agents.zoo import policy_stem
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
+from triplesumo.evaluation.metrics_csv import open_table
 from triplesumo.evaluation.play import PlayConfig, run_play
 from triplesumo.evaluation.video import check_writable
 from triplesumo.rules.scenarios import get_scenario
@@ -45,7 +46,7 @@ def match_to_record(metrics_csv: Path, eval_seed: int, min_steps: int = MIN_VIDE
     """The reset seed of the test match to film from an evaluation's per-match rows (epoch ``i`` reset with
     ``eval_seed + i - 1``) and why it was chosen: the first win of at least ``min_steps`` steps, else the
     longest win, else the longest match."""
-    with metrics_csv.open(newline="", encoding="utf-8") as fh:
+    with open_table(metrics_csv) as fh:
         rows = list(csv.DictReader(fh))
     if not rows:
         raise ValueError(f"{metrics_csv}: no test matches to choose a match to record from")

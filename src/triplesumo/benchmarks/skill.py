@@ -50,6 +50,7 @@ from triplesumo import _dcargs
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.benchmarks import cpu_name, report
 from triplesumo.envs.batch import VectorMatches
+from triplesumo.evaluation.metrics_csv import open_table, table_exists
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
@@ -127,9 +128,9 @@ def _curve(cfg: SkillConfig, run_dir: Path) -> list[dict[str, Any]]:
     """The evaluations of a run, from its ``eval.csv`` (none yet: empty), with the multiple of eval_every each
     crossed (``budget``)."""
     path = run_dir / "eval.csv"
-    if not path.exists():
+    if not table_exists(path):
         return []
-    with path.open(newline="", encoding="utf-8") as fh:
+    with open_table(path) as fh:
         rows = list(csv.DictReader(fh))
 
     def number(x: str) -> float | None:

@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, PER_SEED_FILE
+from triplesumo.evaluation.metrics_csv import open_table, table_exists, write_table
 from triplesumo.evaluation.video import check_writable
 
 BY = ("group", "algo", "folder", "trial")
@@ -153,10 +154,10 @@ def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str,
     seen: set[tuple[str, ...]] = set()
     for folder in folders:
         path = Path(folder) / PER_SEED_FILE
-        if not path.is_file():
+        if not table_exists(path):
             raise FileNotFoundError(f"{path} not found: {folder} is not an evaluation folder of triplesumo evaluate "
                                     "(run evaluate there, with one --policy per seed)")
-        with path.open(newline="", encoding="utf-8") as fh:
+        with open_table(path) as fh:
             reader = csv.DictReader(fh)
             if tuple(reader.fieldnames or ()) != PER_SEED_COLUMNS:
                 raise ValueError(f"{path}: expected the columns {list(PER_SEED_COLUMNS)}, got {reader.fieldnames}")
@@ -195,13 +196,13 @@ def compare(cfg: CompareConfig) -> dict[str, Any]:
     for g in table["groups"]:
         w.writerow([g["group"], g["n_seeds"], f"{g['iqm']:.4f}", f"{g['lo']:.4f}", f"{g['hi']:.4f}",
                     f"{g['mean']:.4f}", " ".join(f"{s:.4f}" for s in g["scores"])])
-    atomic_write_bytes(out / "compare.csv", buf.getvalue().encode())
+    write_table(out / "compare.csv", buf.getvalue().encode())
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["x", "y", "probability_of_improvement", "lo", "hi"])
     for p in table["improvement"]:
         w.writerow([p["x"], p["y"], f"{p['poi']:.4f}", f"{p['lo']:.4f}", f"{p['hi']:.4f}"])
-    atomic_write_bytes(out / "improvement.csv", buf.getvalue().encode())
+    write_table(out / "improvement.csv", buf.getvalue().encode())
     atomic_write_bytes(out / "compare.json", (json.dumps(table, indent=2) + "\n").encode())
     plot_compare(table, out / "compare.png", title=f"test MWR across seeds, by {cfg.by}")
     return table

@@ -54,7 +54,14 @@ from triplesumo.agents.zoo import (
 )
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
-from triplesumo.evaluation.metrics_csv import COLUMNS, repair_metrics_csv
+from triplesumo.evaluation.metrics_csv import (
+    COLUMNS,
+    open_table,
+    packed_path,
+    repair_metrics_csv,
+    table_exists,
+    write_table,
+)
 from triplesumo.evaluation.parallel import (
     ProcessRunner,
     Row,
@@ -360,7 +367,8 @@ def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str,
     record = _record(cfg, candidates)
     kept: dict[str, Any] = {}
     if not cfg.resume:
-        held = [p for p in (out / RECORD_FILE, *(out / label / "metrics.csv" for label in candidates)) if p.exists()]
+        held = [p for p in (out / RECORD_FILE, *(out / label / "metrics.csv" for label in candidates))
+                if table_exists(p)]
         if held:
             names = ", ".join(str(p.relative_to(out)) for p in held)
             raise FileExistsError(f"{out} already holds an evaluation ({names}); "
@@ -543,7 +551,7 @@ def _write_per_seed(path: Path, summary: dict[str, Any], record: dict[str, Any])
     cfg = summary["config"]
     previous: dict[str, dict[str, str]] = {}  # a resume's rows: a kept candidate's files may be gone
     try:
-        with path.open(newline="", encoding="utf-8") as fh:
+        with open_table(path) as fh:
             previous = {row["candidate"]: row for row in csv.DictReader(fh)}
     except (OSError, KeyError, csv.Error):
         pass
@@ -562,7 +570,7 @@ def _write_per_seed(path: Path, summary: dict[str, Any], record: dict[str, Any])
                          "eval_seed": cfg["seed"],
                          "epochs": c["n"], "n_win": c["n_win"], "n_loss": c["n_loss"], "n_draw": c["n_draw"],
                          "test_mwr": c["mean_lwr"], "test_mwr_lo": c["mean_lwr_lo"], "test_mwr_hi": c["mean_lwr_hi"]})
-    atomic_write_bytes(path, buf.getvalue().encode("utf-8"))
+    write_table(path, buf.getvalue().encode("utf-8"))
 
 
 def finished_rows(path: Path, epochs: int, columns: tuple[str, ...] = COLUMNS,
@@ -602,6 +610,8 @@ class RowAppender:
         self.path = path
         with self._naming_the_file():
             path.parent.mkdir(parents=True, exist_ok=True)
+            if fresh:  # a packed copy of an earlier table is not this one's
+                packed_path(path).unlink(missing_ok=True)
             self._fh = path.open("w" if fresh else "a", newline="", encoding="utf-8")
             self._writer = csv.DictWriter(self._fh, columns, lineterminator="\n")
             if fresh:

@@ -35,6 +35,7 @@ from triplesumo.evaluation.metrics import (
     rolling_mean,
     rolling_steps_to_win,
 )
+from triplesumo.evaluation.metrics_csv import open_table
 
 __all__ = [
     "REQUIRED_COLUMNS",
@@ -81,14 +82,14 @@ def read_metrics_csv(path: str | os.PathLike[str]) -> dict[str, NDArray[np.gener
         Column name -> array, in the file's column order, all of the same length.
 
     Raises:
-        FileNotFoundError: If the file does not exist.
+        FileNotFoundError: If the file does not exist (plain, or packed as ``NAME.csv.gz``).
         ValueError: If the file is empty, lacks a required column (the message names
             the file and the missing columns), has a duplicate column, a row with the
             wrong number of fields, a non-numeric cell in a numeric column, or an
             unknown outcome (the message names the file and line).
     """
     source = Path(path)
-    with source.open(newline="", encoding="utf-8") as fh:
+    with open_table(source) as fh:  # plain or packed (metrics.csv.gz)
         reader = csv.reader(fh)
         header = next(reader, None)
         if header is None:

@@ -79,6 +79,7 @@ from triplesumo.agents.zoo import find_policy_file, make_policy, policy_fingerpr
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
+from triplesumo.evaluation.metrics_csv import open_table, write_table
 from triplesumo.evaluation.parallel import TaskRunner, play_chunks, portable_spec
 from triplesumo.evaluation.ratings import MODELS, PLACE_OF_OUTCOME, Elo, RatingTable, check_tau
 from triplesumo.evaluation.runner import SeatedResult, play_matches
@@ -469,7 +470,7 @@ def play_tournament_on(runner: TaskRunner, cfg: TournamentConfig, match_cfg: Mat
 def read_rows(path: Path) -> list[dict[str, str]]:
     import csv
 
-    with path.open(newline="", encoding="utf-8") as fh:
+    with open_table(path) as fh:
         return list(csv.DictReader(fh))
 
 
@@ -580,14 +581,14 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
         w.writerow([rank, e["policy"], e["spec"], *(f"{e[k]:.4f}" for k in ("mu", "sigma", "lo", "hi", "ordinal")),
                     "" if e["elo"] is None else f"{e['elo']:.1f}", e["matches"], *(e[f"n_{o}"] for o in OUTCOMES),
                     *(e["seats"][a][o] for a in seats for o in OUTCOMES)])
-    atomic_write_bytes(out / f"leaderboard{tag}.csv", buf.getvalue().encode())
+    write_table(out / f"leaderboard{tag}.csv", buf.getvalue().encode())
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["row", "column", "n", "wins", "draws", "win_rate", "lo", "hi"])
     for c in results["crossplay"]:
         w.writerow([c["row"], c["column"], c["n"], c["wins"], c["draws"],
                     *("" if c[k] is None else f"{c[k]:.4f}" for k in ("win_rate", "lo", "hi"))])
-    atomic_write_bytes(out / f"crossplay{tag}.csv", buf.getvalue().encode())
+    write_table(out / f"crossplay{tag}.csv", buf.getvalue().encode())
     atomic_write_bytes(out / f"results{tag}.json", (json.dumps(results, indent=2) + "\n").encode())
     title = f"{cfg.scenario}: {results['n_matches']} matches"
     plot_leaderboard(results, out / f"leaderboard{tag}.png", title=title)

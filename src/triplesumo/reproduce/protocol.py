@@ -18,6 +18,7 @@ from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
+from triplesumo.evaluation.metrics_csv import open_table, read_table_bytes, table_exists
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation
 from triplesumo.train.config import TrainConfig
@@ -26,9 +27,9 @@ from triplesumo.train.sweep import SweepConfig, Trial, finished, run_trial, tria
 
 
 def _read_csv(path: Path) -> list[dict[str, str]]:
-    if not path.exists():
+    if not table_exists(path):
         return []
-    with path.open(newline="", encoding="utf-8") as fh:
+    with open_table(path) as fh:
         return list(csv.DictReader(fh))
 
 
@@ -42,9 +43,9 @@ def _fingerprint(policy: str) -> str | None:
 
 def _rows_in(path: Path) -> int:
     """Complete rows of a metrics CSV (lines ending in a newline, less the header)."""
-    if not path.exists():
+    if not table_exists(path):
         return 0
-    return max(path.read_bytes().count(b"\n") - 1, 0)
+    return max(read_table_bytes(path).count(b"\n") - 1, 0)
 
 
 def contest_verdict(counts: dict[str, dict[str, int]], ant: str, spider: str) -> dict[str, Any]:

@@ -13,6 +13,7 @@ from typing import Any
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.compare import trial_group
+from triplesumo.evaluation.metrics_csv import table_exists
 from triplesumo.reproduce.config import REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
 from triplesumo.reproduce.protocol import Protocol, _read_csv
 from triplesumo.train.sweep import Trial, finished, run_facts
@@ -66,7 +67,7 @@ def status(protocol: Protocol) -> list[dict[str, Any]]:
         else:  # one row for the stage; a training stage's run folder is named after it
             runs = [(stage.name, protocol.out / stage.name, stage.complete())]
         for name, folder, done in runs:
-            started = (folder / "metrics.csv").exists()
+            started = table_exists(folder / "metrics.csv")
             evals = _evals(folder)
             rows.append({"stage": stage.name, "run": name,
                          "state": "complete" if done else "running or stopped" if started else "not started",
@@ -88,7 +89,7 @@ def format_status(protocol: Protocol) -> str:
 def _run_row(protocol: Protocol, name: str) -> str:
     """A table row of a run's training."""
     run = protocol.out / name
-    if not (run / "metrics.csv").exists():
+    if not table_exists(run / "metrics.csv"):
         return f"| {name} | - | - | - |"
     facts = run_facts(run, 200)
     return f"| {name} | {facts['epochs']:,} | {facts['env_steps']:,} | {facts['final_mwr']:+.3f} |"

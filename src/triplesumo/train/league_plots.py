@@ -12,6 +12,7 @@ import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import load_json
+from triplesumo.evaluation.metrics_csv import open_table, table_exists
 from triplesumo.train.league import LOG_FILE, POOL_FILE, PRUNED_FILE, League, Snapshot
 from triplesumo.train.league_config import LeagueConfig
 
@@ -85,9 +86,9 @@ def league_figure(run_dir: Path) -> Any:
     from matplotlib.figure import Figure
 
     log = Path(run_dir) / "league" / LOG_FILE
-    if not log.is_file():
+    if not table_exists(log):
         raise FileNotFoundError(f"{log}: no league log (a run without --self-play?)")
-    with open(log, newline="") as fh:
+    with open_table(log) as fh:
         rows = list(csv.DictReader(fh))
     if not rows:
         raise ValueError(f"{log}: no rows yet")

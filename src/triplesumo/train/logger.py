@@ -20,7 +20,14 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.policy_file import atomic_write_bytes, writing
-from triplesumo.evaluation.metrics_csv import COLUMNS, intact_rows, metrics_row_problem, repair_metrics_csv
+from triplesumo.evaluation.metrics_csv import (
+    COLUMNS,
+    intact_rows,
+    metrics_row_problem,
+    repair_metrics_csv,
+    unpack_table,
+    write_table,
+)
 from triplesumo.rules.rewards import TERMS
 
 __all__ = ["COLUMNS", "EVAL_COLUMNS", "LEARNING_COLUMNS", "MetricsLog", "intact_rows", "learning_row_problem",
@@ -81,9 +88,9 @@ class _Table:
         self.path, self.columns = path, columns
         header = _csv_bytes(columns)
         if resume_epoch is None:
-            with writing(path):
-                atomic_write_bytes(path, header)
+            write_table(path, header)
         else:
+            unpack_table(path)  # a packed table (NAME.csv.gz, triplesumo pack) goes back to its plain file
             if backfill and not path.exists():  # a run from before this table: its epochs get empty rows
                 blank = "".join(f"{e}{',' * (len(columns) - 1)}\n" for e in range(1, resume_epoch + 1))
                 with writing(path):

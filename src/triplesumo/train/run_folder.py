@@ -26,6 +26,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
+from triplesumo.evaluation.metrics_csv import PACKED, table_exists
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
 from triplesumo.rules.config import RewardConfig
 from triplesumo.train import checkpoint
@@ -232,7 +233,8 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
     if (run_dir / "config.json").is_file():
         learner = str(load_json(run_dir / "config.json").get("learner", learner))
     paths: list[Path] = []
-    files = sorted(run_dir.glob("metrics-*.csv")) or [run_dir / "metrics.csv"]
+    files = sorted({p.with_name(p.name.removesuffix(PACKED)) for p in run_dir.glob("metrics-*.csv*")
+                    if p.name.endswith((".csv", ".csv" + PACKED))}) or [run_dir / "metrics.csv"]  # plain or packed
     for path in files:
         agent = path.stem.removeprefix("metrics-") if path.name != "metrics.csv" else learner
         metrics = read_metrics_csv(path)
@@ -240,7 +242,7 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
             out = run_dir / "plots" if path.name == "metrics.csv" else run_dir / "plots" / agent
             paths += plot_run(metrics, out, window=window, title=f"{agent} training ({run_dir.name})",
                               label=agent.capitalize())
-    if (run_dir / "league" / "league.csv").is_file():  # a self-play run: rating curves and pool members
+    if table_exists(run_dir / "league" / "league.csv"):  # a self-play run: rating curves and pool members
         paths.append(plot_league(run_dir))
     return paths
 
@@ -259,7 +261,7 @@ def checkpoint_within_rows(run_dir: Path, folder: Path, agents: list[str], learn
         (run_dir / run_file("metrics", a, several, ".csv"), COLUMNS, None) for a in agents]
     tables += [(run_dir / run_file("learning", n, several, ".csv"), LEARNING_COLUMNS, learning_row_problem)
                for n in learners]
-    rows = min(intact_rows(path, columns, problem) for path, columns, problem in tables if path.exists())
+    rows = min(intact_rows(path, columns, problem) for path, columns, problem in tables if table_exists(path))
     if rows >= epoch:
         return folder
     fits = [(e, f) for e, f in checkpoint.checkpoints(run_dir) if e <= rows]

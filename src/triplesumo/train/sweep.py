@@ -45,6 +45,7 @@ import numpy as np
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.metrics import moving_winning_rate
+from triplesumo.evaluation.metrics_csv import open_table, table_exists, write_table
 from triplesumo.evaluation.parallel import TaskRunner, check_counts
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig, typed_value
@@ -216,7 +217,7 @@ def finished(trial: Trial) -> bool:
 
 def run_facts(run_dir: Path, window: int) -> dict[str, Any]:
     """Epochs, env steps and the final MWR (last ``window`` epochs) of a one-learner run, from its ``metrics.csv``."""
-    with (run_dir / "metrics.csv").open(newline="", encoding="utf-8") as fh:
+    with open_table(run_dir / "metrics.csv") as fh:
         rows = list(csv.DictReader(fh))
     lwr = np.array([float(r["local_winning_rate"]) for r in rows])
     mwr = float(moving_winning_rate(lwr[-window:], window)[-1]) if len(lwr) else 0.0
@@ -305,7 +306,7 @@ def _summary(cfg: SweepConfig, out: Path, all_trials: list[Trial], results: dict
     for t in all_trials:
         run_dir = Path(t.config.out) / t.name
         result = results.get(t.name, {})
-        facts = run_facts(run_dir, t.config.window) if (run_dir / "metrics.csv").exists() else {}
+        facts = run_facts(run_dir, t.config.window) if table_exists(run_dir / "metrics.csv") else {}
         rows.append({"trial": t.name, "group": t.group, **facts, "resumed_from": result.get("resumed_from", ""),
                      "seconds": result.get("seconds", ""), "error": result.get("error", ""),
                      "test_mwr": evaluation.get(t.name, {}).get("test_mwr", ""), "run_dir": str(run_dir),
@@ -315,7 +316,7 @@ def _summary(cfg: SweepConfig, out: Path, all_trials: list[Trial], results: dict
     writer = csv.DictWriter(buf, SUMMARY_COLUMNS, extrasaction="ignore", lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    atomic_write_bytes(out / "summary.csv", buf.getvalue().encode())
+    write_table(out / "summary.csv", buf.getvalue().encode())
     atomic_write_bytes(out / "summary.json", (json.dumps(summary, indent=2, default=str) + "\n").encode())
     return summary
 
