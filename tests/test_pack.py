@@ -66,8 +66,11 @@ def test_packing_is_deterministic_and_leaves_small_tables_plain(run: Path, tmp_p
     size = (run / "metrics.csv").stat().st_size
     assert [p.name for p in pack_tables(a, min_bytes=size)] == ["metrics.csv.gz"]  # learning.csv is smaller
     assert (a / "learning.csv").is_file() and not (a / "metrics.csv").exists()
+    (b / "metrics.csv").chmod(0o644)
+    mtime = (b / "metrics.csv").stat().st_mtime
     pack_tables(b, min_bytes=size)
     assert (a / "metrics.csv.gz").read_bytes() == (b / "metrics.csv.gz").read_bytes()
+    assert (b / "metrics.csv.gz").stat().st_mode & 0o777 == 0o644 and (b / "metrics.csv.gz").stat().st_mtime == mtime
     assert pack_tables(a, min_bytes=size) == []  # packed already: nothing to do
 
 

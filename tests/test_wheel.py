@@ -23,8 +23,9 @@ SHIPPED_DATA = {".xml", ".json", ".safetensors"}
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(out),
-                    str(ROOT)], check=True, capture_output=True, timeout=300)
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w",
+                            str(out), str(ROOT)], capture_output=True, text=True, timeout=300)
+    assert built.returncode == 0, f"pip wheel failed ({built.returncode}):\n{built.stdout}\n{built.stderr}"
     (built,) = out.glob("triplesumo-*.whl")
     return built
 

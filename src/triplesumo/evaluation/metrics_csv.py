@@ -130,7 +130,9 @@ def pack_tables(folder: Path | str, min_bytes: int = PACK_MIN_BYTES) -> list[Pat
         if gzip.decompress(packed.read_bytes()) != data:  # pragma: no cover (a disk that returns other bytes)
             packed.unlink()
             raise OSError(f"{packed}: reads back other bytes than {path}; {path} was kept")
-        os.utime(packed, (path.stat().st_atime, path.stat().st_mtime))
+        status = path.stat()
+        os.chmod(packed, status.st_mode & 0o7777)  # the table's permissions and times, not the temp file's
+        os.utime(packed, (status.st_atime, status.st_mtime))
         path.unlink()
         done.append(packed)
     return done
