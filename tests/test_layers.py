@@ -61,10 +61,12 @@ def test_every_module_belongs_to_a_layer() -> None:
     assert all((SRC / name).is_dir() or (SRC / f"{name}.py").is_file() for name in names), names
 
 
-def test_the_envs_without_torch_are_every_env_module_but_the_warp_backend() -> None:
-    listed = set(CONTRACTS["envs-without-torch"]["source_modules"])
+def test_the_envs_without_torch_are_every_env_module_but_the_warp_backend_and_its_chooser() -> None:
+    contract = CONTRACTS["envs-without-torch"]
+    listed = set(contract["source_modules"])
     every = {"triplesumo.envs." + p.stem for p in (SRC / "envs").glob("*.py") if p.stem != "__init__"}
-    assert listed == {"triplesumo.envs"} | every - {"triplesumo.envs.warp"}
+    assert listed == {"triplesumo.envs"} | every - {"triplesumo.envs.warp", "triplesumo.envs.backends"}
+    assert not contract.get("allow_indirect_imports", False)  # no chain of imports reaches torch either
 
 
 def _planted_copy(tmp_path: Path) -> Path:

@@ -24,7 +24,7 @@ _LAZY = {
     "TripleSumoEnv": "triplesumo.envs.single",
     "TripleSumoParallelEnv": "triplesumo.envs.parallel",
     "parallel_env": "triplesumo.envs.parallel",
-    "vector_env": "triplesumo.envs.batch",
+    "vector_env": "triplesumo.envs.backends",
     "VectorMatches": "triplesumo.envs.batch",
     "MatchConfig": "triplesumo.rules.config",
     "ResetNoise": "triplesumo.rules.config",

@@ -89,7 +89,6 @@ from triplesumo.envs.seeding import match_seeds
 from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import REPORTED
-from triplesumo.rules.scenarios import scenario_config
 from triplesumo.sim.physics import PhysicsError
 
 BACKENDS = ("mujoco", "threads")
@@ -502,12 +501,9 @@ def _finish(match: Match) -> StepResult | PhysicsError:
         return err
 
 
-"""Scenarios :func:`vector_env` knows (the games issue adds more)."""
-VECTOR_BACKENDS = ("cpu", "warp")
-
-
 class VectorMatches:
-    """Many matches as arrays: TripleSumo's public batched API on the CPU (:func:`vector_env`).
+    """Many matches as arrays: TripleSumo's public batched API on the CPU
+    (:func:`~triplesumo.envs.backends.vector_env`).
 
     It grows :class:`MatchBatch` (threaded physics, bit for bit the trajectories of single
     matches) into the batched contract that the ``warp`` backend shares: arrays in, arrays
@@ -658,30 +654,3 @@ class VectorMatches:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def vector_env(num_envs: int, scenario: str = "paper", backend: str = "cpu", device: str | None = None,
-               num_threads: int | None = None, **config: Any) -> VectorMatches:
-    """``num_envs`` matches stepped together, as arrays (see :class:`VectorMatches`).
-
-    ``config`` are :class:`MatchConfig` fields (``max_steps``, ``obs_mode``, ...).
-    ``scenario`` is any of ``triplesumo.scenarios()``. ``backend="cpu"`` steps MuJoCo on
-    ``num_threads`` threads (default: one per usable CPU, at most ``num_envs``) and returns
-    numpy arrays; results do not depend on it. ``backend="warp"`` steps MuJoCo Warp on
-    ``device`` (``"cuda"``, or Warp's ``"cpu"``; default: a GPU when Warp sees one) and returns
-    torch tensors on it (:class:`triplesumo.envs.warp.WarpMatchBatch`: the same contract,
-    first-out rules with one body kind; the ``gpu`` extra).
-    """
-    if backend not in VECTOR_BACKENDS:
-        raise ValueError(f"backend must be one of {VECTOR_BACKENDS}, got {backend!r}")
-    if backend == "warp":
-        try:
-            from triplesumo.envs.warp import make_warp_vector_env
-        except ImportError as exc:
-            raise ImportError(f"backend='warp' needs MuJoCo Warp: pip install \"triplesumo[gpu]\" ({exc})") from None
-        if num_threads is not None:
-            raise ValueError("num_threads is for backend='cpu' (MuJoCo threads); backend='warp' runs on device")
-        return make_warp_vector_env(scenario_config(scenario, **config), num_envs, device)  # type: ignore[return-value]
-    if device not in (None, "cpu"):
-        raise ValueError(f"backend='cpu' runs on the CPU: device must be None or 'cpu', got {device!r}")
-    return VectorMatches(num_envs, scenario_config(scenario, **config), num_threads)
