@@ -136,6 +136,25 @@ def test_a_killed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(duel: t
     assert (part / "matches.csv").read_bytes() == done
 
 
+def test_a_packed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(tmp_path: Path) -> None:
+    """Its tables gzipped (``triplesumo pack``), a killed tournament resumes as a plain one does."""
+    import gzip
+
+    from triplesumo.evaluation.metrics_csv import pack_tables
+
+    whole, part = tmp_path / "whole", tmp_path / "part"
+    run_tournament(duel_cfg(whole, rounds=4, n_envs=1), DUEL)
+    run_tournament(duel_cfg(part, rounds=2), DUEL)
+    assert "matches.csv.gz" in {p.name for p in pack_tables(part, min_bytes=0)}
+    torn = gzip.decompress((part / "matches.csv.gz").read_bytes()) + b"7,20003,passive,ran"
+    (part / "matches.csv.gz").write_bytes(gzip.compress(torn))  # and a row torn by the kill
+    run_tournament(duel_cfg(part, rounds=4, resume=True), DUEL)
+    assert (part / "matches.csv").read_bytes() == (whole / "matches.csv").read_bytes()
+    assert not list(part.glob("*.csv.gz"))  # the tables written again replaced their packed copies
+    for name in ("leaderboard.csv", "crossplay.csv"):
+        assert (part / name).read_bytes() == (whole / name).read_bytes()
+
+
 def test_a_tournament_killed_before_its_first_row_resumes_as_a_fresh_start(duel: tuple[Path, dict],
                                                                             tmp_path: Path) -> None:
     """Issue 39, item 16: killed before anything was written, a tournament leaves an empty record and an empty
