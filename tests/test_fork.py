@@ -87,6 +87,28 @@ def test_a_fork_that_changes_only_the_budget_continues_as_the_uninterrupted_run(
     assert train(cfg, resume_dir=fork_dir, overrides={"epochs": 18}).epochs >= 18
 
 
+def test_a_packed_parent_forks_and_resumes_as_the_uninterrupted_run(runs: tuple[Trainer, Trainer],
+                                                                     tmp_path: Path) -> None:
+    """Its tables gzipped (``triplesumo pack``: metrics, learning, the league log), a self-play run forks and
+    resumes as the plain one: the tables come back plain, with the uninterrupted run's rows."""
+    from triplesumo.evaluation.metrics_csv import pack_tables
+
+    full, half = runs
+    parent = tmp_path / "packed" / half.run_dir.name
+    shutil.copytree(half.run_dir, parent)
+    packed = {p.relative_to(parent).as_posix() for p in pack_tables(parent, min_bytes=0)}
+    assert {"league/league.csv.gz", "metrics-ant.csv.gz", "learning-spider.csv.gz"} <= packed
+    cfg = dataclasses.replace(half.cfg, name="more", out=str(tmp_path), epochs=16)
+    fork_dir = fork_run(parent, cfg)
+    train(cfg, resume_dir=fork_dir)
+    resumed = train(half.cfg, resume_dir=parent, overrides={"epochs": 16}).run_dir
+    for run in (fork_dir, resumed):
+        assert not list(run.rglob("*.csv.gz"))
+        for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
+            assert rows(full.run_dir / name) == rows(run / name), (run, name)
+        assert (full.run_dir / "league/league.csv").read_text() == (run / "league/league.csv").read_text()
+
+
 def test_a_fork_admits_by_its_own_league_rules_from_the_fork_epoch(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     full, half = runs

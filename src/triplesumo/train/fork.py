@@ -53,6 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
+from triplesumo.evaluation.metrics_csv import PACKED, stored
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
@@ -172,6 +173,12 @@ def drop_unseated_evicted(state: dict[str, Any]) -> tuple[list[str], list[dict[s
     return files, dropped
 
 
+def _tables(run_dir: Path) -> list[Path]:
+    """The run's own tables (``metrics*.csv``, ``learning*.csv``, ``eval*.csv``), each plain or packed
+    (``NAME.csv.gz``, ``triplesumo pack``)."""
+    return sorted(p for p in run_dir.iterdir() if p.is_file() and p.name.endswith((".csv", ".csv" + PACKED)))
+
+
 def compact_run(run_dir: Path | str) -> dict[str, Any]:
     """Keep only what resuming the run in ``run_dir`` needs, for committing a long run's folder: its newest
     checkpoint (older ones deleted) and the league members its pools and in-flight matches hold. The files of
@@ -257,7 +264,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         target = run_dir / "checkpoints" / folder.name
         written += [run_dir / "checkpoints", run_dir / "league", run_dir / FORK_FILE, run_dir / "config.json",
                     run_dir / LEGS_FILE,
-                    *(run_dir / f.name for f in parent_dir.glob("*.csv"))]
+                    *(run_dir / f.name for f in _tables(parent_dir))]
         target.mkdir(parents=True)
         for name in ("weights.safetensors", "arrays.npz", checkpoint.MANIFEST,
                      *(["replay.npz"] if need_replay else [])):
@@ -268,8 +275,9 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
                 dest.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copyfile(parent_dir / "league" / rel, dest)
             write_pool(run_dir / "league", state["league"])
-            if (parent_dir / "league" / LOG_FILE).is_file():
-                shutil.copyfile(parent_dir / "league" / LOG_FILE, run_dir / "league" / LOG_FILE)
+            log = stored(parent_dir / "league" / LOG_FILE)  # plain or packed: a resume unpacks it
+            if log is not None:
+                shutil.copyfile(log, run_dir / "league" / log.name)
             if seeds:  # the appended zoo entries join the pools now, as members seeded at the fork's epoch
                 league = League.load(run_dir, cfg.league)
                 record["seeded"] = [m.id for m in league.seed(seeds, epoch)]
@@ -277,8 +285,8 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
                 league.save()
         checkpoint.rewrite_state(target, state)  # (its manifest then names no replay buffer it did not copy)
         checkpoint.point_latest(run_dir, target, epoch)
-        for csv_file in sorted(parent_dir.glob("*.csv")):  # metrics*, learning*, eval*: cut back on resume
-            shutil.copyfile(csv_file, run_dir / csv_file.name)
+        for table in _tables(parent_dir):  # metrics*, learning*, eval*: cut back (and unpacked) on resume
+            shutil.copyfile(table, run_dir / table.name)
         atomic_write_bytes(run_dir / FORK_FILE, (json.dumps(record, indent=1) + "\n").encode())
         write_legs(run_dir, legs_before(parent_legs, epoch))  # the parent's sessions up to the fork's epoch
         write_run_config(run_dir, cfg)

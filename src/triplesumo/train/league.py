@@ -91,7 +91,7 @@ from triplesumo.agents.policy_file import (
     policy_paths,
 )
 from triplesumo.agents.zoo import policy_stem
-from triplesumo.evaluation.metrics_csv import repair_metrics_csv
+from triplesumo.evaluation.metrics_csv import repair_metrics_csv, unpack_table
 from triplesumo.evaluation.ratings import PLACE_OF_OUTCOME, Rating, RatingTable
 from triplesumo.train.league_config import LeagueConfig, check_seeds
 
@@ -533,6 +533,7 @@ class League:
         (:func:`~triplesumo.evaluation.metrics_csv.repair_metrics_csv`), which names the file and line of a damaged
         row."""
         log = self.root / LOG_FILE
+        unpack_table(log)  # a packed league log (triplesumo pack) goes back to its plain file, appended to next
         if not log.exists():
             return
         complete = log.read_text(encoding="utf-8", errors="replace").split("\n")[1:-1]
