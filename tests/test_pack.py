@@ -143,3 +143,25 @@ def test_a_table_written_whole_replaces_its_packed_copy(tmp_path: Path) -> None:
     write_table(tmp_path / "summary.csv", b"a,b\n3,4\n")
     assert read_table_bytes(tmp_path / "summary.csv") == b"a,b\n3,4\n"
     assert not (tmp_path / "summary.csv.gz").exists()
+
+
+def test_a_table_still_being_written_is_left_plain(run: Path, tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run appending a row while its folder is packed: the table stays plain, with every row, and the error
+    says why."""
+    import triplesumo.evaluation.metrics_csv as tables
+
+    folder = tmp_path / "live"
+    shutil.copytree(run, folder)
+    compress = gzip.compress
+
+    def while_a_row_is_appended(data: bytes, *args: object, **kw: object) -> bytes:
+        with (folder / "metrics.csv").open("a") as fh:
+            fh.write("a row written meanwhile\n")
+        return compress(data, *args, **kw)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(tables.gzip, "compress", while_a_row_is_appended)
+    with pytest.raises(ValueError, match=r"metrics\.csv changed while it was being packed .* left plain"):
+        pack_tables(folder, min_bytes=(run / "metrics.csv").stat().st_size)
+    assert not (folder / "metrics.csv.gz").exists()
+    assert (folder / "metrics.csv").read_text().endswith("a row written meanwhile\n")

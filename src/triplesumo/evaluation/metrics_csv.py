@@ -122,15 +122,20 @@ def pack_tables(folder: Path | str, min_bytes: int = PACK_MIN_BYTES) -> list[Pat
         if not path.is_file() or path.stat().st_size < min_bytes:
             continue
         stored(path)  # refuses a table already there in both forms
+        before = path.stat()
         data = path.read_bytes()
         packed = packed_path(path)
         payload = gzip.compress(data, compresslevel=9, mtime=0)
         with writing(packed):
             atomic_write_bytes(packed, payload)
+        status = path.stat()
+        if (status.st_size, status.st_mtime_ns) != (before.st_size, before.st_mtime_ns) or len(data) != before.st_size:
+            packed.unlink()  # a run still appending to it: its rows would go to a file about to be removed
+            raise ValueError(f"{path} changed while it was being packed (a run still writing it?); it was left "
+                             "plain: pack a folder once nothing writes to it")
         if gzip.decompress(packed.read_bytes()) != data:  # pragma: no cover (a disk that returns other bytes)
             packed.unlink()
             raise OSError(f"{packed}: reads back other bytes than {path}; {path} was kept")
-        status = path.stat()
         os.chmod(packed, status.st_mode & 0o7777)  # the table's permissions and times, not the temp file's
         os.utime(packed, (status.st_atime, status.st_mtime))
         path.unlink()
