@@ -81,7 +81,11 @@ def read_table_bytes(path: Path | str) -> bytes:
 
 
 def open_table(path: Path | str) -> TextIO:
-    """Table ``path`` opened for reading as UTF-8 text with ``newline=""`` (for :mod:`csv`), plain or packed."""
+    """Table ``path`` opened for reading as UTF-8 text with ``newline=""`` (for :mod:`csv`), plain or packed: a
+    plain one is read as it streams from disk, a packed one decompressed first (a damaged one named)."""
+    where = stored(path)
+    if where is not None and not where.name.endswith(PACKED):
+        return where.open(newline="", encoding="utf-8")
     return io.StringIO(read_table_bytes(path).decode("utf-8"), newline="")
 
 
