@@ -84,15 +84,6 @@ def test_relative_links_are_found() -> None:
     assert "../scenario_paper.mp4" in relative_links(DOCS / "environments" / "paper.md")
 
 
-def test_run_folders_are_outputs_not_source() -> None:
-    """Nothing under results/ is tracked and git ignores the folder: run folders are outputs (issue 40)."""
-    if not tracked():
-        pytest.skip("not a git checkout")
-    assert not [t for t in tracked() if t.startswith("results/")], "results/ holds tracked files"
-    ignored = subprocess.run(["git", "check-ignore", "-q", "results/some-run/metrics.csv"], cwd=ROOT, check=False)
-    assert ignored.returncode == 0, ".gitignore must ignore results/"
-
-
 def nav_pages() -> list[str]:
     """Every page named in mkdocs.yml's nav."""
     nav = (ROOT / "mkdocs.yml").read_text().split("\nnav:\n", 1)[1]
