@@ -51,7 +51,6 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.benchmarks import cpu_name, report
 from triplesumo.envs.batch import VectorMatches
 from triplesumo.evaluation.metrics_csv import open_table, table_exists
-from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.loop import train
@@ -231,9 +230,7 @@ def reference_speed(train_cfg: TrainConfig, repeats: int = 3, seed: int = 0) -> 
 
     import numpy as np
 
-    match_cfg = scenario_config(train_cfg.scenario, max_steps=train_cfg.steps_per_epoch, obs_mode=train_cfg.obs_mode,
-                                reward=train_cfg.reward, physics=train_cfg.physics)
-    env = VectorMatches(train_cfg.n_envs, match_cfg, train_cfg.n_threads)
+    env = VectorMatches(train_cfg.n_envs, train_cfg.match_config(), train_cfg.n_threads)
     shape = (REFERENCE_STEPS, env.num_envs, env.n_agents, env.act_dim)
     actions = np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32)
     times = []

@@ -16,8 +16,8 @@ from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
 from triplesumo.model.specs import PhysicsConfig
-from triplesumo.rules.config import OBS_MODES, RewardConfig
-from triplesumo.rules.scenarios import scenarios
+from triplesumo.rules.config import OBS_MODES, MatchConfig, RewardConfig
+from triplesumo.rules.scenarios import scenario_config, scenarios
 from triplesumo.train.league_config import LeagueConfig
 
 ALGOS = ("ddpg", "td3", "sac", "ppo")
@@ -259,6 +259,11 @@ class TrainConfig:
             return dataclasses.replace(getattr(self, algo), **fields)
         except ValueError as err:
             raise ValueError(f"TrainConfig.learner_config (learner {learner}): {err}") from None
+
+    def match_config(self) -> MatchConfig:
+        """The run's match: its scenario with its epoch length, observations, rewards and physics."""
+        return scenario_config(self.scenario, max_steps=self.steps_per_epoch, obs_mode=self.obs_mode,
+                               reward=self.reward, physics=self.physics)
 
     def learners(self) -> dict[str, str]:
         """Learning agent -> algorithm, in the order given (``{learner: "ddpg"}`` when learn is empty)."""

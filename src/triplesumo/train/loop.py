@@ -44,7 +44,6 @@ from triplesumo.agents.policy_file import load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import Match
-from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train import checkpoint
 from triplesumo.train.collect import ACC_KEYS, Collector, DivergenceError, make_env
 from triplesumo.train.config import TrainConfig
@@ -107,8 +106,7 @@ class Trainer:
         self.cfg = cfg
         self.resumed = resume
         """This session continues a checkpoint (a resume, or a fork's first session)."""
-        self.match_cfg = scenario_config(cfg.scenario, max_steps=cfg.steps_per_epoch, obs_mode=cfg.obs_mode,
-                                         reward=cfg.reward, physics=cfg.physics)
+        self.match_cfg = cfg.match_config()
         agent_names = list(self.match_cfg.agent_names)
         self.specs = learner_specs(cfg, agent_names, {a.name: a.team for a in self.match_cfg.agents})
         self.agents = [a for spec in self.specs for a in spec.agents]
