@@ -43,6 +43,11 @@ def test_a_packed_run_reads_and_plots_as_the_plain_one(run: Path, tmp_path: Path
     done = pack_tables(packed, min_bytes=0)
     assert {p.relative_to(packed) for p in done} == {Path(f"{r}.gz") for r in plain_bytes}
     assert not list(packed.rglob("*.csv"))
+    from triplesumo.evaluation.metrics_csv import tables_in
+
+    names = sorted(p.name for p in run.glob("*.csv"))  # each table by its plain name, plain or packed
+    assert tables_in(packed) == [packed / n for n in names] and tables_in(run) == [run / n for n in names]
+    assert len(names) >= 2
     for rel, data in plain_bytes.items():
         assert gzip.decompress((packed / f"{rel}.gz").read_bytes()) == data  # a standard gzip file
         assert read_table_bytes(packed / rel) == data and table_exists(packed / rel)

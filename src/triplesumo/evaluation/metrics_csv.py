@@ -66,6 +66,15 @@ def table_exists(path: Path | str) -> bool:
     return stored(path) is not None
 
 
+def tables_in(folder: Path | str, pattern: str = "*.csv") -> list[Path]:
+    """The tables of ``folder`` (not its subfolders) whose plain names match ``pattern``, each by its plain name,
+    whether it lies plain or packed; sorted."""
+    folder = Path(folder)
+    names = {p.name for p in folder.glob(pattern) if p.is_file()}
+    names |= {p.name.removesuffix(PACKED) for p in folder.glob(pattern + PACKED) if p.is_file()}
+    return sorted(folder / name for name in names)
+
+
 def read_table_bytes(path: Path | str) -> bytes:
     """The bytes of table ``path`` as written (a packed one decompressed); ``FileNotFoundError`` names the table."""
     where = stored(path)

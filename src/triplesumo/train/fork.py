@@ -53,7 +53,7 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
-from triplesumo.evaluation.metrics_csv import PACKED, stored
+from triplesumo.evaluation.metrics_csv import stored, tables_in
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
@@ -173,12 +173,6 @@ def drop_unseated_evicted(state: dict[str, Any]) -> tuple[list[str], list[dict[s
     return files, dropped
 
 
-def _tables(run_dir: Path) -> list[Path]:
-    """The run's own tables (``metrics*.csv``, ``learning*.csv``, ``eval*.csv``), each plain or packed
-    (``NAME.csv.gz``, ``triplesumo pack``)."""
-    return sorted(p for p in run_dir.iterdir() if p.is_file() and p.name.endswith((".csv", ".csv" + PACKED)))
-
-
 def compact_run(run_dir: Path | str) -> dict[str, Any]:
     """Keep only what resuming the run in ``run_dir`` needs, for committing a long run's folder: its newest
     checkpoint (older ones deleted) and the league members its pools and in-flight matches hold. The files of
@@ -257,6 +251,8 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
     state["config"] = config_to_json(cfg)
     state["run_id"] = run_id_of(cfg)
 
+    # the run's own tables (metrics*, learning*, eval*) as they lie, plain or packed: cut back (and unpacked) on resume
+    tables = [p for name in tables_in(parent_dir) if (p := stored(name)) is not None]
     created = not run_dir.exists()
     prepare_run_dir(run_dir)
     written: list[Path] = []
@@ -264,7 +260,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
         target = run_dir / "checkpoints" / folder.name
         written += [run_dir / "checkpoints", run_dir / "league", run_dir / FORK_FILE, run_dir / "config.json",
                     run_dir / LEGS_FILE,
-                    *(run_dir / f.name for f in _tables(parent_dir))]
+                    *(run_dir / f.name for f in tables)]
         target.mkdir(parents=True)
         for name in ("weights.safetensors", "arrays.npz", checkpoint.MANIFEST,
                      *(["replay.npz"] if need_replay else [])):
@@ -285,7 +281,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
                 league.save()
         checkpoint.rewrite_state(target, state)  # (its manifest then names no replay buffer it did not copy)
         checkpoint.point_latest(run_dir, target, epoch)
-        for table in _tables(parent_dir):  # metrics*, learning*, eval*: cut back (and unpacked) on resume
+        for table in tables:
             shutil.copyfile(table, run_dir / table.name)
         atomic_write_bytes(run_dir / FORK_FILE, (json.dumps(record, indent=1) + "\n").encode())
         write_legs(run_dir, legs_before(parent_legs, epoch))  # the parent's sessions up to the fork's epoch

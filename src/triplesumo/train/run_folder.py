@@ -26,7 +26,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.evaluation.metrics_csv import PACKED, table_exists
+from triplesumo.evaluation.metrics_csv import table_exists, tables_in
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
 from triplesumo.rules.config import RewardConfig
 from triplesumo.train import checkpoint
@@ -233,8 +233,7 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
     if (run_dir / "config.json").is_file():
         learner = str(load_json(run_dir / "config.json").get("learner", learner))
     paths: list[Path] = []
-    files = sorted({p.with_name(p.name.removesuffix(PACKED)) for p in run_dir.glob("metrics-*.csv*")
-                    if p.name.endswith((".csv", ".csv" + PACKED))}) or [run_dir / "metrics.csv"]  # plain or packed
+    files = tables_in(run_dir, "metrics-*.csv") or [run_dir / "metrics.csv"]  # plain or packed
     for path in files:
         agent = path.stem.removeprefix("metrics-") if path.name != "metrics.csv" else learner
         metrics = read_metrics_csv(path)
