@@ -4,7 +4,9 @@
 """
 
 import contextlib
+import functools
 import os
+import subprocess
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -177,3 +179,15 @@ def ray_session() -> Iterator[Any]:
         yield ray
     finally:
         ray.shutdown()
+
+
+@functools.cache
+def tracked_files() -> frozenset[str]:
+    """Paths git tracks in this checkout (a sparse checkout lacks some of them on disk); empty outside a git
+    checkout."""
+    root = Path(__file__).resolve().parents[1]
+    try:
+        out = subprocess.run(["git", "ls-files", "-z"], cwd=root, capture_output=True, check=True).stdout
+    except (OSError, subprocess.CalledProcessError):
+        return frozenset()
+    return frozenset(p for p in out.decode().split("\0") if p)

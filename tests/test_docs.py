@@ -15,11 +15,12 @@ import os
 import re
 import subprocess
 import sys
-from functools import cache
 from pathlib import Path
 from types import ModuleType
 
 import pytest
+
+from conftest import tracked_files
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -36,16 +37,6 @@ _FENCE = re.compile(r"^```.*?^```", re.S | re.M)
 def site_pages() -> list[Path]:
     """The Markdown pages of the site: docs/ less the run outputs under docs/runs/."""
     return sorted(p for p in DOCS.rglob("*.md") if "runs" not in p.relative_to(DOCS).parts)
-
-
-@cache
-def tracked() -> frozenset[str]:
-    """Paths git tracks (a sparse checkout lacks some of them on disk); empty outside a git checkout."""
-    try:
-        out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return frozenset()
-    return frozenset(out.splitlines())
 
 
 def relative_links(page: Path) -> list[str]:
@@ -71,9 +62,9 @@ def test_every_relative_link_resolves(page: Path) -> None:
     for target in relative_links(page):
         path = (page.parent / target.split("#")[0]).resolve()
         rel = path.relative_to(ROOT).as_posix() if path.is_relative_to(ROOT) else None
-        if not path.exists() and (rel is None or not any(t == rel or t.startswith(rel + "/") for t in tracked())):
+        if not path.exists() and (rel is None or not any(t == rel or t.startswith(rel + "/") for t in tracked_files())):
             broken.append(target)
-        elif page != README and (path.is_dir() or (not path.exists() and rel not in tracked())):
+        elif page != README and (path.is_dir() or (not path.exists() and rel not in tracked_files())):
             broken.append(target)  # a site page's link to a folder: `mkdocs build --strict` refuses it
     assert not broken, f"{page.relative_to(ROOT)}: links to missing files (or, from the site, to folders): {broken}"
 

@@ -9,10 +9,11 @@ under ``tests/data/`` are source, not run outputs.
 from __future__ import annotations
 
 import subprocess
-from functools import cache
 from pathlib import Path
 
 import pytest
+
+from conftest import tracked_files
 
 ROOT = Path(__file__).resolve().parents[1]
 RESUME_STATE_LIMIT = 50 * 10**6
@@ -23,20 +24,11 @@ lowered as docs/runs and reproduction/ shrink to what their pages cite, down to 
 FIXTURES = "tests/data/"
 
 
-@cache
-def tracked() -> tuple[str, ...]:
-    try:
-        out = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return ()
-    return tuple(p for p in out.decode().split("\0") if p)
-
-
 @pytest.fixture
-def files() -> tuple[str, ...]:
-    if not tracked():
+def files() -> frozenset[str]:
+    if not tracked_files():
         pytest.skip("not a git checkout")
-    return tracked()
+    return tracked_files()
 
 
 def size(rel: str) -> int:
@@ -45,24 +37,24 @@ def size(rel: str) -> int:
 
 
 @pytest.mark.parametrize("folder", ["results", "runs"])
-def test_run_folders_are_ignored_and_hold_nothing_tracked(files: tuple[str, ...], folder: str) -> None:
+def test_run_folders_are_ignored_and_hold_nothing_tracked(files: frozenset[str], folder: str) -> None:
     assert not [f for f in files if f.startswith(f"{folder}/")], f"{folder}/ holds tracked files"
     ignored = subprocess.run(["git", "check-ignore", "-q", f"{folder}/some-run/metrics.csv"], cwd=ROOT, check=False)
     assert ignored.returncode == 0, f".gitignore must ignore {folder}/"
 
 
-def test_no_replay_buffer_or_tensorboard_events_are_tracked(files: tuple[str, ...]) -> None:
+def test_no_replay_buffer_or_tensorboard_events_are_tracked(files: frozenset[str]) -> None:
     found = [f for f in files if not f.startswith(FIXTURES)
              and (Path(f).name == "replay.npz" or "tfevents" in Path(f).name or "/tensorboard/" in f)]
     assert not found, f"run outputs that never belong in the repository: {found}"
 
 
-def test_resume_state_of_runs_in_progress_takes_at_most_50_mb(files: tuple[str, ...]) -> None:
+def test_resume_state_of_runs_in_progress_takes_at_most_50_mb(files: frozenset[str]) -> None:
     state = sum(size(f) for f in files if "/checkpoints/" in f and not f.startswith(FIXTURES))
     assert state <= RESUME_STATE_LIMIT, f"checkpoints/ folders hold {state / 1e6:.1f} MB (at most 50 MB in all)"
 
 
-def test_tracked_files_stay_under_the_ceiling(files: tuple[str, ...]) -> None:
+def test_tracked_files_stay_under_the_ceiling(files: frozenset[str]) -> None:
     total = sum(size(f) for f in files)
     biggest = sorted(files, key=size, reverse=True)[:5]
     assert total <= TRACKED_CEILING, (f"tracked files take {total / 1e6:.1f} MB, over {TRACKED_CEILING / 1e6:.0f} MB; "
