@@ -2,7 +2,7 @@
 
 Pages link run outputs kept in the repository: plots and CSVs under ``docs/runs/`` (left out of
 the site as a whole for its size, ``exclude_docs``) and files outside ``docs/``
-(``../reproduction/``, ``../results/``, ``../examples/``). This adds exactly the linked files
+(``../examples/``). This adds exactly the linked files
 that exist to the site, those outside ``docs/`` under ``repo/``, and points the links there,
 so that links and images work on the site as they do on a Git host.
 """

@@ -174,8 +174,10 @@ def test_site_builds_strict(tmp_path: Path) -> None:
     assert (tmp_path / "site" / "environments" / "paper.html").is_file()
     assert "TripleSumoParallelEnv" in (tmp_path / "site" / "api" / "envs.html").read_text()
     # docs/hooks.py serves the linked files outside docs/ and under the excluded docs/runs/, and only those
-    assert 'src="repo/reproduction/compare/compare.png"' in (tmp_path / "site" / "REPRODUCTION.html").read_text()
-    assert (tmp_path / "site" / "repo" / "reproduction" / "compare" / "compare.png").is_file()
+    assert 'src="runs/reproduction-v1/compare/compare.png"' in (tmp_path / "site" / "REPRODUCTION.html").read_text()
+    assert (tmp_path / "site" / "runs" / "reproduction-v1" / "compare" / "compare.png").is_file()
+    assert 'href="repo/examples/rllib_bug_ppo.py"' in (tmp_path / "site" / "RLLIB.html").read_text()  # outside docs/
+    assert (tmp_path / "site" / "repo" / "examples" / "rllib_bug_ppo.py").is_file()
     assert 'src="runs/contest-v2/reproduce/bug/learn%3Dbug%3Dsac%2Cseed%3D0/plots/mwr.png"' in (
         tmp_path / "site" / "index.html").read_text()  # the home page's figure, from docs/runs
     assert (tmp_path / "site" / "runs" / "contest-v2" / "reproduce" / "bug" / "learn=bug=sac,seed=0" / "plots" /

@@ -20,7 +20,7 @@ RESUME_STATE_LIMIT = 50 * 10**6
 """Bytes of ``checkpoints/`` folders (runs in progress, compacted) the repository may hold, in all."""
 TRACKED_CEILING = 240 * 10**6
 """Bytes of tracked files, at most: 238 MB when this was written (2026-11-28, 747 MB when issue 40 was filed);
-lowered as docs/runs and reproduction/ shrink to what their pages cite, down to the issue's 100 MB."""
+lowered as docs/runs shrinks to what their pages cite, down to the issue's 100 MB."""
 FIXTURES = "tests/data/"
 
 
