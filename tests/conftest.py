@@ -6,6 +6,7 @@
 import contextlib
 import functools
 import os
+import re
 import subprocess
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -191,3 +192,16 @@ def tracked_files() -> frozenset[str]:
     except (OSError, subprocess.CalledProcessError):
         return frozenset()
     return frozenset(p for p in out.decode().split("\0") if p)
+
+
+_LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)|\bsrc=\"([^\"]+)\"")
+_FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+
+
+def relative_links(page: Path) -> list[str]:
+    """Targets of a Markdown page's links and images and of its HTML ``src=`` outside code blocks, less web
+    addresses and anchors (as written: relative to the page)."""
+    text = _FENCE.sub("", page.read_text())
+    text = re.sub(r"`[^`\n]*`", "", text)  # inline code
+    targets = [a or b for a, b in _LINK.findall(text)]
+    return [t for t in targets if not re.match(r"[a-z]+:", t) and not t.startswith("#")]

@@ -20,7 +20,7 @@ from types import ModuleType
 
 import pytest
 
-from conftest import tracked_files
+from conftest import relative_links, tracked_files
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -30,22 +30,11 @@ COMMANDS = (
     "python3 -m venv .venv && . .venv/bin/activate && pip install -e . && triplesumo demo\n"
     "python3 -m venv .venv && . .venv/bin/activate && pip install -e \".[test]\" && pytest -n 2 -q\n"
 )
-_LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)|\bsrc=\"([^\"]+)\"")
-_FENCE = re.compile(r"^```.*?^```", re.S | re.M)
 
 
 def site_pages() -> list[Path]:
     """The Markdown pages of the site: docs/ less the run outputs under docs/runs/."""
     return sorted(p for p in DOCS.rglob("*.md") if "runs" not in p.relative_to(DOCS).parts)
-
-
-def relative_links(page: Path) -> list[str]:
-    """Targets of the page's Markdown links and images and of its HTML ``src=`` outside code blocks,
-    less web addresses and anchors."""
-    text = _FENCE.sub("", page.read_text())
-    text = re.sub(r"`[^`\n]*`", "", text)  # inline code
-    targets = [a or b for a, b in _LINK.findall(text)]
-    return [t for t in targets if not re.match(r"[a-z]+:", t) and not t.startswith("#")]
 
 
 def test_readme_is_a_short_front_door_starting_with_the_two_commands() -> None:

@@ -1,9 +1,10 @@
 """The repository stays lean (issue 40): run folders are outputs, not source.
 
 ``results/`` (and ``runs/``) are ignored and hold nothing tracked; no replay buffer or TensorBoard event file is
-tracked; the resume state of runs still in progress (``checkpoints/`` folders) takes at most 50 MB in all; and the
-tracked files stay under a ceiling that is lowered as run outputs leave (the issue's goal: 100 MB). Test fixtures
-under ``tests/data/`` are source, not run outputs.
+tracked; the resume state of runs still in progress (``checkpoints/`` folders) takes at most 50 MB in all; run outputs
+(metrics tables, policy weights) are tracked only beside the pages that cite them (``docs/runs/``), in the shipped zoo
+or as test fixtures; there, a large table is packed (``triplesumo pack``) and every plot or video is shown by a page;
+and the tracked files take at most the issue's 100 MB. Test fixtures under ``tests/data/`` are source, not run outputs.
 """
 
 from __future__ import annotations
@@ -13,15 +14,17 @@ from pathlib import Path
 
 import pytest
 
-from conftest import tracked_files
+from conftest import relative_links, tracked_files
+from triplesumo.evaluation.metrics_csv import PACK_MIN_BYTES
 
 ROOT = Path(__file__).resolve().parents[1]
 RESUME_STATE_LIMIT = 50 * 10**6
 """Bytes of ``checkpoints/`` folders (runs in progress, compacted) the repository may hold, in all."""
-TRACKED_CEILING = 240 * 10**6
-"""Bytes of tracked files, at most: 238 MB when this was written (2026-11-28, 747 MB when issue 40 was filed);
-lowered as docs/runs shrinks to what their pages cite, down to the issue's 100 MB."""
+TRACKED_LIMIT = 100 * 10**6
+"""Bytes of tracked files, at most (issue 40): 747 MB when the issue was filed, 72 MB when this limit was set."""
 FIXTURES = "tests/data/"
+BESIDE_PAGES = "docs/runs/"
+ZOO = "src/triplesumo/agents/zoo/"
 
 
 @pytest.fixture
@@ -54,8 +57,34 @@ def test_resume_state_of_runs_in_progress_takes_at_most_50_mb(files: frozenset[s
     assert state <= RESUME_STATE_LIMIT, f"checkpoints/ folders hold {state / 1e6:.1f} MB (at most 50 MB in all)"
 
 
-def test_tracked_files_stay_under_the_ceiling(files: frozenset[str]) -> None:
+def test_tracked_files_take_at_most_100_mb(files: frozenset[str]) -> None:
     total = sum(size(f) for f in files)
     biggest = sorted(files, key=size, reverse=True)[:5]
-    assert total <= TRACKED_CEILING, (f"tracked files take {total / 1e6:.1f} MB, over {TRACKED_CEILING / 1e6:.0f} MB; "
-                                      f"the largest: {[(f, size(f)) for f in biggest]}")
+    assert total <= TRACKED_LIMIT, (f"tracked files take {total / 1e6:.1f} MB, over {TRACKED_LIMIT / 1e6:.0f} MB; "
+                                    f"the largest: {[(f, size(f)) for f in biggest]}")
+
+
+def _run_output(path: str) -> bool:
+    return path.endswith((".safetensors", ".csv", ".csv.gz"))
+
+
+def test_run_outputs_live_beside_the_pages_in_the_zoo_or_as_fixtures(files: frozenset[str]) -> None:
+    stray = sorted(f for f in files if _run_output(f) and not f.startswith((BESIDE_PAGES, ZOO, FIXTURES)))
+    assert not stray, f"run outputs outside {BESIDE_PAGES} (beside the pages), {ZOO} and {FIXTURES}: {stray[:10]}"
+
+
+def test_large_tables_beside_the_pages_are_packed(files: frozenset[str]) -> None:
+    plain = sorted(f for f in files if f.startswith(BESIDE_PAGES) and f.endswith(".csv") and size(f) >= PACK_MIN_BYTES)
+    folders = sorted({str(Path(f).parent) for f in plain})
+    assert not plain, (f"{len(plain)} table(s) of at least {PACK_MIN_BYTES // 1024} KiB left plain, e.g. {plain[:3]}; "
+                       f"run `triplesumo pack` on {folders[:5]}")
+
+
+def test_every_plot_or_video_beside_the_pages_is_shown_by_a_page(files: frozenset[str]) -> None:
+    shown = set()
+    for page in (f for f in files if f.endswith(".md") and (ROOT / f).is_file()):
+        for target in relative_links(ROOT / page):
+            shown.add((ROOT / page).parent.joinpath(target.split("#")[0]).resolve())
+    unseen = sorted(f for f in files if f.startswith(BESIDE_PAGES) and f.endswith((".png", ".mp4", ".gif"))
+                    and (ROOT / f).resolve() not in shown)
+    assert not unseen, f"plots or videos under {BESIDE_PAGES} no page shows (link or drop them): {unseen[:10]}"

@@ -13,6 +13,7 @@ import pytest
 import triplesumo
 from triplesumo.agents import zoo
 from triplesumo.envs.match import Match
+from triplesumo.evaluation.metrics_csv import open_table
 from triplesumo.model import V0_PHYSICS, PhysicsConfig
 from triplesumo.model.specs import physics_record
 from triplesumo.rules.scenarios import scenario_config
@@ -178,7 +179,7 @@ def test_a_history_policy_loads_by_path_without_a_suffix(name: str, monkeypatch:
 
 def _lwr(candidate: Path) -> np.ndarray:
     """Per-start local winning rate of an evaluation candidate's ``metrics.csv``: win +1, loss -1, draw 0."""
-    with open(candidate / "metrics.csv", newline="") as fh:
+    with open_table(candidate / "metrics.csv") as fh:
         return np.array([{"win": 1.0, "loss": -1.0}.get(r["outcome"], 0.0) for r in csv.DictReader(fh)])
 
 
@@ -224,7 +225,7 @@ def test_the_contest_record_is_recomputed_from_its_matches() -> None:
     record = json.loads((CONTEST / "contest.json").read_text())
     counts = {}
     for check in ("ant-pushes", "spider-pushes", "match"):
-        with open(CONTEST / check / "trained" / "metrics.csv", newline="") as fh:
+        with open_table(CONTEST / check / "trained" / "metrics.csv") as fh:
             outcomes = [r["outcome"] for r in csv.DictReader(fh)]
         counts[check] = {"n": len(outcomes), **{f"n_{o}": outcomes.count(o) for o in ("win", "loss", "draw")}}
         summary = json.loads((CONTEST / check / "summary.json").read_text())
@@ -244,7 +245,7 @@ BUGS = [n for n in zoo.available() if n == "bug" or n.startswith("bug-")]
 
 
 def _test_rows() -> list[dict[str, str]]:
-    with open(REPRODUCE / "evaluation" / "per_seed.csv", newline="") as fh:
+    with open_table(REPRODUCE / "evaluation" / "per_seed.csv") as fh:
         return list(csv.DictReader(fh))
 
 
@@ -266,7 +267,7 @@ def test_a_shipped_bug_is_its_trial_and_its_figures_are_recomputed_from_the_matc
     assert manifest["sha256"] == file_sha256(trial / "policy.safetensors")
     rows = [r for r in _test_rows() if "/bug/learn=bug=" in r["policy"]]
     row = next(r for r in rows if r["algo"] == algo and int(r["train_seed"]) == manifest["seed"])
-    with open(REPRODUCE / "evaluation" / row["candidate"] / "metrics.csv", newline="") as fh:
+    with open_table(REPRODUCE / "evaluation" / row["candidate"] / "metrics.csv") as fh:
         matches = list(csv.DictReader(fh))
     s = summarize([m["outcome"] for m in matches], [float(m["steps"]) for m in matches])
     assert s["n"] == ev["test_matches"] == 2000 and ev["eval_seed"] == 10_000
@@ -275,7 +276,7 @@ def test_a_shipped_bug_is_its_trial_and_its_figures_are_recomputed_from_the_matc
         (ev["test_mwr"], ev["test_mwr_lo"], ev["test_mwr_hi"]), abs=1e-12)
 
     def train_mwr(seed: str) -> float:
-        with open(REPRODUCE / "bug" / f"learn=bug={algo},seed={seed}" / "metrics.csv", newline="") as fh:
+        with open_table(REPRODUCE / "bug" / f"learn=bug={algo},seed={seed}" / "metrics.csv") as fh:
             lwr = [float(r["local_winning_rate"]) for r in csv.DictReader(fh)][-200:]
         return sum(lwr) / len(lwr)
 
