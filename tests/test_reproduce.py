@@ -282,6 +282,20 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
     assert "learn=bug=ddpg,seed=1" in table and "complete" not in table and not (out / "bug").exists()
     assert main(argv) == 0
     record = _record(out)
+    # the folder moved (a clone elsewhere, a copy): --status reads it whole, every stage complete, the evaluation too
+    # although its records name the policies at the old place (they are this folder's policies, the same files)
+    moved = tmp_path / "moved"
+    shutil.copytree(out, moved)
+    capsys.readouterr()
+    assert main([*argv[:3], str(moved), *argv[4:], "--status"]) == 0
+    rows = {line.split()[1]: line.split()[2:] for line in capsys.readouterr().out.splitlines()[1:-1]}
+    assert {name: row[0] for name, row in rows.items()} == dict.fromkeys(rows, "complete"), rows
+    assert {"evaluation", "learn=bug=ddpg,seed=1"} <= set(rows)
+    (moved / "bug" / "learn=bug=ddpg,seed=1" / "policy.safetensors").unlink()  # and it checks the files found there
+    capsys.readouterr()
+    assert main([*argv[:3], str(moved), *argv[4:], "--status"]) == 0
+    rows = {line.split()[1]: line.split()[2:] for line in capsys.readouterr().out.splitlines()[1:-1]}
+    assert rows["evaluation"][0] != "complete" and rows["contest"][0] == "complete"
     # one Bug run loses its checkpoints and policy (as a run stopped part way): it is not done, the rest is
     run = out / "bug" / "learn=bug=ddpg,seed=1"
     shutil.rmtree(run / "checkpoints")

@@ -286,8 +286,22 @@ class Protocol:
                               steps_per_epoch=self.steps, out=str(self.out / "evaluation"), n_envs=self.n_envs,
                               progress=self.cfg.progress)
 
-    def _evaluation_complete(self) -> bool:
+    def evaluation_rows(self) -> list[dict[str, str]]:
+        """The test's rows (``evaluation/per_seed.csv``, one per candidate), each Bug's policy named where it is now.
+
+        The evaluation records its candidates by the paths it was given, absolute; a folder that moved since (a
+        clone elsewhere, a copy) recorded them at its old place. A recorded path that ends with the path of one of
+        this folder's Bug policies inside the folder (``bug/<trial>/policy``) is that policy, here; baselines and
+        policies from elsewhere are kept as recorded."""
+        inside = {Path(p).relative_to(self.out).parts: p for p in self.evaluation_config().policy}
         rows = _read_csv(self.out / "evaluation" / "per_seed.csv")
+        for row in rows:
+            parts = Path(row["policy"]).parts
+            row["policy"] = next((inside[parts[k:]] for k in range(len(parts)) if parts[k:] in inside), row["policy"])
+        return rows
+
+    def _evaluation_complete(self) -> bool:
+        rows = self.evaluation_rows()
         want = set(self.evaluation_config().policy) | {"passive", "random"}
         return ({r["policy"] for r in rows} == want and all(int(r["epochs"]) == self.epochs["eval"] for r in rows)
                 and all(_rows_in(self.out / "evaluation" / r["candidate"] / "metrics.csv") == self.epochs["eval"]

@@ -12,7 +12,7 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig
-from triplesumo.reproduce.protocol import Protocol, _read_csv
+from triplesumo.reproduce.protocol import Protocol
 from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status
 from triplesumo.train import legs
 from triplesumo.version import ENV_VERSION, __version__
@@ -115,7 +115,7 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
 
     by_policy = {str(Path(t.config.out) / t.name / "policy"): Path(t.config.out) / t.name
                  for t in protocol.bug_trials()}  # not the ablations
-    rows = [r for r in _read_csv(protocol.out / "evaluation" / "per_seed.csv") if r["policy"] in by_policy]
+    rows = [r for r in protocol.evaluation_rows() if r["policy"] in by_policy]
     # the ring every stage trained on, and the env version whose default it is (the trainer wrote the one it ran under)
     extra: dict[str, Any] = {"code_version": version, "reproduction": _shown(protocol.out),
                              "physics": dataclasses.asdict(protocol.physics),
