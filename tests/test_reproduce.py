@@ -38,7 +38,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "ppo", "--seeds", "0", "--no-progress",
             "--ablations", "noise=gaussian", "still=-1", "--publish"]
     assert main(argv) == 0
-    stages = ["ant", "spider", "contest", "bug", "ablations", "evaluation", "compare"]
+    stages = ["ant", "spider", "pair", "contest", "bug", "ablations", "evaluation", "compare"]
     record = _record(out)
     assert record["runs"][-1]["ran"] == stages and record["runs"][-1]["version"]
     for name in stages:

@@ -25,9 +25,15 @@ PUSH_MIN = 0.5
 
 class ContestError(RuntimeError):
     """The Bug stage refused a pair that failed the contest rule (the message names each failed check)."""
+
+
+class PairError(RuntimeError):
+    """Stage 1 found no pair by its rules within the sides' epoch budgets (the message names the side, its screens
+    and the record)."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
-RUN_OPTIONS = ("progress", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish", "docs")
+RUN_OPTIONS = ("progress", "sides_at_once", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish",
+               "docs")
 """ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
 make: a folder resumes with other values."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
@@ -77,13 +83,25 @@ class ReproduceConfig:
     training matches: SAC +0.445, TD3 +0.210, PPO -0.290). ``--algos ddpg td3 sac ppo`` reruns the comparison."""
     seeds: tuple[int, ...] = (0, 1, 2)
     """Training seeds of Bug, for every algorithm."""
-    ant_epochs: int = 5_000
-    """Stage ``ant``: epochs of the Ant learning to push a still Spider, Bug still. The paper gives its Ant 3,000; the
-    Ant of docs/CONTEST.md first pushed at least half of the screen's still Spiders at 5,000 (11 of 100 at 2,000, 20
-    at 3,000)."""
-    spider_epochs: int = 6_000
-    """Stage ``spider``: epochs of the Spider learning to push a still Ant and Bug: the Spider of docs/CONTEST.md
-    first pushed at least half of the screen's at 6,000 (33 of 100 at 3,000, 47 at 5,000)."""
+    ant_epochs: int = 10_000
+    """Stage ``ant``: at most this many epochs of the Ant learning to push a still Spider, Bug still; it stops at its
+    earliest screened checkpoint that pushes at least :data:`PUSH_MIN` of the screen's still opponents out (the pair
+    rule may train it on to a later one). The paper gives its Ant 3,000; the Ant of docs/CONTEST.md first passed at
+    5,000 (11 of 100 at 2,000, 20 at 3,000). A side that reaches its budget without passing stops the protocol
+    (:class:`PairError`)."""
+    spider_epochs: int = 10_000
+    """Stage ``spider``: at most this many epochs of the Spider learning to push a still Ant and Bug, screened as the
+    Ant is: the Spider of docs/CONTEST.md first passed at 6,000 (33 of 100 at 3,000, 47 at 5,000)."""
+    screen_every: int = 1000
+    """Stage 1: each side is screened every this many epochs (its policy kept as ``ROLE/screens/policy-EPOCH``)."""
+    screen_epochs: int = 100
+    """Stage 1: starts of each screen and of each pair's match (screen_seed + i; held out from training, from the
+    contest's starts and from the Bug's test starts)."""
+    screen_seed: int = 30_000
+    """Screen start i resets with screen_seed + i."""
+    sides_at_once: bool = True
+    """Train the Ant and the Spider side by side, each in a process of its own on one core (their runs are
+    independent: the outputs are those of one after the other)."""
     pretrain_seed: int = 1
     """Seed of both pre-training runs."""
     pretrain: RewardConfig = PRETRAIN_REWARD
@@ -193,8 +211,8 @@ class ReproduceConfig:
             raise ValueError(f"ReproduceConfig.pretrain.still {still}: surviving without a result would be worth "
                              f"{worth:.0f} (still / (1 - gamma), gamma {gamma}), no more than losing ({loss:.0f}); the "
                              f"pre-trained sides would not learn to stay in. Use a value above {loss * (1 - gamma):g}")
-        for name in ("ant_epochs", "spider_epochs", "bug_epochs", "bug_eval_epochs", "contest_epochs", "eval_epochs",
-                     "n_envs"):
+        for name in ("ant_epochs", "spider_epochs", "screen_every", "screen_epochs", "bug_epochs", "bug_eval_epochs",
+                     "contest_epochs", "eval_epochs", "n_envs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 1, got {value!r}")
@@ -219,3 +237,6 @@ class Stage:
     complete: Callable[[], bool]
     run: Callable[[], list[str]]
     """Makes (or finishes) the outputs; returns the commands that do the same by hand."""
+    commands: Callable[[], list[str]] | None = None
+    """The commands that make the outputs by hand, for a stage an earlier one made alongside its own (the Spider,
+    trained beside the Ant)."""

@@ -19,11 +19,13 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.evaluation.metrics_csv import open_table, read_table_bytes, table_exists
+from triplesumo.evaluation.parallel import ProcessRunner
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation
+from triplesumo.reproduce.pretrain import PAIR_FILE, SCREENS_FILE, Side, counts_of, play_pair_rule, read_record
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.run_folder import command_for, training_done
-from triplesumo.train.sweep import SweepConfig, Trial, finished, run_trial, trials
+from triplesumo.train.run_folder import command_for
+from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
 
 
 def _read_csv(path: Path) -> list[dict[str, str]]:
@@ -94,13 +96,17 @@ class Protocol:
         self.epochs = {"ant": 2, "spider": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
             "ant": cfg.ant_epochs, "spider": cfg.spider_epochs, "bug": cfg.bug_epochs, "contest": cfg.contest_epochs,
             "eval": cfg.eval_epochs}
+        self.screen_every = 1 if tiny else cfg.screen_every
+        self.screen_epochs = 4 if tiny else cfg.screen_epochs
         self.physics = PhysicsConfig(border_rim=cfg.border_rim)
-        self.ant_policy, self.spider_policy = cfg.pair or (str(self.out / "ant" / "policy"),
-                                                           str(self.out / "spider" / "policy"))
         self.stages = [
             *(self._pretrain_stage(role, against)
               for role, against in (() if cfg.pair else (("ant", "a still Spider, Bug still"),
                                                          ("spider", "a still Ant and Bug")))),
+            *(() if cfg.pair else (
+                Stage("pair", "the pair rule: the sides' picks meet with Bug passive on the screen's starts",
+                      (self.out / "pair" / PAIR_FILE,), lambda: bool(self.pair_record().get("pick")),
+                      self._pair_stage),)),
             Stage("contest", "is the pair a contest? (each side pushes; the team loses without Bug, not hopelessly)",
                   (self.out / "contest" / "contest.json",), self._contest_complete, self._contest),
             Stage("bug", "Bug per algorithm x seed in the pair's match (Ant and Spider frozen)", (self.out / "bug",),
@@ -114,12 +120,38 @@ class Protocol:
                   self._compare_complete, self._compare),
         ]
 
-    # ------------------------------------------------------------ train stages
+    # ------------------------------------------------------------ stage 1
+    @property
+    def ant_policy(self) -> str:
+        """The Ant of the pair: ``--pair``'s, else stage 1's pick (``ant/screens/policy-EPOCH``)."""
+        return self._pair_policy("ant")
+
+    @property
+    def spider_policy(self) -> str:
+        return self._pair_policy("spider")
+
+    def _pair_policy(self, role: str) -> str:
+        if self.cfg.pair:
+            return self.cfg.pair[0 if role == "ant" else 1]
+        pick = self.pair_record().get("pick")
+        return str(self.out / pick[role]["policy"]) if pick else str(self.out / role / "policy")
+
+    def pair_record(self) -> dict[str, Any]:
+        return read_record(self.out / "pair" / PAIR_FILE, {})
+
     def _pretrain_stage(self, role: str, against: str) -> Stage:
-        """Stage ``ant`` or ``spider`` (:meth:`pretrain`): done when its run finished and wrote its policy."""
-        return Stage(role, f"the {role.capitalize()} learns to push: against {against}",
-                     (self.out / role / "policy.json",), lambda: self._trained(self.pretrain(role)),
-                     lambda: self._train(self.pretrain(role)))
+        """Stage ``ant`` or ``spider``: that side trains and is screened until a screen passes
+        (:class:`~triplesumo.reproduce.pretrain.Side`); with ``sides_at_once`` the first of the two runs both."""
+        def run() -> list[str]:
+            roles = [role]
+            if self.cfg.sides_at_once and role == "ant" and not self.side("spider").pick():
+                roles.append("spider")
+            self.train_sides(roles)
+            return [self.side_commands(role)]
+
+        return Stage(role, f"the {role.capitalize()} learns to push: against {against}, screened every "
+                           f"{self.screen_every:,} epochs", (self.out / role / SCREENS_FILE,),
+                     lambda: self.side(role).pick() is not None, run, lambda: [self.side_commands(role)])
 
     def _base(self, **kw: Any) -> TrainConfig:
         """A train config at the protocol's budgets; tiny networks and buffers when tiny."""
@@ -136,7 +168,8 @@ class Protocol:
 
     def pretrain(self, role: str) -> TrainConfig:
         """Stage ``ant`` or ``spider``: that side alone learns (DDPG) to push still opponents (every other agent
-        passive: a body that neither leaves the ring by itself nor pushes back), on the pre-training reward."""
+        passive: a body that neither leaves the ring by itself nor pushes back), on the pre-training reward, up to its
+        epoch budget (a screen stops it earlier)."""
         others = tuple(f"{a}=passive" for a in ("ant", "bug", "spider") if a != role)
         base = self._base(name=role, learn=(f"{role}=ddpg",), policies=others, epochs=self.epochs[role],
                           seed=self.cfg.pretrain_seed, reward=self.cfg.pretrain)
@@ -144,12 +177,65 @@ class Protocol:
         return base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
                                                               checkpoint_every=250)
 
-    def _trained(self, cfg: TrainConfig) -> bool:
-        return training_done(cfg) and (Path(cfg.out) / cfg.name / "policy.json").exists()
+    def side(self, role: str) -> Side:
+        """A side's training in legs with its screens (:class:`~triplesumo.reproduce.pretrain.Side`)."""
+        cfg = self.pretrain(role)
+        others = tuple(f"{a}=passive" for a in ("ant", "bug", "spider") if a != role)
 
-    def _train(self, cfg: TrainConfig) -> list[str]:
-        run_trial(cfg)  # resumes the run from its last checkpoint when there is one
-        return [command_for(cfg)]
+        def train_to(epochs: int) -> int:
+            leg = dataclasses.replace(cfg, epochs=epochs)
+            run_trial(leg)  # resumes the run from its last checkpoint when there is one
+            return int(run_facts(Path(cfg.out) / cfg.name, 1)["env_steps"])
+
+        def screen(policy: str, out: Path) -> dict[str, int]:
+            ecfg = self._check_config(out, role, policy, others, self.screen_epochs, self.cfg.screen_seed)
+            self._evaluate(ecfg)
+            return counts_of(out / "summary.json")
+
+        return Side(role, self.out / role, self.screen_every, self.epochs[role],
+                    f"{self.screen_epochs}, seed {self.cfg.screen_seed} + i", train_to, screen,
+                    push_min=0.0 if self.cfg.tiny else PUSH_MIN)  # tiny: the rule recorded, not enforced
+
+    def train_sides(self, roles: list[str]) -> None:
+        """Train and screen the sides until each passes: side by side in processes of their own when there are
+        two."""
+        if len(roles) > 1:
+            quiet = dataclasses.replace(self.cfg, progress=False)  # two progress bars would garble each other
+            runner = ProcessRunner(workers=len(roles))
+            for k, get in runner(train_side, [(quiet, role) for role in roles]):
+                get()  # a side's error (PairError, a crash) surfaces here, after the other side finished
+                print(f"  stage {roles[k]}: done")
+        else:
+            self.side(roles[0]).until_pass(0)
+
+    def side_commands(self, role: str) -> str:
+        """How a side's legs and screens are made by hand."""
+        cfg = self.pretrain(role)
+        run = Path(cfg.out) / cfg.name
+        legs = [s["epoch"] for s in self.side(role).screens()]
+        first = dataclasses.replace(cfg, epochs=legs[0] if legs else self.screen_every)
+        return "; ".join([command_for(first), *(f"triplesumo train --resume {shlex.quote(str(run))} --epochs {e}"
+                                                for e in legs[1:]),
+                          f"(after each leg: copy {run}/policy.* to {run}/screens/policy-EPOCH.* and screen it with "
+                          f"triplesumo evaluate --learner {role} --epochs {self.screen_epochs} "
+                          f"--seed {self.cfg.screen_seed}, the other agents passive)"])
+
+    def _pair_stage(self) -> list[str]:
+        sides = {role: self.side(role) for role in ("ant", "spider")}
+
+        def play(ant: dict[str, Any], spider: dict[str, Any]) -> dict[str, int]:
+            out = self.out / "pair" / f"ant-{ant['epoch']}_spider-{spider['epoch']}"
+            ant_policy, spider_policy = (str(sides[r].run_dir / s["policy"]) for r, s in (("ant", ant),
+                                                                                       ("spider", spider)))
+            self._evaluate(self._check_config(out, "spider", spider_policy, (f"ant={ant_policy}", "bug=passive"),
+                                              self.screen_epochs, self.cfg.screen_seed))
+            return counts_of(out / "summary.json")
+
+        band = (-1.0, 1.0) if self.cfg.tiny else CONTEST_BAND  # tiny: the rule recorded, not enforced
+        record = play_pair_rule(sides, self.out / "pair" / PAIR_FILE, play, band)
+        pick = record["pick"]
+        return [f"the pair rule on {len(record['pairs'])} pair(s) played: Ant {pick['ant']['epoch']:,}, Spider "
+                f"{pick['spider']['epoch']:,} (pair/{PAIR_FILE})", *(self.side_commands(r) for r in ("ant", "spider"))]
 
     def sweep(self) -> SweepConfig:
         return SweepConfig(grid=("learn=" + ",".join(f"bug={a}" for a in self.cfg.algos),
@@ -230,14 +316,19 @@ class Protocol:
             evaluate(dataclasses.replace(ecfg, resume=resume))
         return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]
 
+    def _check_config(self, out: Path, learner: str, policy: str, others: tuple[str, ...], epochs: int,
+                      seed: int) -> EvaluateConfig:
+        """One policy, frozen, in the learner's seat against ``others`` on ``epochs`` starts from ``seed``."""
+        return EvaluateConfig(learner=learner, policy=(policy,), policies=others, baselines=(), epochs=epochs,
+                              seed=seed, steps_per_epoch=self.steps, physics=self.physics, out=str(out),
+                              n_envs=self.n_envs, progress=self.cfg.progress)
+
     def contest_configs(self) -> dict[str, EvaluateConfig]:
         """Stage 2's three evaluations on the same held-out starts: each side against a passive opponent, and the
         match with Bug passive (played from the Spider's seat; the team's MWR is minus the Spider's)."""
         def one(name: str, learner: str, policy: str, others: tuple[str, ...]) -> EvaluateConfig:
-            return EvaluateConfig(learner=learner, policy=(policy,), policies=others, baselines=(),
-                                  epochs=self.epochs["contest"], seed=self.cfg.contest_seed,
-                                  steps_per_epoch=self.steps, physics=self.physics,
-                                  out=str(self.out / "contest" / name), n_envs=self.n_envs, progress=self.cfg.progress)
+            return self._check_config(self.out / "contest" / name, learner, policy, others, self.epochs["contest"],
+                                      self.cfg.contest_seed)
 
         return {"ant-pushes": one("ant-pushes", "ant", self.ant_policy, ("spider=passive", "bug=passive")),
                 "spider-pushes": one("spider-pushes", "spider", self.spider_policy, ("ant=passive", "bug=passive")),
@@ -252,9 +343,7 @@ class Protocol:
         counts: dict[str, dict[str, int]] = {}
         for name, ecfg in self.contest_configs().items():
             commands += self._evaluate(ecfg)
-            summary = json.loads((Path(ecfg.out) / "summary.json").read_text())
-            c = next(iter(summary["candidates"].values()))
-            counts[name] = {k: int(c[k]) for k in ("n", "n_win", "n_loss", "n_draw")}
+            counts[name] = counts_of(Path(ecfg.out) / "summary.json")
         facts = contest_verdict(counts, *(self._in_out(p) for p in (self.ant_policy, self.spider_policy)))
         print(format_contest(facts))
         atomic_write_bytes(self.out / "contest" / "contest.json", (json.dumps(facts, indent=2) + "\n").encode())
@@ -328,3 +417,8 @@ class Protocol:
         print(format_compare(compare(ccfg)))
         return [f"triplesumo compare {shlex.quote(ccfg.folders[0])} --by {ccfg.by} --seed {ccfg.seed} "
                 f"--reps {ccfg.reps} --out {shlex.quote(ccfg.out)}"]
+
+
+def train_side(cfg: ReproduceConfig, role: str) -> None:
+    """A side's legs and screens until one passes, in a worker process (:meth:`Protocol.train_sides`)."""
+    Protocol(cfg).side(role).until_pass(0)

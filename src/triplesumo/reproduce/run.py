@@ -65,8 +65,19 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
         print(f"report (so far): {out / REPORT_FILE}")
         return record
     record["runs"].append(run_now)
+    run_now["machine"] = _machine(protocol)
     n = len(protocol.stages)
+    made_before = {stage.name for stage in protocol.stages if stage.complete()}
+    made_with: dict[str, str] = {}  # a stage made alongside an earlier one of this run (the Spider beside the Ant)
     for k, stage in enumerate(protocol.stages, 1):
+        if stage.complete() and stage.name not in made_before and stage.commands is not None:
+            by = next(name for name in reversed(run_now["ran"]) if name not in made_with)
+            print(f"[{k}/{n}] {stage.name}: made alongside {by} ({stage.title})")
+            record["stages"][stage.name] = {**record["stages"][by], "with": by, "commands": stage.commands()}
+            made_with[stage.name] = by
+            run_now["ran"].append(stage.name)
+            atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+            continue
         if stage.complete():
             print(f"[{k}/{n}] {stage.name}: complete, skipped ({stage.title})")
             run_now["skipped"].append(stage.name)
@@ -87,6 +98,16 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     _write_report(protocol, record)
     print(f"report: {out / REPORT_FILE}; record: {path}")
     return record
+
+
+def _machine(protocol: Protocol) -> dict[str, Any]:
+    """The machine this run of the protocol ran on and its speed, as ``bench skill`` records them: the CPU and a
+    fixed seeded collection of the Bug stage's matches (ms per env step), so that stage times measured on two
+    machines can be set side by side."""
+    from triplesumo.benchmarks.skill import machine, reference_speed
+
+    base = protocol.bug_base()
+    return {**machine(base), "reference": reference_speed(base, repeats=1 if protocol.cfg.tiny else 3)}
 
 
 def _now() -> str:
