@@ -44,7 +44,21 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     for name in stages:
         for rel in record["stages"][name]["outputs"]:
             assert (out / rel).exists(), rel
-        assert record["stages"][name]["commands"]
+        assert record["stages"][name]["commands"] and record["stages"][name]["seconds"] > 0  # each stage's wall time
+    # the machine and its speed, as bench skill records them; the Spider trained beside the Ant
+    machine = record["runs"][-1]["machine"]
+    assert machine["cores"] and machine["reference"]["ms_per_env_step"] > 0
+    assert record["stages"]["spider"]["with"] == "ant"
+    assert record["stages"]["spider"]["seconds"] == record["stages"]["ant"]["seconds"]
+    # stage 1 as code: a screen after every leg (tiny: every epoch, the rules recorded but not enforced), the pair
+    # rule's pick, and the contest played on it
+    for role in ("ant", "spider"):
+        screens = json.loads((out / role / "screens.json").read_text())["screens"]
+        assert [s["epoch"] for s in screens] == [1] and screens[0]["n"] == 4
+        assert (out / role / "screens" / "policy-1.safetensors").is_file()
+    pair = json.loads((out / "pair" / "pair.json").read_text())
+    assert [(p["ant_epoch"], p["spider_epoch"]) for p in pair["pairs"]] == [(1, 1)]
+    assert pair["pick"]["ant"]["policy"] == "ant/screens/policy-1"
     for role, others in (("ant", "bug=passive spider=passive"), ("spider", "ant=passive bug=passive")):
         cmd = record["stages"][role]["commands"][0]  # each side alone against still opponents
         assert cmd.startswith(f"triplesumo train --name {role}") and f"--learn {role}=ddpg" in cmd
@@ -56,6 +70,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
         assert json.loads((out / role / "config.json").read_text())["reward"]["opponents"] == "sum"
     assert (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.json").exists()
     contest = json.loads((out / "contest" / "contest.json").read_text())
+    assert (contest["ant"], contest["spider"]) == ("ant/screens/policy-1", "spider/screens/policy-1")
     assert contest["matches"] == 4 and contest["team_wins"] + contest["team_losses"] + contest["draws"] == 1.0
     assert set(contest["counts"]) == {"ant-pushes", "spider-pushes", "match"}
     assert contest["contest"] == (not contest["failed"])  # tiny: recorded, not enforced (the Bug stage ran)
@@ -373,3 +388,105 @@ def test_the_bug_stage_refuses_a_pair_that_is_no_contest(tmp_path: Path) -> None
     assert _record(tmp_path / "rep")["stages"].keys() == {"contest"}
     with pytest.raises(ContestError):  # and again on a re-run: the recorded verdict stands
         run_reproduce(cfg)
+
+
+def test_the_checkpoint_rule_takes_the_earliest_screen_that_pushes_half() -> None:
+    from triplesumo.reproduce.pretrain import first_passing
+
+    def screen(epoch: int, wins: int) -> dict[str, int]:
+        return {"epoch": epoch, "n": 100, "n_win": wins, "n_loss": 0, "n_draw": 100 - wins}
+
+    # the shipped Spider's screens (docs/CONTEST.md): 14, 33, 47, 61, 74 of 100 at 2,000 .. 7,000
+    screens = [screen(7000, 74), screen(2000, 14), screen(3000, 33), screen(5000, 47), screen(6000, 61)]
+    assert first_passing(screens)["epoch"] == 6000  # the earliest at >= 50 %, whatever the order recorded
+    assert first_passing(screens, after=6000)["epoch"] == 7000  # the next one, for the pair rule
+    assert first_passing(screens, after=7000) is None
+    assert first_passing([screen(1000, 49)]) is None and first_passing([screen(1000, 50)])["epoch"] == 1000
+    assert first_passing([screen(1000, 0)], push_min=0.0)["epoch"] == 1000  # tiny: recorded, not enforced
+
+
+def test_the_pair_rule_keeps_the_band_and_names_the_side_to_strengthen() -> None:
+    from triplesumo.reproduce.pretrain import pair_move
+
+    assert [pair_move(m) for m in (-0.75, -0.50, -0.46, -0.10, +0.05)] == ["ant", "pair", "pair", "pair", "spider"]
+    assert pair_move(0.9, band=(-1.0, 1.0)) == "pair"
+
+
+def _scripted_side(tmp_path: Path, role: str, wins: dict[int, int], trained: list[tuple[str, int]],
+                   budget: int = 5000) -> Any:
+    """A side whose legs write a policy file and whose screens answer from ``wins`` (epoch -> pushes of 100)."""
+    from triplesumo.agents.policy_file import policy_paths
+    from triplesumo.reproduce.pretrain import Side
+
+    run = tmp_path / role
+
+    def train(epochs: int) -> int:
+        trained.append((role, epochs))
+        run.mkdir(exist_ok=True)
+        for path in policy_paths(run / "policy"):
+            path.write_text(f"{role} at {epochs}")
+        return 100 * epochs
+
+    def screen(policy: str, out: Path) -> dict[str, int]:
+        epoch = int(policy.rsplit("-", 1)[1])
+        assert Path(policy + ".json").read_text() == f"{role} at {epoch}"  # the leg's own policy, kept
+        return {"n": 100, "n_win": wins[epoch], "n_loss": 0, "n_draw": 100 - wins[epoch]}
+
+    return Side(role, run, 1000, budget, "100, seed 30000 + i", train, screen)
+
+
+def test_stage_one_trains_each_side_to_its_first_passing_screen_then_the_pair_rule_strengthens_the_loser(
+        tmp_path: Path) -> None:
+    """Scripted screens and pair matches: the Ant passes at 2,000, the Spider at 1,000; their pair leaves the team
+    hopeless (-0.70), so the Ant trains on to its next passing screen (4,000: 3,000 does not pass), and that pair lies
+    in the band. Every leg, screen and pair is recorded; a re-run trains and plays nothing."""
+    from triplesumo.reproduce.pretrain import PAIR_FILE, play_pair_rule
+
+    trained: list[tuple[str, int]] = []
+    sides = {"ant": _scripted_side(tmp_path, "ant", {1000: 10, 2000: 55, 3000: 48, 4000: 60}, trained),
+             "spider": _scripted_side(tmp_path, "spider", {1000: 51}, trained)}
+    team = {(2000, 1000): (80, 10), (4000, 1000): (60, 30)}  # (Spider wins, team wins) of 100
+    played: list[tuple[int, int]] = []
+
+    def play(ant: dict[str, Any], spider: dict[str, Any]) -> dict[str, int]:
+        played.append((ant["epoch"], spider["epoch"]))
+        w, lo = team[played[-1]]
+        return {"n": 100, "n_win": w, "n_loss": lo, "n_draw": 100 - w - lo}
+
+    record = play_pair_rule(sides, tmp_path / "pair" / PAIR_FILE, play)
+    assert trained == [("ant", 1000), ("ant", 2000), ("spider", 1000), ("ant", 3000), ("ant", 4000)]
+    assert played == [(2000, 1000), (4000, 1000)]
+    assert [(p["team_mwr"], p["move"]) for p in record["pairs"]] == [(-0.7, "ant"), (-0.3, "pair")]
+    assert record["pick"] == {"ant": {"epoch": 4000, "policy": "ant/screens/policy-4000"},
+                              "spider": {"epoch": 1000, "policy": "spider/screens/policy-1000"}}
+    screens = json.loads((tmp_path / "ant" / "screens.json").read_text())["screens"]
+    assert [(s["epoch"], s["n_win"], s["env_steps"]) for s in screens] == [
+        (1000, 10, 100_000), (2000, 55, 200_000), (3000, 48, 300_000), (4000, 60, 400_000)]
+    assert all(s["train_seconds"] >= 0 and s["screen_seconds"] >= 0 for s in screens)
+    assert json.loads((tmp_path / "pair" / PAIR_FILE).read_text()) == record
+    assert play_pair_rule(sides, tmp_path / "pair" / PAIR_FILE, play) == record  # resumed: nothing again
+    assert len(trained) == 5 and len(played) == 2
+
+
+def test_a_side_that_never_passes_within_its_budget_stops_stage_one_naming_its_screens(tmp_path: Path) -> None:
+    from triplesumo.reproduce import PairError
+
+    trained: list[tuple[str, int]] = []
+    side = _scripted_side(tmp_path, "spider", {1000: 6, 2000: 14, 3000: 33}, trained, budget=3000)
+    with pytest.raises(PairError, match=r"the Spider pushed still opponents out in fewer than 50% .* up to its budget "
+                                        r"of 3,000 epochs \(6/100 at 1,000, 14/100 at 2,000, 33/100 at 3,000; "
+                                        r".*screens.json\)\. Raise the budget \(--spider-epochs\)"):
+        side.until_pass()
+    assert [e for _, e in trained] == [1000, 2000, 3000]
+    with pytest.raises(PairError):  # a re-run trains nothing again: the screens are recorded
+        side.until_pass()
+    assert len(trained) == 3
+
+
+def test_the_cli_stops_a_refused_pair_with_rc_2_and_a_message(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["reproduce", "--out", str(tmp_path / "rep"), "--pair", "passive", "passive", "--contest-epochs", "2",
+            "--n-envs", "2", "--algos", "ddpg", "--seeds", "0", "--no-progress"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "triplesumo reproduce: stopped: stage bug refused" in err and "Traceback" not in err

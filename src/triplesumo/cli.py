@@ -233,9 +233,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"summary: {scfg.out}/summary.csv, summary.json" + (f"; compare: {scfg.out}/compare/"
                                                                       if scfg.evaluate_epochs else ""))
         elif args.command == "reproduce":
-            from triplesumo.reproduce import ReproduceConfig, run_reproduce
+            from triplesumo.reproduce import ContestError, PairError, ReproduceConfig, run_reproduce
 
-            run_reproduce(_dcargs.build(ReproduceConfig, args))
+            try:
+                run_reproduce(_dcargs.build(ReproduceConfig, args))
+            except (ContestError, PairError) as exc:  # a protocol's check refused to go on: a verdict, not a crash
+                print(f"triplesumo reproduce: stopped: {exc}", file=sys.stderr)
+                return 2
         elif args.command == "compact":
             from triplesumo.train.fork import compact_run
 

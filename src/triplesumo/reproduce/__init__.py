@@ -67,6 +67,7 @@ from triplesumo.reproduce.config import (
     RUN_OPTIONS,
     SKILL,
     ContestError,
+    PairError,
     ReproduceConfig,
     Stage,
     ablation,
@@ -76,7 +77,7 @@ from triplesumo.reproduce.reporting import DOCS_BEGIN, DOCS_END, embed_report, f
 from triplesumo.reproduce.run import check_same_options, code_version, run_reproduce
 
 __all__ = [
-    "ABLATION_ALIASES", "CONTEST_BAND", "ContestError", "DOCS_BEGIN", "DOCS_END", "PRETRAIN_REWARD",
+    "ABLATION_ALIASES", "CONTEST_BAND", "ContestError", "DOCS_BEGIN", "DOCS_END", "PRETRAIN_REWARD", "PairError",
     "PROTOCOL_FIELDS", "PUSH_MIN", "Protocol", "RECORD_FILE", "REPORT_FILE", "RUN_OPTIONS", "ReproduceConfig",
     "SKILL", "Stage", "ablation", "check_same_options", "code_version", "contest_verdict", "embed_report",
     "format_contest", "format_status", "report", "run_reproduce", "status"

@@ -14,7 +14,7 @@ from typing import Any
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.compare import trial_group
 from triplesumo.evaluation.metrics_csv import table_exists
-from triplesumo.reproduce.config import REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
+from triplesumo.reproduce.config import PUSH_MIN, REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
 from triplesumo.reproduce.protocol import Protocol, _read_csv
 from triplesumo.train.sweep import Trial, finished, run_facts
 
@@ -95,6 +95,48 @@ def _run_row(protocol: Protocol, name: str) -> str:
     return f"| {name} | {facts['epochs']:,} | {facts['env_steps']:,} | {facts['final_mwr']:+.3f} |"
 
 
+def _machines(record: dict[str, Any]) -> list[str]:
+    """Where each run of the protocol ran (several sessions may share one folder): its CPU, cores and reference
+    speed (ms per env step of a fixed seeded collection: a slower box takes longer for the same stages), the
+    stages it ran."""
+    runs = [r for r in record.get("runs", []) if r.get("machine") and r.get("ran")]
+    if not runs:
+        return []
+    lines = ["| run started | machine | reference (ms per env step) | stages run |", "| --- | --- | ---: | --- |"]
+    for r in runs:
+        m = r["machine"]
+        lines.append(f"| {r['started']} | {m['cpu']}, {m['cores']} cores | {m['reference']['ms_per_env_step']:.3f} | "
+                     f"{', '.join(r['ran'])} |")
+    return [*lines, ""]
+
+
+def _stage_one_section(protocol: Protocol) -> list[str]:
+    """Each side's screens (the checkpoint rule) and every pair played (the pair rule), from their records."""
+    lines = [f"Screens: every {protocol.screen_every:,} epochs each side's policy, frozen, against still opponents on "
+             f"{protocol.screen_epochs} starts (seed {protocol.cfg.screen_seed} + i); a side's pick is its earliest "
+             f"checkpoint that pushes at least {PUSH_MIN:.0%} of them out.", "",
+             "| side | epochs | env steps | pushes out (W / L / D) | passes | leg wall time | screen wall time |",
+             "| --- | ---: | ---: | --- | --- | ---: | ---: |"]
+    for role in ("ant", "spider"):
+        side = protocol.side(role)
+        for sc in side.screens():
+            lines.append(f"| {role} | {sc['epoch']:,} | {sc['env_steps']:,} | {sc['n_win']} / {sc['n_loss']} / "
+                         f"{sc['n_draw']} of {sc['n']} | {'yes' if sc['n_win'] / sc['n'] >= side.push_min else 'no'}"
+                         f" | {_duration(sc['train_seconds'])} | {_duration(sc['screen_seconds'])} |")
+    pair = protocol.pair_record()
+    if pair.get("pairs"):
+        lo, hi = pair["band"]
+        lines += ["", f"Pairs played with Bug passive on the same starts (the pair rule: a team MWR in [{lo:+.2f}, "
+                      f"{hi:+.2f}] makes the pair; below it the Ant trains on, above it the Spider):", "",
+                  "| Ant | Spider | Spider W / L / D | team MWR | next |", "| ---: | ---: | --- | ---: | --- |"]
+        for p in pair["pairs"]:
+            c = p["counts"]
+            nxt = "**the pair**" if p["move"] == "pair" else f"a stronger {p['move'].capitalize()}"
+            lines.append(f"| {p['ant_epoch']:,} | {p['spider_epoch']:,} | {c['n_win']} / {c['n_loss']} / "
+                         f"{c['n_draw']} | {p['team_mwr']:+.3f} | {nxt} |")
+    return [*lines, ""]
+
+
 def _trial_group(trial: Trial) -> str:
     """The compare group of a trial's policy (``ddpg``, ``ddpg,ddpg.noise=gaussian``)."""
     return trial_group({"group": "trained", "algo": "", "policy": str(Path(trial.config.out) / trial.name / "policy")})
@@ -115,13 +157,14 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
              f"`{out.name}/`." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
                                                     if cfg.tiny else ""), "",
              f"Ring: {ring}; every stage trained and was evaluated on it.", "",
+             *_machines(record),
              "## Stage 1: the pair (each side learns to push still opponents)", "",
              *([f"Skipped: the pair was given (`--pair {' '.join(cfg.pair)}`).", ""] if cfg.pair else [
                  f"Pre-training reward: the paper's terms with still = {cfg.pretrain.still:g} (losing costs more than "
                  f"surviving), draw = {cfg.pretrain.draw:g}, per-axis dead zone {cfg.pretrain.axis_dead_zone:g} m, "
                  f"per-opponent terms as a {cfg.pretrain.opponents}.", "",
                  "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |",
-                 _run_row(protocol, "ant"), _run_row(protocol, "spider"), ""])]
+                 _run_row(protocol, "ant"), _run_row(protocol, "spider"), "", *_stage_one_section(protocol)])]
     contest_path = out / "contest" / "contest.json"
     lines += ["## Stage 2: is it a contest?", ""]
     if contest_path.exists():
