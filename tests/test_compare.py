@@ -146,14 +146,16 @@ def test_evaluate_writes_one_row_per_seed_and_compare_reads_them(seeds_eval: Pat
     # The folder twice: its evaluations are counted once.
     assert main(["compare", str(seeds_eval), str(seeds_eval), "--out", str(out), "--reps", "500"]) == 0
     printed = capsys.readouterr().out
-    assert "IQM" in printed and "P(X > Y)" in printed
+    assert "IQM" in printed
     table = json.loads((out / "compare.json").read_text())
     groups = {g["group"]: g for g in table["groups"]}
     assert set(groups) == {"trained", "passive", "random"}
     assert groups["trained"]["n_seeds"] == 2 and groups["passive"]["n_seeds"] == 1
     assert sorted(groups["trained"]["scores"]) == sorted(float(r["test_mwr"]) for r in rows[:2])
     assert groups["trained"]["iqm"] == pytest.approx(np.mean(groups["trained"]["scores"]))
-    assert len(table["improvement"]) == 6
+    # two seeds and two baselines: per-run values and their mean, no interval and no P(X > Y)
+    assert all(g["lo"] is None and g["hi"] is None for g in table["groups"]) and table["improvement"] == []
+    assert "fewer than 5 runs, no interval and no P(X > Y)" in printed
     assert (out / "compare.png").read_bytes().startswith(PNG)
     with (out / "compare.csv").open(newline="") as fh:
         assert {r["group"] for r in csv.DictReader(fh)} == set(groups)
@@ -201,8 +203,8 @@ def test_trial_group_is_the_run_folder_without_its_seed(policy: str, group: str,
 
 def test_the_printed_table_keeps_long_group_names_whole() -> None:
     long = "ddpg,ddpg.noise=gaussian,reward.still=-1"
-    groups = [{"group": g, "n_seeds": 3, "iqm": -0.6, "lo": -0.7, "hi": -0.5, "scores": [-0.7, -0.6, -0.5]}
-              for g in (long, "ppo")]
+    groups = [{"group": g, "n_seeds": 5, "iqm": -0.6, "lo": -0.7, "hi": -0.5, "mean": -0.6,
+               "scores": [-0.7, -0.6, -0.6, -0.6, -0.5]} for g in (long, "ppo")]
     table = {"confidence": 0.95, "groups": groups,
              "improvement": [{"x": long, "y": "ppo", "poi": 0.5, "lo": 0.0, "hi": 1.0},
                              {"x": "ppo", "y": long, "poi": 0.5, "lo": 0.0, "hi": 1.0}]}
@@ -210,3 +212,48 @@ def test_the_printed_table_keeps_long_group_names_whole() -> None:
     assert lines[1].startswith(long + " ") and lines[2].startswith("ppo ")
     assert f"{long} > ppo" in lines[-2] and lines[-1].endswith(f"ppo > {long}  0.500 [0.000, 1.000]")
     assert len({line.index(" > ") for line in lines[-2:]}) == 1  # the columns line up
+
+
+def _per_seed_folder(folder: Path, scores: dict[str, list[float]]) -> Path:
+    """An evaluation folder's per_seed.csv with the given test MWR per algorithm, one row per run."""
+    folder.mkdir(parents=True)
+    with (folder / "per_seed.csv").open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(PER_SEED_COLUMNS)
+        for algo, values in scores.items():
+            for k, v in enumerate(values):
+                w.writerow(["trained", f"{algo}-{k}", f"runs/{algo}-{k}/policy", f"{algo}{k:062d}", algo, k, "bug",
+                            10_000, 2000, 0, 0, 0, v, v - 0.04, v + 0.04])
+    return folder
+
+
+def test_three_runs_report_their_values_and_mean_and_ten_runs_rliables_interval(tmp_path: Path) -> None:
+    from rliable import library as rly_library
+
+    ten = [0.58, 0.36, 0.38, 0.44, 0.51, 0.29, 0.47, 0.40, 0.62, 0.33]
+    folder = _per_seed_folder(tmp_path / "ev", {"sac": ten, "ddpg": [0.06, 0.12, 0.18]})
+    table = compare(CompareConfig(folders=(str(folder),), by="algo", reps=2000, out=str(tmp_path / "cmp")))
+    groups = {g["group"]: g for g in table["groups"]}
+    few = groups["ddpg"]
+    assert few["lo"] is None and few["hi"] is None and few["mean"] == pytest.approx(0.12)
+    assert table["improvement"] == []  # a group of 3 runs is compared with nothing
+    many = groups["sac"]
+    scores = np.array(ten)[:, None]
+    assert many["iqm"] == pytest.approx(rly_metrics.aggregate_iqm(scores))
+    np.random.seed(0)  # noqa: NPY002 (rliable's bootstrap draws from numpy's global generator)
+    _, ci = rly_library.get_interval_estimates({"sac": scores}, lambda x: np.array([rly_metrics.aggregate_iqm(x)]),
+                                               reps=2000)
+    assert many["lo"] == pytest.approx(ci["sac"][0, 0], abs=0.03)
+    assert many["hi"] == pytest.approx(ci["sac"][1, 0], abs=0.03)
+    assert many["lo"] < many["iqm"] < many["hi"]
+    with (tmp_path / "cmp" / "compare.csv").open(newline="") as fh:
+        rows = {r["group"]: r for r in csv.DictReader(fh)}
+    assert rows["ddpg"]["lo"] == rows["ddpg"]["hi"] == ""
+    assert float(rows["sac"]["lo"]) == pytest.approx(many["lo"], abs=1e-4)
+    printed = format_compare(table)
+    assert "mean +0.120" in printed and f"{many['iqm']:+.3f} [{many['lo']:+.3f}, {many['hi']:+.3f}]" in printed
+    assert (tmp_path / "cmp" / "compare.png").read_bytes().startswith(PNG)
+    # five runs against five: P(X > Y) with its interval
+    five = compare(CompareConfig(folders=(str(_per_seed_folder(tmp_path / "ev5", {"a": ten[:5], "b": ten[5:]})),),
+                                 by="algo", reps=500, out=str(tmp_path / "cmp5")))
+    assert {(p["x"], p["y"]) for p in five["improvement"]} == {("a", "b"), ("b", "a")}

@@ -22,6 +22,11 @@ estimates are rliable's own functions, and a test holds the intervals to
 
 An evaluation repeated in several folders (same policy files by sha256, same test seed
 and epochs) is counted once: identical evaluations are not independent seeds.
+
+A group of fewer than :data:`MIN_RUNS` runs gets no interval and takes part in no probability of improvement:
+over three runs a bootstrap's 95 % interval is their minimum and maximum, and P(X > Y) of two groups that never
+overlap is 1.00 however few runs stand behind it. Such a group shows its per-run values and their mean
+(``lo``, ``hi`` null in ``compare.json``, empty in ``compare.csv``; the printed table says so).
 """
 
 from __future__ import annotations
@@ -43,6 +48,8 @@ from triplesumo.evaluation.metrics_csv import open_table, table_exists, write_ta
 from triplesumo.evaluation.video import check_writable
 
 BY = ("group", "algo", "folder", "trial")
+MIN_RUNS = 5
+"""Fewest runs (seeds) of a group for a bootstrap interval or a probability of improvement."""
 
 
 @dataclass(frozen=True)
@@ -182,20 +189,22 @@ def compare(cfg: CompareConfig) -> dict[str, Any]:
     grouped = read_per_seed(cfg.folders, cfg.by)
     scores = {g: np.array([[float(r["test_mwr"])] for r in rows]) for g, rows in grouped.items()}
     est = interval_estimates(scores, cfg.reps, cfg.confidence, cfg.seed)
-    table: dict[str, Any] = {"config": asdict(cfg), "by": cfg.by, "confidence": cfg.confidence, "groups": [],
-                             "improvement": []}
+    table: dict[str, Any] = {"config": asdict(cfg), "by": cfg.by, "confidence": cfg.confidence,
+                             "min_runs": MIN_RUNS, "groups": [], "improvement": []}
     for g, rows in sorted(grouped.items(), key=lambda kv: -est["groups"][kv[0]]["iqm"]):
+        interval = {"lo": None, "hi": None} if len(rows) < MIN_RUNS else {}  # per-run values and mean only
         table["groups"].append({"group": g, "n_seeds": len(rows), "scores": [float(r["test_mwr"]) for r in rows],
                                 "policies": [r["policy"] for r in rows], "mean": float(np.mean(scores[g])),
-                                **est["groups"][g]})
+                                **est["groups"][g], **interval})
     for (gx, gy), p in est["pairs"].items():
-        table["improvement"].append({"x": gx, "y": gy, **p})
+        if min(len(grouped[gx]), len(grouped[gy])) >= MIN_RUNS:
+            table["improvement"].append({"x": gx, "y": gy, **p})
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["group", "n_seeds", "iqm", "lo", "hi", "mean", "seed_scores"])
     for g in table["groups"]:
-        w.writerow([g["group"], g["n_seeds"], f"{g['iqm']:.4f}", f"{g['lo']:.4f}", f"{g['hi']:.4f}",
-                    f"{g['mean']:.4f}", " ".join(f"{s:.4f}" for s in g["scores"])])
+        w.writerow([g["group"], g["n_seeds"], f"{g['iqm']:.4f}", *(("", "") if g["lo"] is None else (
+            f"{g['lo']:.4f}", f"{g['hi']:.4f}")), f"{g['mean']:.4f}", " ".join(f"{s:.4f}" for s in g["scores"])])
     write_table(out / "compare.csv", buf.getvalue().encode())
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -214,8 +223,12 @@ def format_compare(table: dict[str, Any]) -> str:
     w = max([24, *(len(g["group"]) for g in table["groups"])])  # whole names: ablations are long
     lines = [f"{'group':{w}s} {'seeds':>5s} {f'IQM [{pct}% CI]':>26s}  per-seed test MWR"]
     for g in table["groups"]:
-        ci = f"{g['iqm']:+.3f} [{g['lo']:+.3f}, {g['hi']:+.3f}]"
+        ci = f"{g['iqm']:+.3f} [{g['lo']:+.3f}, {g['hi']:+.3f}]" if g["lo"] is not None else f"mean {g['mean']:+.3f}"
         lines.append(f"{g['group']:{w}s} {g['n_seeds']:5d} {ci:>26s}  " + " ".join(f"{s:+.3f}" for s in g["scores"]))
+    few = [g["group"] for g in table["groups"] if g["lo"] is None]
+    if few:
+        lines.append(f"(fewer than {table.get('min_runs', MIN_RUNS)} runs, no interval and no P(X > Y): the per-run "
+                     f"values and their mean: {', '.join(few)})")
     if table["improvement"]:
         lines.append("")
         lines.append(f"{'P(X > Y)':{2 * w + 3}s} {f'[{pct}% CI]':>18s}")

@@ -115,13 +115,19 @@ def plot_crossplay(results: dict[str, Any], path: Path, title: str = "") -> Path
 
 
 def plot_compare(table: dict[str, Any], path: Path, title: str = "") -> Path:
-    """Per-seed test MWR of each group (dots) with its IQM and bootstrap interval (bar)."""
+    """Per-seed test MWR of each group (dots) with its IQM and bootstrap interval (bar), or with their mean alone for a
+    group of fewer runs than an interval needs."""
     groups = table["groups"]
     fig = Figure(figsize=(max(4.0, 1.2 * len(groups) + 1.5), 3.8))
     ax = fig.add_subplot()
     for k, g in enumerate(groups):
-        ax.errorbar([k], [g["iqm"]], yerr=[[g["iqm"] - g["lo"]], [g["hi"] - g["iqm"]]], fmt="s", color="black",
-                    capsize=6, markersize=7, zorder=3, label="IQM" if k == 0 else None)
+        if g["lo"] is None:  # fewer runs than an interval needs: their mean, no bar
+            ax.scatter([k], [g["mean"]], marker="D", color="black", s=30, zorder=3,
+                       label="mean (fewer than 5 runs)" if all(h["lo"] is not None for h in groups[:k]) else None)
+        else:
+            ax.errorbar([k], [g["iqm"]], yerr=[[g["iqm"] - g["lo"]], [g["hi"] - g["iqm"]]], fmt="s", color="black",
+                        capsize=6, markersize=7, zorder=3,
+                        label="IQM" if all(h["lo"] is None for h in groups[:k]) else None)
         seeds = np.asarray(g["scores"], dtype=float)
         jitter = np.linspace(-0.15, 0.15, len(seeds)) if len(seeds) > 1 else np.zeros(1)
         ax.scatter(k + jitter, seeds, color="#4a7bd0", alpha=0.7, s=18, zorder=2,

@@ -146,6 +146,12 @@ def _ci(x: float, lo: float, hi: float) -> str:
     return f"{x:+.3f} [{lo:+.3f}, {hi:+.3f}]"
 
 
+def _group_estimate(g: dict[str, Any]) -> str:
+    """A compare group's IQM with its interval, or the mean of fewer runs than an interval needs."""
+    return f"mean {g['mean']:+.3f} (no interval: {g['n_seeds']} run(s))" if g["lo"] is None else _ci(
+        g["iqm"], g["lo"], g["hi"])
+
+
 def report(protocol: Protocol, record: dict[str, Any]) -> str:
     """``REPRODUCTION.md`` of a reproduction folder, every number read from the files it wrote."""
     out, cfg = protocol.out, protocol.cfg
@@ -207,13 +213,14 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
         table = json.loads(cmp_path.read_text())
         pct = round(100 * table["confidence"])
         lines += ["## Stage 5: per algorithm across seeds (IQM, stratified bootstrap)", "",
-                  f"| algorithm | seeds | per-seed test MWR | IQM [{pct}% CI] |", "| --- | ---: | --- | ---: |"]
+                  f"| algorithm | seeds | per-seed test MWR | IQM [{pct}% CI] (mean of fewer than 5 runs) |",
+                  "| --- | ---: | --- | ---: |"]
         for g in table["groups"]:
             if g["group"] in ablated:
                 continue
             kind = " (baseline)" if g["group"] in ("passive", "random") else ""
             lines.append(f"| {g['group']}{kind} | {g['n_seeds']} | {' '.join(f'{s:+.3f}' for s in g['scores'])} | "
-                         f"{_ci(g['iqm'], g['lo'], g['hi'])} |")
+                         f"{_group_estimate(g)} |")
         lines += ["", "Plots: `compare/compare.png` (IQM by group), `evaluation/compare_mwr.png` (test curves), "
                   "`*/plots/` (training curves).", ""]
         lines += _ablation_section(table, ablated, pct)
@@ -258,7 +265,7 @@ def _ablation_section(table: dict[str, Any], ablated: dict[str, str], pct: int) 
         vs = "-" if p is None else f"{p['poi']:.2f} [{p['lo']:.2f}, {p['hi']:.2f}]"
         change = g["group"].removeprefix("ddpg,")
         lines.append(f"| {change} | {g['n_seeds']} | {' '.join(f'{s:+.3f}' for s in g['scores'])} | "
-                     f"{_ci(g['iqm'], g['lo'], g['hi'])} | {vs} |")
+                     f"{_group_estimate(g)} | {vs} |")
     return [*lines, ""]
 
 
