@@ -132,6 +132,7 @@ class Protocol:
                      "checkpoint_every": 1}
         return TrainConfig(out=str(self.out), steps_per_epoch=self.steps, n_envs=self.n_envs,
                            progress=self.cfg.progress, tensorboard=not self.cfg.tiny, physics=self.physics,
+                           allow_other_ring=self.cfg.allow_other_ring,
                            save_replay=self.cfg.save_replay, **extra, **kw)
 
     def pretrain(self, role: str) -> TrainConfig:
@@ -237,6 +238,7 @@ class Protocol:
             return EvaluateConfig(learner=learner, policy=(policy,), policies=others, baselines=(),
                                   epochs=self.epochs["contest"], seed=self.cfg.contest_seed,
                                   steps_per_epoch=self.steps, physics=self.physics,
+                                  allow_other_ring=self.cfg.allow_other_ring,
                                   out=str(self.out / "contest" / name), n_envs=self.n_envs, progress=self.cfg.progress)
 
         return {"ant-pushes": one("ant-pushes", "ant", self.ant_policy, ("spider=passive", "bug=passive")),
@@ -282,7 +284,7 @@ class Protocol:
                                                           for t in self.bug_trials() + self.ablation_trials()),
                               policies=(f"ant={self.ant_policy}", f"spider={self.spider_policy}"),
                               baselines=("passive", "random"), epochs=self.epochs["eval"], seed=self.cfg.eval_seed,
-                              physics=self.physics,
+                              physics=self.physics, allow_other_ring=self.cfg.allow_other_ring,
                               steps_per_epoch=self.steps, out=str(self.out / "evaluation"), n_envs=self.n_envs,
                               progress=self.cfg.progress)
 
