@@ -141,14 +141,23 @@ def test_play_evaluate_and_train_refuse_another_ring_unless_allowed(tmp_path: Pa
     assert json.loads((runs / "r" / "config.json").read_text())["allow_other_ring"] is True
 
 
-def test_a_league_seed_of_another_ring_is_refused_unless_allowed(tmp_path: Path, other: dict[str, str]) -> None:
+def test_a_league_seed_of_another_ring_is_refused_unless_allowed_and_so_is_one_a_fork_adds(
+        tmp_path: Path, other: dict[str, str]) -> None:
     from conftest import tiny
 
-    cfg = tiny(tmp_path, learn=("spider=ddpg",), policies=("ant=passive", "bug=passive"), self_play=True)
-    cfg = dataclasses.replace(cfg, league=dataclasses.replace(cfg.league, zoo=(f"ant={other['circle']}",
-                                                                               "bug=passive")))
-    with pytest.raises(ValueError, match=r"LeagueConfig.zoo: .*circle.json: the policy was trained on another ring"):
-        train(cfg)
+    from triplesumo.train.fork import fork_run
+
+    base = tiny(tmp_path, learn=("spider=ddpg",), policies=("ant=passive", "bug=passive"), self_play=True, epochs=2)
+    seeds = (f"ant={other['circle']}", "bug=passive")
+    refused = r"LeagueConfig.zoo: .*circle.json: the policy was trained on another ring"
+    with pytest.raises(ValueError, match=refused):
+        train(dataclasses.replace(base, league=dataclasses.replace(base.league, zoo=seeds)))
+    parent = train(base).run_dir  # seeds nothing
+    fork = dataclasses.replace(base, name="fork", league=dataclasses.replace(base.league, zoo=seeds))
+    with pytest.raises(ValueError, match=refused):
+        fork_run(parent, fork)
+    assert not (tmp_path / "fork").exists()
+    assert fork_run(parent, dataclasses.replace(fork, allow_other_ring=True)).is_dir()
 
 
 def test_evaluate_and_tournament_configs_take_the_flag(tmp_path: Path, other: dict[str, str]) -> None:

@@ -50,7 +50,7 @@ from triplesumo.train.collect import ACC_KEYS, Collector, DivergenceError, make_
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.evaluations import Evaluations
 from triplesumo.train.league import League
-from triplesumo.train.league_config import check_seeds
+from triplesumo.train.league_config import check_seed_rings, check_seeds
 from triplesumo.train.learners import Learner, OffPolicyLearner, host, learner_specs, make_learner
 from triplesumo.train.legs import LEGS_FILE, legs_before, make_leg, read_legs, write_legs
 from triplesumo.train.logger import MetricsLog, run_file
@@ -71,7 +71,7 @@ from triplesumo.train.run_folder import (
 )
 from triplesumo.train.seats import Seats
 from triplesumo.version import ENV_VERSION, __version__
-from triplesumo.zoo import check_ring, policies_from_pairs
+from triplesumo.zoo import policies_from_pairs
 
 __all__ = ["DivergenceError", "TrainResult", "Trainer", "train"]
 
@@ -125,11 +125,7 @@ class Trainer:
             refuse_existing_run(run_dir, start_over)
             if cfg.self_play:  # a new league copies its seeds' files into its pools (a resumed one has them)
                 check_seeds(cfg.league.zoo)
-                for entry in cfg.league.zoo:  # they play on this run's ring
-                    try:
-                        check_ring(entry.partition("=")[2], cfg.physics, cfg.allow_other_ring)
-                    except ValueError as err:
-                        raise ValueError(f"LeagueConfig.zoo: {err}") from None
+                check_seed_rings(cfg.league.zoo, cfg.physics, cfg.allow_other_ring)
         check_memory(cfg, [(spec.name, spec.algo, *dims[spec.name]) for spec in self.specs])
         self.probe = probe = sizing
         """A match of the run's config (never stepped): roster, observation and action sizes."""
