@@ -144,7 +144,6 @@ def test_play_evaluate_and_train_refuse_another_ring_unless_allowed(tmp_path: Pa
 def test_a_league_seed_of_another_ring_is_refused_unless_allowed_and_so_is_one_a_fork_adds(
         tmp_path: Path, other: dict[str, str]) -> None:
     from conftest import tiny
-
     from triplesumo.train.fork import fork_run
 
     base = tiny(tmp_path, learn=("spider=ddpg",), policies=("ant=passive", "bug=passive"), self_play=True, epochs=2)
