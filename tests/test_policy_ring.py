@@ -109,6 +109,9 @@ def test_the_shipped_zoo_and_the_policies_of_docs_runs_load_on_their_own_ring() 
                 zoo.make_policy(str(path), expect_physics=PhysicsConfig())
         checked += 1
     assert checked >= 40
+    zoo.load("ant-selfplay", expect_physics=V1_PHYSICS)  # the shipped self-play policies are env v1's
+    with pytest.raises(RingError, match=r"ant-selfplay\.json: the policy was trained on another ring: a cylinder rim"):
+        zoo.load("ant-selfplay", expect_physics=PhysicsConfig())
 
 
 def test_play_evaluate_and_train_refuse_another_ring_unless_allowed(tmp_path: Path, other: dict[str, str],
