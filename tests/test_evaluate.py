@@ -353,10 +353,12 @@ def test_resume_refuses_what_would_change_the_rows(
         evaluate(dataclasses.replace(cfg, resume=True, seed=7))
     with pytest.raises(ValueError, match="candidate 'trained'"):
         evaluate(dataclasses.replace(cfg, resume=True, policy=("zoo:bug",)))
-    with pytest.raises(ValueError, match="physics was .*'border_rim': True.*, now None"):  # the v0 ring
-        evaluate(dataclasses.replace(cfg, resume=True, physics=V0_PHYSICS))
-    with pytest.raises(ValueError, match="physics was .*'layout': 'fair'.*, now .*'layout': 'circle'"):  # v1's
+    with pytest.raises(ValueError, match="the policy was trained on another ring"):  # the tiny zoo's is v2's
         evaluate(dataclasses.replace(cfg, resume=True, physics=V1_PHYSICS))
+    with pytest.raises(ValueError, match="physics was .*'border_rim': True.*, now None"):  # the v0 ring
+        evaluate(dataclasses.replace(cfg, resume=True, physics=V0_PHYSICS, allow_other_ring=True))
+    with pytest.raises(ValueError, match="physics was .*'layout': 'fair'.*, now .*'layout': 'circle'"):  # v1's
+        evaluate(dataclasses.replace(cfg, resume=True, physics=V1_PHYSICS, allow_other_ring=True))
     # The same path, other contents: the policy file was retrained in place.
     stem = tmp_path / "bug"
     for suffix in (".json", ".safetensors"):

@@ -191,6 +191,9 @@ def test_the_ring_is_chosen_and_part_of_what_the_rows_depend_on(tmp_path: Path) 
     assert TournamentConfig().match_config().physics.border_rim  # env v1: the paper's rim
     v0 = TournamentConfig(physics=V0_PHYSICS, out=str(tmp_path))
     assert v0.match_config().physics == V0_PHYSICS
+    with pytest.raises(ValueError, match=r"zoo/ant\.json: the policy was trained on another ring"):
+        Tournament(v0)  # the zoo's policies were trained on env v2's ring
+    v0 = dataclasses.replace(v0, allow_other_ring=True)
     assert Tournament(v0).record()["rows_depend_on"]["match"]["physics"]["border_rim"] is False
 
 

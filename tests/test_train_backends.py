@@ -268,7 +268,8 @@ def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_ex
         return TrainConfig(name=name, out=str(tmp_path), epochs=epochs, steps_per_epoch=20, n_envs=2,
                            checkpoint_every=3, seed=3, ddpg=ddpg, progress=False, tensorboard=False, self_play=True,
                            league=league, learn=("ant=ddpg", "bug=ddpg", "spider=ddpg"),
-                           physics=PhysicsConfig(layout="circle", start_radius=1.7), backend="warp", device="cpu")
+                           physics=PhysicsConfig(layout="circle", start_radius=1.7), backend="warp", device="cpu",
+                           allow_other_ring=True)  # (zoo:spider was trained on env v2's ring)
 
     whole = Trainer(both("whole", 6))
     whole.run()

@@ -284,10 +284,12 @@ def main(argv: list[str] | None = None) -> int:
                           f"obs_mode={meta['obs_mode']} epochs={meta.get('epochs')} seed={meta.get('seed')}{mwr}{was}  "
                           f"made by: {meta.get('command')}")
             else:
+                from triplesumo.zoo import publish  # (refuses a manifest whose ring is invalid)
+
                 if not args.policy or not args.name:
                     raise ValueError("zoo publish needs POLICY and NAME")
                 evaluation = json.loads(Path(args.evaluation).read_text()) if args.evaluation else None
-                print(zoo_module.publish(Path(args.policy), args.name, evaluation))
+                print(publish(Path(args.policy), args.name, evaluation))
         elif args.command == "replay":
 
             from triplesumo.evaluation.recording import ReplayConfig, run_replay

@@ -44,14 +44,7 @@ import numpy as np
 
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
-from triplesumo.agents.zoo import (
-    check_policy_pairs,
-    check_seat,
-    expand_pairs,
-    make_policy,
-    policies_from_pairs,
-    policy_fingerprint,
-)
+from triplesumo.agents.zoo import check_policy_pairs, check_seat, expand_pairs, policy_fingerprint
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.metrics_csv import (
@@ -77,6 +70,7 @@ from triplesumo.evaluation.video import check_writable
 from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config
+from triplesumo.zoo import make_policy, policies_from_pairs
 
 
 @dataclass(frozen=True)
@@ -106,6 +100,9 @@ class EvaluateConfig:
     """Observation mode the policies expect."""
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The simulation (``border_rim``: the paper's solid ring rim); as the policies were trained on."""
+    allow_other_ring: bool = False
+    """Let a policy file trained on another ring (its manifest's physics: rim, start layout) play on this one;
+    without it such a policy is refused, naming both rings."""
     window: int = 200
     """λ of the MWR and rolling curves (paper: 200)."""
     out: str = "runs/evaluation"
@@ -356,11 +353,13 @@ def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str,
     candidates = {**seeds, **compare, **{b: b for b in baselines}}
     try:
         teams = {a.name: a.team for a in match_cfg.agents}
-        others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes, teams=teams)
+        others = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, action_sizes=motors, obs_dims=sizes, teams=teams,
+                                     physics=cfg.physics, allow_other_ring=cfg.allow_other_ring)
         for spec in candidates.values():  # a policy file drives the learner's seat only if trained for it
             check_seat(spec, cfg.learner, teams)
         policies = {label: make_policy(spec, seed=cfg.seed, expect_obs_mode=cfg.obs_mode,
-                                       action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner])
+                                       action_size=motors[cfg.learner], expect_obs_dim=sizes[cfg.learner],
+                                       expect_physics=cfg.physics, allow_other_ring=cfg.allow_other_ring)
                     for label, spec in candidates.items()}  # every file checked before any epoch is played
     except ValueError as err:
         raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from triplesumo.agents.zoo import check_policy_pairs, expand_pairs, policies_from_pairs
+from triplesumo.agents.zoo import check_policy_pairs, expand_pairs
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.runner import MatchRecord, play_match
+from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.scenarios import get_scenario
+from triplesumo.zoo import policies_from_pairs
 
 
 @dataclass(frozen=True)
@@ -35,6 +37,11 @@ class PlayConfig:
     """Video height in pixels."""
     scenario: str = "paper"
     """Named game (paper, ffa, pursuit, 2v2; ``triplesumo.scenarios()``) with its default roster."""
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    """The simulation: its ring (rim, start layout) as the policies were trained on."""
+    allow_other_ring: bool = False
+    """Let a policy file trained on another ring (its manifest's physics: rim, start layout) play on this one;
+    without it such a policy is refused, naming both rings."""
 
     def __post_init__(self) -> None:
         get_scenario(self.scenario)
@@ -47,13 +54,15 @@ class PlayConfig:
 
 def run_play(cfg: PlayConfig) -> MatchRecord:
     """Play the match, print its outcome, and return its record."""
-    match = Match(get_scenario(cfg.scenario).config(max_steps=cfg.max_steps, obs_mode=cfg.obs_mode))
+    match = Match(get_scenario(cfg.scenario).config(max_steps=cfg.max_steps, obs_mode=cfg.obs_mode,
+                                                    physics=cfg.physics))
     pairs = expand_pairs(cfg.policies, match.agents)
     check_policy_pairs("PlayConfig.policies", pairs, agents=list(match.agents))
     try:
         policies = policies_from_pairs(pairs, cfg.seed, cfg.obs_mode, obs_dims=match.observer.sizes,
                                        action_sizes=dict(zip(match.agents, match.action_sizes, strict=True)),
-                                       teams={a.name: a.team for a in match.config.agents})
+                                       teams={a.name: a.team for a in match.config.agents},
+                                       physics=cfg.physics, allow_other_ring=cfg.allow_other_ring)
     except ValueError as err:
         raise ValueError(f"scenario {cfg.scenario!r}: {err}") from None
     video = Path(cfg.video) if cfg.video else None

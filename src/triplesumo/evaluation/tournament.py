@@ -89,6 +89,7 @@ from triplesumo.model.specs import PhysicsConfig, physics_record
 from triplesumo.rules.config import OBS_MODES, MatchConfig
 from triplesumo.rules.scenarios import scenario_config, scenarios
 from triplesumo.rules.teams import Teams
+from triplesumo.zoo import check_ring
 
 SCHEDULES = ("round-robin", "sampled")
 RATE_BY = ("policy", "seat")
@@ -121,6 +122,9 @@ class TournamentConfig:
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The simulation (``border_rim``: the paper's solid ring rim, the default since env v1;
     ``--no-physics.border-rim`` for env v0's ring); as the policies were trained on."""
+    allow_other_ring: bool = False
+    """Let a policy file trained on another ring (its manifest's physics: rim, start layout) play on this one;
+    without it such a policy is refused, naming both rings."""
     rating_model: str = "PlackettLuce"
     """openskill model: PlackettLuce, BradleyTerryFull, BradleyTerryPart, ThurstoneMostellerFull or
     ThurstoneMostellerPart."""
@@ -254,11 +258,15 @@ def parse_entries(pairs: tuple[str, ...]) -> dict[str, str]:
     return entries
 
 
-def _manifest(spec: str, obs_mode: str) -> dict[str, Any] | None:
-    """A policy file's manifest (``None`` for built-ins); errors name the spec."""
+def _manifest(spec: str, physics: PhysicsConfig | None = None, allow_other_ring: bool = False) -> dict[str, Any] | None:
+    """A policy file's manifest (``None`` for built-ins); errors name the spec, and with ``physics`` (the
+    matches' simulation) a policy trained on another ring, unless ``allow_other_ring``."""
     if spec in BUILTIN:
         return None
-    return load_policy(find_policy_file(spec))[1]  # the weights too: a broken file is refused before any match
+    manifest = load_policy(find_policy_file(spec))[1]  # the weights too: a broken file is refused before any match
+    if physics is not None:
+        check_ring(spec, physics, allow_other_ring)
+    return manifest
 
 
 def eligible_seats(spec: str, manifest: dict[str, Any] | None, match: Match) -> list[str]:
@@ -329,7 +337,8 @@ class Tournament:
         match = Match(self.match_cfg)
         self.agents = match.agents
         self.teams = Teams.from_agents(self.match_cfg.agents)
-        self.manifests = {name: _manifest(spec, self.match_cfg.obs_mode) for name, spec in self.entries.items()}
+        self.manifests = {name: _manifest(spec, self.match_cfg.physics, cfg.allow_other_ring)
+                          for name, spec in self.entries.items()}
         """Each entry's policy manifest (``None`` for a built-in)."""
         self.seats_of = {name: eligible_seats(spec, self.manifests[name], match) for name, spec in self.entries.items()}
         idle = [f"{n}={self.entries[n]}" for n, s in self.seats_of.items() if not s]

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
 
 from triplesumo.model.bodies import BODIES
 
@@ -148,6 +149,97 @@ V0_PHYSICS = PhysicsConfig(layout="circle", rim_shape="cylinder", border_rim=Fal
 evaluation record without a ``physics`` entry was made on."""
 PHYSICS_ADDED_LATER = {"layout": "circle", "start_edge": 1.0, "rim_shape": "cylinder"}
 """PhysicsConfig fields newer than env v1, with the value every record written before them used."""
+
+
+RING_FIELDS = ("border_rim", "rim_shape", "layout", "start_edge", "start_radius", "start_height")
+"""The PhysicsConfig fields that make the ring a policy plays on: its rim and where the agents start (the
+timestep, integrator, frame skip and memory are not the ring). A policy is trained on one ring, the one its
+manifest records (:func:`recorded_physics`), and refused on another unless that is allowed explicitly."""
+RINGS = {"v0": V0_PHYSICS, "v1": V1_PHYSICS, "v2": PhysicsConfig()}
+"""The default simulation of each env version: the ring of a record (a policy manifest) that names its env version
+(``env_version``) but holds no ``physics``."""
+
+
+class RingError(ValueError):
+    """A record names no valid ring (:func:`recorded_physics`), or a policy was trained on another ring than the
+    match it is loaded into (:func:`ring_problem`)."""
+
+
+def ring_of(physics: PhysicsConfig) -> dict[str, object]:
+    """The fields of :data:`RING_FIELDS` that shape ``physics``' ring: the rim's shape only where it collides
+    (``border_rim``), ``start_edge`` only for the fair layout and ``start_radius`` only for the circle."""
+    ring: dict[str, object] = {"border_rim": physics.border_rim, "layout": physics.layout,
+                               "start_height": physics.start_height}
+    if physics.border_rim:
+        ring["rim_shape"] = physics.rim_shape
+    if physics.layout == "fair":
+        ring["start_edge"] = physics.start_edge
+    else:
+        ring["start_radius"] = physics.start_radius
+    return ring
+
+
+def describe_ring(physics: PhysicsConfig) -> str:
+    """``physics``' ring in words, e.g. "a box rim, the fair start 1.0 m from the edges (env v2's ring)"."""
+    rim = f"a {physics.rim_shape} rim" if physics.border_rim else "no rim (visual border markers)"
+    start = (f"the fair start {physics.start_edge} m from the edges" if physics.layout == "fair"
+             else f"the circle start of radius {physics.start_radius} m")
+    height = f", torsos {physics.start_height} m high" if physics.start_height != PhysicsConfig().start_height else ""
+    versions = [v for v, p in RINGS.items() if ring_of(p) == ring_of(physics)]
+    return f"{rim}, {start}{height}" + (f" (env {versions[-1]}'s ring)" if versions else "")
+
+
+def ring_problem(trained: PhysicsConfig, match: PhysicsConfig) -> str | None:
+    """Why a policy trained on the simulation ``trained`` does not play on ``match``'s ring (both rings in words,
+    the fields that differ and the options that give its own), or ``None`` on the same ring."""
+    a, b = ring_of(trained), ring_of(match)
+    if a == b:
+        return None
+    differ = [f for f in RING_FIELDS if (f in a or f in b) and getattr(trained, f) != getattr(match, f)]
+    own = " ".join(_flag(f, getattr(trained, f)) for f in differ)
+    return (f"the policy was trained on another ring: {describe_ring(trained)}; this match is on "
+            f"{describe_ring(match)} (they differ in {', '.join(f'physics.{f}' for f in differ)}). Play it on its own "
+            f"ring ({own}), or say that it may play on this one (--allow-other-ring; allow_other_ring=True in Python)")
+
+
+def _flag(field: str, value: object) -> str:
+    """The command-line option that sets PhysicsConfig ``field`` to ``value``."""
+    name = "physics." + field.replace("_", "-")
+    if isinstance(value, bool):
+        return f"--{name}" if value else f"--no-{name}"
+    return f"--{name} {value}"
+
+
+def recorded_physics(record: Mapping[str, object], where: str = "the record") -> PhysicsConfig:
+    """The simulation a record (a policy manifest) says it was made on: its ``physics`` (fields newer than the record
+    filled in as env v0 and v1 ran them, :func:`physics_record`), else the default simulation of the env version it
+    names (:data:`RINGS`; a record naming none is env v0's, made before either was recorded). :class:`RingError`
+    naming ``where`` and the field for a ``physics`` that is no valid PhysicsConfig, an unknown env version without
+    one, or a ``physics`` that its env version could not have written (a v1 record with v2's fair layout)."""
+    version = record.get("env_version", "v0")
+    if "physics" not in record:
+        if not isinstance(version, str) or version not in RINGS:
+            raise RingError(f"{where}: env_version {version!r} is none of {sorted(RINGS)} and it records no physics: "
+                            "the ring it was made on is unknown")
+        return RINGS[version]
+    data = record["physics"]
+    if not isinstance(data, dict):
+        raise RingError(f"{where}: physics must be a JSON object of PhysicsConfig's fields, got {data!r}")
+    known = {f.name for f in fields(PhysicsConfig)}
+    unknown = sorted(set(data) - known)
+    if unknown:
+        raise RingError(f"{where}: physics has unknown field(s) {unknown} (a PhysicsConfig has {sorted(known)})")
+    try:
+        physics = PhysicsConfig(**{**{k: v for k, v in PHYSICS_ADDED_LATER.items() if k not in data}, **data})
+    except (TypeError, ValueError) as exc:
+        raise RingError(f"{where}: physics: {exc}") from None
+    if version in ("v0", "v1"):  # fields those versions did not have can only hold what they ran
+        newer = [k for k, v in PHYSICS_ADDED_LATER.items() if data.get(k, v) != v]
+        if newer:
+            ran = ", ".join(f"{k}={PHYSICS_ADDED_LATER[k]!r}" for k in newer)
+            raise RingError(f"{where}: env_version {version!r} contradicts its physics: "
+                            + ", ".join(f"physics.{k} {data[k]!r}" for k in newer) + f" (env {version} ran {ran})")
+    return physics
 
 
 def physics_record(data: object) -> object:

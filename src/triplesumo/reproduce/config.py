@@ -33,7 +33,7 @@ class PairError(RuntimeError):
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
 RUN_OPTIONS = ("progress", "sides_at_once", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish",
-               "docs")
+               "docs", "allow_other_ring")
 """ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
 make: a folder resumes with other values."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
@@ -111,6 +111,9 @@ class ReproduceConfig:
     pair: tuple[str, ...] = ()
     """Skip stage 1 and check this Ant and Spider instead (two policy specs: ``zoo:ant zoo:spider``, files,
     ``passive``); the contest rule and everything after it run on them."""
+    allow_other_ring: bool = False
+    """Let a pair trained on another ring than this reproduction's (``border_rim``; the fair start) play on it;
+    without it such a pair is refused, naming both rings."""
     bug_epochs: int = 20_000
     """Stage 3: at most this many epochs per Bug run (the paper's 20,000)."""
     bug_env_steps: int = 1_000_000

@@ -164,6 +164,7 @@ class Protocol:
                      "checkpoint_every": 1}
         return TrainConfig(out=str(self.out), steps_per_epoch=self.steps, n_envs=self.n_envs,
                            progress=self.cfg.progress, tensorboard=not self.cfg.tiny, physics=self.physics,
+                           allow_other_ring=self.cfg.allow_other_ring,
                            save_replay=self.cfg.save_replay, **extra, **kw)
 
     def pretrain(self, role: str) -> TrainConfig:
@@ -320,8 +321,9 @@ class Protocol:
                       seed: int) -> EvaluateConfig:
         """One policy, frozen, in the learner's seat against ``others`` on ``epochs`` starts from ``seed``."""
         return EvaluateConfig(learner=learner, policy=(policy,), policies=others, baselines=(), epochs=epochs,
-                              seed=seed, steps_per_epoch=self.steps, physics=self.physics, out=str(out),
-                              n_envs=self.n_envs, progress=self.cfg.progress)
+                              seed=seed, steps_per_epoch=self.steps, physics=self.physics,
+                              allow_other_ring=self.cfg.allow_other_ring, out=str(out), n_envs=self.n_envs,
+                              progress=self.cfg.progress)
 
     def contest_configs(self) -> dict[str, EvaluateConfig]:
         """Stage 2's three evaluations on the same held-out starts: each side against a passive opponent, and the
@@ -371,7 +373,7 @@ class Protocol:
                                                           for t in self.bug_trials() + self.ablation_trials()),
                               policies=(f"ant={self.ant_policy}", f"spider={self.spider_policy}"),
                               baselines=("passive", "random"), epochs=self.epochs["eval"], seed=self.cfg.eval_seed,
-                              physics=self.physics,
+                              physics=self.physics, allow_other_ring=self.cfg.allow_other_ring,
                               steps_per_epoch=self.steps, out=str(self.out / "evaluation"), n_envs=self.n_envs,
                               progress=self.cfg.progress)
 

@@ -96,6 +96,9 @@ class TrainConfig:
     """The hybrid reward's weights (C1, C2, C3, still punishment, win/loss/draw)."""
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     """The simulation (timestep, integrator, start layout, ``border_rim``: the paper's solid ring rim)."""
+    allow_other_ring: bool = False
+    """Let a policy file trained on another ring (its manifest's physics: rim, start layout) play on this one, as a
+    fixed policy or a league seed; without it such a policy is refused, naming both rings. A resume may change it."""
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
     """DDPG hyper-parameters (paper Table 2)."""
     td3: TD3Config = field(default_factory=TD3Config)

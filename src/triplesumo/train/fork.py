@@ -57,7 +57,7 @@ from triplesumo.evaluation.metrics_csv import stored, tables_in
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
 from triplesumo.train.league import LOG_FILE, PRUNED_FILE, League, write_pool
-from triplesumo.train.league_config import check_seeds
+from triplesumo.train.league_config import check_seed_rings, check_seeds
 from triplesumo.train.legs import LEGS_FILE, legs_before, read_legs, write_legs
 from triplesumo.train.run_folder import (
     FORK_FILE,
@@ -221,6 +221,7 @@ def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | No
     changes = check_fork(parent, cfg)
     seeds = added_seeds(parent, cfg)
     check_seeds(seeds)  # their files are copied into the fork's pools below
+    check_seed_rings(seeds, cfg.physics, cfg.allow_other_ring)
     run_dir = Path(cfg.out) / cfg.name
     if run_dir.resolve() == parent_dir.resolve():
         raise ValueError(f"a fork needs its own folder: --name/--out give {run_dir}, the parent's folder")

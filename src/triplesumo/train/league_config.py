@@ -10,6 +10,8 @@ from dataclasses import dataclass
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.zoo import find_policy_file, policy_stem
 from triplesumo.evaluation.ratings import MODELS
+from triplesumo.model.specs import PhysicsConfig
+from triplesumo.zoo import check_ring
 
 SAMPLING = ("uniform", "latest", "pfsp")
 """Opponent sampling rules (see the module docstring)."""
@@ -147,6 +149,17 @@ def check_seeds(entries: Sequence[str]) -> None:
     neither built in, shipped nor a policy file: what seeding them needs, checked before anything is copied."""
     for entry in entries:
         check_spec(entry.partition("=")[2], "LeagueConfig.zoo")
+
+
+def check_seed_rings(entries: Sequence[str], physics: PhysicsConfig, allow_other_ring: bool = False) -> None:
+    """``ValueError`` naming :attr:`LeagueConfig.zoo`, the policy file and both rings for the first ROLE=POLICY entry
+    whose policy was trained on another ring than ``physics`` (the run's), unless ``allow_other_ring``
+    (:func:`triplesumo.zoo.check_ring`): the seeds play on the run's ring."""
+    for entry in entries:
+        try:
+            check_ring(entry.partition("=")[2], physics, allow_other_ring)
+        except ValueError as err:
+            raise ValueError(f"LeagueConfig.zoo: {err}") from None
 
 
 def check_spec(spec: str, where: str, files: bool = True) -> None:

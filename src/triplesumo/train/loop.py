@@ -41,15 +41,16 @@ import torch
 
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.policy_file import load_json, save_policy
-from triplesumo.agents.zoo import expand_pairs, policies_from_pairs
+from triplesumo.agents.zoo import expand_pairs
 from triplesumo.envs.batch import MatchBatch
 from triplesumo.envs.match import Match
+from triplesumo.model.specs import PhysicsConfig, describe_ring
 from triplesumo.train import checkpoint
 from triplesumo.train.collect import ACC_KEYS, Collector, DivergenceError, make_env
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.evaluations import Evaluations
 from triplesumo.train.league import League
-from triplesumo.train.league_config import check_seeds
+from triplesumo.train.league_config import check_seed_rings, check_seeds
 from triplesumo.train.learners import Learner, OffPolicyLearner, host, learner_specs, make_learner
 from triplesumo.train.legs import LEGS_FILE, legs_before, make_leg, read_legs, write_legs
 from triplesumo.train.logger import MetricsLog, run_file
@@ -70,6 +71,7 @@ from triplesumo.train.run_folder import (
 )
 from triplesumo.train.seats import Seats
 from triplesumo.version import ENV_VERSION, __version__
+from triplesumo.zoo import policies_from_pairs
 
 __all__ = ["DivergenceError", "TrainResult", "Trainer", "train"]
 
@@ -123,6 +125,7 @@ class Trainer:
             refuse_existing_run(run_dir, start_over)
             if cfg.self_play:  # a new league copies its seeds' files into its pools (a resumed one has them)
                 check_seeds(cfg.league.zoo)
+                check_seed_rings(cfg.league.zoo, cfg.physics, cfg.allow_other_ring)
         check_memory(cfg, [(spec.name, spec.algo, *dims[spec.name]) for spec in self.specs])
         self.probe = probe = sizing
         """A match of the run's config (never stepped): roster, observation and action sizes."""
@@ -152,7 +155,8 @@ class Trainer:
             self.policies = policies_from_pairs(
                 pairs, cfg.seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
                 action_sizes=dict(zip(probe.agents, probe.action_sizes, strict=True)),
-                teams={a.name: a.team for a in self.match_cfg.agents})
+                teams={a.name: a.team for a in self.match_cfg.agents}, physics=cfg.physics,
+                allow_other_ring=cfg.allow_other_ring)
         except ValueError as err:
             raise ValueError(f"TrainConfig.policies (scenario {cfg.scenario!r}): {err}") from None
         others = [(probe.agents.index(a), p) for a, p in self.policies.items()]
@@ -492,6 +496,9 @@ class Trainer:
             saved = config_from_json(state["config"], f"{folder / 'state.json'} (its config)")
         except ValueError as exc:
             raise checkpoint.CheckpointError(str(exc)) from exc
+        if saved.physics != self.cfg.physics:
+            raise checkpoint.CheckpointError(physics_mismatch(folder / "state.json", saved.physics,
+                                                              self.run_dir / "config.json", self.cfg.physics))
         for name in ("learner", "learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
                      "reward", "ddpg", "td3", "sac", "ppo", "learner_config", "seed", "self_play", "league", "backend"):
             # (save_replay may differ: resuming without the replay buffer is allowed, not exact)
@@ -559,6 +566,35 @@ class Trainer:
         plot_metrics(self.run_dir, self.cfg.window)
 
 
+def physics_mismatch(state: Path, made: PhysicsConfig, config: Path, given: PhysicsConfig) -> str:
+    """Why a checkpoint (``state``, made on ``made``) cannot resume on the physics ``given`` that the run's
+    ``config`` says: a run never trains on another simulation than its checkpoint's. A ``config.json`` that
+    records no physics is read as env v0's (:data:`~triplesumo.model.specs.V0_PHYSICS`, what run folders made
+    before it was recorded ran); one whose checkpoint records other physics was written by hand or damaged."""
+    raw = load_json(config) if config.is_file() else {}
+    said = "records no physics, which reads as env v0's" if "physics" not in raw else "records other physics"
+    fields = [f.name for f in dataclasses.fields(PhysicsConfig) if getattr(made, f.name) != getattr(given, f.name)]
+    differ = ", ".join(f"physics.{f} {getattr(made, f)!r} there, {getattr(given, f)!r} here" for f in fields)
+    return (f"{state}: incompatible checkpoint: it was made on {describe_ring(made)} ({differ}), but {config} "
+            f"{said}: {describe_ring(given)}. Nothing was trained; to resume, set config.json's \"physics\" to the "
+            f"checkpoint's (the \"physics\" inside the \"config\" of {state})")
+
+
+def check_checkpoint_physics(run_dir: Path, physics: PhysicsConfig) -> None:
+    """:class:`~triplesumo.train.checkpoint.CheckpointError` (:func:`physics_mismatch`) unless the newest
+    checkpoint of ``run_dir`` whose ``state.json`` reads was made on ``physics``, before anything is loaded onto it
+    (every checkpoint of a run is made on its one simulation); a run without a readable one passes here."""
+    for _, folder in reversed(checkpoint.checkpoints(run_dir)):
+        try:
+            made = config_from_json(load_json(folder / "state.json")["config"]).physics
+        except (ValueError, KeyError, TypeError):
+            continue  # damaged: the resume names it, or goes on from an older one
+        if made != physics:
+            raise checkpoint.CheckpointError(physics_mismatch(folder / "state.json", made, run_dir / "config.json",
+                                                              physics))
+        return
+
+
 def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str, Any] | None = None,
           start_over: bool = False, from_checkpoint: str | None = None,
           session_command: str | None = None) -> TrainResult:
@@ -572,7 +608,10 @@ def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str,
     """
     if resume_dir is not None:
         resume_dir = Path(resume_dir)
-        saved = config_from_json(load_json(resume_dir / "config.json"), str(resume_dir / "config.json"))
+        raw = load_json(resume_dir / "config.json")
+        saved = config_from_json(raw, str(resume_dir / "config.json"))
+        if isinstance(raw, dict) and "physics" not in raw:  # read as env v0's: unless its checkpoints say otherwise
+            check_checkpoint_physics(resume_dir, saved.physics)
         cfg = dataclasses.replace(saved, **(overrides or {}))
         trainer = Trainer(cfg, run_dir=resume_dir, resume=True, from_checkpoint=from_checkpoint,
                           session_command=session_command)

@@ -58,12 +58,14 @@ FORK_FILE = "fork.json"
 """In a run folder made by ``train --fork`` (:mod:`triplesumo.train.fork`): where it came from."""
 
 
-RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay", "n_threads", "eval_background")
+RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay", "n_threads", "eval_background",
+                    "allow_other_ring")
 """The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``): budgets, output,
 and ``n_threads``, the threads stepping the CPU physics, which advance every match alone and bit for bit
 whatever their number (``tests/test_batch.py``), so that a run started on a laptop goes on with the cores of a
 larger machine and trains exactly what it would have; and ``eval_background``, where the evaluations play
-(their figures are the same)."""
+(their figures are the same); and ``allow_other_ring``, which lets a policy of another ring play and changes
+nothing else."""
 
 
 def flag_list(fields: Iterable[str]) -> str:
@@ -96,7 +98,7 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
 
 ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics", "backend",
                "device", "eval_every", "eval_epochs", "eval_seed", "eval_target", "learner_config",
-               "eval_background")
+               "eval_background", "allow_other_ring")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget, evaluations while training): a config.json without them gets their defaults; any other
 missing key is an error."""
