@@ -66,8 +66,8 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
     # the machine is named in the record and the table; a CPU-only run says its GPU figure is not measured
     import os
 
-    from triplesumo.benchmarks import cpu_name
     from triplesumo.benchmarks.skill import format_skill
+    from triplesumo.train.machine import cpu_name
 
     m = result["machine"]
     assert m["cores"] == os.cpu_count() and m["backend"] == "cpu" and m["device"] == "cpu" and m["gpu"] is None
@@ -75,7 +75,7 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
     assert f"measured on {os.cpu_count()} CPU cores ({m['cpu']})" in format_skill(result)
     assert "GPU: not measured" in format_skill(result)
     # and its speed, before and after: the same seeded collection of the run's 2 matches (100 steps each)
-    from triplesumo.benchmarks.skill import REFERENCE_STEPS
+    from triplesumo.train.machine import REFERENCE_STEPS
 
     assert set(m["reference"]) == {"before", "after"}
     for when, ref in m["reference"].items():

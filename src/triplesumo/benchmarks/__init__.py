@@ -34,18 +34,3 @@ def versions(*extra: str) -> dict[str, str]:
         except metadata.PackageNotFoundError:
             found[package] = "not installed"
     return found
-
-
-def cpu_name() -> str:
-    """The CPU's model name as the OS reports it (Linux: ``model name`` in /proc/cpuinfo, e.g. "AMD EPYC 9B14"),
-    else what :func:`platform.processor` knows, else the architecture: the machine a time was measured on."""
-    import platform
-
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()

@@ -29,8 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from triplesumo.benchmarks import cpu_name, versions
+from triplesumo.benchmarks import versions
 from triplesumo.rules import MatchConfig
+from triplesumo.train.machine import cpu_name
 
 DEFAULT_SIZES = (1, 16, 256, 1024, 4096, 16384)
 TARGET_ENV_STEPS_PER_S = 100_000.0

@@ -104,7 +104,7 @@ def _machine(protocol: Protocol) -> dict[str, Any]:
     """The machine this run of the protocol ran on and its speed, as ``bench skill`` records them: the CPU and a
     fixed seeded collection of the Bug stage's matches (ms per env step), so that stage times measured on two
     machines can be set side by side."""
-    from triplesumo.benchmarks.skill import machine, reference_speed
+    from triplesumo.train.machine import machine, reference_speed
 
     base = protocol.bug_base()
     return {**machine(base), "reference": reference_speed(base, repeats=1 if protocol.cfg.tiny else 3)}

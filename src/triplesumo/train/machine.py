@@ -1,0 +1,70 @@
+"""The machine a time was measured on, and its speed: what every timed result (``bench skill``, ``reproduce``)
+records beside its times, since two shared 2-core boxes of the same name can differ by a factor of two."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from triplesumo.envs.batch import VectorMatches
+from triplesumo.train.config import TrainConfig
+
+
+def cpu_name() -> str:
+    """The CPU's model name as the OS reports it (Linux: ``model name`` in /proc/cpuinfo, e.g. "AMD EPYC 9B14"),
+    else what :func:`platform.processor` knows, else the architecture: the machine a time was measured on."""
+    import platform
+
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def machine(train_cfg: TrainConfig) -> dict[str, Any]:
+    """Where the times were measured: the CPU (its cores), and the backend and device the matches stepped on
+    (a GPU's own name where one did; none here means no GPU figure: "not measured")."""
+    import os
+
+    device = train_cfg.device or ("cpu" if train_cfg.backend == "cpu" else "cuda")
+    gpu = None
+    if device.startswith("cuda"):
+        import torch
+
+        gpu = torch.cuda.get_device_name(torch.device(device)) if torch.cuda.is_available() else None
+    return {"cpu": cpu_name(), "cores": os.cpu_count(), "backend": train_cfg.backend,
+            "device": device, "gpu": gpu, "n_threads": train_cfg.n_threads, "torch_threads": train_cfg.torch_threads}
+
+
+REFERENCE_STEPS = 100
+"""Steps of the reference collection (each steps all ``n_envs`` matches): 1,600 env steps for 16 matches."""
+
+
+def reference_speed(train_cfg: TrainConfig, repeats: int = 3, seed: int = 0) -> dict[str, Any]:
+    """The machine's speed on the bench's physics: milliseconds of wall time per env step of a fixed seeded
+    collection (``train_cfg``'s match and ``n_envs`` matches on its ``n_threads`` MuJoCo threads, uniform random
+    actions drawn from ``seed``, :data:`REFERENCE_STEPS` steps, no learner), the best of ``repeats``. The same
+    collection on every machine, so that times to skill measured on two machines can be set side by side."""
+    import time
+
+    import numpy as np
+
+    env = VectorMatches(train_cfg.n_envs, train_cfg.match_config(), train_cfg.n_threads)
+    shape = (REFERENCE_STEPS, env.num_envs, env.n_agents, env.act_dim)
+    actions = np.random.default_rng(seed).uniform(-1.0, 1.0, shape).astype(np.float32)
+    times = []
+    try:
+        for _ in range(repeats):
+            env.reset(seed=seed)
+            t0 = time.perf_counter()
+            for step in actions:
+                env.step(step)
+            times.append(time.perf_counter() - t0)
+    finally:
+        env.close()
+    env_steps = REFERENCE_STEPS * train_cfg.n_envs
+    return {"ms_per_env_step": round(1000 * min(times) / env_steps, 4), "env_steps": env_steps,
+            "repeats": repeats, "n_envs": train_cfg.n_envs, "n_threads": train_cfg.n_threads}
