@@ -538,3 +538,27 @@ def test_one_seed_gives_one_start_in_every_view() -> None:
     np.testing.assert_array_equal(vec[0], pz["bug"])
     np.testing.assert_array_equal(vec[1], other)
     assert not np.array_equal(single, other)
+
+
+def test_stepping_before_the_first_reset_and_after_the_end_say_which() -> None:
+    """A never-reset env said "the match is over"; after the end, a step with no actions (no agent left to act)
+    returns empty dicts, as PettingZoo's own parallel envs do (what SuperSuit's black_death_v3 sends)."""
+    env = parallel_env(max_steps=2)
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before the first step\(\)"):
+        env.step(zero_actions())
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before the first step\(\)"):
+        env.step({})
+    env.reset(seed=0)
+    env.step(zero_actions())
+    *_, truncated, _ = env.step(zero_actions())
+    assert all(truncated.values()) and env.agents == []
+    assert env.step({}) == ({}, {}, {}, {}, {})
+    with pytest.raises(RuntimeError, match=r"the match is over: call reset\(\) before step\(\)"):
+        env.step(zero_actions())
+    match = Match(MatchConfig(max_steps=1))
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before the first step"):
+        match.step_array(np.zeros((3, 8)))
+    match.reset(seed=0)
+    match.step_array(np.zeros((3, 8)))
+    with pytest.raises(RuntimeError, match=r"the match is over: call reset\(\)"):
+        match.step_array(np.zeros((3, 8)))

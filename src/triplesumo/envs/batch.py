@@ -85,7 +85,7 @@ import mujoco.batch
 import numpy as np
 from gymnasium import spaces
 
-from triplesumo.envs.match import Match, StepResult, scale_actions
+from triplesumo.envs.match import Match, StepResult, real_array, scale_actions
 from triplesumo.envs.seeding import match_seeds
 from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
@@ -340,19 +340,42 @@ class MatchBatch:
                 self._forces[k] = sim.contact_forces()
 
     def _checked_shape(self, actions: np.ndarray) -> np.ndarray:
-        """``actions`` as float64 ``(n_matches, n_agents, action_width)``; ``ValueError`` for another shape,
-        ``RuntimeError`` if a match is over."""
-        if np.iscomplexobj(actions) or getattr(actions, "is_complex", lambda: False)():
-            raise ValueError("actions must be real numbers, got complex values (their imaginary parts would be "
-                             "dropped)")
-        actions = np.asarray(actions, dtype=np.float64)
+        """``actions`` as float64 ``(n_matches, n_agents, action_width)``; ``ValueError`` for another shape or
+        values that are not real numbers (naming the match and agent), ``RuntimeError`` if a match is over or
+        was never started."""
         expected = (self.n_matches, self.n_agents, self.action_width)
+        try:
+            actions = real_array(actions, "actions", f"real numbers of shape {expected}", copy=False)
+        except ValueError:
+            self._name_bad_action(actions)
+            raise
         if actions.shape != expected:
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
-        finished = [k for k, m in enumerate(self.matches) if m.over]
-        if finished:
-            raise RuntimeError(f"matches {finished} are over (or were never started): call reset_one(k) first")
+        if any(m.over for m in self.matches):
+            never = [k for k, m in enumerate(self.matches) if not m.started]
+            if never:
+                raise RuntimeError(f"matches {never} were never started: call reset_one(k) before the first step")
+            finished = [k for k, m in enumerate(self.matches) if m.over]
+            raise RuntimeError(f"matches {finished} are over: call reset_one(k) first")
         return actions
+
+    def _name_bad_action(self, actions: Any) -> None:
+        """``ValueError`` naming the match and agent whose action row holds something that is not a real
+        number, if ``actions`` has the batch's shape (``Match.check_action``'s message); else nothing."""
+        if np.iscomplexobj(actions):  # refused as a whole already ("real numbers, got complex values")
+            return
+        try:
+            cells = np.array(actions, dtype=object)
+        except (TypeError, ValueError, RuntimeError):
+            return
+        if cells.shape != (self.n_matches, self.n_agents, self.action_width):
+            return
+        for k, match in enumerate(self.matches):
+            for i, agent in enumerate(self.agents):
+                try:
+                    match.check_action(agent, cells[k, i, :match.action_sizes[i]])
+                except ValueError as err:
+                    raise ValueError(f"match {k}: {err}") from None
 
     def _controls(self, actions: np.ndarray) -> np.ndarray:
         """:meth:`Match.prepare` of every match at once (first-out rules: every agent in play)."""

@@ -18,6 +18,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from triplesumo.envs.batch import VectorMatches
+from triplesumo.envs.match import real_array
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.scenarios import resolve
 
@@ -122,14 +123,16 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
         return self._obs[:, self._learner_index].copy(), self._learner_infos(infos, None)
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        act = np.asarray(actions, dtype=np.float64)
         sizes, L = self.matches.action_sizes, self._learner_index
-        if act.shape != (self.num_envs, sizes[L]):
+        expected = (self.num_envs, sizes[L])
+        act = real_array(actions, f"actions of {self.learner!r}", f"real numbers of shape {expected}", copy=False)
+        if act.shape != expected:
             raise ValueError(f"actions must have shape ({self.num_envs}, {sizes[L]}), got {act.shape}")
         full = np.zeros((self.num_envs, self.matches.n_agents, self.matches.act_dim))
         full[:, L, :sizes[L]] = act
         for i, name, policy in self._driven:
-            driven = np.asarray(policy(self._obs[:, i]), dtype=np.float64)
+            driven = real_array(policy(self._obs[:, i]), f"policy of {name!r}: its actions",
+                                f"real numbers of shape ({self.num_envs}, {sizes[i]})", copy=False)
             if driven.shape != (self.num_envs, sizes[i]):
                 raise ValueError(f"policy of {name!r} must map ({self.num_envs}, obs_dim) observations to "
                                  f"({self.num_envs}, {sizes[i]}) actions, got {driven.shape}")
