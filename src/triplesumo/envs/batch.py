@@ -86,7 +86,7 @@ import numpy as np
 from gymnasium import spaces
 
 from triplesumo.envs.match import Match, StepResult, real_array, scale_actions
-from triplesumo.envs.seeding import match_seeds
+from triplesumo.envs.seeding import check_seed, match_seeds
 from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import REPORTED
@@ -217,7 +217,7 @@ class MatchBatch:
 
     # ------------------------------------------------------------------ reset
     def reset_all(self, seed: int) -> list[tuple[list[np.ndarray], list[dict[str, Any]]]]:
-        """Reset every match; match ``k`` is seeded with ``match_seeds(seed, n_matches)[k]``."""
+        """Reset every match; match ``k`` is seeded with ``match_seeds(seed, n_matches)[k]``, ``seed + k``."""
         return [self.reset_one(k, s) for k, s in enumerate(match_seeds(seed, self.n_matches))]
 
     def reset_one(self, k: int, seed: int | None = None) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
@@ -612,11 +612,12 @@ class VectorMatches:
     and ``infos["_final_obs"]`` ``(N,)`` says which rows hold one. Rewards, flags,
     outcome, terms and ``step`` returned for that step are the finished match's.
 
-    Seeding: ``reset(seed)`` gives match ``k`` the seed ``match_seeds(seed, N)[k]``
-    (``SeedSequence(seed).spawn``), and each later match of slot ``k`` draws its start
-    from that match's own generator. So match ``k``'s run of matches depends only on
-    ``(seed, k)``: never on ``N`` nor on the thread count. ``reset(seed=[s_0, ...])``
-    seeds each match as ``Match.reset(s_k)`` (``None`` keeps its generator going).
+    Seeding: ``reset(seed)`` gives match ``k`` the seed ``seed + k`` (``match_seeds``), the
+    match ``parallel_env().reset(seed=seed + k)`` starts, as Gymnasium's vector envs seed
+    their slots; each later match of slot ``k`` draws its start from that match's own
+    generator. So match ``k``'s run of matches depends only on ``(seed, k)``: never on
+    ``N`` nor on the thread count. ``reset(seed=[s_0, ...])`` seeds each match as
+    ``Match.reset(s_k)`` (``None`` keeps its generator going). A seed must be an integer >= 0.
     """
 
     def __init__(self, num_envs: int, config: MatchConfig | None = None, num_threads: int | None = None) -> None:
@@ -659,12 +660,12 @@ class VectorMatches:
         if seed is None:
             seeds: Sequence[int | None] = ([None] * self.num_envs if self._seeded else
                                            match_seeds(int(np.random.default_rng().integers(2**63)), self.num_envs))
-        elif isinstance(seed, int | np.integer) and not isinstance(seed, bool):
-            seeds = match_seeds(int(seed), self.num_envs)
-        elif isinstance(seed, Sequence) and len(seed) == self.num_envs:
-            seeds = list(seed)
+        elif isinstance(seed, Sequence) and not isinstance(seed, str):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = [None if s is None else check_seed(s) for s in seed]
         else:
-            raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = match_seeds(check_seed(seed), self.num_envs)
         for k, s in enumerate(seeds):
             self._obs[k] = self.batch.reset_one(k, s)[0]
         self._seeded = True

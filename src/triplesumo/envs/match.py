@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from triplesumo.envs.seeding import check_seed
 from triplesumo.model import build_model, ring_half_size
 from triplesumo.rules import outcome as rules_outcome
 from triplesumo.rules import rewards as rules_rewards
@@ -94,7 +95,7 @@ class Match:
         from the current one.
         """
         if seed is not None:
-            self.np_random = np.random.default_rng(seed)
+            self.np_random = np.random.default_rng(check_seed(seed))
         qpos, qvel = self.start_state(self.np_random)
         self.sim.reset(qpos, qvel)
         self.steps = 0

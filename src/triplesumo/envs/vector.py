@@ -19,6 +19,7 @@ from gymnasium.vector.utils import batch_space
 
 from triplesumo.envs.batch import VectorMatches
 from triplesumo.envs.match import real_array
+from triplesumo.envs.seeding import check_seed, match_seeds
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.scenarios import resolve
 
@@ -113,12 +114,14 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
 
     def reset(self, *, seed: int | Sequence[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        if seed is None or isinstance(seed, int | np.integer):
-            seeds = [None if seed is None else int(seed) + k for k in range(self.num_envs)]
-        elif isinstance(seed, Sequence) and len(seed) == self.num_envs:
-            seeds = list(seed)
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, Sequence) and not isinstance(seed, str):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = [None if s is None else check_seed(s) for s in seed]
         else:
-            raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = [*match_seeds(seed, self.num_envs)]  # seed + k, checked
         self._obs, infos = self.matches.reset([self._match_seed(k, s) for k, s in enumerate(seeds)])
         return self._obs[:, self._learner_index].copy(), self._learner_infos(infos, None)
 

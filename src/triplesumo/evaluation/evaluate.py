@@ -53,6 +53,7 @@ from triplesumo.agents.zoo import (
     policy_fingerprint,
 )
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.metrics_csv import (
     COLUMNS,
@@ -140,6 +141,7 @@ class EvaluateConfig:
     one process. 1: played here, on n_threads threads."""
 
     def __post_init__(self) -> None:
+        check_seed(self.seed, "EvaluateConfig.seed")
         if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
             raise ValueError(f"EvaluateConfig.record must be an int >= 0, got {self.record!r}")
         for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads", "ray_chunk", "workers"):
