@@ -207,3 +207,34 @@ def test_a_lean_info_level_keeps_the_outcome_for_torchrl() -> None:
     assert set(rollout["next", "bug", "info"].keys()) == {"outcome", "place", "eliminated"}
     assert rollout["next", "bug", "info", "outcome"].flatten()[5].item() == 3  # a draw at the step limit
     env.close()
+
+
+def test_supersuit_black_death_plays_to_the_step_limit() -> None:
+    """SuperSuit's ``black_death_v3`` steps the env once more after all agents have left (its done test is
+    ``terminated & truncated``), with no actions; that step raised "the match is over". PettingZoo's own parallel
+    envs return empty dicts then, and so does ours: black death, alone and on the guide's vector-env route, plays
+    match after match through the step limit and ring exits."""
+    import supersuit as ss
+
+    env = ss.black_death_v3(triplesumo.parallel_env(max_steps=3))
+    for seed in (0, 1):
+        env.reset(seed=seed)
+        steps = 0
+        while env.agents:
+            _, _, terms, truncs, _ = env.step({a: np.zeros(8, np.float32) for a in env.agents})
+            steps += 1
+        assert steps == 4 and all(terms.values()) and all(truncs.values())  # its extra step ends the episode
+    vec = ss.pettingzoo_env_to_vec_env_v1(ss.black_death_v3(triplesumo.parallel_env(obs_mode="egocentric",
+                                                                                     max_steps=3)))
+    vec = ss.concat_vec_envs_v1(vec, 2, num_cpus=0, base_class="stable_baselines3")
+    vec.reset()
+    done = np.zeros(vec.num_envs, int)
+    for _ in range(13):  # three matches of each copy, and more
+        *_, dones, _ = vec.step(np.random.default_rng(0).uniform(-1, 1, (vec.num_envs, 8)))
+        done += dones
+    assert (done == 3).all()
+    ffa = ss.black_death_v3(triplesumo.parallel_env(scenario="ffa", max_steps=40))  # agents leave mid-match
+    ffa.reset(seed=0)
+    rng = np.random.default_rng(0)
+    while ffa.agents:
+        ffa.step({a: rng.uniform(-1, 1, 8) for a in ffa.agents})

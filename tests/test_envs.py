@@ -528,13 +528,88 @@ def test_paper_observations_are_separate_arrays_per_agent() -> None:
 
 
 def test_one_seed_gives_one_start_in_every_view() -> None:
-    """Issue 39, item 11: ``reset(seed=s)`` starts the same match in the PettingZoo view, the Gymnasium view and
-    each slot of the native vector view (seed s + k in slot k), and differs for another seed."""
-    pz, _ = triplesumo.parallel_env().reset(seed=0)
-    single, _ = gymnasium.make("TripleSumo-v2").reset(seed=0)
-    other, _ = gymnasium.make("TripleSumo-v2").reset(seed=1)
-    vec, _ = gymnasium.make_vec("TripleSumo-v2", num_envs=2).reset(seed=0)
-    np.testing.assert_array_equal(single, pz["bug"])
-    np.testing.assert_array_equal(vec[0], pz["bug"])
-    np.testing.assert_array_equal(vec[1], other)
-    assert not np.array_equal(single, other)
+    """``reset(seed=s)`` starts match k as ``reset(seed=s + k)`` in all four views: the PettingZoo view, the
+    Gymnasium view, the native ``gym.make_vec`` view and ``triplesumo.vector_env`` (which derived its seeds by
+    ``SeedSequence`` and so started other matches), and another seed starts another match."""
+    s, n = 5, 3
+    arrays = triplesumo.vector_env(n, obs_mode="egocentric")
+    every, _ = arrays.reset(seed=s)
+    arrays.close()
+    vec, _ = gymnasium.make_vec("TripleSumo-v2", num_envs=n, obs_mode="egocentric").reset(seed=s)
+    bug = AGENTS.index("bug")
+    for k in range(n):
+        pz, _ = parallel_env(obs_mode="egocentric").reset(seed=s + k)
+        single, _ = gymnasium.make("TripleSumo-v2", obs_mode="egocentric").reset(seed=s + k)
+        np.testing.assert_array_equal(single, pz["bug"])
+        np.testing.assert_array_equal(vec[k], pz["bug"])
+        for i, agent in enumerate(AGENTS):
+            np.testing.assert_array_equal(every[k, i], pz[agent])
+    assert not np.array_equal(every[0, bug], every[1, bug])
+
+
+@pytest.mark.parametrize("seed", [-1, 2.5, "3", True], ids=["negative", "float", "str", "bool"])
+def test_a_seed_that_is_not_a_non_negative_integer_is_refused_in_every_view(seed: object) -> None:
+    """numpy's "expected non-negative integer" (Gymnasium's own error in gym.make) named no seed."""
+    said = rf"seed must be a non-negative integer \(0, 1, 2, \.\.\.\), got {seed!r}"
+    with pytest.raises(ValueError, match=said):
+        parallel_env().reset(seed=seed)
+    with pytest.raises(ValueError, match=said):
+        gymnasium.make("TripleSumo-v2").reset(seed=seed)
+    vec = gymnasium.make_vec("TripleSumo-v2", num_envs=2)
+    with pytest.raises(ValueError, match=said):
+        vec.reset(seed=seed)
+    with pytest.raises(ValueError, match=said):
+        vec.reset(seed=[0, seed])
+    with triplesumo.vector_env(2) as env:
+        with pytest.raises(ValueError, match=said):
+            env.reset(seed=seed)
+        with pytest.raises(ValueError, match=said):
+            env.reset(seed=[seed, 0])
+    with pytest.raises(ValueError, match=said):
+        Match().reset(seed=seed)
+
+
+@pytest.mark.parametrize(("make", "field"), [
+    ("triplesumo.train.config:TrainConfig", "seed"),
+    ("triplesumo.evaluation.evaluate:EvaluateConfig", "seed"),
+    ("triplesumo.evaluation.play:PlayConfig", "seed"),
+    ("triplesumo.evaluation.tournament:TournamentConfig", "seed"),
+    ("triplesumo.evaluation.compare:CompareConfig", "seed"),
+    ("triplesumo.demo:DemoConfig", "seed"),
+    ("triplesumo.reproduce.config:ReproduceConfig", "contest_seed"),
+    ("triplesumo.train.sweep:SweepConfig", "eval_seed"),
+    ("triplesumo.benchmarks.skill:SkillConfig", "eval_seed"),
+])
+def test_config_seed_fields_refuse_a_negative_seed(make: str, field: str) -> None:
+    """A negative seed got as far as numpy's generators, whose error named neither the field nor the seed."""
+    import importlib
+
+    module, name = make.split(":")
+    cls = getattr(importlib.import_module(module), name)
+    with pytest.raises(ValueError, match=rf"{name}\.{field} must be a non-negative integer \(0, 1, 2, \.\.\.\), "
+                                         "got -1"):
+        cls(**{field: -1})
+
+
+def test_stepping_before_the_first_reset_and_after_the_end_say_which() -> None:
+    """A never-reset env said "the match is over"; after the end, a step with no actions (no agent left to act)
+    returns empty dicts, as PettingZoo's own parallel envs do (what SuperSuit's black_death_v3 sends)."""
+    env = parallel_env(max_steps=2)
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before the first step\(\)"):
+        env.step(zero_actions())
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before the first step\(\)"):
+        env.step({})
+    env.reset(seed=0)
+    env.step(zero_actions())
+    *_, truncated, _ = env.step(zero_actions())
+    assert all(truncated.values()) and env.agents == []
+    assert env.step({}) == ({}, {}, {}, {}, {})
+    with pytest.raises(RuntimeError, match=r"the match is over: call reset\(\) before step\(\)"):
+        env.step(zero_actions())
+    match = Match(MatchConfig(max_steps=1))
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before the first step"):
+        match.step_array(np.zeros((3, 8)))
+    match.reset(seed=0)
+    match.step_array(np.zeros((3, 8)))
+    with pytest.raises(RuntimeError, match=r"the match is over: call reset\(\)"):
+        match.step_array(np.zeros((3, 8)))

@@ -267,3 +267,27 @@ def test_a_match_file_recorded_before_env_v2_replays_on_its_own_ring(tmp_path: P
     loaded = MatchFile.load(path)
     assert loaded.config.physics == V1_PHYSICS
     verify(loaded)
+
+
+def test_a_match_file_with_a_bad_seed_names_the_file(recorded: tuple[Path, MatchFile], tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    """Seed -5 gave numpy's "expected non-negative integer", and seed 2**70 (a seed, but not the recorded one)
+    "replay differs from the recording", neither naming the file."""
+    path, _ = recorded
+    good = _arrays(path)
+    meta = json.loads(str(good["meta"]))
+    negative = _write(tmp_path / "negative.npz", **{**good, "meta": np.array(json.dumps({**meta, "seed": -5}))})
+    with pytest.raises(MatchFileError, match=rf"{negative}: corrupt metadata: seed must be a non-negative integer "
+                                             r"\(0, 1, 2, \.\.\.\), got -5"):
+        MatchFile.load(negative)
+    huge = _write(tmp_path / "huge.npz", **{**good, "meta": np.array(json.dumps({**meta, "seed": 2**70}))})
+    assert main(["replay", str(huge)]) == 2
+    assert f"triplesumo replay: error: {huge}: replay differs from the recording at step 0" in capsys.readouterr().err
+
+
+def test_a_negative_play_seed_names_the_seed_not_a_policy(capsys: pytest.CaptureFixture) -> None:
+    """``play --seed -1`` said "policy 'random' for 'ant' does not fit this roster: expected non-negative
+    integer"."""
+    assert main(["play", "--seed", "-1", "--max-steps", "3"]) == 2
+    err = capsys.readouterr().err
+    assert "PlayConfig.seed must be a non-negative integer (0, 1, 2, ...), got -1" in err and "policy" not in err

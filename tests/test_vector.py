@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -239,3 +241,66 @@ def test_make_vec_refusing_its_arguments_says_why_and_nothing_else() -> None:
                           "    print('refused:', e)\n"], capture_output=True, text=True, timeout=120)
     assert "refused: num_envs" in out.stdout, out.stdout + out.stderr
     assert "AttributeError" not in out.stderr and "Exception ignored" not in out.stderr, out.stderr
+
+
+def test_a_batch_too_big_for_memory_is_refused_at_once(tmp_path, capsys) -> None:
+    """``vector_env(10**6)``, ``gym.make_vec(num_envs=10**6)`` and ``train --n-envs 1000000`` built matches for
+    over 100 s before memory ran out. The bytes per match are estimated from the first one and compared with the
+    memory available before any other is built, where batches are built (``MatchBatch``)."""
+    import time
+
+    from triplesumo.cli import main
+    from triplesumo.envs.batch import MatchBatch, available_memory, match_bytes
+
+    first = Match(MatchConfig())
+    assert match_bytes(first) > first.model.nbuffer + first.data.nbuffer  # more than MuJoCo's buffers alone
+    assert match_bytes(first, "mujoco") == match_bytes(first) + first.data.nbuffer  # the batch's own MjData
+    assert (available_memory() or 0) > 0
+    huge = r"1,000,000 matches need about [\d,]+\.\d GiB \(0\.\d\d MiB each.*more than the [\d,]+\.\d GiB this machine"
+    for make, name in ((lambda: MatchBatch(None, 10**6), "n_matches"),
+                       (lambda: triplesumo.vector_env(10**6), "num_envs"),
+                       (lambda: gym.make_vec("TripleSumo-Paper-v2", num_envs=10**6), "num_envs")):
+        t0 = time.perf_counter()
+        with pytest.raises(MemoryError, match=rf"{name}={huge}"):
+            make()
+        assert time.perf_counter() - t0 < 2.0, name
+    t0 = time.perf_counter()
+    with pytest.warns(UserWarning, match="gradient steps per step"):  # the schedule's own warning comes first
+        assert main(["train", "--out", str(tmp_path), "--name", "huge", "--n-envs", "1000000", "--no-progress",
+                     "--no-tensorboard"]) == 2
+    assert time.perf_counter() - t0 < 2.0
+    assert re.search(rf"TrainConfig\.n_envs={huge}", capsys.readouterr().err)
+    assert not (tmp_path / "huge").exists()
+
+
+def test_make_vec_refuses_complex_and_non_number_actions_naming_the_learner() -> None:
+    """The native ``gym.make_vec`` view dropped an imaginary part (numpy's ComplexWarning) where the other views
+    refuse it, and an object array with 'x' gave numpy's message; ``vector_env`` named no agent for 'x'."""
+    env = gym.make_vec("TripleSumo-v2", num_envs=2, max_steps=5)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"actions of 'bug' must be real numbers, got complex values"):
+        env.step(np.zeros((2, 8)) + 0.5j)
+    with pytest.raises(ValueError, match=r"actions of 'bug' must be real numbers, got complex values"):
+        env.step([[0.5j] * 8] * 2)
+    hidden = np.zeros((2, 8), dtype=object)  # numpy casts a complex scalar in an object array with a warning only
+    hidden[0, 0] = np.complex64(2j)
+    with pytest.raises(ValueError, match=r"actions of 'bug' must be real numbers, got complex values"):
+        env.step(hidden)
+    pz = triplesumo.parallel_env()
+    pz.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action of 'spider' must be real numbers, got complex values"):
+        pz.step({"ant": np.zeros(8), "bug": np.zeros(8), "spider": hidden[0]})
+    odd = np.zeros((2, 8), dtype=object)
+    odd[1, 3] = "x"
+    with pytest.raises(ValueError, match=r"actions of 'bug' must be real numbers of shape \(2, 8\); got 'x' \(str\) "
+                                         r"at \[1, 3\], which is not a number"):
+        env.step(odd)
+    env.step(np.zeros((2, 8)))  # nothing was stepped by the refusals
+    env.close()
+    with triplesumo.vector_env(2, max_steps=5) as arrays:
+        arrays.reset(seed=0)
+        odd = np.zeros((2, 3, 8), dtype=object)
+        odd[1, 2, 5] = "x"
+        with pytest.raises(ValueError, match=r"match 1: action of 'spider' must be 8 real numbers, shape \(8,\); "
+                                             r"got 'x' \(str\) at \[5\], which is not a number"):
+            arrays.step(odd)

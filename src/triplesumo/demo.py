@@ -27,6 +27,7 @@ from pathlib import Path
 from triplesumo.agents.policy_file import load_json, policy_paths
 from triplesumo.agents.zoo import policy_stem
 from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate, format_summary
 from triplesumo.evaluation.metrics_csv import open_table
 from triplesumo.evaluation.play import PlayConfig, run_play
@@ -93,6 +94,7 @@ class DemoConfig:
     """Named game (paper, ffa, pursuit, 2v2); outside the paper its learner trains against random others."""
 
     def __post_init__(self) -> None:
+        check_seed(self.seed, "DemoConfig.seed")
         get_scenario(self.scenario)
         for name in ("train_epochs", "eval_epochs", "n_envs", "steps_per_epoch"):
             value = getattr(self, name)

@@ -49,6 +49,7 @@ from typing import Any
 from triplesumo import _dcargs
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.benchmarks import report
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.metrics_csv import open_table, table_exists
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
@@ -88,6 +89,7 @@ class SkillConfig:
     sets its out, name, learn (bug=ALGO), epochs and max_env_steps."""
 
     def __post_init__(self) -> None:
+        check_seed(self.eval_seed, "SkillConfig.eval_seed")
         algos = tuple(a for item in self.algos for a in str(item).split(",") if a)
         object.__setattr__(self, "algos", algos)
         if not algos or len(set(algos)) < len(algos) or any(a not in ALGOS for a in algos):

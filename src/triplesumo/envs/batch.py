@@ -77,6 +77,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -84,8 +85,8 @@ import mujoco.batch
 import numpy as np
 from gymnasium import spaces
 
-from triplesumo.envs.match import Match, StepResult, scale_actions
-from triplesumo.envs.seeding import match_seeds
+from triplesumo.envs.match import Match, StepResult, real_array, scale_actions
+from triplesumo.envs.seeding import check_seed, match_seeds
 from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import REPORTED
@@ -94,6 +95,62 @@ from triplesumo.sim.physics import PhysicsError
 BACKENDS = ("mujoco", "threads")
 _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _NO_STAGE = int(mujoco.mjtStage.mjSTAGE_NONE)
+
+
+UNCOUNTED_BYTES = 512 * 1024
+"""Bytes per match that MuJoCo's buffer sizes leave out, counted by :func:`match_bytes`: the part of the
+``MjData`` arena a step uses and the match's Python objects (measured: a paper match takes about 1.1 MB of
+resident memory, 0.38 MB of it its ``MjModel`` and ``MjData`` buffers; so the estimate stays below the truth)."""
+
+
+def match_bytes(match: Match, backend: str = "threads") -> int:
+    """Bytes one more match like ``match`` takes in a :class:`MatchBatch`: its own ``MjModel`` and ``MjData``
+    buffers, :data:`UNCOUNTED_BYTES`, and with ``backend="mujoco"`` the batch's own ``MjData`` of it."""
+    data = match.data.nbuffer * (2 if backend == "mujoco" else 1)
+    return match.model.nbuffer + data + UNCOUNTED_BYTES
+
+
+def available_memory() -> int | None:
+    """Bytes this process could still get: ``MemAvailable`` plus free swap from ``/proc/meminfo`` (else
+    ``os.sysconf``'s available pages), no more than a cgroup v2 memory limit leaves; ``None`` if unknown."""
+    have: int | None = None
+    try:
+        info = {k: int(v.split()[0]) * 1024 for k, v in
+                (line.split(":", 1) for line in Path("/proc/meminfo").read_text().splitlines() if ":" in line)}
+        if "MemAvailable" in info:
+            have = info["MemAvailable"] + info.get("SwapFree", 0)
+    except (OSError, ValueError):
+        pass
+    if have is None:
+        try:
+            have = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            return None
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit != "max":
+            have = min(have, int(limit) - int(Path("/sys/fs/cgroup/memory.current").read_text()))
+    except (OSError, ValueError):
+        pass
+    return have
+
+
+def check_memory(first: Match, n_matches: int, backend: str = "threads") -> None:
+    """``MemoryError`` (a ``ValueError`` too) naming ``n_matches`` and the estimate when ``n_matches`` matches
+    like ``first`` would take more memory than this machine has available: checked before they are built, so
+    that a batch too big for the machine is refused at once instead of filling memory for minutes."""
+    per_match = match_bytes(first, backend)
+    need, have = n_matches * per_match, available_memory()
+    if have is not None and need > have:
+        raise BatchMemoryError(
+            f"n_matches={n_matches:,} matches need about {need / 2**30:,.1f} GiB ({per_match / 2**20:.2f} MiB each: "
+            f"MuJoCo model and data, arena and Python objects), more than the {have / 2**30:,.1f} GiB this machine "
+            f"has available; at most about {max(1, have // per_match):,} fit")
+
+
+class BatchMemoryError(MemoryError, ValueError):
+    """A batch of matches that this machine's memory cannot hold (a ``ValueError`` too: the size was a bad
+    argument here, and the commands report it as one)."""
 
 
 class MatchBatch:
@@ -107,8 +164,9 @@ class MatchBatch:
             raise ValueError(f"n_threads must be an integer >= 1, got {n_threads!r}")
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-        self.matches = [Match(config) for _ in range(n_matches)]
-        first = self.matches[0]
+        first = Match(config)
+        check_memory(first, n_matches, backend)
+        self.matches = [first, *(Match(config) for _ in range(n_matches - 1))]
         self.config = first.config
         self.agents = first.agents
         self.n_agents = first.n_agents
@@ -159,7 +217,7 @@ class MatchBatch:
 
     # ------------------------------------------------------------------ reset
     def reset_all(self, seed: int) -> list[tuple[list[np.ndarray], list[dict[str, Any]]]]:
-        """Reset every match; match ``k`` is seeded with ``match_seeds(seed, n_matches)[k]``."""
+        """Reset every match; match ``k`` is seeded with ``match_seeds(seed, n_matches)[k]``, ``seed + k``."""
         return [self.reset_one(k, s) for k, s in enumerate(match_seeds(seed, self.n_matches))]
 
     def reset_one(self, k: int, seed: int | None = None) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
@@ -282,19 +340,42 @@ class MatchBatch:
                 self._forces[k] = sim.contact_forces()
 
     def _checked_shape(self, actions: np.ndarray) -> np.ndarray:
-        """``actions`` as float64 ``(n_matches, n_agents, action_width)``; ``ValueError`` for another shape,
-        ``RuntimeError`` if a match is over."""
-        if np.iscomplexobj(actions) or getattr(actions, "is_complex", lambda: False)():
-            raise ValueError("actions must be real numbers, got complex values (their imaginary parts would be "
-                             "dropped)")
-        actions = np.asarray(actions, dtype=np.float64)
+        """``actions`` as float64 ``(n_matches, n_agents, action_width)``; ``ValueError`` for another shape or
+        values that are not real numbers (naming the match and agent), ``RuntimeError`` if a match is over or
+        was never started."""
         expected = (self.n_matches, self.n_agents, self.action_width)
+        try:
+            actions = real_array(actions, "actions", f"real numbers of shape {expected}", copy=False)
+        except ValueError:
+            self._name_bad_action(actions)
+            raise
         if actions.shape != expected:
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
-        finished = [k for k, m in enumerate(self.matches) if m.over]
-        if finished:
-            raise RuntimeError(f"matches {finished} are over (or were never started): call reset_one(k) first")
+        if any(m.over for m in self.matches):
+            never = [k for k, m in enumerate(self.matches) if not m.started]
+            if never:
+                raise RuntimeError(f"matches {never} were never started: call reset_one(k) before the first step")
+            finished = [k for k, m in enumerate(self.matches) if m.over]
+            raise RuntimeError(f"matches {finished} are over: call reset_one(k) first")
         return actions
+
+    def _name_bad_action(self, actions: Any) -> None:
+        """``ValueError`` naming the match and agent whose action row holds something that is not a real
+        number, if ``actions`` has the batch's shape (``Match.check_action``'s message); else nothing."""
+        if np.iscomplexobj(actions):  # refused as a whole already ("real numbers, got complex values")
+            return
+        try:
+            cells = np.array(actions, dtype=object)
+        except (TypeError, ValueError, RuntimeError):
+            return
+        if cells.shape != (self.n_matches, self.n_agents, self.action_width):
+            return
+        for k, match in enumerate(self.matches):
+            for i, agent in enumerate(self.agents):
+                try:
+                    match.check_action(agent, cells[k, i, :match.action_sizes[i]])
+                except ValueError as err:
+                    raise ValueError(f"match {k}: {err}") from None
 
     def _controls(self, actions: np.ndarray) -> np.ndarray:
         """:meth:`Match.prepare` of every match at once (first-out rules: every agent in play)."""
@@ -531,11 +612,12 @@ class VectorMatches:
     and ``infos["_final_obs"]`` ``(N,)`` says which rows hold one. Rewards, flags,
     outcome, terms and ``step`` returned for that step are the finished match's.
 
-    Seeding: ``reset(seed)`` gives match ``k`` the seed ``match_seeds(seed, N)[k]``
-    (``SeedSequence(seed).spawn``), and each later match of slot ``k`` draws its start
-    from that match's own generator. So match ``k``'s run of matches depends only on
-    ``(seed, k)``: never on ``N`` nor on the thread count. ``reset(seed=[s_0, ...])``
-    seeds each match as ``Match.reset(s_k)`` (``None`` keeps its generator going).
+    Seeding: ``reset(seed)`` gives match ``k`` the seed ``seed + k`` (``match_seeds``), the
+    match ``parallel_env().reset(seed=seed + k)`` starts, as Gymnasium's vector envs seed
+    their slots; each later match of slot ``k`` draws its start from that match's own
+    generator. So match ``k``'s run of matches depends only on ``(seed, k)``: never on
+    ``N`` nor on the thread count. ``reset(seed=[s_0, ...])`` seeds each match as
+    ``Match.reset(s_k)`` (``None`` keeps its generator going). A seed must be an integer >= 0.
     """
 
     def __init__(self, num_envs: int, config: MatchConfig | None = None, num_threads: int | None = None) -> None:
@@ -544,8 +626,8 @@ class VectorMatches:
             num_threads = max(1, min(num_envs, usable))
         try:
             self.batch = MatchBatch(config, num_envs, num_threads or 1, backend="threads")
-        except ValueError as err:
-            raise ValueError(str(err).replace("n_matches", "num_envs").replace("n_threads", "num_threads")) from None
+        except ValueError as err:  # the same error (a BatchMemoryError stays one), in this class's words
+            raise type(err)(str(err).replace("n_matches", "num_envs").replace("n_threads", "num_threads")) from None
         first = self.batch.matches[0]
         sizes = sorted({first.observer.sizes[a] for a in first.agents})
         if len(sizes) != 1:
@@ -578,12 +660,12 @@ class VectorMatches:
         if seed is None:
             seeds: Sequence[int | None] = ([None] * self.num_envs if self._seeded else
                                            match_seeds(int(np.random.default_rng().integers(2**63)), self.num_envs))
-        elif isinstance(seed, int | np.integer) and not isinstance(seed, bool):
-            seeds = match_seeds(int(seed), self.num_envs)
-        elif isinstance(seed, Sequence) and len(seed) == self.num_envs:
-            seeds = list(seed)
+        elif isinstance(seed, Sequence) and not isinstance(seed, str):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = [None if s is None else check_seed(s) for s in seed]
         else:
-            raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = match_seeds(check_seed(seed), self.num_envs)
         for k, s in enumerate(seeds):
             self._obs[k] = self.batch.reset_one(k, s)[0]
         self._seeded = True

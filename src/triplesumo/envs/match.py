@@ -11,12 +11,14 @@ wrap it; batch runners and benchmarks use it directly through :meth:`Match.step_
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from triplesumo.envs.seeding import check_seed
 from triplesumo.model import build_model, ring_half_size
 from triplesumo.rules import outcome as rules_outcome
 from triplesumo.rules import rewards as rules_rewards
@@ -78,6 +80,8 @@ class Match:
         self._obs_noise = float(self.config.evader_obs_noise)
         self.np_random = np.random.default_rng()
         self.steps = 0
+        self.started = False
+        """Whether :meth:`reset` (or :meth:`restore`) has started a match yet."""
         self.over = True
         self.physics_error: str | None = None
         """What MuJoCo reported when a physics error truncated the current match, else ``None``."""
@@ -91,10 +95,11 @@ class Match:
         from the current one.
         """
         if seed is not None:
-            self.np_random = np.random.default_rng(seed)
+            self.np_random = np.random.default_rng(check_seed(seed))
         qpos, qvel = self.start_state(self.np_random)
         self.sim.reset(qpos, qvel)
         self.steps = 0
+        self.started = True
         self.over = False
         self.physics_error = None
         self.alive = [True] * self.n_agents
@@ -160,8 +165,8 @@ class Match:
                 padded[i, :self.action_sizes[i]] = self.check_action(a, actions[a])
             return padded
         try:
-            if any(np.iscomplexobj(actions[a]) for a in agents):
-                raise TypeError("complex")  # numpy would drop the imaginary part: let check_action refuse it
+            if any(np.iscomplexobj(actions[a]) or _object_array(actions[a]) for a in agents):
+                raise TypeError("complex or object")  # numpy could drop imaginary parts: check_action refuses them
             stacked = np.array([actions[a] for a in agents], dtype=np.float64)
         except (TypeError, ValueError):  # ragged, complex or not numbers: let check_action name the agent
             stacked = None
@@ -189,15 +194,8 @@ class Match:
 
     def check_action(self, agent: str, action: Any) -> np.ndarray:
         """One agent's action as a float64 copy, or ``ValueError`` naming the agent."""
-        if getattr(action, "requires_grad", False):  # a torch tensor still in an autograd graph
-            raise ValueError(f"action of {agent!r} is a tensor that requires grad: pass action.detach()")
-        if np.iscomplexobj(action) or getattr(action, "is_complex", lambda: False)():
-            raise ValueError(f"action of {agent!r} must be real numbers, got complex values")
-        try:
-            arr = np.array(action, dtype=np.float64, copy=True)
-        except (TypeError, ValueError, RuntimeError) as exc:
-            raise ValueError(f"action of {agent!r} must be an array of numbers: {exc}") from None
         size = self.action_sizes[self.agents.index(agent)]
+        arr = real_array(action, f"action of {agent!r}", f"{size} real numbers, shape ({size},)")
         if arr.shape != (size,):
             raise ValueError(f"action of {agent!r} must have shape ({size},), got {arr.shape}")
         if not np.isfinite(arr).all():
@@ -223,8 +221,9 @@ class Match:
         (:class:`triplesumo.envs.batch.MatchBatch`) can check every match first.
         """
         if self.over:
-            raise RuntimeError("the match is over (or was never started): call reset() first")
-        actions = np.asarray(actions, dtype=np.float64)
+            raise RuntimeError(self.why_not_playing())
+        actions = real_array(actions, "actions", f"real numbers of shape ({self.n_agents}, {self.action_width})",
+                             copy=False)
         if actions.shape != (self.n_agents, self.action_width):
             raise ValueError(f"actions must have shape ({self.n_agents}, {self.action_width}), got {actions.shape}")
         if self._pad is not None:  # columns past an agent's motors are ignored, whatever they hold
@@ -237,6 +236,12 @@ class Match:
         if not all(self.alive):  # an eliminated body no longer acts
             ctrl[[not playing for playing in self.alive]] = 0.0
         return ctrl
+
+    def why_not_playing(self) -> str:
+        """Why this match cannot step now: never started, or over."""
+        if not self.started:
+            return "the match was never started: call reset() before the first step()"
+        return "the match is over: call reset() before step()"
 
     def finish_step(self) -> StepResult:
         """Judge the physics step just taken: outcome, rewards, observations, MuJoCo warnings.
@@ -373,6 +378,7 @@ class Match:
         mujoco.mj_forward(self.model, self.data)
         self.sim.set_warnings_seen(snap["warnings"])
         self.steps = int(snap["steps"])
+        self.started = True
         self.over = bool(snap["over"])
         self._last_obs = list(np.asarray(snap["last_obs"], dtype=np.float32)) if len(snap["last_obs"]) else []
         self.np_random = np.random.default_rng()
@@ -391,6 +397,52 @@ class Match:
             flags = np.array([0.0 if playing else 1.0 for playing in self.alive], dtype=np.float32)
             return np.concatenate([state, flags])
         return state
+
+
+def real_array(values: Any, what: str, expected: str, copy: bool = True) -> np.ndarray:
+    """``values`` as a float64 array (a copy unless ``copy=False`` and it already is one), or ``ValueError``
+    saying that ``what`` must be ``expected``: complex values (numpy would drop their imaginary parts with a
+    warning), a torch tensor that requires grad, and values that are not numbers are refused. The one check of
+    actions in every view."""
+    if getattr(values, "requires_grad", False):  # a torch tensor still in an autograd graph
+        raise ValueError(f"{what} is a tensor that requires grad: pass .detach()")
+    complex_values = f"{what} must be real numbers, got complex values (their imaginary parts would be dropped)"
+    if np.iscomplexobj(values) or getattr(values, "is_complex", lambda: False)():
+        raise ValueError(complex_values)
+    try:
+        if not _object_array(values):
+            return np.array(values, dtype=np.float64, copy=copy or None)
+        with warnings.catch_warnings():  # numpy complex scalars in an object array: cast with only a warning
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            return np.array(values, dtype=np.float64)
+    except np.exceptions.ComplexWarning:
+        raise ValueError(complex_values) from None
+    except (TypeError, ValueError, RuntimeError) as exc:
+        raise ValueError(f"{what} must be {expected}; {_not_a_number(values) or exc}") from None
+
+
+def _object_array(values: Any) -> bool:
+    """Whether ``values`` is a numpy array of Python objects."""
+    return isinstance(values, np.ndarray) and values.dtype.kind == "O"
+
+
+def _not_a_number(values: Any) -> str | None:
+    """The first element of ``values`` that is no number, as "got 'x' (str) at [0, 3]" (``None`` if none is found:
+    a ragged nesting, say)."""
+    try:
+        cells = np.array(values, dtype=object)
+    except (TypeError, ValueError, RuntimeError):
+        return None
+    for index in np.ndindex(cells.shape):
+        item = cells[index]
+        try:
+            np.array(item, dtype=np.float64)
+        except (TypeError, ValueError, RuntimeError):
+            where = f" at {list(index)}" if index else ""
+            if isinstance(item, complex | np.complexfloating):
+                return f"got the complex value {item!r}{where} (its imaginary part would be dropped)"
+            return f"got {item!r} ({type(item).__name__}){where}, which is not a number"
+    return None
 
 
 def scale_actions(actions: np.ndarray, half_range: np.ndarray, mid: np.ndarray) -> np.ndarray:

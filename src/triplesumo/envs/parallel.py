@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -96,7 +97,9 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
     step limit (default 500) is reached, a draw; or MuJoCo reports a physics warning (bad
     qacc, full contact or constraint memory, non-finite state): outcome code 4 and
     ``env.unwrapped.match.physics_error`` says what happened (``on_physics_error="raise"``
-    raises ``PhysicsError`` instead). All agents end together.
+    raises ``PhysicsError`` instead). All agents end together, and leave ``env.agents``; a
+    ``step({})`` after that returns five empty dicts (as PettingZoo's own parallel envs do;
+    SuperSuit's ``black_death_v3`` sends it), any other step says to ``reset()`` first.
 
     ## Arguments
     ``triplesumo.parallel_env(render_mode=None, **config)`` where ``config`` are fields of
@@ -194,7 +197,9 @@ class TripleSumoParallelEnv(MatchAccess, ParallelEnv):
 
     def step(self, actions: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         if not self.agents:
-            raise RuntimeError("the match is over: call reset() before step()")
+            if self.match.started and isinstance(actions, Mapping) and not actions:
+                return {}, {}, {}, {}, {}  # no agent left to act (PettingZoo's parallel envs do the same)
+            raise RuntimeError(self.match.why_not_playing())
         result = self.match.step_array(self.match.actions_from_dict(actions))
         names = self.agents
         if len(names) == self.match.n_agents:

@@ -11,6 +11,7 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import check_seed
 from triplesumo.envs.viewing import RENDER_MODES, MatchAccess, MatchView
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.scenarios import resolve
@@ -101,6 +102,8 @@ class TripleSumoEnv(MatchAccess, gym.Env):
         self._view = MatchView(self.match, render_mode, width, height)
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        if seed is not None:
+            seed = check_seed(seed)
         super().reset(seed=seed)
         if seed is None:
             seed = int(self.np_random.integers(2**63))

@@ -18,6 +18,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from triplesumo.envs.batch import VectorMatches
+from triplesumo.envs.match import real_array
+from triplesumo.envs.seeding import check_seed, match_seeds
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.scenarios import resolve
 
@@ -112,24 +114,28 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
 
     def reset(self, *, seed: int | Sequence[int | None] | None = None,
               options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict[str, Any]]:
-        if seed is None or isinstance(seed, int | np.integer):
-            seeds = [None if seed is None else int(seed) + k for k in range(self.num_envs)]
-        elif isinstance(seed, Sequence) and len(seed) == self.num_envs:
-            seeds = list(seed)
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, Sequence) and not isinstance(seed, str):
+            if len(seed) != self.num_envs:
+                raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = [None if s is None else check_seed(s) for s in seed]
         else:
-            raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
+            seeds = [*match_seeds(seed, self.num_envs)]  # seed + k, checked
         self._obs, infos = self.matches.reset([self._match_seed(k, s) for k, s in enumerate(seeds)])
         return self._obs[:, self._learner_index].copy(), self._learner_infos(infos, None)
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        act = np.asarray(actions, dtype=np.float64)
         sizes, L = self.matches.action_sizes, self._learner_index
-        if act.shape != (self.num_envs, sizes[L]):
+        expected = (self.num_envs, sizes[L])
+        act = real_array(actions, f"actions of {self.learner!r}", f"real numbers of shape {expected}", copy=False)
+        if act.shape != expected:
             raise ValueError(f"actions must have shape ({self.num_envs}, {sizes[L]}), got {act.shape}")
         full = np.zeros((self.num_envs, self.matches.n_agents, self.matches.act_dim))
         full[:, L, :sizes[L]] = act
         for i, name, policy in self._driven:
-            driven = np.asarray(policy(self._obs[:, i]), dtype=np.float64)
+            driven = real_array(policy(self._obs[:, i]), f"policy of {name!r}: its actions",
+                                f"real numbers of shape ({self.num_envs}, {sizes[i]})", copy=False)
             if driven.shape != (self.num_envs, sizes[i]):
                 raise ValueError(f"policy of {name!r} must map ({self.num_envs}, obs_dim) observations to "
                                  f"({self.num_envs}, {sizes[i]}) actions, got {driven.shape}")

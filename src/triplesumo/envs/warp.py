@@ -62,7 +62,7 @@ import warp as wp
 from gymnasium import spaces
 
 from triplesumo.envs.match import Match
-from triplesumo.envs.seeding import match_seeds
+from triplesumo.envs.seeding import check_seed, match_seeds
 from triplesumo.rules import batched as rules_batched
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import TERMS
@@ -241,7 +241,7 @@ class WarpMatchBatch:
     continue the slot's stream)."""
 
     def reset(self, seed: int | Sequence[int | None] | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """Start every match: match ``k`` from ``match_seeds(seed, num_envs)[k]``'s stream.
+        """Start every match: match ``k`` from ``match_seeds(seed, num_envs)[k]``'s stream (``seed + k``).
 
         ``infos`` has the keys of :meth:`step`'s (terms zero, outcome 0, no valid final_obs).
 
@@ -252,7 +252,8 @@ class WarpMatchBatch:
         if isinstance(seed, Sequence):
             if len(seed) != self.num_envs or (None in seed and not self._rngs):
                 raise ValueError(f"seed must be an int, None or a list of {self.num_envs} seeds, got {seed!r}")
-            self._rngs = [self._rngs[k] if s is None else np.random.default_rng(s) for k, s in enumerate(seed)]
+            self._rngs = [self._rngs[k] if s is None else np.random.default_rng(check_seed(s))
+                          for k, s in enumerate(seed)]
             seed = None
         if seed is None and not self._rngs:
             seed = self._seed if self._seed is not None else int(np.random.SeedSequence().generate_state(1)[0])

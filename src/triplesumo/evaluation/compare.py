@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, PER_SEED_FILE
 from triplesumo.evaluation.metrics_csv import open_table, table_exists, write_table
 from triplesumo.evaluation.video import check_writable
@@ -72,6 +73,7 @@ class CompareConfig:
     """Folder for compare.csv, compare.json, improvement.csv and compare.png."""
 
     def __post_init__(self) -> None:
+        check_seed(self.seed, "CompareConfig.seed")
         if self.by not in BY:
             raise ValueError(f"CompareConfig.by must be one of {BY}, got {self.by!r}")
         if isinstance(self.reps, bool) or not isinstance(self.reps, int) or self.reps < 100:

@@ -46,6 +46,7 @@ from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, check_seat, expand_pairs, policy_fingerprint
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.metrics import local_winning_rate, summarize
 from triplesumo.evaluation.metrics_csv import (
     COLUMNS,
@@ -137,6 +138,7 @@ class EvaluateConfig:
     one process. 1: played here, on n_threads threads."""
 
     def __post_init__(self) -> None:
+        check_seed(self.seed, "EvaluateConfig.seed")
         if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
             raise ValueError(f"EvaluateConfig.record must be an int >= 0, got {self.record!r}")
         for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads", "ray_chunk", "workers"):

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from triplesumo.agents.zoo import check_policy_pairs, expand_pairs
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.runner import MatchRecord, play_match
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.scenarios import get_scenario
@@ -44,6 +45,7 @@ class PlayConfig:
     without it such a policy is refused, naming both rings."""
 
     def __post_init__(self) -> None:
+        check_seed(self.seed, "PlayConfig.seed")
         get_scenario(self.scenario)
         check_policy_pairs("PlayConfig.policies", self.policies)
         if self.width < 16 or self.height < 16:

@@ -30,6 +30,7 @@ import numpy as np
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import check_seed
 from triplesumo.model.specs import PhysicsConfig, physics_record
 from triplesumo.rules.config import MatchConfig
 
@@ -271,6 +272,10 @@ def _meta_problem(meta: Any) -> str | None:
     seed = meta.get("seed")
     if not isinstance(seed, int) or isinstance(seed, bool):
         return f"seed must be an integer, got {seed!r}"
+    try:
+        check_seed(seed)
+    except ValueError as exc:
+        return str(exc)
     for key in ("policies", "outcomes"):
         if not isinstance(meta.get(key, {}), dict):
             return f"{key} must be a JSON object, got {meta[key]!r}"
@@ -328,11 +333,22 @@ class ReplayConfig:
 
 def run_replay(path: Path, cfg: ReplayConfig) -> MatchFile:
     """Load, optionally verify, and optionally render a match file; prints what it did."""
-    from triplesumo.evaluation.video import check_writable, write_mp4
+    from triplesumo.evaluation.video import check_writable
 
     if cfg.video is not None:
         check_writable(Path(cfg.video))
     record = MatchFile.load(Path(path))
+    try:
+        _replay(path, record, cfg)
+    except MatchFileError as exc:  # the re-simulation parted from the file: say which file
+        raise MatchFileError(f"{path}: {exc}") from None
+    return record
+
+
+def _replay(path: Path, record: MatchFile, cfg: ReplayConfig) -> None:
+    """:func:`run_replay` after the file is loaded."""
+    from triplesumo.evaluation.video import write_mp4
+
     who = ", ".join(f"{a}={p}" for a, p in record.policies.items()) or "unnamed policies"
     ends = ", ".join(f"{a}: {o}" for a, o in record.outcomes.items())
     print(f"{path}: seed {record.seed}, {record.steps} steps, {who}; {ends}")
@@ -344,4 +360,3 @@ def run_replay(path: Path, cfg: ReplayConfig) -> MatchFile:
         verify(record)
     if cfg.verify:
         print(f"verified: re-simulating the recorded actions gives all {record.steps + 1} states bit for bit")
-    return record

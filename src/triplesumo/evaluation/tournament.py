@@ -77,6 +77,7 @@ from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy, seat_problem
 from triplesumo.agents.zoo import find_policy_file, make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.evaluate import RowAppender, check_ray, finished_rows
 from triplesumo.evaluation.metrics import OUTCOMES
 from triplesumo.evaluation.metrics_csv import open_table, write_table
@@ -163,6 +164,7 @@ class TournamentConfig:
     far the run has been resumed since, so a published table stays regenerable."""
 
     def __post_init__(self) -> None:
+        check_seed(self.seed, "TournamentConfig.seed")
         for name in ("rounds", "matches", "steps_per_epoch", "n_envs", "n_threads", "ray_chunk", "league_snapshots"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:

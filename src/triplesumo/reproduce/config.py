@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.evaluate import check_ray
 from triplesumo.rules.config import RewardConfig
 from triplesumo.train import sweep
@@ -179,6 +180,8 @@ class ReproduceConfig:
     """With ray: the CPUs Ray reserves for each Bug run (so at most num_cpus / cpus_per_trial train at once)."""
 
     def __post_init__(self) -> None:
+        for name in ("pretrain_seed", "contest_seed", "eval_seed"):
+            check_seed(getattr(self, name), f"ReproduceConfig.{name}")
         if isinstance(self.ablations, list):
             object.__setattr__(self, "ablations", tuple(self.ablations))
         fields = [ablation(a)[0] + "=" + ablation(a)[1] for a in self.ablations]

@@ -68,8 +68,9 @@ def make_env(cfg: TrainConfig, match_cfg: MatchConfig) -> Any:
                              f"{exc}") from None
     try:
         return VectorMatches(cfg.n_envs, match_cfg, cfg.n_threads)
-    except ValueError as exc:
-        raise ValueError(f"TrainConfig (scenario {cfg.scenario!r}, obs_mode {cfg.obs_mode!r}): {exc}") from None
+    except ValueError as exc:  # the same error (a BatchMemoryError stays one), naming the run's option
+        said = str(exc).replace("num_envs=", "TrainConfig.n_envs=")
+        raise type(exc)(f"TrainConfig (scenario {cfg.scenario!r}, obs_mode {cfg.obs_mode!r}): {said}") from None
 
 
 class Updates(threading.Thread):

@@ -15,6 +15,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
+from triplesumo.envs.seeding import check_seed
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.config import OBS_MODES, MatchConfig, RewardConfig
 from triplesumo.rules.scenarios import scenario_config, scenarios
@@ -167,6 +168,7 @@ class TrainConfig:
     agent, or with share=team its team's learner, ant+bug; a tuple value's items space-separated)."""
 
     def __post_init__(self) -> None:
+        check_seed(self.seed, "TrainConfig.seed")
         for name in ("policies", "learn", "learner_config"):
             if isinstance(getattr(self, name), list):
                 object.__setattr__(self, name, tuple(getattr(self, name)))

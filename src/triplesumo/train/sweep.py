@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from triplesumo.agents.policy_file import atomic_write_bytes
+from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.metrics import moving_winning_rate
 from triplesumo.evaluation.metrics_csv import open_table, table_exists, write_table
 from triplesumo.evaluation.parallel import TaskRunner, check_counts
@@ -81,6 +82,7 @@ class SweepConfig:
     """Test epoch i resets with eval_seed + i (the same starts for every trial)."""
 
     def __post_init__(self) -> None:
+        check_seed(self.eval_seed, "SweepConfig.eval_seed")
         for name, low in (("num_cpus", 0), ("cpus_per_trial", 1), ("max_retries", 0), ("evaluate_epochs", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
