@@ -340,3 +340,31 @@ def test_a_fork_may_only_append_to_the_parents_zoo(runs: tuple[Trainer, Trainer]
     for zoo in ((), ("spider=random",), ("ant=zero", "bug=zero", "spider=passive")):
         with pytest.raises(ValueError, match=r"must start with the parent's \['spider=passive'\]"):
             check_fork(parent, dataclasses.replace(fork, league=dataclasses.replace(parent.league, zoo=zoo)))
+
+
+def test_compact_drop_replay_leaves_a_checkpoint_that_resumes_with_an_empty_buffer(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A long run's resume state, committed: ``compact --drop-replay`` deletes the checkpoint's replay buffer and its
+    manifest's record of it; a resume then trains on from the checkpoint with an empty buffer (and says so), while a
+    checkpoint whose manifest records a buffer that is gone is refused as damaged, naming the file."""
+    from conftest import tiny
+    from triplesumo.train import checkpoint
+
+    first = train(tiny(tmp_path, "run", epochs=4, checkpoint_every=2, save_replay=True))
+    run = first.run_dir
+    damaged = tmp_path / "damaged"
+    shutil.copytree(run, damaged)
+    newest = checkpoint.latest(run)
+    assert checkpoint.holds_replay(newest) and (newest / "replay.npz").is_file()
+    assert main(["compact", str(run), "--drop-replay"]) == 0
+    assert "and the replay buffer; it resumes with an empty replay buffer" in capsys.readouterr().out
+    assert not (newest / "replay.npz").exists() and not checkpoint.holds_replay(newest)
+    checkpoint.verify(newest, need_replay=True)  # the manifest names only what the folder holds
+    assert [p.name for p in (run / "checkpoints").glob("epoch-*")] == [newest.name]
+    resumed = train(tiny(tmp_path, "run", epochs=4, save_replay=True), resume_dir=run, overrides={"epochs": 6})
+    assert resumed.epochs == 6
+    assert "holds no replay buffer" in capsys.readouterr().out
+    assert checkpoint.holds_replay(checkpoint.latest(run))  # and saves its new buffer again
+    (checkpoint.latest(damaged) / "replay.npz").unlink()
+    with pytest.raises(checkpoint.CheckpointError, match=r"replay.npz: file not found"):
+        train(tiny(tmp_path, "damaged", epochs=4, save_replay=True), resume_dir=damaged, overrides={"epochs": 6})

@@ -89,6 +89,9 @@ def _parser() -> argparse.ArgumentParser:
                                              "committing it; the evicted members deleted are listed in "
                                              "league/pruned.json")
     compact.add_argument("run_dir", help="run folder (holds checkpoints/)")
+    compact.add_argument("--drop-replay", action="store_true",
+                         help="also delete the checkpoint's replay buffer (a repository keeps none): the run then "
+                              "resumes with an empty buffer")
     pack = sub.add_parser("pack", help="gzip the large tables (*.csv) of a finished output folder into NAME.csv.gz, "
                                        "e.g. before committing it beside a docs page; every command reads them as "
                                        "before, and a resume unpacks a table it appends to")
@@ -243,10 +246,11 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "compact":
             from triplesumo.train.fork import compact_run
 
-            removed = compact_run(Path(args.run_dir))
+            removed = compact_run(Path(args.run_dir), drop_replay=args.drop_replay)
             print(f"{args.run_dir}: removed {len(removed['checkpoints'])} older checkpoint(s) "
                   f"{removed['checkpoints']} and {len(removed['members'])} evicted league member(s) "
-                  f"(listed in league/pruned.json); it resumes as before")
+                  f"(listed in league/pruned.json)" + ("" if not removed["replay"] else " and the replay buffer")
+                  + ("; it resumes with an empty replay buffer" if removed["replay"] else "; it resumes as before"))
         elif args.command == "pack":
             from triplesumo.evaluation.metrics_csv import pack_tables
 

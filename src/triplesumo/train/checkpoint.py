@@ -235,6 +235,17 @@ def verify(folder: Path, need_replay: bool = True) -> None:
             raise CheckpointError(f"{path}: sha256 differs from {folder / MANIFEST} (damaged or truncated)")
 
 
+def holds_replay(folder: Path) -> bool:
+    """Whether a checkpoint holds a replay buffer: its manifest records ``replay.npz``. One saved without
+    (``save_replay=False``) or compacted of it (``triplesumo compact --drop-replay``) does not, and a resume from it
+    starts with an empty buffer; one that records the file and lacks it is damaged (:func:`verify` names it)."""
+    try:
+        sums = load_json(Path(folder) / MANIFEST).get("sha256")
+    except PolicyFileError as exc:
+        raise CheckpointError(str(exc)) from exc
+    return isinstance(sums, dict) and "replay.npz" in sums
+
+
 def newest_intact(run_dir: Path, below: int | None = None) -> Path | None:
     """The newest checkpoint of ``run_dir`` (recording an epoch < ``below``) whose files all verify."""
     for epoch, folder in reversed(checkpoints(run_dir)):

@@ -173,19 +173,26 @@ def drop_unseated_evicted(state: dict[str, Any]) -> tuple[list[str], list[dict[s
     return files, dropped
 
 
-def compact_run(run_dir: Path | str) -> dict[str, Any]:
+def compact_run(run_dir: Path | str, drop_replay: bool = False) -> dict[str, Any]:
     """Keep only what resuming the run in ``run_dir`` needs, for committing a long run's folder: its newest
     checkpoint (older ones deleted) and the league members its pools and in-flight matches hold. The files of
     the other evicted members are deleted and their records (id, side, epoch, sha256) appended to
     ``league/pruned.json``; ``pool.json`` and the checkpoint's ``state.json`` (and its manifest's sha256) drop
     them. Metrics, policies and ``league.csv`` are kept. Resuming afterwards trains exactly what it would have;
-    a tournament's ``--league RUN`` then picks among the kept snapshots. Returns what was removed."""
+    a tournament's ``--league RUN`` then picks among the kept snapshots. With ``drop_replay`` the checkpoint's
+    replay buffer goes too (a repository keeps no buffer): a resume then starts with an empty one, not exactly
+    as the run would have gone on. Returns what was removed."""
     run_dir = Path(run_dir)
     folder = checkpoint.latest(run_dir)
     checkpoint.verify(folder, need_replay=(folder / "replay.npz").is_file())
     state = load_json(folder / "state.json")
     older = [f for e, f in checkpoint.checkpoints(run_dir) if f != folder]
-    removed: dict[str, Any] = {"checkpoints": [f.name for f in older], "members": []}
+    removed: dict[str, Any] = {"checkpoints": [f.name for f in older], "members": [],
+                               "replay": drop_replay and checkpoint.holds_replay(folder)}
+    if removed["replay"]:  # the manifest first (it then names no replay buffer), then the file
+        (folder / "replay.npz").rename(folder / "replay.npz.dropping")
+        checkpoint.rewrite_state(folder, state)
+        (folder / "replay.npz.dropping").unlink()
     if "league" in state:
         _, dropped = drop_unseated_evicted(state)
         removed["members"] = [m["id"] for m in dropped]

@@ -462,16 +462,23 @@ class Trainer:
         return self.cfg.save_replay and any(isinstance(lr, OffPolicyLearner) for lr in self.learners)
 
     def _restore(self, from_checkpoint: str | None) -> None:
-        need_replay = self._needs_replay()
+        def load(folder: Path) -> tuple[Any, ...]:
+            # a checkpoint that holds no replay buffer (saved without, or compacted of it) resumes with an empty one
+            need_replay = self._needs_replay() and checkpoint.holds_replay(folder)
+            if self._needs_replay() and not need_replay:
+                print(f"{folder}: the checkpoint holds no replay buffer (saved without or compacted of it): the "
+                      "run resumes with an empty one, not exactly as it would have gone on")
+            return checkpoint.load(folder, need_replay=need_replay)
+
         if from_checkpoint is not None:
             folder = checkpoint.find(self.run_dir, from_checkpoint)
-            loaded = checkpoint.load(folder, need_replay=need_replay)
+            loaded = load(folder)
         else:
             try:
                 folder = checkpoint.latest(self.run_dir)
                 if self.league is None:  # (self-play runs, whose agents may sit matches out, check their own tables)
                     folder = checkpoint_within_rows(self.run_dir, folder, self.agents, [s.name for s in self.specs])
-                loaded = checkpoint.load(folder, need_replay=need_replay)
+                loaded = load(folder)
             except checkpoint.CheckpointError as exc:
                 intact = checkpoint.newest_intact(self.run_dir)
                 if intact is None:
