@@ -292,3 +292,29 @@ def test_a_shipped_bug_is_its_trial_and_its_figures_are_recomputed_from_the_matc
         assert file_sha256(zoo.ZOO_DIR / "bug.safetensors") == file_sha256(zoo.ZOO_DIR / f"bug-{algo}.safetensors")
     else:
         assert name == f"bug-{algo}"
+
+
+def test_the_headline_table_is_recomputed_from_the_committed_matches() -> None:
+    """The README's and the home page's table of the result: every per-seed test MWR of the SAC and DDPG Bugs, their
+    mean, and the passive and random baselines, each recomputed from its 2,000 per-match rows."""
+    from triplesumo.evaluation.metrics import summarize
+
+    def mwr(row: dict[str, str]) -> float:
+        with open_table(REPRODUCE / "evaluation" / row["candidate"] / "metrics.csv") as fh:
+            matches = list(csv.DictReader(fh))
+        assert len(matches) == 2000
+        return float(summarize([m["outcome"] for m in matches], [float(m["steps"]) for m in matches])["mean_lwr"])
+
+    rows = _test_rows()
+    seeds = {algo: [mwr(r) for r in sorted((r for r in rows if r["algo"] == algo and "/bug/learn=bug=" in r["policy"]),
+                                             key=lambda r: int(r["train_seed"]))] for algo in ("sac", "ddpg")}
+    baseline = {g: mwr(next(r for r in rows if r["group"] == g)) for g in ("passive", "random")}
+    assert [len(v) for v in seeds.values()] == [3, 3]
+    for page in (ROOT / "README.md", ROOT / "docs" / "index.md"):
+        text = page.read_text()
+        for algo, label in (("sac", "| **SAC** |"), ("ddpg", "| DDPG (paper preset) |")):
+            values = " ".join(f"{v:+.3f}" for v in seeds[algo])
+            mean = f"{np.mean(seeds[algo]):+.3f}"
+            line = next(x for x in text.splitlines() if x.startswith(label))
+            assert values in line and mean in line, (page.name, line, values, mean)
+        assert f"| passive / random | {baseline['passive']:+.3f} / {baseline['random']:+.3f} |" in text, page.name
