@@ -283,6 +283,16 @@ def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
         rllib.TripleSumoMultiAgentEnv({"match_config": rllib.scenario_config(), "max_steps": 5})
 
 
+def test_make_config_sets_one_torch_thread_unless_told_otherwise(rllib: Any) -> None:
+    """The driver holds RLlib's learner; torch's default threads (one per core) stall on a busy 2-core box."""
+    code = ("import torch; torch.set_num_threads(2); from triplesumo.integrations.rllib import make_config; "
+            "make_config('paper', threads=None); kept = torch.get_num_threads(); make_config('paper'); "
+            "print(kept, torch.get_num_threads())")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.split() == ["2", "1"], proc.stdout
+
+
 @pytest.mark.usefixtures("local_ray")
 def test_a_gymnasium_id_without_its_module_builds_on_remote_env_runners_once_registered(rllib: Any) -> None:
     """A remote env runner has not imported triplesumo, so Gymnasium does not know "TripleSumo-Paper-v2" there
@@ -324,6 +334,7 @@ def test_a_gymnasium_id_given_as_a_scenario_names_rllibs_names(rllib: Any) -> No
     ({"share": "team"},  # paper observations: one vector for both seats of the module
      r"share='team' \(module 'team'\): one network for seats \['ant', 'bug'\] with obs_mode 'paper'"),
     ({"algo": "NoSuchAlgo"}, "algo: unknown RLlib algorithm 'NoSuchAlgo'"),
+    ({"threads": 0}, r"threads must be an int >= 1 \(torch.set_num_threads\) or None, got 0"),
     ({"max_step": 5}, r"unknown option\(s\) \['max_step'\]"),
 ])
 def test_make_config_rejects_bad_input_naming_the_problem(rllib: Any, kwargs: dict, message: str) -> None:

@@ -66,6 +66,7 @@ from triplesumo.agents.networks import ActorPolicy
 from triplesumo.agents.policy_file import load_fixed_policy
 from triplesumo.agents.zoo import find_policy_file, make_policy
 from triplesumo.envs.parallel import TripleSumoParallelEnv
+from triplesumo.integrations._threads import DEFAULT_THREADS, set_torch_threads
 from triplesumo.registration import ENV_IDS
 from triplesumo.rules.config import MatchConfig, check_shared_network
 from triplesumo.rules.outcome import PLAYING, outcome_name
@@ -401,7 +402,7 @@ configs: RLlib then runs its connectors and modules on batches of this many obse
 
 def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collection[str] | None = None,
                 algo: str = "PPO", share: str | None = None, frozen: Mapping[str, str] | None = None,
-                frozen_in_env: bool = True, **overrides: Any) -> AlgorithmConfig:
+                frozen_in_env: bool = True, threads: int | None = DEFAULT_THREADS, **overrides: Any) -> AlgorithmConfig:
     """An RLlib ``AlgorithmConfig`` for a TripleSumo match, on the new API stack.
 
     Args:
@@ -419,6 +420,10 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
             env steps/s of ``False`` per env runner on a loaded 2-core box, ``triplesumo bench
             rllib``); their outcomes are still reported. ``False``: every agent is RLlib's, the frozen ones
             played by :class:`FrozenPolicyModule` (the torch actor) as RLlib modules.
+        threads: torch's intra-op threads in this process (``torch.set_num_threads``), set here: the driver
+            holds the learner (RLlib's default ``num_learners=0``) and, with ``num_env_runners=0``, samples too.
+            1 by default (torch's default of one thread per core stalls on a busy 2-core box; Ray's remote env
+            runners start with ``OMP_NUM_THREADS=1``); ``None`` leaves torch's setting.
         **overrides: :class:`MatchConfig` fields (``max_steps=200``, ``obs_mode=...``).
 
     The env reports lean infos (``info_level="outcome"``: outcome, place, eliminated) and each
@@ -427,6 +432,7 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
     ``make_config(...).training(lr=1e-4).env_runners(num_env_runners=2)``.
     """
     match_config = scenario_config(scenario, **overrides)
+    set_torch_threads(threads, "threads")
     modules = module_of_agent(match_config, share)
     module_ids = list(dict.fromkeys(modules.values()))
     frozen = dict(frozen or {})
