@@ -212,7 +212,7 @@ def test_a_lean_info_level_keeps_the_outcome_for_torchrl() -> None:
 
 def test_the_sb3_adapter_sets_one_torch_thread_unless_told_otherwise() -> None:
     # SB3 trains in the process that builds its env; torch's default (a thread per core) ran its PPO and SAC
-    # 7-13x slower on a busy 2-core box. A fresh process, so that the thread settings of this one stay as they are.
+    # several times slower on a busy 2-core box. A fresh process, so that this one's thread settings stay.
     out = run_python(textwrap.dedent("""
         import torch
         torch.set_num_threads(2)

@@ -123,7 +123,7 @@ def make_vec_env(env_id: str = PAPER_ID, n_envs: int = 1, seed: int | None = Non
     """``gym.make_vec(env_id, n_envs, **kwargs)`` as an SB3 ``VecEnv`` (``seed`` seeds the first reset).
 
     ``threads``: torch's intra-op threads in this process (``torch.set_num_threads``), set here because SB3 trains in
-    the process that builds its env: 1 by default, since SB3's PPO and SAC ran 7 to 13 times slower on a 2-core box
+    the process that builds its env: 1 by default, since SB3's PPO and SAC ran several times slower on a 2-core box
     with torch's default (one thread per core, which stall whenever another process holds a core); ``None`` leaves
     torch's setting as it is.
     """
