@@ -5,6 +5,7 @@ and resuming (a raised budget, a lost record rebuilt from the runs, a lower targ
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -181,3 +182,13 @@ def test_background_evaluations_give_the_same_curve(tmp_path: Path,
     assert all(e["wall_seconds"] >= e["train_seconds"] for e in background["evaluations"])
     more = run_skill(_tiny(tmp_path / "bg", target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]  # inline now
     assert more["evaluations"][:3] == background["evaluations"] and len(more["evaluations"]) == 4
+
+
+def test_the_progress_bar_counts_env_steps_to_the_budget(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    # the bench's runs have an epoch backstop of 10**9; the bar counts what stops them: env steps to max_env_steps
+    run_skill(_tiny(tmp_path / "b", target=1.0, max_env_steps=EVERY, train=dataclasses.replace(TINY_TRAIN,
+                                                                                              progress=True)))
+    err = capfd.readouterr().err
+    last = err.replace("\r", "\n").strip().splitlines()[-1]
+    assert f"{EVERY:.1f}/{EVERY:.1f} [" in last and "step/s" in last, err[-800:]  # 40.0/40.0, scaled as 1.00M
+    assert "1000000000" not in err and "epoch" not in err, err[-800:]

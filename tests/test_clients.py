@@ -50,7 +50,8 @@ CHECKS = {
         assert obs.shape == (16, 222) and reward.shape == (16,) and info["outcome"].shape == (16,)
     """,
     "sb3": """
-        assert model.num_timesteps >= 256 and env.num_envs == 8
+        assert model.num_timesteps >= 256 and env.num_envs == 8 and torch.get_num_threads() == 1
+        assert len(model.ep_info_buffer) >= 8  # the comment promises returns: 16-step matches end
         assert all({"r", "l", "t"} <= set(e) for e in model.ep_info_buffer)
     """,
     "gymnasium-async": """
@@ -238,3 +239,56 @@ def test_supersuit_black_death_plays_to_the_step_limit() -> None:
     rng = np.random.default_rng(0)
     while ffa.agents:
         ffa.step({a: rng.uniform(-1, 1, 8) for a in ffa.agents})
+
+
+def test_the_sb3_adapter_sets_one_torch_thread_unless_told_otherwise() -> None:
+    # SB3 trains in the process that builds its env; torch's default (a thread per core) ran its PPO and SAC
+    # several times slower on a busy 2-core box. A fresh process, so that this one's thread settings stay.
+    out = run_python(textwrap.dedent("""
+        import torch
+        torch.set_num_threads(2)
+        from triplesumo.integrations.sb3 import make_vec_env
+        make_vec_env("TripleSumo-v2", n_envs=1, threads=None).close()
+        kept = torch.get_num_threads()
+        make_vec_env("TripleSumo-v2", n_envs=1).close()
+        default = torch.get_num_threads()
+        make_vec_env("TripleSumo-v2", n_envs=1, threads=2).close()
+        print(kept, default, torch.get_num_threads())
+        try:
+            make_vec_env("TripleSumo-v2", threads=0)
+        except ValueError as exc:
+            print(exc)
+    """))
+    assert out.splitlines()[0] == "2 1 2", out
+    assert "threads must be an int >= 1" in out and "got 0" in out, out
+
+
+def _bug_start(obs: dict[str, np.ndarray]) -> np.ndarray:
+    return np.asarray(obs["bug"])
+
+
+def test_one_seed_starts_the_same_match_in_the_gymnasium_views() -> None:
+    """docs/libraries.md: match k of gym.make_vec(id, num_envs=N).reset(seed=s) is gym.make(id).reset(seed=s + k)'s,
+    which is parallel_env().reset(seed=s + k)'s (Bug's observation at the start)."""
+    seed, n = 7, 3
+    envs = gym.make_vec("TripleSumo-v2", num_envs=n)
+    vec, _ = envs.reset(seed=seed)
+    envs.close()
+    for k in range(n):
+        single, _ = gym.make("TripleSumo-v2").reset(seed=seed + k)
+        parallel, _ = triplesumo.parallel_env().reset(seed=seed + k)
+        np.testing.assert_array_equal(vec[k], single, err_msg=f"make_vec match {k}")
+        np.testing.assert_array_equal(_bug_start(parallel), single, err_msg=f"parallel_env seed {seed + k}")
+
+
+def test_one_seed_starts_the_same_match_in_vector_env() -> None:
+    """docs/libraries.md: match k of triplesumo.vector_env(num_envs=N).reset(seed=s) is the match of
+    parallel_env().reset(seed=s + k)."""
+    seed, n = 7, 3
+    env = triplesumo.vector_env(num_envs=n)
+    obs, _ = env.reset(seed=seed)
+    bug = env.agents.index("bug")
+    env.close()
+    for k in range(n):
+        parallel, _ = triplesumo.parallel_env().reset(seed=seed + k)
+        np.testing.assert_array_equal(obs[k, bug], _bug_start(parallel), err_msg=f"vector_env match {k}")

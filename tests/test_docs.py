@@ -1,5 +1,10 @@
 """The README as a front door and the documentation site under docs/ (built by MkDocs from mkdocs.yml).
 
+Every Python code block of the README and the site's pages runs (:func:`test_the_python_blocks_of_a_page_run`),
+each in a fresh namespace, a page's blocks in one fresh process; a block marked ``<!-- example: NAME -->`` runs in
+tests/test_clients.py with checks of what it leaves behind, and one marked ``<!-- no-test: REASON -->`` (a GPU, a
+cluster) is not run, says why and is counted.
+
 The README stays short and starts with the two commands; every relative link of the README and the
 site's pages resolves to a file of the repository; every page of the nav exists and every page is
 in the nav; the environment pages are what docs/gen_env_pages.py writes from the code; the API
@@ -11,10 +16,12 @@ literally (docs/griffe_roles.py); and, where MkDocs is installed (the ``docs`` e
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import re
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
 
@@ -178,3 +185,94 @@ def test_site_builds_strict(tmp_path: Path) -> None:
     literal = {name: LITERAL_ROLE.findall(text)[:3] for name, text in api.items() if LITERAL_ROLE.search(text)}
     assert not literal, f"Sphinx roles shown literally: {literal}"
     assert 'href="#triplesumo.algos.base.Algorithm"><code>Algorithm</code></a>' in api["algos.html"]
+
+
+# ------------------------------------------------------------------ code examples
+_PY_BLOCK = re.compile(r"(?:^<!--[ \t]*(example|no-test):[ \t]*([^\n]*?)[ \t]*-->[ \t]*\n)?^```python\n(.*?)^```",
+                       re.S | re.M)
+NOT_RUN_HERE = {"docs/gpu.md": 1}
+"""Blocks marked ``<!-- no-test: REASON -->`` per page: a change here is a decision, not an accident."""
+RUN_WITH_CHECKS = {"docs/libraries.md": 6}
+"""Blocks marked ``<!-- example: NAME -->``, run by tests/test_clients.py with checks of their results."""
+
+
+@dataclass(frozen=True)
+class CodeBlock:
+    page: str
+    """The page, relative to the repository."""
+    line: int
+    """The line of the block's first line of code."""
+    code: str
+    marker: str | None
+    """``"example"``, ``"no-test"`` or ``None`` (run here)."""
+    note: str
+    """The example's name, or why the block is not run."""
+
+
+def python_blocks(page: Path) -> list[CodeBlock]:
+    """The ``python`` code blocks of a page, with their markers."""
+    text = page.read_text()
+    return [CodeBlock(page.relative_to(ROOT).as_posix(), text.count("\n", 0, m.start(3)) + 1, m.group(3), m.group(1),
+                      m.group(2)) for m in _PY_BLOCK.finditer(text)]
+
+
+def example_pages() -> list[Path]:
+    return [p for p in (README, *site_pages()) if python_blocks(p)]
+
+
+def test_python_blocks_are_found_with_their_markers() -> None:
+    blocks = python_blocks(DOCS / "libraries.md")
+    assert [b.note for b in blocks if b.marker == "example"][:2] == ["gymnasium-vector", "sb3"]
+    lines = (DOCS / "libraries.md").read_text().splitlines()
+    assert blocks[0].code.startswith("import gymnasium as gym\n") and lines[blocks[0].line - 2:blocks[0].line] == [
+        "```python", "import gymnasium as gym"]  # line: the block's first line of code, for tracebacks
+    gpu = python_blocks(DOCS / "gpu.md")
+    assert [b.marker for b in gpu] == ["no-test"] and "CUDA" in gpu[0].note
+
+
+def test_every_python_block_runs_or_says_why_not() -> None:
+    blocks = [b for p in example_pages() for b in python_blocks(p)]
+    counts: dict[str, dict[str, int]] = {"no-test": {}, "example": {}}
+    for b in blocks:
+        if b.marker is not None:
+            counts[b.marker][b.page] = counts[b.marker].get(b.page, 0) + 1
+    silent = [f"{b.page}:{b.line}" for b in blocks if b.marker is not None and not b.note]
+    assert not silent, f"a marked block must say why it is not run here (or name its example): {silent}"
+    assert counts["no-test"] == NOT_RUN_HERE, counts["no-test"]
+    assert counts["example"] == RUN_WITH_CHECKS, counts["example"]
+    assert sum(b.marker is None for b in blocks) >= 10
+
+
+_RUN_BLOCKS = """
+import json, sys, time
+for name, line, code in json.loads(sys.stdin.read()):
+    print(f"--- {name}:{line}", flush=True)
+    start = time.perf_counter()
+    try:
+        exec(compile("\\n" * (line - 1) + code, name, "exec"), {"__name__": "__main__"})
+    finally:  # each block starts its own Ray, as a reader who runs it alone does
+        ray = sys.modules.get("ray")
+        if ray is not None and ray.is_initialized():
+            ray.shutdown()
+    print(f"+++ {time.perf_counter() - start:.1f} s", flush=True)
+"""
+
+
+@pytest.mark.parametrize("page", example_pages(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_the_python_blocks_of_a_page_run(page: Path, tmp_path: Path) -> None:
+    """A page's unmarked blocks, each in a fresh namespace (so each has its own imports), in one fresh process
+    (imports are paid once) whose working folder is empty (what a block writes lands there)."""
+    blocks = [(b.page, b.line, b.code) for b in python_blocks(page) if b.marker is None]
+    if not blocks:
+        pytest.skip("every block is marked (run in tests/test_clients.py, or not here)")
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""),
+           "MUJOCO_GL": "egl", "OMP_NUM_THREADS": "1", "RAY_DEDUP_LOGS": "0"}
+    try:
+        proc = subprocess.run([sys.executable, "-c", _RUN_BLOCKS], input=json.dumps(blocks), capture_output=True,
+                              text=True, timeout=240, env=env, cwd=tmp_path)
+    except subprocess.TimeoutExpired as exc:
+        raise AssertionError(f"{page.relative_to(ROOT)}: the examples did not finish in 240 s") from exc
+    ran = re.findall(r"^--- (\S+)$", proc.stdout, re.M)
+    assert proc.returncode == 0, (f"{ran[-1] if ran else page}: the example failed\n--- stderr ---\n"
+                                  f"{proc.stderr[-4000:]}")
+    assert len(ran) == len(blocks)

@@ -266,7 +266,8 @@ def test_frozen_module_plays_the_zoo_policy_deterministically(rllib: Any) -> Non
 
 
 def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
-    assert rllib.register_envs() == [f"triplesumo_{name}_v2" for name in triplesumo.scenarios()]
+    assert rllib.register_envs() == [*(f"triplesumo_{name}_v2" for name in triplesumo.scenarios()),
+                                     *triplesumo.envs.ENV_IDS]
     env = rllib.make_env({"max_steps": 7})
     obs, _ = env.reset(seed=1)
     assert set(obs) == {"ant", "bug", "spider"} and env.observation_space["bug"].shape == (222,)
@@ -282,6 +283,44 @@ def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
         rllib.TripleSumoMultiAgentEnv({"match_config": rllib.scenario_config(), "max_steps": 5})
 
 
+def test_make_config_sets_one_torch_thread_unless_told_otherwise(rllib: Any) -> None:
+    """The driver holds RLlib's learner; torch's default threads (one per core) stall on a busy 2-core box."""
+    code = ("import torch; torch.set_num_threads(2); from triplesumo.integrations.rllib import make_config; "
+            "make_config('paper', threads=None); kept = torch.get_num_threads(); make_config('paper'); "
+            "print(kept, torch.get_num_threads())")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.split() == ["2", "1"], proc.stdout
+
+
+@pytest.mark.usefixtures("local_ray")
+def test_a_gymnasium_id_without_its_module_builds_on_remote_env_runners_once_registered(rllib: Any) -> None:
+    """A remote env runner has not imported triplesumo, so Gymnasium does not know "TripleSumo-Paper-v2" there
+    (RLlib's driver then fails with an IndexError); register_envs() registers the Gymnasium ids with Tune too."""
+    from ray.rllib.algorithms.ppo import PPOConfig
+    from ray.tune.registry import ENV_CREATOR, _global_registry
+
+    assert "TripleSumo-Paper-v2" in rllib.register_envs()
+    assert _global_registry.contains(ENV_CREATOR, "TripleSumo-Paper-v2")
+    config = (PPOConfig().environment("TripleSumo-Paper-v2", env_config={"max_steps": 20})
+              .env_runners(num_env_runners=1, sample_timeout_s=120)
+              .training(train_batch_size_per_learner=64, minibatch_size=32, num_epochs=1).debugging(seed=0))
+    algo = config.build_algo()
+    try:
+        result = algo.train()
+        assert result["env_runners"]["num_env_steps_sampled_lifetime"] >= 64
+        assert algo.env_runner_group.num_healthy_remote_workers() == 1
+    finally:
+        algo.stop()
+
+
+def test_a_gymnasium_id_given_as_a_scenario_names_rllibs_names(rllib: Any) -> None:
+    with pytest.raises(ValueError, match=r"'TripleSumo-Paper-v2' is a Gymnasium id.*register_envs\(\)"):
+        rllib.env_id("TripleSumo-Paper-v2")
+    with pytest.raises(ValueError, match=r"'TripleSumo-Paper-v2' is a Gymnasium id.*register_envs\(\)"):
+        rllib.make_config("TripleSumo-Paper-v2")
+
+
 @pytest.mark.parametrize(("kwargs", "message"), [
     ({"scenario": "chess"}, "scenario: unknown scenario 'chess'"),
     ({"policies_to_train": ["beetle"]}, r"policies_to_train: unknown module id\(s\) \['beetle'\]"),
@@ -295,6 +334,7 @@ def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
     ({"share": "team"},  # paper observations: one vector for both seats of the module
      r"share='team' \(module 'team'\): one network for seats \['ant', 'bug'\] with obs_mode 'paper'"),
     ({"algo": "NoSuchAlgo"}, "algo: unknown RLlib algorithm 'NoSuchAlgo'"),
+    ({"threads": 0}, r"threads must be an int >= 1 \(torch.set_num_threads\) or None, got 0"),
     ({"max_step": 5}, r"unknown option\(s\) \['max_step'\]"),
 ])
 def test_make_config_rejects_bad_input_naming_the_problem(rllib: Any, kwargs: dict, message: str) -> None:

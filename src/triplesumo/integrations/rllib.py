@@ -8,7 +8,8 @@ imports Ray.
   PettingZoo env), built from an ``env_config`` holding :class:`~triplesumo.rules.MatchConfig`
   field overrides or a whole config under ``"match_config"``, and optionally ``"fixed"``:
   agents that act inside the env with the project's numpy policies, unseen by RLlib;
-  :func:`register_envs` registers every scenario by name (``"triplesumo_paper_v2"``, ...).
+  :func:`register_envs` registers every scenario by name (``"triplesumo_paper_v2"``, ...) and every
+  Gymnasium id (``"TripleSumo-Paper-v2"``, ...), so that remote env runners find them.
 - :func:`make_config` returns an ``AlgorithmConfig`` (PPO by default) with one RLModule per
   agent (module ids = agent names) or per team (``share="team"``: module ids = team labels),
   the policy-mapping function, ``policies_to_train``, the project's observation and action
@@ -35,6 +36,7 @@ Example (the paper's setup: Bug learns, the zoo's Ant and Spider are frozen)::
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Collection, Mapping
 from typing import Any
 
@@ -64,6 +66,8 @@ from triplesumo.agents.networks import ActorPolicy
 from triplesumo.agents.policy_file import load_fixed_policy
 from triplesumo.agents.zoo import find_policy_file, make_policy
 from triplesumo.envs.parallel import TripleSumoParallelEnv
+from triplesumo.integrations._threads import DEFAULT_THREADS, set_torch_threads
+from triplesumo.registration import ENV_IDS
 from triplesumo.rules.config import MatchConfig, check_shared_network
 from triplesumo.rules.outcome import PLAYING, outcome_name
 from triplesumo.rules.scenarios import scenario_config as named_scenario_config
@@ -71,8 +75,8 @@ from triplesumo.rules.scenarios import scenarios
 from triplesumo.version import ENV_VERSION
 
 __all__ = ["ENVS_PER_RUNNER", "OUTCOMES", "SCENARIOS", "SHARE_MODES", "FrozenPolicyModule", "OutcomeCallback",
-           "TripleSumoMultiAgentEnv", "env_id", "fixed_policies", "make_config", "make_env", "match_config_from",
-           "module_of_agent", "register_envs", "scenario_config"]
+           "TripleSumoMultiAgentEnv", "env_id", "fixed_policies", "make_config", "make_env", "make_gym_env",
+           "match_config_from", "module_of_agent", "register_envs", "scenario_config"]
 
 SCENARIOS: tuple[str, ...] = scenarios()
 """Named scenarios (``triplesumo.scenarios()``); each is registered as ``triplesumo_{name}_v2`` by
@@ -93,15 +97,26 @@ def scenario_config(scenario: str | MatchConfig = "paper", **overrides: Any) -> 
             raise ValueError(f"unknown MatchConfig field(s) {unknown}; known: {sorted(known)}")
         return dataclasses.replace(scenario, **overrides)
     if scenario not in SCENARIOS:
-        raise ValueError(f"scenario: unknown scenario {scenario!r}; known: {list(SCENARIOS)} "
-                         "(or pass a MatchConfig)")
+        raise _unknown_scenario(scenario)
     return named_scenario_config(scenario, **overrides)
+
+
+def _unknown_scenario(scenario: object) -> ValueError:
+    """The error for a scenario name RLlib's side does not know; a Gymnasium id gets its RLlib names."""
+    if scenario in ENV_IDS:
+        return ValueError(
+            f"scenario: {scenario!r} is a Gymnasium id (the single-agent view), not a scenario; scenarios: "
+            f"{list(SCENARIOS)}. Give RLlib the id with its module, 'triplesumo:{scenario}', or call register_envs() "
+            "first (it registers the Gymnasium ids and the multi-agent names 'triplesumo_<scenario>_"
+            f"{ENV_VERSION}' with Tune), else RLlib's remote env runners, which have not imported triplesumo, "
+            "do not know it")
+    return ValueError(f"scenario: unknown scenario {scenario!r}; known: {list(SCENARIOS)} (or pass a MatchConfig)")
 
 
 def env_id(scenario: str) -> str:
     """RLlib env name of a scenario, e.g. ``"triplesumo_paper_v2"``."""
     if scenario not in SCENARIOS:
-        raise ValueError(f"scenario: unknown scenario {scenario!r}; known: {list(SCENARIOS)}")
+        raise _unknown_scenario(scenario)
     return f"triplesumo_{scenario}_{ENV_VERSION}"
 
 
@@ -269,17 +284,29 @@ def _creator(scenario: str) -> Any:
     return create
 
 
-def register_envs() -> list[str]:
-    """Register every scenario by name with RLlib (Tune's env registry); returns the names.
+def make_gym_env(env_config: Mapping[str, Any], gym_id: str) -> gym.Env:
+    """``gym.make(gym_id, **env_config)``: a Gymnasium id of TripleSumo as Tune's env creator. Being a function of
+    this module, it imports triplesumo (which registers the Gymnasium ids) in the process that calls it."""
+    return gym.make(gym_id, **dict(env_config))
 
-    For hand-written configs (``PPOConfig().environment("triplesumo_paper_v2")``);
-    :func:`make_config` passes the env class itself, which needs no registry.
+
+def register_envs() -> list[str]:
+    """Register every scenario and every Gymnasium id by name with RLlib (Tune's env registry); returns the names.
+
+    For hand-written configs: ``PPOConfig().environment("triplesumo_paper_v2")`` (the multi-agent env of a scenario,
+    :func:`make_env`) or ``PPOConfig().environment("TripleSumo-Paper-v2")`` (the Gymnasium id, single-agent: Bug
+    learns). An RLlib env runner in another process has not imported triplesumo, so Gymnasium does not know the
+    ids there (unless given with the module, ``"triplesumo:TripleSumo-Paper-v2"``); Tune's registry reaches every
+    process. :func:`make_config` passes the env class itself, which needs no registry.
     """
-    ids = []
+    names = []
     for scenario in SCENARIOS:
         register_env(env_id(scenario), _creator(scenario))
-        ids.append(env_id(scenario))
-    return ids
+        names.append(env_id(scenario))
+    for gym_id in ENV_IDS:
+        register_env(gym_id, functools.partial(make_gym_env, gym_id=gym_id))
+        names.append(gym_id)
+    return names
 
 
 # ----------------------------------------------------------------------------- modules
@@ -375,7 +402,7 @@ configs: RLlib then runs its connectors and modules on batches of this many obse
 
 def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collection[str] | None = None,
                 algo: str = "PPO", share: str | None = None, frozen: Mapping[str, str] | None = None,
-                frozen_in_env: bool = True, **overrides: Any) -> AlgorithmConfig:
+                frozen_in_env: bool = True, threads: int | None = DEFAULT_THREADS, **overrides: Any) -> AlgorithmConfig:
     """An RLlib ``AlgorithmConfig`` for a TripleSumo match, on the new API stack.
 
     Args:
@@ -393,6 +420,10 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
             env steps/s of ``False`` per env runner on a loaded 2-core box, ``triplesumo bench
             rllib``); their outcomes are still reported. ``False``: every agent is RLlib's, the frozen ones
             played by :class:`FrozenPolicyModule` (the torch actor) as RLlib modules.
+        threads: torch's intra-op threads in this process (``torch.set_num_threads``), set here: the driver
+            holds the learner (RLlib's default ``num_learners=0``) and, with ``num_env_runners=0``, samples too.
+            1 by default (torch's default of one thread per core stalls on a busy 2-core box; Ray's remote env
+            runners start with ``OMP_NUM_THREADS=1``); ``None`` leaves torch's setting.
         **overrides: :class:`MatchConfig` fields (``max_steps=200``, ``obs_mode=...``).
 
     The env reports lean infos (``info_level="outcome"``: outcome, place, eliminated) and each
@@ -401,6 +432,7 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
     ``make_config(...).training(lr=1e-4).env_runners(num_env_runners=2)``.
     """
     match_config = scenario_config(scenario, **overrides)
+    set_torch_threads(threads, "threads")
     modules = module_of_agent(match_config, share)
     module_ids = list(dict.fromkeys(modules.values()))
     frozen = dict(frozen or {})

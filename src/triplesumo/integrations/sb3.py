@@ -8,7 +8,7 @@ SB3 ``VecEnv``, so PPO, SAC, TD3 and DDPG train on many matches in one process::
     from stable_baselines3 import PPO
     from triplesumo.integrations.sb3 import make_vec_env
 
-    env = make_vec_env("TripleSumo-Paper-v2", n_envs=8)
+    env = make_vec_env("TripleSumo-Paper-v2", n_envs=8)  # also sets one torch thread (threads=1)
     PPO("MlpPolicy", env).learn(10_000)
 
 SB3's conventions: when match ``k`` ends, the returned observation is already its next
@@ -31,6 +31,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from triplesumo.envs.vector import TripleSumoVectorEnv
+from triplesumo.integrations._threads import DEFAULT_THREADS, set_torch_threads
 from triplesumo.registration import PAPER_ID
 
 
@@ -117,8 +118,16 @@ def _row(infos: dict[str, Any], k: int) -> dict[str, Any]:
 
 
 def make_vec_env(env_id: str = PAPER_ID, n_envs: int = 1, seed: int | None = None,
+                 threads: int | None = DEFAULT_THREADS,
                  **kwargs: Any) -> TripleSumoVecEnv:
-    """``gym.make_vec(env_id, n_envs, **kwargs)`` as an SB3 ``VecEnv`` (``seed`` seeds the first reset)."""
+    """``gym.make_vec(env_id, n_envs, **kwargs)`` as an SB3 ``VecEnv`` (``seed`` seeds the first reset).
+
+    ``threads``: torch's intra-op threads in this process (``torch.set_num_threads``), set here because SB3 trains in
+    the process that builds its env: 1 by default, since SB3's PPO and SAC ran several times slower on a 2-core box
+    with torch's default (one thread per core, which stall whenever another process holds a core); ``None`` leaves
+    torch's setting as it is.
+    """
+    set_torch_threads(threads, "threads")
     vector = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point", **kwargs)
     env = TripleSumoVecEnv(vector.unwrapped)
     if seed is not None:

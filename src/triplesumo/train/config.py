@@ -120,7 +120,7 @@ class TrainConfig:
     torch_threads: int = 1
     """torch.set_num_threads on CPU (two threads collapse when the other core is busy)."""
     progress: bool = True
-    """Show a progress bar (epoch, MWR, steps/s)."""
+    """Show a progress bar (epochs, or env steps when max_env_steps is set; MWR, steps/s)."""
     tensorboard: bool = True
     """Write TensorBoard events beside the CSV."""
     max_minutes: float = 0.0

@@ -308,16 +308,13 @@ class Trainer:
             self.train_seconds = (trained_before + time.perf_counter() - start
                                   - (self.evaluations.seconds - evals_before))
 
-        bar = None
-        if cfg.progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=cfg.epochs, initial=min(self.epochs_done, cfg.epochs), unit="epoch",
-                       desc=f"train {' '.join(s.name for s in self.specs)}", dynamic_ncols=True)
+        bar = self.progress_bar() if cfg.progress else None
         try:
             while self.epochs_done < cfg.epochs:
                 before, steps_before = self.epochs_done, self.env_steps
                 finished = self.collect_step()
+                if bar is not None:
+                    bar.update(min(self.progress_count(), int(bar.total)) - bar.n)
                 reached = False
                 if self.evaluations.due(steps_before, self.env_steps):
                     clock()
@@ -326,7 +323,6 @@ class Trainer:
                     clock()
                     reached = self.evaluations.collect(self.log, self.train_seconds) or reached
                 if finished and bar is not None:
-                    bar.update(min(self.epochs_done, cfg.epochs) - min(before, cfg.epochs))
                     rate = (self.env_steps - start_steps) / max(time.perf_counter() - start, 1e-9)
                     mwrs = {f"MWR {a}" if len(self.agents) > 1 else "MWR": f"{self.mwr(a):+.3f}" for a in self.agents}
                     bar.set_postfix(mwrs | {"steps_s": f"{rate:.0f}"}, refresh=False)
@@ -354,6 +350,22 @@ class Trainer:
         self.finish_outputs()
         return TrainResult(self.run_dir, self.epochs_done, self.env_steps, self.updates, self.mwr(),
                            time.perf_counter() - start, dict(self.timers), {a: self.mwr(a) for a in self.agents})
+
+    def progress_count(self) -> int:
+        """What the progress bar counts: env steps when the run has an env-step budget (``max_env_steps``),
+        else epochs."""
+        return self.env_steps if self.cfg.max_env_steps > 0 else self.epochs_done
+
+    def progress_bar(self) -> Any:
+        """A tqdm bar to the run's budget: env steps to ``max_env_steps`` when that is set (a run whose epochs
+        are only a backstop, as ``bench skill``'s), else epochs to ``epochs``."""
+        from tqdm import tqdm
+
+        cfg = self.cfg
+        steps = cfg.max_env_steps > 0
+        total = cfg.max_env_steps if steps else cfg.epochs
+        return tqdm(total=total, initial=min(self.progress_count(), total), unit="step" if steps else "epoch",
+                    unit_scale=steps, desc=f"train {' '.join(s.name for s in self.specs)}", dynamic_ncols=True)
 
     # ---------------------------------------------------------- checkpoints
     def policy_stem(self, learner: Learner) -> Path:
