@@ -27,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from triplesumo._lock import held_tree
 from triplesumo.agents.policy_file import atomic_write_bytes, writing
 from triplesumo.evaluation.metrics import OUTCOMES
 from triplesumo.rules.rewards import TERMS
@@ -130,6 +131,11 @@ def pack_tables(folder: Path | str, min_bytes: int = PACK_MIN_BYTES) -> list[Pat
         raise NotADirectoryError(f"{folder}: not a folder")
     if isinstance(min_bytes, bool) or not isinstance(min_bytes, int) or min_bytes < 0:
         raise ValueError(f"min_bytes must be an int >= 0, got {min_bytes!r}")
+    with held_tree(folder, "pack"):  # not while a run, evaluation or tournament in it still writes
+        return _pack(folder, min_bytes)
+
+
+def _pack(folder: Path, min_bytes: int) -> list[Path]:
     done = []
     for path in sorted(folder.rglob("*.csv")):
         if not path.is_file() or path.stat().st_size < min_bytes:
