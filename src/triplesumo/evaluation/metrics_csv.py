@@ -23,6 +23,7 @@ import gzip
 import io
 import math
 import os
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
@@ -77,7 +78,8 @@ def tables_in(folder: Path | str, pattern: str = "*.csv") -> list[Path]:
 
 
 def read_table_bytes(path: Path | str) -> bytes:
-    """The bytes of table ``path`` as written (a packed one decompressed); ``FileNotFoundError`` names the table."""
+    """The bytes of table ``path`` as written (a packed one decompressed); ``FileNotFoundError`` names the table,
+    ``ValueError`` a packed file that does not decompress (not gzip, cut short, or bytes damaged mid-stream)."""
     where = stored(path)
     if where is None:
         raise FileNotFoundError(f"{path} not found (nor {packed_path(path).name})")
@@ -85,8 +87,8 @@ def read_table_bytes(path: Path | str) -> bytes:
     if where.name.endswith(PACKED):
         try:
             return gzip.decompress(data)
-        except (OSError, EOFError) as exc:
-            raise ValueError(f"{where}: not a gzipped table ({exc})") from None
+        except (OSError, EOFError, zlib.error) as exc:  # not gzip; cut short; damaged inside its stream
+            raise ValueError(f"{where}: not a gzipped table, or a damaged one ({exc}); nothing was changed") from None
     return data
 
 
