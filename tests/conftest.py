@@ -145,6 +145,27 @@ def small_disk(folder: Path, size: str) -> Iterator[Path]:
         subprocess.run(["umount", str(folder)], check=True)
 
 
+@contextlib.contextmanager
+def read_only(folder: Path) -> Iterator[Path]:
+    """``folder`` made read-only for the block: ``chmod a-w``, or, as root (whom permissions do not stop; CI runs
+    as root), ``chattr +i`` (immutable: no entry is created, removed or renamed in it, whoever asks); the test is
+    skipped where root's file system has no immutable flag."""
+    if os.geteuid() != 0:
+        mode = folder.stat().st_mode
+        folder.chmod(0o555)
+        try:
+            yield folder
+        finally:
+            folder.chmod(mode)
+        return
+    if subprocess.run(["chattr", "+i", str(folder)], capture_output=True).returncode != 0:
+        pytest.skip("as root a read-only folder needs chattr +i, which this file system does not support")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["chattr", "-i", str(folder)], check=True)
+
+
 def own_ray_workers(task: str) -> list[int]:
     """Pids of the Ray workers now running ``task`` (Ray titles them ``ray::TASK``) that belong to this
     test process's own local Ray: descendants of it (driver -> raylet -> worker). Other pytest-xdist

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import read_only, tiny
 from test_train_selfplay import BOTH_COMMAND, both
 from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
 from triplesumo.cli import main
@@ -270,6 +271,24 @@ def test_compact_keeps_what_resuming_needs_and_the_resumed_run_is_unchanged(
     assert {m["id"] for m in pruned} <= {m["id"] for m in json.loads((run / "league/pruned.json").read_text())[
         "members"]}
     assert main(["compact", str(tmp_path / "nothing")]) == 2
+
+
+@pytest.mark.parametrize("frozen", [".", "checkpoints"])
+def test_compact_of_a_read_only_run_fails_naming_the_path_and_removes_nothing(
+        tmp_path: Path, frozen: str, capsys: pytest.CaptureFixture[str]) -> None:
+    run = train(tiny(tmp_path)).run_dir  # checkpoints at epochs 2 and 4
+    before = digests(run)
+    assert {p.name for p in (run / "checkpoints").glob("epoch-*")} == {"epoch-000002", "epoch-000004"}
+    with read_only(run / frozen):
+        assert main(["compact", str(run)]) == 2
+    out, err = capsys.readouterr()
+    assert "removed" not in out
+    assert (f"{run}: cannot write its lock file" if frozen == "." else
+            f"cannot remove {run / 'checkpoints' / 'epoch-000002'}") in err, err
+    assert digests(run) == before  # nothing removed, nothing half-removed
+    assert main(["compact", str(run)]) == 0  # writable again: it goes as it should
+    assert "removed 1 older checkpoint(s) ['epoch-000002']" in capsys.readouterr().out
+    assert [p.name for p in (run / "checkpoints").glob("*epoch-*")] == ["epoch-000004"]
 
 
 def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_them(

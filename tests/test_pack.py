@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import gzip
 import shutil
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -97,6 +98,45 @@ def test_a_damaged_packed_table_names_its_file(tmp_path: Path) -> None:
     with pytest.raises(FileNotFoundError, match=r"other\.csv not found \(nor other\.csv\.gz\)"):
         read_table_bytes(tmp_path / "other.csv")
     assert (tmp_path / "metrics.csv.gz").read_bytes() == b"not gzip at all"
+
+
+def zlib_error(data: bytes) -> bool:
+    """Whether gunzipping ``data`` fails inside its deflate stream (``zlib.error``, not a CRC or length check)."""
+    try:
+        gzip.decompress(data)
+    except zlib.error:
+        return True
+    except (OSError, EOFError):
+        return False
+    return False
+
+
+def test_a_packed_table_damaged_mid_stream_is_named_by_plot_and_both_resumes(
+        run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder, evaluation = tmp_path / "run", tmp_path / "evaluation"
+    shutil.copytree(run, folder)
+    evaluate_argv = ["evaluate", "--policy", str(run / "policy"), "--baselines", "--epochs", "2",
+                     "--steps-per-epoch", "20", "--n-envs", "2", "--no-progress", "--out", str(evaluation),
+                     "--policies", "spider=random", "ant=zero"]
+    assert main(evaluate_argv) == 0
+    damaged = []
+    for table in (folder / "metrics.csv", evaluation / "trained" / "metrics.csv"):
+        pack_tables(table.parent, min_bytes=0)
+        packed = stored(table).read_bytes()  # type: ignore[union-attr]
+        flipped = (packed[:k] + bytes(b ^ 0xFF for b in packed[k:k + 8]) + packed[k + 8:]  # bytes flipped mid-stream
+                   for k in range(10, len(packed) - 16))  # (after the 10-byte header, before the CRC)
+        bad = next(b for b in flipped if zlib_error(b))  # what readers met until now: zlib.error, naming no file
+        stored(table).write_bytes(bad)  # type: ignore[union-attr]
+        damaged.append(stored(table))
+    before = {p: p.read_bytes() for f in (folder, evaluation) for p in f.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    for argv, table in ((["plot", str(folder)], damaged[0]),
+                        (["train", "--resume", str(folder), "--epochs", "6"], damaged[0]),
+                        ([*evaluate_argv, "--resume"], damaged[1])):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert f"{table}: not a gzipped table, or a damaged one" in err, (argv, err)
+    assert {p: p.read_bytes() for f in (folder, evaluation) for p in f.rglob("*") if p.is_file()} == before
 
 
 def test_a_torn_packed_table_is_unpacked_then_cut_back(run: Path, tmp_path: Path) -> None:

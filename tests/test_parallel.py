@@ -175,3 +175,57 @@ def test_a_failed_trial_gives_its_error_and_the_others_go_on() -> None:
     results = run_trials(runner, configs, lambda k, r: done.append(k), cpus_per_trial=2)
     assert results == [{"trial": "a"}, {"trial": "b", "error": "ValueError: last line"}, {"trial": "c"}]
     assert done == [2, 1, 0] and runner.cpus == [2]
+
+
+def _children(pid: int) -> set[int]:
+    """Live (not zombie) processes whose parent is ``pid``."""
+    found = set()
+    for proc in Path("/proc").iterdir():
+        try:
+            stat = (proc / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()  # state, ppid, ... (the command may hold spaces)
+        if proc.name.isdigit() and int(fields[1]) == pid and fields[0] != "Z":
+            found.add(int(proc.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2:].split()[0] != "Z"  # a zombie has exited (nothing reaps it here)
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads processes from /proc (Linux)")
+def test_evaluate_workers_and_their_resource_tracker_die_with_a_killed_evaluate(tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    import triplesumo
+
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(triplesumo.__file__).parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-m", "triplesumo.cli", "evaluate", "--policy", "passive", "--workers",
+                             "2", "--epochs", "400", "--steps-per-epoch", "200", "--no-progress",
+                             "--out", str(tmp_path / "ev")], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while len(children := _children(proc.pid)) < 3:  # the resource tracker and two spawned workers
+            assert proc.poll() is None and time.monotonic() < deadline, "evaluate --workers 2 started no workers"
+            time.sleep(0.2)
+        time.sleep(1.0)  # the workers' initializers have run (they play their first chunks)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    deadline = time.monotonic() + 5
+    while (alive := [p for p in children if _alive(p)]) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    for pid in alive:  # (clean up before failing)
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, f"orphans of the killed evaluate still running: {alive}"

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import re
 from pathlib import Path
 
 import pytest
 
 import triplesumo.agents.zoo
-from conftest import TinyZoo
+from conftest import TinyZoo, small_disk
 from triplesumo.cli import main
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.tournament import Tournament, TournamentConfig, run_tournament
@@ -357,3 +358,16 @@ def test_unknown_policies_and_rosters_without_a_lineup_are_refused(tmp_path: Pat
         Tournament(TournamentConfig(policies=("p=passive", "r=random")))  # 3 seats, 2 policies
     assert main(["tournament", "--policies", "bad", "--out", str(tmp_path)]) == 2
     assert Match(DUEL).agents == ("a", "b")
+
+
+@pytest.mark.parametrize("size", ["4k", "12k", "40k"])  # full before the rows, the tables, the plots
+def test_a_tournament_on_a_full_disk_names_the_file_it_could_not_write(
+        tmp_path: Path, size: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with small_disk(tmp_path / "disk", size) as disk:
+        out = disk / "t"
+        assert main(["tournament", "--policies", "p=passive", "r=random", "s=random", "--rounds", "2",
+                     "--steps-per-epoch", "100", "--no-progress", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert "No space left on device" in err, err
+        named = re.search(rf"{re.escape(str(out))}/(\w+\.(csv|json|png))\b", err)
+        assert named, err  # the file, in the tournament's folder

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from triplesumo import _dcargs
+from triplesumo._lock import FolderInUseError
 
 if TYPE_CHECKING:
     from triplesumo.evaluation.parallel import TaskRunner
@@ -320,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.ray import main as bench_ray
 
                 bench_ray(args.rest)
-    except (ValueError, FileNotFoundError, PermissionError, OSError, FloatingPointError) as exc:
+    except (ValueError, FileNotFoundError, PermissionError, OSError, FloatingPointError, FolderInUseError) as exc:
         print(f"triplesumo {args.command}: error: {exc}", file=sys.stderr)
         return 2
     return 0

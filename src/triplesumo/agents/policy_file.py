@@ -70,18 +70,35 @@ def writing(path: Path | str, last_good: str = "") -> Iterator[None]:
 
 
 def atomic_write_bytes(path: Path, payload: bytes) -> None:
-    """Write ``payload`` to ``path`` via a temp file, fsync and ``os.replace``."""
+    """Write ``payload`` to ``path`` via a temp file, fsync and ``os.replace``. A failed write (a full disk, a
+    read-only folder) leaves ``path`` as it was and raises an ``OSError`` of the same kind naming ``path``."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise _naming(path, exc) from exc
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise _naming(path, exc) from exc
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _naming(path: Path, exc: OSError) -> OSError:
+    """``exc`` as an ``OSError`` of the same kind (errno) and cause (``strerror``) whose ``filename`` is ``path``
+    (its message then names it: ``[Errno 28] No space left on device: 'OUT/results.json'``)."""
+    if str(path) in str(exc):
+        return exc
+    if not exc.errno:
+        return OSError(f"cannot write {path}: {exc}")
+    return OSError(exc.errno, exc.strerror or os.strerror(exc.errno), str(path))
 
 
 def atomic_save_tensors(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str] | None = None) -> None:

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from triplesumo._lock import held
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.agents.zoo import check_policy_pairs, check_seat, expand_pairs, policy_fingerprint
@@ -321,8 +322,14 @@ def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str,
     :class:`~triplesumo.evaluation.parallel.ProcessRunner` of that many processes. Without either,
     they are played here, on ``cfg.n_threads`` MuJoCo threads.
     With ``cfg.resume`` the rows already in ``out`` are kept (see the module docstring);
-    ``ValueError`` names what changed if they no longer fit the config.
+    ``ValueError`` names what changed if they no longer fit the config. ``out`` is held for the whole call
+    (:func:`triplesumo._lock.held`): a second evaluation into it meanwhile is refused, naming this one's PID.
     """
+    with held(Path(cfg.out), "evaluate"):
+        return _evaluate(cfg, runner)
+
+
+def _evaluate(cfg: EvaluateConfig, runner: TaskRunner | None) -> dict[str, Any]:
     if cfg.ray and runner is None:
         raise ValueError("EvaluateConfig.ray: evaluate plays on the runner it is handed; pass one, e.g. "
                          "triplesumo.integrations.ray_tasks.RayRunner() inside ray_tasks.session() (as --ray does)")
@@ -368,10 +375,10 @@ def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str,
     record = _record(cfg, candidates)
     kept: dict[str, Any] = {}
     if not cfg.resume:
-        held = [p for p in (out / RECORD_FILE, *(out / label / "metrics.csv" for label in candidates))
-                if table_exists(p)]
-        if held:
-            names = ", ".join(str(p.relative_to(out)) for p in held)
+        there = [p for p in (out / RECORD_FILE, *(out / label / "metrics.csv" for label in candidates))
+                 if table_exists(p)]
+        if there:
+            names = ", ".join(str(p.relative_to(out)) for p in there)
             raise FileExistsError(f"{out} already holds an evaluation ({names}); "
                                   "nothing was changed: add --resume to continue or extend it, or choose another --out")
     carried: set[str] = set()

@@ -12,6 +12,8 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from triplesumo.evaluation.plots import save_figure
+
 _DPI = 120
 
 
@@ -30,9 +32,7 @@ def plot_leaderboard(results: dict[str, Any], path: Path, title: str = "") -> Pa
     ax.set_title(f"{title} ({results['rating_model']})".strip())
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=_DPI)
-    fig.clear()
-    return path
+    return save_figure(fig, path, _DPI)
 
 
 def plot_ladder(results: dict[str, Any], path: Path, title: str = "") -> Path:
@@ -76,9 +76,7 @@ def plot_ladder(results: dict[str, Any], path: Path, title: str = "") -> Path:
     ax.legend(loc="best", fontsize=7)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=_DPI)
-    fig.clear()
-    return path
+    return save_figure(fig, path, _DPI)
 
 
 def plot_crossplay(results: dict[str, Any], path: Path, title: str = "") -> Path:
@@ -109,9 +107,7 @@ def plot_crossplay(results: dict[str, Any], path: Path, title: str = "") -> Path
     ax.set_title(f"{title}: win rate of row against column [{pct}% Wilson]".strip(": "), fontsize=9)
     fig.colorbar(image, ax=ax, label="win rate")
     fig.tight_layout()
-    fig.savefig(path, dpi=_DPI)
-    fig.clear()
-    return path
+    return save_figure(fig, path, _DPI)
 
 
 def plot_compare(table: dict[str, Any], path: Path, title: str = "") -> Path:
@@ -140,6 +136,4 @@ def plot_compare(table: dict[str, Any], path: Path, title: str = "") -> Path:
     ax.legend(loc="best", fontsize=8)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=_DPI)
-    fig.clear()
-    return path
+    return save_figure(fig, path, _DPI)

@@ -23,10 +23,12 @@ import gzip
 import io
 import math
 import os
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
+from triplesumo._lock import held_tree
 from triplesumo.agents.policy_file import atomic_write_bytes, writing
 from triplesumo.evaluation.metrics import OUTCOMES
 from triplesumo.rules.rewards import TERMS
@@ -76,7 +78,8 @@ def tables_in(folder: Path | str, pattern: str = "*.csv") -> list[Path]:
 
 
 def read_table_bytes(path: Path | str) -> bytes:
-    """The bytes of table ``path`` as written (a packed one decompressed); ``FileNotFoundError`` names the table."""
+    """The bytes of table ``path`` as written (a packed one decompressed); ``FileNotFoundError`` names the table,
+    ``ValueError`` a packed file that does not decompress (not gzip, cut short, or bytes damaged mid-stream)."""
     where = stored(path)
     if where is None:
         raise FileNotFoundError(f"{path} not found (nor {packed_path(path).name})")
@@ -84,8 +87,8 @@ def read_table_bytes(path: Path | str) -> bytes:
     if where.name.endswith(PACKED):
         try:
             return gzip.decompress(data)
-        except (OSError, EOFError) as exc:
-            raise ValueError(f"{where}: not a gzipped table ({exc})") from None
+        except (OSError, EOFError, zlib.error) as exc:  # not gzip; cut short; damaged inside its stream
+            raise ValueError(f"{where}: not a gzipped table, or a damaged one ({exc}); nothing was changed") from None
     return data
 
 
@@ -130,6 +133,11 @@ def pack_tables(folder: Path | str, min_bytes: int = PACK_MIN_BYTES) -> list[Pat
         raise NotADirectoryError(f"{folder}: not a folder")
     if isinstance(min_bytes, bool) or not isinstance(min_bytes, int) or min_bytes < 0:
         raise ValueError(f"min_bytes must be an int >= 0, got {min_bytes!r}")
+    with held_tree(folder, "pack"):  # not while a run, evaluation or tournament in it still writes
+        return _pack(folder, min_bytes)
+
+
+def _pack(folder: Path, min_bytes: int) -> list[Path]:
     done = []
     for path in sorted(folder.rglob("*.csv")):
         if not path.is_file() or path.stat().st_size < min_bytes:

@@ -22,8 +22,13 @@ so a stopped run leaves them about equally far.
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
 import os
+import signal
+import sys
+import threading
+import time
 from collections.abc import Callable, Generator, Hashable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from contextlib import closing
@@ -34,7 +39,7 @@ from typing import Any, Protocol, TypeVar
 from triplesumo.agents.builtin import BUILTIN
 
 __all__ = ["ONE_THREAD", "Finished", "ProcessRunner", "Row", "TaskRunner", "ThreadRunner", "check_counts",
-           "play_chunks", "play_schedules", "portable_spec"]
+           "die_with_parent", "play_chunks", "play_schedules", "portable_spec"]
 
 T = TypeVar("T")
 K = TypeVar("K", bound=Hashable)
@@ -79,7 +84,8 @@ class ProcessRunner:
 
     The processes are started with ``spawn``, never ``fork``: a child forked after torch ran its
     thread pool can hang in its next torch call (see :mod:`triplesumo.agents.frozen`). So ``fn``
-    and the tasks' arguments are pickled, and ``fn`` must be importable by module and name."""
+    and the tasks' arguments are pickled, and ``fn`` must be importable by module and name. They die with
+    this process (:func:`die_with_parent`), ``kill -9`` included."""
 
     workers: int = 1
     """Tasks run at once."""
@@ -92,7 +98,8 @@ class ProcessRunner:
         saved = {name: os.environ.get(name) for name in ONE_THREAD}
         os.environ.update({name: os.environ.get(name) or "1" for name in ONE_THREAD})  # inherited by the workers
         try:
-            with ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            with ProcessPoolExecutor(self.workers, mp_context=multiprocessing.get_context("spawn"),
+                                     initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
                 yield from _finished(pool, fn, tasks)
         finally:
             for name, value in saved.items():
@@ -100,6 +107,34 @@ class ProcessRunner:
                     os.environ.pop(name, None)
                 else:
                     os.environ[name] = value
+
+
+def die_with_parent(parent: int) -> None:
+    """Make this worker process end when its parent ``parent`` (a PID) does, however the parent ends (``kill -9``
+    included): a worker initializer. On Linux the kernel sends it SIGKILL when the parent exits
+    (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread checks every half second that the parent is still
+    the one it was started by. A worker whose parent is gone already exits at once. With its workers gone, the
+    resource tracker of :mod:`multiprocessing` reads the end of its pipe and exits too: nothing is left running."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(None, use_errno=True)
+            set_pdeathsig = 1  # PR_SET_PDEATHSIG, <linux/prctl.h>
+            armed = libc.prctl(set_pdeathsig, signal.SIGKILL, 0, 0, 0) == 0
+        except (OSError, AttributeError):
+            armed = False
+    else:
+        armed = False
+    if os.getppid() != parent:  # the parent died before the signal was armed
+        os._exit(1)
+    if armed:
+        return
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
 
 
 def _finished(pool: Executor, fn: Callable[..., T], tasks: Sequence[tuple[Any, ...]]) -> Finished[T]:

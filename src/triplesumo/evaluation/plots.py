@@ -205,10 +205,18 @@ def _new_axes(title: str, xlabel: str, ylabel: str) -> tuple[Figure, Axes]:
 
 def _save(fig: Figure, path: Path) -> Path:
     """Write ``fig`` as a PNG at ``path``, then clear it to release its artists."""
+    return save_figure(fig, path, _DPI)
+
+
+def save_figure(fig: Figure, path: Path, dpi: int) -> Path:
+    """Write ``fig`` as a PNG at ``path``, then clear it to release its artists. An ``OSError`` (a full disk, a
+    read-only folder) is re-raised, of the same kind, naming the file."""
     try:
-        fig.savefig(path, dpi=_DPI)
+        fig.savefig(path, dpi=dpi)
     except OSError as exc:
-        raise _folder_error(path.parent, exc) from exc
+        reason = exc.strerror or str(exc)
+        raise (OSError(exc.errno, f"cannot write plot {path}: {reason}") if exc.errno is not None
+               else OSError(f"cannot write plot {path}: {reason}")) from exc
     finally:
         fig.clear()
     return path

@@ -73,6 +73,7 @@ from typing import Any
 
 import numpy as np
 
+from triplesumo._lock import held
 from triplesumo.agents.builtin import BUILTIN
 from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy, seat_problem
 from triplesumo.agents.zoo import find_policy_file, make_policy, policy_fingerprint
@@ -422,7 +423,12 @@ def run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None = None,
         raise ValueError("TournamentConfig.ray: run_tournament plays on the runner it is handed; pass one, e.g. "
                          "triplesumo.integrations.ray_tasks.RayRunner() inside ray_tasks.session() (as --ray does)")
     out = check_writable(Path(cfg.out), folder=True)
-    cfg = cfg.resolved()
+    with held(out, "tournament"):  # one writer: a second tournament into it meanwhile is refused
+        return _run_tournament(cfg.resolved(), match_cfg, runner, out)
+
+
+def _run_tournament(cfg: TournamentConfig, match_cfg: MatchConfig | None, runner: TaskRunner | None,
+                    out: Path) -> dict[str, Any]:
     t = Tournament(cfg, match_cfg)
     policies = {n: make_policy(s, seed=cfg.seed, expect_obs_mode=t.match_cfg.obs_mode) for n, s in t.entries.items()}
     record = json.loads(json.dumps(t.record()))

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from triplesumo._lock import held
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig
@@ -50,7 +51,11 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     out = protocol.out
     if cfg.docs:  # before hours of training: the file and its markers are there
         _docs_markers(Path(cfg.docs).read_text().splitlines())
-    out.mkdir(parents=True, exist_ok=True)
+    with held(out, "reproduce"):  # one reproduction per folder (each run and evaluation holds its own too)
+        return _run_reproduce(cfg, protocol, out)
+
+
+def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[str, Any]:
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))

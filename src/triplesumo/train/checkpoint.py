@@ -147,6 +147,23 @@ def prune(run_dir: Path, current: int) -> None:
     drop_after(run_dir, current)
 
 
+def remove_folder(folder: Path) -> None:
+    """Delete ``folder`` for good, or fail naming it: it is first renamed aside (``.NAME.removing``, which
+    :func:`checkpoints` does not list), so a folder that cannot be removed (a read-only run folder) stays whole
+    under its name and is never left half-deleted there; ``OSError`` names the folder and the cause."""
+    folder = Path(folder)
+    aside = folder.with_name(f".{folder.name}.removing")
+    try:
+        shutil.rmtree(aside, ignore_errors=True)  # (left by an earlier removal that failed)
+        os.replace(folder, aside)
+    except OSError as exc:
+        raise OSError(exc.errno, f"cannot remove {folder}: {exc.strerror or exc}; it was left as it was") from exc
+    try:
+        shutil.rmtree(aside)
+    except OSError as exc:
+        raise OSError(exc.errno, f"cannot remove {aside} (was {folder}): {exc.strerror or exc}") from exc
+
+
 def drop_after(run_dir: Path, epoch: int) -> None:
     """Remove the checkpoint folders of ``run_dir`` that record an epoch later than ``epoch``: a history
     abandoned by ``--resume --from`` (its rows are cut; the epochs are trained again). Folders that record

@@ -10,6 +10,7 @@ saved with it (the frozen weights it plays) and played again by a resume."""
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -75,10 +76,12 @@ WORKER_NICE = 19
 what is left (on one with cores to spare, nothing changes)."""
 
 
-def _worker_init() -> None:
-    import os
-
+def _worker_init(parent: int) -> None:
     import torch
+
+    from triplesumo.evaluation.parallel import die_with_parent
+
+    die_with_parent(parent)  # a training run killed with kill -9 leaves no evaluation worker behind
 
     torch.set_num_threads(1)  # the worker plays numpy policies; its MuJoCo threads are the run's n_threads
     if hasattr(os, "nice"):  # (POSIX; Windows has no niceness)
@@ -126,7 +129,8 @@ class Evaluations:
 
     def _submit(self, job: Pending) -> None:
         if self._pool is None:  # spawned, not forked: the training process holds threads (torch, the learner's)
-            self._pool = multiprocessing.get_context("spawn").Pool(1, initializer=_worker_init)
+            self._pool = multiprocessing.get_context("spawn").Pool(1, initializer=_worker_init,
+                                                                   initargs=(os.getpid(),))
         job.future = self._pool.apply_async(play_evaluation, self._args(job.frozen))
         self.pending.append(job)
 

@@ -52,6 +52,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+from triplesumo._lock import held
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.evaluation.metrics_csv import stored, tables_in
 from triplesumo.train import checkpoint
@@ -183,6 +184,11 @@ def compact_run(run_dir: Path | str, drop_replay: bool = False) -> dict[str, Any
     replay buffer goes too (a repository keeps no buffer): a resume then starts with an empty one, not exactly
     as the run would have gone on. Returns what was removed."""
     run_dir = Path(run_dir)
+    with held(run_dir, "compact"):  # not while a run trains or resumes in it
+        return _compact(run_dir, drop_replay)
+
+
+def _compact(run_dir: Path, drop_replay: bool) -> dict[str, Any]:
     folder = checkpoint.latest(run_dir)
     checkpoint.verify(folder, need_replay=(folder / "replay.npz").is_file())
     state = load_json(folder / "state.json")
@@ -205,9 +211,10 @@ def compact_run(run_dir: Path | str, drop_replay: bool = False) -> dict[str, Any
         write_pool(root, state["league"])
         atomic_write_bytes(pruned_path, (json.dumps({"members": pruned}, indent=1) + "\n").encode())
         for m in dropped:
-            shutil.rmtree(root / "members" / m["id"], ignore_errors=True)
-    for old in older:
-        shutil.rmtree(old, ignore_errors=True)
+            if (root / "members" / m["id"]).exists():
+                checkpoint.remove_folder(root / "members" / m["id"])
+    for old in older:  # a folder that cannot be removed fails the command, naming it (nothing claims it went)
+        checkpoint.remove_folder(old)
     return removed
 
 
@@ -222,8 +229,13 @@ def parent_config(parent_dir: Path | str) -> TrainConfig:
 def fork_run(parent_dir: Path | str, cfg: TrainConfig, from_checkpoint: str | None = None) -> Path:
     """Make the fork ``cfg.out/cfg.name`` of the run in ``parent_dir`` at its checkpoint ``from_checkpoint``
     (``epoch-N``; default its latest) and return its folder (module docstring). ``cfg`` is the parent's
-    config with the fork's changes (:func:`check_fork`); nothing is written when a check fails."""
-    parent_dir = Path(parent_dir)
+    config with the fork's changes (:func:`check_fork`); nothing is written when a check fails. The new
+    folder is held while it is made (:func:`triplesumo._lock.held`)."""
+    with held(Path(cfg.out) / cfg.name, "train --fork"):
+        return _fork_run(Path(parent_dir), cfg, from_checkpoint)
+
+
+def _fork_run(parent_dir: Path, cfg: TrainConfig, from_checkpoint: str | None) -> Path:
     parent = parent_config(parent_dir)
     changes = check_fork(parent, cfg)
     seeds = added_seeds(parent, cfg)

@@ -39,6 +39,7 @@ import mujoco
 import numpy as np
 import torch
 
+from triplesumo._lock import held
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.policy_file import load_json, save_policy
 from triplesumo.agents.zoo import expand_pairs
@@ -619,23 +620,28 @@ def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str,
           session_command: str | None = None) -> TrainResult:
     """Start a run, or resume the one in ``resume_dir`` (with e.g. more epochs).
 
+    The run folder is held for the whole call (:func:`triplesumo._lock.held`): a second process training,
+    resuming or starting over the same folder meanwhile is refused at once, naming this one's PID.
+
     A new run refuses a folder that already holds a run (:class:`RunExistsError`) unless
     ``start_over``, which moves that run aside to ``RUN.old-K`` first. ``from_checkpoint``
     (``epoch-N``) resumes from an older checkpoint than the latest, e.g. when the latest is
     damaged; the epochs after it are trained again. ``session_command`` is what started this session
     (the CLI's command line), recorded in its leg of ``RUN/legs.json`` (:mod:`triplesumo.train.legs`).
     """
-    if resume_dir is not None:
-        resume_dir = Path(resume_dir)
-        raw = load_json(resume_dir / "config.json")
-        saved = config_from_json(raw, str(resume_dir / "config.json"))
-        if isinstance(raw, dict) and "physics" not in raw:  # read as env v0's: unless its checkpoints say otherwise
-            check_checkpoint_physics(resume_dir, saved.physics)
-        cfg = dataclasses.replace(saved, **(overrides or {}))
-        trainer = Trainer(cfg, run_dir=resume_dir, resume=True, from_checkpoint=from_checkpoint,
-                          session_command=session_command)
-    else:
-        if from_checkpoint is not None:
-            raise ValueError("--from needs --resume RUN_DIR (it names a checkpoint of that run)")
-        trainer = Trainer(cfg, start_over=start_over, session_command=session_command)
-    return trainer.run()
+    if resume_dir is None and from_checkpoint is not None:
+        raise ValueError("--from needs --resume RUN_DIR (it names a checkpoint of that run)")
+    run_dir = Path(resume_dir) if resume_dir is not None else Path(cfg.out) / cfg.name
+    what = "train --resume" if resume_dir is not None else "train --start-over" if start_over else "train"
+    with held(run_dir, what):  # one writer per run folder, from before its config is read to the end
+        if resume_dir is not None:
+            raw = load_json(run_dir / "config.json")
+            saved = config_from_json(raw, str(run_dir / "config.json"))
+            if isinstance(raw, dict) and "physics" not in raw:  # read as env v0's: unless its checkpoints say otherwise
+                check_checkpoint_physics(run_dir, saved.physics)
+            cfg = dataclasses.replace(saved, **(overrides or {}))
+            trainer = Trainer(cfg, run_dir=run_dir, resume=True, from_checkpoint=from_checkpoint,
+                              session_command=session_command)
+        else:
+            trainer = Trainer(cfg, start_over=start_over, session_command=session_command)
+        return trainer.run()

@@ -12,7 +12,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 import shlex
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from triplesumo._lock import held, move_held
 from triplesumo.agents.policy_file import atomic_write_bytes, load_json
 from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
@@ -206,8 +206,8 @@ def refuse_existing_run(run_dir: Path, start_over: bool) -> Path | None:
     k = 1
     while (aside := run_dir.with_name(f"{run_dir.name}.old-{k}")).exists():
         k += 1
-    with checkpoint.writing(aside):
-        os.replace(run_dir, aside)
+    with held(run_dir, "train --start-over"), checkpoint.writing(aside):  # (not while another process runs it)
+        move_held(run_dir, aside, "train --start-over")
     print(f"start over: the earlier run in {run_dir} was moved to {aside}")
     return aside
 

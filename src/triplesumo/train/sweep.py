@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from triplesumo._lock import held
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.metrics import moving_winning_rate
@@ -243,9 +244,12 @@ def run_sweep(cfg: SweepConfig, base: TrainConfig | None, runner: TaskRunner) ->
     """Run (or resume) the sweep's trials as tasks of ``runner`` (the command line hands down a
     :class:`~triplesumo.integrations.ray_tasks.RayRunner` built from ``cfg.address``, ``num_cpus`` and
     ``max_retries``), evaluate and compare when asked (on the same runner), write the summary; returns it."""
-    base = base or TrainConfig()
     out = Path(cfg.out).resolve()
-    out.mkdir(parents=True, exist_ok=True)
+    with held(out, "sweep"):  # one sweep per folder (each trial holds its own run folder)
+        return _run_sweep(cfg, base or TrainConfig(), runner, out)
+
+
+def _run_sweep(cfg: SweepConfig, base: TrainConfig, runner: TaskRunner, out: Path) -> dict[str, Any]:
     todo_all = trials(cfg, base)
     canonical = {k: v for k, v in config_to_json(dataclasses.replace(base, progress=False)).items()
                  if k not in ("out", "name")}  # what the sweep sets itself
