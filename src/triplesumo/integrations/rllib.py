@@ -389,9 +389,9 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
             frozen nor trained are RLlib's default modules left as initialised.
         frozen_in_env: ``True`` (default): the frozen modules' agents act inside the env
             (its ``fixed`` entry) with the project's numpy policies, and RLlib's modules,
-            multi-agent dicts and episodes hold only the other agents (1.8 to 3.5 times the
-            env steps/s of ``False`` per env runner on a loaded 2-core box, ``triplesumo bench
-            rllib``); their outcomes are still reported. ``False``: every agent is RLlib's, the frozen ones
+            multi-agent dicts and episodes hold only the other agents (several times the
+            env steps/s of ``False`` per env runner: ``triplesumo bench rllib``); their
+            outcomes are still reported. ``False``: every agent is RLlib's, the frozen ones
             played by :class:`FrozenPolicyModule` (the torch actor) as RLlib modules.
         **overrides: :class:`MatchConfig` fields (``max_steps=200``, ``obs_mode=...``).
 
