@@ -1,4 +1,4 @@
-"""Data flows one way (STYLE.md): the import-linter contracts in ``pyproject.toml`` hold, cover every module,
+"""Data flows one way (docs/layout.md): the import-linter contracts in ``pyproject.toml`` hold, cover every module,
 and fail on a planted upward import and a planted import circle.
 
     cli -> reproduce | demo | benchmarks -> integrations -> train -> evaluation -> algos | zoo -> agents

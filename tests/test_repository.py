@@ -9,6 +9,7 @@ and the tracked files take at most the issue's 100 MB. Test fixtures under ``tes
 
 from __future__ import annotations
 
+import re
 import subprocess
 from pathlib import Path
 
@@ -88,3 +89,86 @@ def test_every_plot_or_video_beside_the_pages_is_shown_by_a_page(files: frozense
     unseen = sorted(f for f in files if f.startswith(BESIDE_PAGES) and f.endswith((".png", ".mp4", ".gif"))
                     and (ROOT / f).resolve() not in shown)
     assert not unseen, f"plots or videos under {BESIDE_PAGES} no page shows (link or drop them): {unseen[:10]}"
+
+
+# ------------------------------------------------------------------ code, not history; no citation of a missing file
+HISTORY = re.compile(r"\bissues?\s*#?\d+|\bissue's\b|\bthe issue\b|\bPR\s*#?\d+"
+                     r"|(?<![\w.`'\"])sessions?(?![\w(`\"]|'(?!s\b))", re.I)
+"""A mention of the project's history in the package: an issue or pull request, or a session as a word of prose.
+The code names ``ray_tasks.session`` and ``session_command`` are names, not history, and do not match."""
+PACKAGE = "src/"
+TEXT = (".py", ".json", ".xml", ".md", ".toml", ".txt", ".yml", ".yaml", ".cfg", ".cff", ".in")
+"""Suffixes of the tracked text files read here."""
+
+
+def history_in(text: str) -> list[str]:
+    """The lines of ``text`` that mention the project's history (:data:`HISTORY`)."""
+    return [line.strip() for line in text.splitlines() if HISTORY.search(line)]
+
+
+def test_history_is_found() -> None:
+    for line in ("(issue 38)", "Issue 10: the batched path", "the issue's +0.2", "see issue #12", "fixed in PR 7",
+                 "A run is trained over several sessions", "this session's leg"):
+        assert history_in(line), line
+    for line in ("with ray_tasks.session(address):", "session_command=typed", ":func:`session` connects",
+                 '__all__ = ["session"]', "def session(address: str = ''):", "it issues a warning"):
+        assert not history_in(line), line
+
+
+def test_the_package_holds_code_not_history(files: frozenset[str]) -> None:
+    """No issue, pull request or session in src/: a docstring or comment says what the code does and why."""
+    found = [f"{f}: {line[:100]}" for f in sorted(files) if f.startswith(PACKAGE) and f.endswith(TEXT)
+             and (ROOT / f).is_file() for line in history_in((ROOT / f).read_text())]
+    assert not found, "history in the package (say what the code does and why instead):\n" + "\n".join(found)
+
+
+_MARKDOWN = re.compile(r"(?<![\w./*{}<>$-])((?:\.{1,2}/|[\w.-]+/)*[\w-][\w.-]*\.md)(?![\w/])")
+PLACEHOLDERS = {"NAME"}
+"""File stems written as placeholders (``docs/environments/NAME.md``): not a citation of one file."""
+RECORDS = ("docs/runs/", "tests/data/")
+"""Run outputs and test fixtures: files recorded as they were written, not read here."""
+
+
+def cited_markdown(text: str) -> list[str]:
+    """The ``*.md`` files a text names: bare names (``README.md``) and paths (``docs/layout.md``,
+    ``../README.md``), less web addresses."""
+    return _MARKDOWN.findall(re.sub(r"[a-z][a-z0-9+.-]*://\S+", "", text))
+
+
+def cite_resolves(cite: str, source: str, files: frozenset[str]) -> bool:
+    """Whether the repository has the ``*.md`` file that ``cite`` names in the tracked file ``source``: a bare name
+    anywhere; a path from the citing file's folder, the repository's root or ``docs/`` (where mkdocs.yml names its
+    pages); a path inside a folder the repository does not have (an output folder: ``OUT/REPRODUCTION.md``) by its
+    file name. A path from a folder the repository has (``docs/``, ``src/``, ``../``) must resolve."""
+    path = Path(cite)
+    if path.stem in PLACEHOLDERS:
+        return True
+    names = {Path(f).name for f in files}
+    if len(path.parts) == 1:
+        return path.name in names
+    for base in ((ROOT / source).parent, ROOT, ROOT / "docs"):
+        full = (base / path).resolve()
+        if full.is_file() or (full.is_relative_to(ROOT) and full.relative_to(ROOT).as_posix() in files):
+            return True
+    tops = {f.split("/")[0] for f in files if "/" in f}
+    return path.parts[0] not in {*tops, "..", "."} and path.name in names
+
+
+def test_citations_of_markdown_files_are_found_and_checked() -> None:
+    files = frozenset({"README.md", "docs/layout.md", "docs/REPRODUCTION.md", "src/triplesumo/cli.py"})
+    text = ("Layers (STYLE.md); see docs/layout.md, [x](../README.md), OUT/REPRODUCTION.md, docs/NOPE.md, "
+            "docs/environments/NAME.md and https://github.com/a/b/blob/main/CONTRIBUTING.md; globs: /bench/*.md")
+    cites = cited_markdown(text)
+    assert cites == ["STYLE.md", "docs/layout.md", "../README.md", "OUT/REPRODUCTION.md", "docs/NOPE.md",
+                     "docs/environments/NAME.md"]
+    missing = [c for c in cites if not cite_resolves(c, "docs/layout.md", files)]
+    assert missing == ["STYLE.md", "docs/NOPE.md"]
+
+
+def test_no_tracked_text_file_cites_a_markdown_file_the_repository_lacks(files: frozenset[str]) -> None:
+    this = Path(__file__).resolve().relative_to(ROOT).as_posix()  # (its examples cite missing files on purpose)
+    broken = [f"{f}: {cite}" for f in sorted(files) if f.endswith(TEXT) and not f.startswith(RECORDS)
+              and f != this and (ROOT / f).is_file()
+              for cite in cited_markdown((ROOT / f).read_text(errors="replace"))
+              if not cite_resolves(cite, f, files)]
+    assert not broken, "citations of *.md files the repository does not have:\n" + "\n".join(broken)

@@ -128,7 +128,8 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     picked = shipped["evaluation"]["selection"]
     assert picked["train_mwr"] == pytest.approx(sum(lwr[-200:]) / len(lwr[-200:]))
     assert picked["algo_iqm_test_mwr"] == groups[top]["iqm"] and picked["seeds"] == 1
-    assert json.loads((zoo / "bug.json").read_text())["algo"] == top
+    assert json.loads((zoo / "bug.json").read_text())["alias_of"] == f"bug-{top}"  # an alias: one copy of its weights
+    assert not (zoo / "bug.safetensors").exists()
     assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 | {picked['train_mwr']:+.3f} |" in report
     # zoo:bug-ALGO resolves where a zoo spec is accepted: a policy, an evaluated candidate, a seat, a tournament entry
     assert make_policy(f"zoo:bug-{best['algo']}", expect_obs_mode="paper") is not None
@@ -150,7 +151,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     # what was published stays in the record and the report of later runs and of --status
     assert main([a for a in argv if a != "--publish"] + ["--status"]) == 0
     assert f"| `zoo:bug-{best['algo']}` | {best['algo']} | 0 |" in (out / "REPRODUCTION.md").read_text()
-    assert [p["name"] for p in _record(out)["published"]] == ["ant", "spider", "bug", "bug-ddpg", "bug-ppo"]
+    assert [p["name"] for p in _record(out)["published"]] == ["ant", "spider", "bug-ddpg", "bug-ppo", "bug"]
 
     # packed (triplesumo pack: every table gzipped, as a reproduction kept beside a docs page), it is the same
     # reproduction: complete, nothing trained or played again, the same report

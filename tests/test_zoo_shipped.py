@@ -27,13 +27,13 @@ def test_the_zoo_ships_the_paper_roster_and_the_self_play_policies() -> None:
 
 
 def test_the_zoo_ships_one_self_play_spider() -> None:
-    spiders = [n for n in zoo.available() if json.loads((zoo.ZOO_DIR / f"{n}.json").read_text())["agent"] == "spider"]
+    spiders = [n for n in zoo.available() if zoo.manifest_of(n)["agent"] == "spider"]
     assert spiders == ["spider", "spider-selfplay"]
 
 
 @pytest.mark.parametrize("name", zoo.available())
 def test_shipped_policy_manifest_says_how_it_was_made(name: str) -> None:
-    manifest = json.loads((zoo.ZOO_DIR / f"{name}.json").read_text())
+    manifest = zoo.manifest_of(name)  # (an alias's: its target's)
     scenario = manifest.get("scenario", "paper")
     if scenario == "paper":
         assert manifest["agent"] == name.split("-")[0]  # spider-selfplay plays the Spider
@@ -112,7 +112,7 @@ def test_paper_env_uses_the_shipped_ant_and_spider() -> None:
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAD_TO_HEAD = [n for n in zoo.available()
-                if json.loads((zoo.ZOO_DIR / f"{n}.json").read_text())["evaluation"].get("kind") == "head_to_head"]
+                if zoo.alias_target(n) is None and zoo.manifest_of(n)["evaluation"].get("kind") == "head_to_head"]
 
 
 def test_some_shipped_policy_is_published_with_head_to_head_claims() -> None:
@@ -188,7 +188,7 @@ def test_shipped_head_to_head_claims_match_the_published_matches(name: str) -> N
     """Every row a manifest claims is its evaluation folder's ``summary.json`` row, and every paired
     difference is recomputed here from the per-start outcomes of the candidates' ``metrics.csv``
     (win +1, loss -1, draw 0; mean of this minus other, normal 95% interval)."""
-    manifest = json.loads((zoo.ZOO_DIR / f"{name}.json").read_text())
+    manifest = zoo.manifest_of(name)
     evaluation = manifest["evaluation"]
     assert evaluation["runs"] and evaluation["test_mwr"] == evaluation["runs"][0]["rows"][
         evaluation["runs"][0]["this"]]["mean_lwr"]
@@ -287,9 +287,9 @@ def test_a_shipped_bug_is_its_trial_and_its_figures_are_recomputed_from_the_matc
     algos = {r["algo"] for r in rows}
     by_algo = {a: iqm(np.array([float(r["test_mwr"]) for r in rows if r["algo"] == a])) for a in algos}
     assert ev["selection"]["algo_iqm_test_mwr"] == pytest.approx(by_algo[algo], abs=1e-12)
-    if name == "bug":
+    if name == "bug":  # an alias of that Bug (zoo:bug-ALGO), its weights stored once
         assert algo == max(by_algo, key=lambda a: (by_algo[a], a == "ddpg"))
-        assert file_sha256(zoo.ZOO_DIR / "bug.safetensors") == file_sha256(zoo.ZOO_DIR / f"bug-{algo}.safetensors")
+        assert zoo.alias_target("bug") == f"bug-{algo}" and manifest["zoo_name"] == f"bug-{algo}"
     else:
         assert name == f"bug-{algo}"
 
@@ -318,3 +318,87 @@ def test_the_headline_table_is_recomputed_from_the_committed_matches() -> None:
             line = next(x for x in text.splitlines() if x.startswith(label))
             assert values in line and mean in line, (page.name, line, values, mean)
         assert f"| passive / random | {baseline['passive']:+.3f} / {baseline['random']:+.3f} |" in text, page.name
+
+
+# ------------------------------------------------------------------ aliases: one copy of each weights file
+def test_every_shipped_weights_file_is_stored_once_and_zoo_bug_is_an_alias() -> None:
+    from triplesumo.agents.policy_file import file_sha256
+
+    weights = sorted(zoo.ZOO_DIR.glob("*.safetensors"))
+    digests = [file_sha256(p) for p in weights]
+    assert len(set(digests)) == len(digests), [p.name for p in weights]
+    aliases = {n: zoo.alias_target(n) for n in zoo.available() if zoo.alias_target(n)}
+    assert aliases == {"bug": zoo.manifest_of("bug")["zoo_name"]} and aliases["bug"].startswith("bug-")
+    assert sorted(p.stem for p in weights) == sorted(set(zoo.available()) - set(aliases))
+    assert json.loads((zoo.ZOO_DIR / "bug.json").read_text())["alias_of"] == aliases["bug"]
+
+
+def test_an_alias_loads_the_weights_of_its_target() -> None:
+    from triplesumo.agents.policy_file import load_policy
+
+    target = zoo.alias_target("bug")
+    assert target is not None and zoo.policy_stem("zoo:bug") == zoo.ZOO_DIR / target
+    (alias, alias_manifest), (same, manifest) = zoo.load("bug"), zoo.load(target)
+    assert alias_manifest == manifest  # the loader checked the weights against the target's sha256
+    obs = np.linspace(-1.0, 1.0, manifest["obs_dim"] * 4).astype(np.float32).reshape(4, -1)
+    assert np.array_equal(alias(obs), same(obs))
+    torch_alias, torch_target = zoo.make_policy("zoo:bug"), load_policy(zoo.ZOO_DIR / target)[0]
+    for (k, a), (_, b) in zip(torch_alias.actor.state_dict().items(), torch_target.actor.state_dict().items(),
+                              strict=True):
+        assert a.equal(b), k
+    assert zoo.policy_fingerprint("zoo:bug") == zoo.policy_fingerprint(f"zoo:{target}")
+    assert zoo.find_policy_file("zoo:bug") == zoo.ZOO_DIR / target
+
+
+def _tiny_zoo(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A zoo of one shipped policy (``spider``, copied) pointed at by ``ZOO_DIR``."""
+    import shutil
+
+    for suffix in (".json", ".safetensors"):
+        shutil.copy(zoo.ZOO_DIR / f"spider{suffix}", tmp_path / f"spider{suffix}")
+    monkeypatch.setattr(zoo, "ZOO_DIR", tmp_path)
+    return tmp_path
+
+
+def test_publish_alias_writes_a_manifest_alone_and_replaces_an_earlier_copy(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tiny = _tiny_zoo(tmp_path, monkeypatch)
+    for suffix in (".json", ".safetensors"):  # an earlier full copy under the alias's name
+        (tiny / f"arachne{suffix}").write_bytes((tiny / f"spider{suffix}").read_bytes())
+    path = zoo.publish_alias("arachne", "spider", extra={"rule": "why"})
+    assert json.loads(path.read_text()) == {"alias_of": "spider", "zoo_name": "arachne", "rule": "why"}
+    assert not (tiny / "arachne.safetensors").exists() and zoo.available() == ["arachne", "spider"]
+    assert zoo.load("arachne")[1]["zoo_name"] == "spider"
+    with pytest.raises(zoo.PolicyFileError, match=r"cannot make zoo:x an alias of zoo:beetle: .* no weights"):
+        zoo.publish_alias("x", "beetle")
+    with pytest.raises(zoo.PolicyFileError, match=r"cannot make zoo:x an alias of zoo:arachne"):
+        zoo.publish_alias("x", "arachne")  # an alias of an alias
+    with pytest.raises(ValueError, match="of itself"):
+        zoo.publish_alias("spider", "spider")
+
+
+@pytest.mark.parametrize(("alias", "error"), [
+    ({"alias_of": "beetle"}, r"moth\.json: zoo:moth is an alias of zoo:beetle, which the zoo does not ship "
+                             r"\(shipped: \['moth', 'spider'\]\)"),
+    ({"alias_of": 3}, r"moth\.json: alias_of must be a zoo name, got 3"),
+])
+def test_an_alias_of_a_name_the_zoo_lacks_is_refused_naming_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, alias: dict[str, object], error: str) -> None:
+    tiny = _tiny_zoo(tmp_path, monkeypatch)
+    (tiny / "moth.json").write_text(json.dumps(alias))
+    for load in (lambda: zoo.load("moth"), lambda: zoo.make_policy("zoo:moth"),
+                 lambda: zoo.policy_fingerprint("zoo:moth")):
+        with pytest.raises(zoo.PolicyFileError, match=error):
+            load()
+
+
+def test_an_alias_of_an_alias_or_with_weights_of_its_own_is_refused(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    tiny = _tiny_zoo(tmp_path, monkeypatch)
+    (tiny / "moth.json").write_text(json.dumps({"alias_of": "spider"}))
+    (tiny / "gnat.json").write_text(json.dumps({"alias_of": "moth"}))
+    with pytest.raises(zoo.PolicyFileError, match=r"zoo:gnat is an alias of zoo:moth, itself an alias"):
+        zoo.load("gnat")
+    (tiny / "moth.safetensors").write_bytes((tiny / "spider.safetensors").read_bytes())
+    with pytest.raises(zoo.PolicyFileError, match=r"an alias \(of zoo:spider\) ships no weights"):
+        zoo.load("moth")

@@ -157,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.train.run_folder import RESUME_OVERRIDES, flag_list
 
             plain = ("command", "resume", "fork", "from_checkpoint", "start_over")
-            typed = shlex.join(["triplesumo", *argv])  # this session's leg records it (RUN/legs.json)
+            typed = shlex.join(["triplesumo", *argv])  # this command's leg records it (RUN/legs.json)
             given = {k for k in vars(args) if k not in plain}
             if args.fork:
                 import dataclasses
@@ -280,11 +280,13 @@ def main(argv: list[str] | None = None) -> int:
                 names = zoo_module.available()
                 width = max((len(n) for n in names), default=8)
                 for name in names:
-                    meta = json.loads((zoo_module.ZOO_DIR / f"{name}.json").read_text())
+                    meta = zoo_module.manifest_of(name)  # (an alias's: its target's)
                     ev = meta.get("evaluation", {})
                     mwr = (f" test_mwr={ev['test_mwr']:+.3f} [{ev['test_mwr_lo']:+.3f}, {ev['test_mwr_hi']:+.3f}]"
                            if "test_mwr" in ev else "")
                     was = f" (was zoo:{meta['renamed_from']})" if "renamed_from" in meta else ""
+                    target = zoo_module.alias_target(name)
+                    was += f" (alias of zoo:{target})" if target else ""
                     print(f"{name:{width}s} agent={meta['agent']} env={meta.get('env_version', 'v0')} "
                           f"obs_mode={meta['obs_mode']} epochs={meta.get('epochs')} seed={meta.get('seed')}{mwr}{was}  "
                           f"made by: {meta.get('command')}")

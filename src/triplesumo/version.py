@@ -7,7 +7,7 @@ so that reading a version never imports gymnasium.
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 ENV_VERSION = "v2"
 """Version of the envs' behaviour, in every id (``TripleSumo-v2``, ``triplesumo_v2``); the history is in
 :class:`triplesumo.envs.parallel.TripleSumoParallelEnv`."""

@@ -9,9 +9,8 @@ actions. Why not torch for a policy that never learns:
   of ``gym.make_vec(..., vectorization_mode="async")`` and SB3's
   ``SubprocVecEnv(start_method="fork")``). Loading and acting here touch no torch.
 - **Cheap for one observation.** No torch dispatch: a zoo policy on one observation costs
-  about 47 us against 74 us for the torch actor under ``inference_mode`` (2-core box, one
-  thread each). A batch of 16 costs more (about 315 us against 183 us: float64 GEMM),
-  still small beside the 16 matches' physics step it drives.
+  less than the torch actor under ``inference_mode``. A batch costs more (float64 GEMM),
+  still small beside the matches' physics step it drives (``docs/bench/index.md``).
 - **Independent of the batch size in practice.** float32 GEMM and GEMV sum in different
   orders and give last-bit differences between an observation alone and inside a batch;
   float64 sums differ by about 1e-16 before the cast to float32, which moves a float32

@@ -1,4 +1,4 @@
-"""Uniform experience replay for off-policy learners (DDPG), in preallocated numpy arrays
+"""Uniform experience replay for the off-policy learners (DDPG, TD3, SAC), in preallocated numpy arrays
 (or torch tensors on a device: :class:`TorchReplayBuffer`).
 
 What goes in (the caller's contract):

@@ -19,9 +19,9 @@ Layouts:
     4 matches per runner (``ENVS_PER_RUNNER``); lean infos.
 ``in_env_1``
     As ``in_env_4`` with 1 match per runner.
-``modules_1`` (before issue 39 item 14)
+``modules_1``
     The frozen Ant and Spider as RLlib modules (``frozen_in_env=False``, torch actors),
-    1 match per runner, full infos: the adapter's layout before.
+    1 match per runner, full infos: what ``in_env_4`` is measured against.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """``triplesumo bench skill``: time to skill, the wall time and env steps until Bug's team first
-reaches a test MWR of ``target`` (the issue's +0.2), per algorithm.
+reaches a test MWR of ``target`` (default +0.2), per algorithm.
 
 For each algorithm Bug is trained with the project's own ``triplesumo train`` (``--learn
 bug=ALGO``, the match of ``--train.*``: by default the paper's ongoing match of ``zoo:ant``

@@ -15,8 +15,8 @@ Exactness: the trajectories are bit for bit those of stepping each match alone w
     4's native threaded stepping. Its state rows are ``mjSTATE_INTEGRATION`` (qpos, qvel,
     controls *and* the solver warm start) and a persistent batch keeps one ``MjData`` per
     simulation, so after a step ``Batch.get_data(k, match.data)`` hands match ``k`` its
-    complete ``MjData``: contacts for the contact forces, warning counters, warm start.
-    That copy costs about 3 us; no ``mj_forward`` is needed.
+    complete ``MjData``: contacts for the contact forces, warning counters, warm start;
+    no ``mj_forward`` is needed.
 ``backend="threads"``
     A Python thread pool (the calling thread and ``n_threads - 1`` others) in which each
     thread runs whole steps (``sim.step`` then ``finish_step``) on the matches' own
@@ -24,23 +24,15 @@ Exactness: the trajectories are bit for bit those of stepping each match alone w
     contacts cost more; fixed blocks per thread left one thread waiting). ``mj_step``
     releases the GIL, so one thread's physics overlaps another's Python rules.
 
-Why not ``mujoco.rollout`` (measured, mujoco 4.0.0): its persistent pool steps *scratch*
-``MjData`` (one per thread, any of which may run any match) and returns only the
-``mjSTATE_FULLPHYSICS`` state, without the final ``qacc_warmstart``. Each match's data
-must then be set from that state and ``mj_forward`` run for its contacts (about 25 us,
-4 % of an RK4 env step). That is not exact twice over: the lost warm start moves the
-solver's result (qpos differed from sequential stepping from the 4th step on: 3e-15
-after 10 steps, 1.5e-8 after 100, 16 matches, growing with the chaos of contact), and
-``mj_forward`` gives the contacts of the new state where ``mj_step`` leaves those of the
-last substep's start, so the observed contact forces change (by 7 N at the 4th step of
-a test). Rollout also clears the warning counters and stops a trajectory at its first
-warning.
-
-Speed on the 2-core machine (16 matches, RK4; median of interleaved rounds, noisy):
-physics alone, against ``mj_step`` match after match: ``mujoco`` backend on 2 threads
-1.70 x, Python threads 1.55 x, rollout on 2 threads plus ``mj_forward`` 1.52 x. Whole
-steps with the rules (``triplesumo bench env``): ``mujoco`` 2 threads about 1.5-1.6 x,
-``threads`` 2 threads about 1.4-1.5 x; one thread of either is as fast as step_array.
+Why not ``mujoco.rollout``: its persistent pool steps *scratch* ``MjData`` (one per
+thread, any of which may run any match) and returns only the ``mjSTATE_FULLPHYSICS``
+state, without the final ``qacc_warmstart``. Each match's data must then be set from that
+state and ``mj_forward`` run for its contacts, which is not exact twice over: the lost warm
+start moves the solver's result, and ``mj_forward`` gives the contacts of the new state
+where ``mj_step`` leaves those of the last substep's start, so the observed contact forces
+change. Rollout also clears the warning counters and stops a trajectory at its first
+warning. How much each backend gains, and the measurements behind this paragraph, are in
+``docs/bench/index.md``.
 
 Finished matches are not reset here: after a step in which ``results[k]`` is terminated
 or truncated, call :meth:`reset_one` for ``k`` before the next :meth:`step`.
@@ -305,9 +297,9 @@ class MatchBatch:
         # Every thread (the calling one too, as mujoco.batch's caller) takes the next match not yet
         # taken from one shared iterator (next() of a range iterator is atomic under the GIL): the
         # matches' physics costs differ with their contacts, and fixed blocks of matches per thread
-        # left one thread idle while the other finished its block (measured: 6.8 ms against 6.0 ms of
-        # mujoco.batch for 16 matches on 2 threads). The matches with the most contacts at their last
-        # step go first, so the last ones taken are short. Which thread steps a match changes nothing in it.
+        # left one thread idle while the other finished its block (docs/bench/index.md). The matches with
+        # the most contacts at their last step go first, so the last ones taken are short. Which thread
+        # steps a match changes nothing in it.
         todo = iter(range(self.n_matches) if self._pool is None else
                     sorted(range(self.n_matches), key=self._contacts.__getitem__, reverse=True))
         others = [] if self._pool is None else [self._pool.submit(self._physics_block, todo, ctrl)
@@ -593,9 +585,8 @@ class VectorMatches:
     ``mj_rnePostConstraint`` release the GIL) and copies their states into rows, then the
     rules judge all matches over arrays. The ``mujoco`` backend (``mujoco.batch``) would
     have to copy every match's whole ``MjData`` out of the batch after each step for its
-    contact forces, which doubles the memory the physics runs through: measured on the
-    2-core box, 0.84-0.91 x raw ``mujoco.batch`` physics of the same matches against
-    0.94-0.97 x on threads (``docs/bench/env_vector_cpu.md``).
+    contact forces, which doubles the memory the physics runs through and slows it
+    (``docs/bench/index.md``).
 
     Shapes (``N = num_envs``, ``A = n_agents``): observations ``(N, A, obs_dim)`` float32;
     actions ``(N, A, act_dim)`` in [-1, 1], scaled to each agent's control range as

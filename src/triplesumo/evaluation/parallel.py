@@ -7,7 +7,7 @@ finishes. :class:`ThreadRunner` runs the tasks on threads of this process, :clas
 worker processes of this machine (what ``evaluate --workers N`` plays on); Ray's runner is
 :class:`triplesumo.integrations.ray_tasks.RayRunner`, which the command line builds for
 ``--ray``. So nothing in :mod:`triplesumo.evaluation` or :mod:`triplesumo.train` imports Ray
-or :mod:`triplesumo.integrations`: the layers stay one-way (STYLE.md).
+or :mod:`triplesumo.integrations`: the layers stay one-way (the import-linter contracts in ``pyproject.toml``).
 
 :func:`play_chunks` is the one pattern of a schedule of matches: matches ``first .. n - 1``
 are cut into chunks, each chunk is a task that plays its matches with the same code as a

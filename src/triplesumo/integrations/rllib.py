@@ -416,9 +416,9 @@ def make_config(scenario: str | MatchConfig = "paper", policies_to_train: Collec
             frozen nor trained are RLlib's default modules left as initialised.
         frozen_in_env: ``True`` (default): the frozen modules' agents act inside the env
             (its ``fixed`` entry) with the project's numpy policies, and RLlib's modules,
-            multi-agent dicts and episodes hold only the other agents (1.8 to 3.5 times the
-            env steps/s of ``False`` per env runner on a loaded 2-core box, ``triplesumo bench
-            rllib``); their outcomes are still reported. ``False``: every agent is RLlib's, the frozen ones
+            multi-agent dicts and episodes hold only the other agents (several times the
+            env steps/s of ``False`` per env runner: ``triplesumo bench rllib``); their
+            outcomes are still reported. ``False``: every agent is RLlib's, the frozen ones
             played by :class:`FrozenPolicyModule` (the torch actor) as RLlib modules.
         threads: torch's intra-op threads in this process (``torch.set_num_threads``), set here: the driver
             holds the learner (RLlib's default ``num_learners=0``) and, with ``num_env_runners=0``, samples too.

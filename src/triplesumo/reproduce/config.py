@@ -32,7 +32,7 @@ class PairError(RuntimeError):
     """Stage 1 found no pair by its rules within the sides' epoch budgets (the message names the side, its screens
     and the record)."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
-"""Short names of the ablations the issue asks about (Gaussian noise, a smaller still punishment)."""
+"""Short names of the ablations of the paper preset (Gaussian noise, a smaller still punishment)."""
 RUN_OPTIONS = ("progress", "sides_at_once", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish",
                "docs", "allow_other_ring")
 """ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
@@ -50,7 +50,7 @@ PRETRAIN_REWARD = RewardConfig(still=-1.0, draw=-200.0, axis_dead_zone=0.25, opp
 
 Bug's stage trains on the paper's reward (the env's default)."""
 SKILL = 0.2
-"""Time to skill: the test MWR Bug's team first reaches (the issue's +0.2)."""
+"""Time to skill: the test MWR Bug's team first reaches (+0.2)."""
 
 
 def ablation(item: str) -> tuple[str, str, Any]:
@@ -123,7 +123,7 @@ class ReproduceConfig:
     bug_learn_every: int = 16
     """Stage 3 (and the ablations): collected transitions per gradient step of the TD3 and SAC Bugs, one per step
     of the 16 matches, the algorithm schedule of ``bench train``. Their library default, 1 (the papers' one update
-    per transition), costs 11-16 ms of CPU per update on a 2-core machine: 3-4 h per 1 M env steps and run.
+    per transition), makes every run several times slower (``docs/bench/index.md``).
     0 keeps the algorithm's default. DDPG keeps the paper preset (30) and PPO its rollouts."""
     bug_eval_every: int = 100_000
     """Stage 3 (and the ablations): every this many env steps each Bug run evaluates its current policy on the
@@ -167,7 +167,7 @@ class ReproduceConfig:
     relative to that file; the rest of the file is kept."""
     status: bool = False
     """Run nothing: print where each stage and Bug run stands (env steps, the newest test MWR while training) and
-    regenerate REPRODUCTION.md from the outputs there are so far (a long reproduction, between sessions)."""
+    regenerate REPRODUCTION.md from the outputs there are so far (a long reproduction, between its runs)."""
     ray: bool = False
     """Train the Bug runs of stage 4 and the ablations as Ray tasks, several at once (as ``triplesumo sweep``: a
     task whose worker dies runs again and resumes its run), and play the test matches of stages 3 and 5 as Ray

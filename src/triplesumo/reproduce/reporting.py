@@ -96,7 +96,7 @@ def _run_row(protocol: Protocol, name: str) -> str:
 
 
 def _machines(record: dict[str, Any]) -> list[str]:
-    """Where each run of the protocol ran (several sessions may share one folder): its CPU, cores and reference
+    """Where each run of the protocol ran (several runs of it may share one folder): its CPU, cores and reference
     speed (ms per env step of a fixed seeded collection: a slower box takes longer for the same stages), the
     stages it ran."""
     runs = [r for r in record.get("runs", []) if r.get("machine") and r.get("ran")]
@@ -286,8 +286,8 @@ def _skill_section(protocol: Protocol) -> list[str]:
              f"Env steps and training wall time (collection, learning, checkpoints; the evaluations apart) until "
              f"Bug's test MWR first reached {SKILL:+.2f}, from the evaluations stage 4 made while training: every "
              f"{first.eval_every:,} env steps, the current policy frozen on the first {first.eval_epochs} test "
-             "matches of stage 5. Measured on the machine that ran each run, never projected; a run resumed "
-             "across sessions adds its sessions' training times, and restarts with an empty replay buffer.", "",
+             "matches of stage 5. Measured on the machine that ran each run, never projected; a resumed run adds "
+             "the training times of its legs, and restarts with an empty replay buffer.", "",
              "| run | reached | env steps | training wall time | evaluations | best test MWR (at env steps) |",
              "| --- | --- | ---: | ---: | ---: | ---: |"]
     for trial, run in runs:

@@ -131,12 +131,18 @@ SELECT_WINDOW = 200
 matches (training starts only: the test starts pick nothing; docs/CONTEST.md, the Bug stage's rules)."""
 
 
+BUG_RULE = ("the shipped Bug (bug-ALGO) of the algorithm with the highest IQM test MWR across its seeds, "
+            "DDPG (the paper preset) on a tie")
+"""Why ``zoo:bug`` is the alias of the Bug it names (recorded in its manifest)."""
+
+
 def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
     """Ship Ant and Spider (with the contest check they passed), ``bug-<algo>`` for every algorithm (its seed with
-    the highest training MWR over the last :data:`SELECT_WINDOW` training matches) and ``bug`` (that Bug of the
-    algorithm with the highest IQM test MWR across its seeds, the protocol's measure of an algorithm). Each manifest
+    the highest training MWR over the last :data:`SELECT_WINDOW` training matches) and ``bug``, an alias of that Bug of
+    the algorithm with the highest IQM test MWR across its seeds, the protocol's measure of an algorithm. Each manifest
     carries the code version, the ring, and for a Bug its test MWR with its 95 % interval and how it was picked."""
     from triplesumo import zoo  # (its publish refuses an invalid ring)
+    from triplesumo.agents.zoo import publish_alias
     from triplesumo.train.sweep import run_facts
 
     by_policy = {str(Path(t.config.out) / t.name / "policy"): Path(t.config.out) / t.name
@@ -168,13 +174,17 @@ def _publish(protocol: Protocol, version: str) -> list[dict[str, Any]]:
     for algo in sorted({r["algo"] for r in rows}):  # per algorithm: its seed by training MWR, lower seed on a tie
         mine = sorted((r for r in rows if r["algo"] == algo), key=lambda r: int(r["train_seed"]))
         picks[algo] = max(mine, key=lambda r: train_mwr[r["policy"]])
-    if picks:
+    ship += [(Path(row["policy"]), f"bug-{algo}", row) for algo, row in picks.items()]
+    if picks:  # zoo:bug, an alias (its weights are stored once, as bug-ALGO's), made once its target is there
         best = max(picks, key=lambda a: (groups[a]["iqm"], a == "ddpg"))  # the paper preset on a tie
         ship.append((Path(picks[best]["policy"]), "bug", picks[best]))
-        ship += [(Path(row["policy"]), f"bug-{algo}", row) for algo, row in picks.items()]
     made = []
     for stem, name, row in ship:
-        path = zoo.publish(stem, name, contest if row is None else evaluation(row), extra=extra)
+        if name == "bug" and row is not None:
+            path = publish_alias(name, f"bug-{row['algo']}",
+                                 extra={"rule": BUG_RULE, "reproduction": extra["reproduction"]})
+        else:
+            path = zoo.publish(stem, name, contest if row is None else evaluation(row), extra=extra)
         made.append({"name": name, "file": str(path), "policy": str(stem),
                      **({} if row is None else {"algo": row["algo"], "train_seed": row["train_seed"],
                                                 "train_mwr": train_mwr[row["policy"]],

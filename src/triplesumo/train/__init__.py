@@ -1,1 +1,2 @@
-"""Training: the DDPG loop over batched matches, checkpoints, metrics logging."""
+"""Training: the loop of one or more learners (DDPG, TD3, SAC, PPO) over batched matches, self-play leagues,
+checkpoints, metrics logging."""

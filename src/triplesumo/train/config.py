@@ -82,13 +82,13 @@ class TrainConfig:
     steps_per_epoch: int = 500
     """Step limit of a match (paper: 500); reaching it is a draw."""
     n_envs: int = 16
-    """Matches collected at once (one batched acting call, threaded physics). 16 measured
-    1.52x the sequential speed on 2 threads (``triplesumo bench env``)."""
+    """Matches collected at once (one batched acting call, threaded physics): 16 keep 2 threads busy
+    (``triplesumo bench env``; ``docs/bench/index.md``)."""
     n_threads: int = 1
-    """Threads MuJoCo uses to step the matches. 1 by default: the DDPG updates run in a
-    thread of their own beside the physics (overlap_learning), so one MuJoCo thread plus the
-    update thread use both cores; measured the same training speed as 2 MuJoCo threads
-    (1179 vs 1168 env steps/s) with learning nearly free (0.89 x collection alone)."""
+    """Threads MuJoCo uses to step the matches. 1 by default: the updates run in a thread of
+    their own beside the physics (overlap_learning), so one MuJoCo thread plus the update
+    thread use two cores, as fast as 2 MuJoCo threads (``triplesumo bench train``;
+    ``docs/bench/index.md``)."""
     seed: int = 0
     """Seeds networks, exploration, replay sampling and every match's reset noise."""
     obs_mode: str = "paper"

@@ -102,7 +102,7 @@ class Pending:
 class Evaluations:
     """The evaluations of a run: how many were written (:attr:`count`, the rows of each learner's eval CSV),
     those in flight (:attr:`pending`, ``eval_background``) and the wall time the training spent on them
-    (:attr:`seconds`), over every session of the run."""
+    (:attr:`seconds`), over every leg of the run (:mod:`triplesumo.train.legs`)."""
 
     def __init__(self, cfg: TrainConfig, match_cfg: MatchConfig, obs_dims: Mapping[str, int],
                  action_sizes: Mapping[str, int], pairs: tuple[str, ...]) -> None:
@@ -111,7 +111,7 @@ class Evaluations:
         self.count = 0
         """Evaluations written so far (``eval_every``): the rows of each learner's eval CSV."""
         self.seconds = 0.0
-        """Wall time the training spent on evaluations, over every session of the run: all of an inline
+        """Wall time the training spent on evaluations, over every leg of the run: all of an inline
         evaluation's, only the waits for a background one (at the run's end)."""
         self.pending: list[Pending] = []
         """Background evaluations handed to the worker and not yet written, oldest first."""

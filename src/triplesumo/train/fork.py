@@ -18,7 +18,7 @@ run (its latest by default):
   command, the checkpoint and its epoch and env steps, each changed field as ``[parent,
   fork]``, the fork's command, and the evicted members left behind.
 * ``legs.json``: the parent's legs (:mod:`triplesumo.train.legs`) up to the fork's epoch; the fork's
-  first session appends its own (``kind`` ``fork``).
+  first leg is appended by its first training (``kind`` ``fork``).
 
 Training then resumes the new folder (:func:`~triplesumo.train.loop.train` with
 ``resume_dir``); the fork's policy files name the fork's command and carry ``forked_from``
@@ -304,7 +304,7 @@ def _fork_run(parent_dir: Path, cfg: TrainConfig, from_checkpoint: str | None) -
         for table in tables:
             shutil.copyfile(table, run_dir / table.name)
         atomic_write_bytes(run_dir / FORK_FILE, (json.dumps(record, indent=1) + "\n").encode())
-        write_legs(run_dir, legs_before(parent_legs, epoch))  # the parent's sessions up to the fork's epoch
+        write_legs(run_dir, legs_before(parent_legs, epoch))  # the parent's legs up to the fork's epoch
         write_run_config(run_dir, cfg)
     except BaseException:  # a half-made fork is no run: take back what was written
         for path in [run_dir] if created else written:

@@ -1,8 +1,8 @@
 """A run's legs: which code trained which epochs.
 
-A long run is trained over several sessions (``--resume``, ``--fork``), possibly by several
-versions of the code. Every session appends one *leg* to ``RUN/legs.json`` when it starts
-training::
+A long run is trained by several invocations of ``triplesumo train`` (``--resume``, ``--fork``),
+possibly by several versions of the code. Every invocation appends one *leg* to ``RUN/legs.json``
+when it starts training::
 
     {"format": "triplesumo-legs/1", "legs": [
       {"kind": "start", "epoch": 0, "env_steps": 0, "run_id": "...",
@@ -12,7 +12,7 @@ training::
        "started": "2026-11-26T08:48:15+00:00", "command": "triplesumo train ..."},
       {"kind": "resume", "epoch": 5100, ...}]}
 
-``kind`` is ``start`` (a new run), ``fork`` (the first session of a fork, from the parent's
+``kind`` is ``start`` (a new run), ``fork`` (the first leg of a fork, from the parent's
 checkpoint) or ``resume``; ``epoch`` and ``env_steps`` are where the leg starts, so a leg
 trained the epochs up to the next leg's ``epoch``. ``code`` is the git commit of the
 checkout the ``triplesumo`` package was imported from and whether tracked files under the
@@ -21,7 +21,7 @@ count), or ``null`` when the package is not a tracked part of a git checkout (an
 wheel). A resume from a checkpoint older than the newest cuts the legs that started at or
 after it (their epochs are trained again); a fork starts with its parent's legs up to the
 fork's epoch. The trainer writes the legs into every policy manifest (its own and its league
-snapshots), so a shipped policy names the code of every session that trained it.
+snapshots), so a shipped policy names the code of every leg that trained it.
 """
 
 from __future__ import annotations

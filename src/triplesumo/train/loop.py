@@ -108,7 +108,7 @@ class Trainer:
                  session_command: str | None = None) -> None:
         self.cfg = cfg
         self.resumed = resume
-        """This session continues a checkpoint (a resume, or a fork's first session)."""
+        """This leg continues a checkpoint (a resume, or a fork's first leg)."""
         self.match_cfg = cfg.match_config()
         agent_names = list(self.match_cfg.agent_names)
         self.specs = learner_specs(cfg, agent_names, {a.name: a.team for a in self.match_cfg.agents})
@@ -142,9 +142,9 @@ class Trainer:
         """A fork's parent (``fork.json``), named in every policy manifest it writes; None for other runs."""
         self.command = command or (fork["command"] if fork is not None else command_for(cfg))
         self.session_command = session_command or self.command
-        """What started this session (its leg's command): the typed command line where the CLI gives it."""
+        """What started this leg (its command): the typed command line where the CLI gives it."""
         self.legs: list[dict[str, Any]] = []
-        """The run's legs (:mod:`triplesumo.train.legs`), this session's last once :meth:`run` starts."""
+        """The run's legs (:mod:`triplesumo.train.legs`), this one's last once :meth:`run` starts."""
         self.run_id: str | None = run_id_of(cfg)
         """This run's id (:func:`run_id_of`), kept by its checkpoints: every policy file it writes (its own and
         its league snapshots, across resumes) names it, so copies of them still group by run. None for a run
@@ -168,7 +168,7 @@ class Trainer:
         self.rng = np.random.default_rng(cfg.seed)
         """Warm-up actions, exploration, every match's reset seed (and the league's seed)."""
         self.train_seconds = 0.0
-        """Wall time of training so far, over every session of the run: collection, learning and checkpoints,
+        """Wall time of training so far, over every leg of the run: collection, learning and checkpoints,
         the evaluations excluded (as of the last evaluation or checkpoint)."""
         self.evaluations = Evaluations(cfg, self.match_cfg, probe.observer.sizes,
                                        dict(zip(probe.agents, probe.action_sizes, strict=True)), pairs)
@@ -282,7 +282,7 @@ class Trainer:
                                f"{self.last_good()}. Lower the learning rates ({rates}) or the reward scale")
 
     def start_leg(self) -> dict[str, Any]:
-        """Append this session's leg to ``RUN/legs.json`` (cutting the legs of epochs trained again) and
+        """Append this leg to ``RUN/legs.json`` (cutting the legs of epochs trained again) and
         return it: ``start`` for a new run, ``fork`` for a fork continued from its fork epoch, else ``resume``."""
         kind = "start"
         if self.resumed:
@@ -386,7 +386,7 @@ class Trainer:
             "updates": learner.algo.num_updates, "command": self.command,
             **({"run_id": self.run_id} if self.run_id else {}),
             **({"forked_from": self.forked_from} if self.forked_from else {}),
-            "legs": self.legs,  # which code trained which epochs, session by session
+            "legs": self.legs,  # which code trained which epochs, leg by leg
             # self-play: the seeds of the opponent pools (league.zoo, else the seats' policies)
             "trained_against": list(self.league.config.zoo if self.league is not None else self.cfg.policies),
             "agents": list(probe.agents), "scenario": self.cfg.scenario,
@@ -626,8 +626,8 @@ def train(cfg: TrainConfig, resume_dir: Path | None = None, overrides: dict[str,
     A new run refuses a folder that already holds a run (:class:`RunExistsError`) unless
     ``start_over``, which moves that run aside to ``RUN.old-K`` first. ``from_checkpoint``
     (``epoch-N``) resumes from an older checkpoint than the latest, e.g. when the latest is
-    damaged; the epochs after it are trained again. ``session_command`` is what started this session
-    (the CLI's command line), recorded in its leg of ``RUN/legs.json`` (:mod:`triplesumo.train.legs`).
+    damaged; the epochs after it are trained again. ``session_command`` is what started this leg of the run
+    (the CLI's command line), recorded in it of ``RUN/legs.json`` (:mod:`triplesumo.train.legs`).
     """
     if resume_dir is None and from_checkpoint is not None:
         raise ValueError("--from needs --resume RUN_DIR (it names a checkpoint of that run)")

@@ -1,5 +1,5 @@
 """The machine a time was measured on, and its speed: what every timed result (``bench skill``, ``reproduce``)
-records beside its times, since two shared 2-core boxes of the same name can differ by a factor of two."""
+records beside its times, since two machines with the same CPU name can differ in speed (shared machines, load)."""
 
 from __future__ import annotations
 

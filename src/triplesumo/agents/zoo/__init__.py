@@ -2,7 +2,9 @@
 
 Each entry is ``NAME.safetensors`` + ``NAME.json`` in this folder (see
 :mod:`triplesumo.agents.policy_file`); the manifest records the command and seed that
-made it. :func:`make_policy` also resolves built-in policies and policy files, so one
+made it. An *alias* is a manifest alone, ``NAME.json`` holding ``{"alias_of": "OTHER"}``: ``zoo:NAME``
+then loads ``zoo:OTHER``'s files, so weights shipped under two names are stored once
+(:func:`alias_target`). :func:`make_policy` also resolves built-in policies and policy files, so one
 string names any policy: ``"zero"`` / ``"passive"``, ``"random"``, ``"zoo:spider"``, or a
 path to a policy file (``runs/x/policy`` or ``runs/x/policy.json``).
 """
@@ -10,6 +12,7 @@ path to a policy file (``runs/x/policy`` or ``runs/x/policy.json``).
 from __future__ import annotations
 
 import hashlib
+import json
 import re
 from importlib import resources
 from pathlib import Path
@@ -18,6 +21,7 @@ from typing import Any
 from triplesumo.agents.builtin import ACTION_SIZE, BUILTIN
 from triplesumo.agents.policy_file import (
     PolicyFileError,
+    atomic_write_bytes,
     bare_stem,
     load_fixed_policy,
     load_json,
@@ -40,9 +44,49 @@ RETIRED: dict[str, str] = {
 ``spider-selfplay-v0``), are policy files under :data:`HISTORY` (its README says what each was)."""
 
 
+ALIAS = "alias_of"
+"""The manifest key of an alias: ``NAME.json`` with ``{"alias_of": "OTHER", ...}`` and no ``NAME.safetensors`` names
+``zoo:OTHER`` under a second name (``zoo:bug`` is the shipped Bug of the best algorithm, ``zoo:bug-sac``)."""
+
+
 def available() -> list[str]:
-    """Names of the shipped policies."""
+    """Names of the shipped policies (aliases included)."""
     return sorted(p.stem for p in ZOO_DIR.glob("*.json"))
+
+
+def _alias_of(zoo_dir: Path, name: str) -> str | None:
+    """What ``NAME.json`` in ``zoo_dir`` is an alias of (:data:`ALIAS`), checked: the target ships its own weights;
+    ``None`` for a policy with weights of its own. :class:`PolicyFileError` naming the manifest otherwise."""
+    manifest_path = zoo_dir / f"{name}.json"
+    target = load_json(manifest_path).get(ALIAS)
+    if target is None:
+        return None
+    if not isinstance(target, str) or not target:
+        raise PolicyFileError(f"{manifest_path}: {ALIAS} must be a zoo name, got {target!r}")
+    if (zoo_dir / f"{name}.safetensors").exists():
+        raise PolicyFileError(f"{manifest_path}: an alias (of zoo:{target}) ships no weights, but "
+                              f"{name}.safetensors is there")
+    if not (zoo_dir / f"{target}.json").is_file():
+        shipped = sorted(p.stem for p in zoo_dir.glob("*.json"))
+        raise PolicyFileError(f"{manifest_path}: zoo:{name} is an alias of zoo:{target}, which the zoo does not "
+                              f"ship (shipped: {shipped})")
+    if ALIAS in load_json(zoo_dir / f"{target}.json"):
+        raise PolicyFileError(f"{manifest_path}: zoo:{name} is an alias of zoo:{target}, itself an alias: an alias "
+                              "names a policy with weights")
+    return target
+
+
+def alias_target(name: str) -> str | None:
+    """The zoo name that ``zoo:NAME`` is an alias of (:data:`ALIAS`), or ``None`` when NAME ships its own weights.
+    An alias of a name the zoo does not ship, of another alias, or with weights of its own is refused
+    (:class:`~triplesumo.agents.policy_file.PolicyFileError` naming the manifest)."""
+    return _alias_of(ZOO_DIR, name)
+
+
+def manifest_of(name: str) -> dict[str, Any]:
+    """The manifest of ``zoo:NAME`` (of its target, for an alias), unchecked against the weights: what
+    ``zoo list`` shows. :func:`load` checks both."""
+    return load_json(policy_paths(policy_stem(f"zoo:{name}"))[0])
 
 
 def retired_error(name: str) -> FileNotFoundError:
@@ -55,8 +99,9 @@ def retired_error(name: str) -> FileNotFoundError:
 
 def policy_stem(spec: str | Path) -> Path:
     """The policy-file stem (the path without ``.json``/``.safetensors``) that ``spec`` names:
-    ``zoo:NAME`` a shipped policy (``FileNotFoundError`` naming the shipped ones when there is no
-    ``NAME``; for a retired ``NAME``, :data:`RETIRED`, one naming where it went), anything else a policy-file
+    ``zoo:NAME`` a shipped policy, the one it names for an alias (:func:`alias_target`; ``FileNotFoundError``
+    naming the shipped ones when there is no ``NAME``; for a retired ``NAME``, :data:`RETIRED`, one naming where it
+    went), anything else a policy-file
     path, given with or without a suffix. Built-in policies (``passive``, ``random``, ...) have no file:
     ``ValueError``. Whether a path's files exist is for the loader to say."""
     if isinstance(spec, str) and spec in BUILTIN:
@@ -67,7 +112,7 @@ def policy_stem(spec: str | Path) -> Path:
             raise retired_error(name)
         if name not in available():
             raise FileNotFoundError(f"no policy {name!r} in the zoo ({ZOO_DIR}); shipped: {available()}")
-        return ZOO_DIR / name
+        return ZOO_DIR / (alias_target(name) or name)
     return bare_stem(spec)
 
 
@@ -117,6 +162,25 @@ def publish(policy_stem: Path, name: str, evaluation: dict[str, Any] | None = No
                                                if k not in ("format", "obs_dim", "act_dim", "hidden", "obs_norm")},
                 obs_norm=policy.obs_norm)
     return zoo_dir / f"{name}.json"
+
+
+def publish_alias(name: str, target: str, zoo_dir: Path | None = None, extra: dict[str, Any] | None = None) -> Path:
+    """Make ``zoo:NAME`` an alias of the shipped ``zoo:TARGET`` (:data:`ALIAS`): ``NAME.json`` holds the alias and
+    ``extra`` entries (e.g. why it names that policy), and a ``NAME.safetensors`` of an earlier copy is removed, so
+    the weights are stored once. ``TARGET`` must ship its own weights (``PolicyFileError`` otherwise)."""
+    if not re.fullmatch(r"[a-z][a-z0-9_-]*", name):
+        raise ValueError(f"zoo name must be lower-case letters, digits, - or _, got {name!r}")
+    zoo_dir = Path(zoo_dir) if zoo_dir is not None else ZOO_DIR
+    if name == target:
+        raise ValueError(f"zoo:{name} cannot be an alias of itself")
+    if not (zoo_dir / f"{target}.safetensors").is_file() or _alias_of(zoo_dir, target) is not None:
+        raise PolicyFileError(f"cannot make zoo:{name} an alias of zoo:{target}: {zoo_dir} has no weights "
+                              f"{target}.safetensors (an alias names a policy with weights)")
+    path = zoo_dir / f"{name}.json"
+    atomic_write_bytes(path, (json.dumps({**(extra or {}), ALIAS: target, "zoo_name": name}, indent=2,
+                                         sort_keys=True) + "\n").encode())
+    (zoo_dir / f"{name}.safetensors").unlink(missing_ok=True)
+    return path
 
 
 def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None,
