@@ -7,8 +7,8 @@ For each algorithm and each of ``seeds`` Bug is trained with the project's own `
 (``train --eval-every``): every ``eval_every`` env steps (25,000), at the step that crosses a multiple of it,
 Bug's current policy plays frozen (no exploration) the same ``eval_epochs`` seeded test matches (200; test
 match ``i`` resets with ``eval_seed + i``, as ``triplesumo evaluate``), into the run's ``eval.csv``. By
-default they play in a worker process while Bug trains on (``--train.eval-background``; ``--no-train.
-eval-background``: inline). A run stops at the first evaluation whose test MWR is ``>= target``
+default they play in a worker process while Bug trains on (``--train.eval-background``;
+``--no-train.eval-background``: inline). A run stops at the first evaluation whose test MWR is ``>= target``
 (*reached*, ``train --eval-target``) or at ``max_env_steps`` (*not reached*: reported as such, with the best
 test MWR seen).
 
@@ -329,8 +329,11 @@ def plot_skill(result: dict[str, Any], path: Path) -> Path:
     axes[0].set_ylabel(f"test MWR ({result['eval_epochs']} seeded test matches)")
     axes[0].legend(fontsize=8)
     m, ms = result["machine"], result["reference"]["ms_per_env_step"]
+    medians = "; ".join(_summary_line(algo, entry["summary"], result["max_env_steps"])
+                        for algo, entry in result["algos"].items())
     fig.suptitle(f"time to skill: Bug's test MWR while training (star: first evaluation at the target)\n"
-                 f"{m['cores']} CPU cores ({m['cpu']}), reference collection {ms:.3f} ms per env step", fontsize=10)
+                 f"{m['cores']} CPU cores ({m['cpu']}), reference collection {ms:.3f} ms per env step\n{medians}",
+                 fontsize=9)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
@@ -355,15 +358,15 @@ def format_skill(result: dict[str, Any]) -> str:
              + "".join(f"\nreference collection {when} the bench: {r['ms_per_env_step']:.3f} ms per env step "
                        f"({r['env_steps']:,} env steps, best of {r['repeats']})"
                        for when, r in m["reference"].items())
-             + f"\nreference seconds: seconds x {ref['reference_ms_per_env_step']} / {ref['ms_per_env_step']:.3f} "
-               f"(the mean reference collection, ms per env step) = seconds x {ref['scale']:.3f}: the time on a box "
-               f"whose reference collection takes {ref['reference_ms_per_env_step']} ms per env step")
+             + f"\nreference seconds: the time on a box whose reference collection takes "
+               f"{ref['reference_ms_per_env_step']} ms per env step,\n  seconds x {ref['reference_ms_per_env_step']} / "
+               f"{ref['ms_per_env_step']:.3f} (the mean reference collection here) = seconds x {ref['scale']:.3f}")
     where_eval = "in the background" if result.get("eval_background") else "inline"
     lines = [f"time to skill: first test MWR >= {result['target']:+.2f} ({result['eval_epochs']} seeded test "
              f"matches every {result['eval_every']:,} env steps, {where_eval}; budget {result['max_env_steps']:,} "
              f"env steps; seeds {' '.join(map(str, result['seeds']))})", where,
-             "seconds: the training's wall time when the policy that reached the target was frozen; "
-             "wall: when its result was known (evaluations included)", "",
+             "seconds: the training's wall time when the policy that reached the target was frozen;",
+             "wall: when its result was known (the evaluations' time included)", "",
              f"{'algo':6s} {'seed':>4s} {'reached':>11s} {'env steps':>11s} {'seconds':>8s} {'ref. s':>8s} "
              f"{'wall (s)':>8s} {'evals':>5s}  test MWR curve"]
     for algo, entry in result["algos"].items():
@@ -378,12 +381,16 @@ def format_skill(result: dict[str, Any]) -> str:
                 lines.append(f"{algo:6s} {run['seed']:4d} {run['status']:>11s} {'-':>11s} {'-':>8s} {'-':>8s} "
                              f"{'-':>8s} {len(run['evaluations']):5d}  {curve}{best}")
     lines.append("")
-    for algo, entry in result["algos"].items():
-        s = entry["summary"]
-        lines.append(f"{algo}: median (min - max) over {s['seeds']} seeds, {s['reached']} reached: "
-                     f"{_median_range(s['env_steps'], ',.0f')} env steps, {_median_range(s['seconds'], '.0f')} s, "
-                     f"{_median_range(s['reference_seconds'], '.0f')} reference s")
+    lines += [_summary_line(algo, entry["summary"], result["max_env_steps"]) for algo, entry in result["algos"].items()]
     return "\n".join(lines)
+
+
+def _summary_line(algo: str, s: dict[str, Any], budget: int) -> str:
+    if not s["reached"]:
+        return f"{algo}: not reached by any of its {s['seeds']} seeds within {budget:,} env steps"
+    return (f"{algo}: median (min - max) over {s['seeds']} seeds, {s['reached']} reached: "
+            f"{_median_range(s['env_steps'], ',.0f')} env steps, {_median_range(s['seconds'], '.0f')} s, "
+            f"{_median_range(s['reference_seconds'], '.0f')} reference s")
 
 
 def main(argv: list[str] | None = None) -> int:
