@@ -28,8 +28,8 @@ EVERY = 40
 
 
 def _tiny(out: Path, **kw: Any) -> SkillConfig:
-    return SkillConfig(**{"algos": ("ddpg",), "eval_every": EVERY, "eval_epochs": 4, "max_env_steps": 3 * EVERY,
-                          "out": str(out), "train": TINY_TRAIN, **kw})
+    return SkillConfig(**{"algos": ("ddpg",), "seeds": (0,), "eval_every": EVERY, "eval_epochs": 4,
+                          "max_env_steps": 3 * EVERY, "out": str(out), "train": TINY_TRAIN, **kw})
 
 
 def _checkpoint_steps(run_dir: Path) -> list[int]:
@@ -47,22 +47,26 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
         not_reached: tuple[Path, dict[str, Any]]) -> None:
     out, result = not_reached
     assert json.loads((out / "skill.json").read_text()) == result and (out / "skill.png").stat().st_size > 0
-    entry = result["algos"]["ddpg"]
+    entry = result["algos"]["ddpg"]["runs"][0]
     ev = entry["evaluations"]
     assert entry["status"] == "not reached" and entry["reached"] is False and entry["env_steps"] is None
     assert [e["budget"] for e in ev] == [EVERY, 2 * EVERY, 3 * EVERY]
     assert all(e["budget"] <= e["env_steps"] < e["budget"] + 2 for e in ev)  # the step (of 2 matches) crossing it
     assert all(e["test_mwr"] < 1.0 and e["n_win"] + e["n_loss"] + e["n_draw"] == 4 for e in ev)
     assert entry["best_test_mwr"] == max(e["test_mwr"] for e in ev)
-    for key in ("train_seconds", "eval_seconds", "wall_seconds"):
+    assert entry["seconds"] is entry["reference_seconds"] is None
+    assert result["algos"]["ddpg"]["summary"]["env_steps"] == {"median": None, "min": None, "max": None}
+    for key in ("policy_train_seconds", "train_seconds", "eval_seconds", "wall_seconds"):
         assert all(a[key] < b[key] for a, b in zip(ev, ev[1:], strict=False)), key  # cumulative
     assert all(abs(e["wall_seconds"] - e["train_seconds"] - e["eval_seconds"]) < 2e-3 for e in ev)
+    assert all(e["policy_train_seconds"] == e["train_seconds"] for e in ev)  # inline: frozen, played, written
     # the project's own training run with its evaluations (eval.csv), stopped at the budget after a checkpoint
-    assert _checkpoint_steps(out / "ddpg")[-1] >= ev[-1]["env_steps"] >= 3 * EVERY
-    with (out / "ddpg" / "eval.csv").open() as fh:
+    run = out / "ddpg" / "seed0"
+    assert _checkpoint_steps(run)[-1] >= ev[-1]["env_steps"] >= 3 * EVERY
+    with (run / "eval.csv").open() as fh:
         assert [float(r["test_mwr"]) for r in csv.DictReader(fh)] == [e["test_mwr"] for e in ev]
-    config = json.loads((out / "ddpg" / "config.json").read_text())
-    assert config["learn"] == ["bug=ddpg"] and config["steps_per_epoch"] == 20
+    config = json.loads((run / "config.json").read_text())
+    assert config["learn"] == ["bug=ddpg"] and config["steps_per_epoch"] == 20 and config["seed"] == 0
     assert result["command"].startswith("triplesumo bench skill") and "--target 1.0" in result["command"]
     # the machine is named in the record and the table; a CPU-only run says its GPU figure is not measured
     import os
@@ -88,33 +92,35 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
 
 def test_resume_raised_budget_lost_evaluation_and_lower_target(not_reached: tuple[Path, dict[str, Any]]) -> None:
     out, result = not_reached
-    ev = result["algos"]["ddpg"]["evaluations"]
+    ev = result["algos"]["ddpg"]["runs"][0]["evaluations"]
     # a raised budget trains one more chunk from the last checkpoint; the recorded curve is kept
-    more = run_skill(_tiny(out, target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]
+    more = run_skill(_tiny(out, target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]["runs"][0]
     assert more["evaluations"][:3] == ev and more["evaluations"][3]["budget"] == 4 * EVERY
     assert more["status"] == "not reached"
     # a lost record is rebuilt from the runs' eval.csv, without training
     record = json.loads((out / "skill.json").read_text())
     (out / "skill.json").unlink()
-    steps = _checkpoint_steps(out / "ddpg")
+    steps = _checkpoint_steps(out / "ddpg" / "seed0")
     again = run_skill(_tiny(out, target=1.0, max_env_steps=4 * EVERY))
-    assert again["algos"]["ddpg"]["evaluations"] == record["algos"]["ddpg"]["evaluations"]
-    assert _checkpoint_steps(out / "ddpg") == steps
-    # a lower target on the recorded curve: the first evaluation at it, no training
-    path = out / "ddpg" / "eval.csv"
+    assert again["algos"]["ddpg"]["runs"][0]["evaluations"] == record["algos"]["ddpg"]["runs"][0]["evaluations"]
+    assert _checkpoint_steps(out / "ddpg" / "seed0") == steps
+    # a lower target on the recorded curve: the first evaluation at it, no training; the eval.csv here as a run
+    # from before policy_train_seconds wrote it: its time to skill is the time its row was written
+    path = out / "ddpg" / "seed0" / "eval.csv"
     with path.open(newline="") as fh:
         rows = list(csv.DictReader(fh))
     for row, mwr in zip(rows, (-0.5, 0.25, 0.75, 0.5), strict=True):
         row["test_mwr"] = str(mwr)
+        del row["policy_train_seconds"]
     with path.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, list(rows[0]), lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
-    lower = run_skill(_tiny(out, target=0.2, max_env_steps=4 * EVERY))["algos"]["ddpg"]
+    lower = run_skill(_tiny(out, target=0.2, max_env_steps=4 * EVERY))["algos"]["ddpg"]["runs"][0]
     assert lower["status"] == "reached" and lower["at"] == 1
     assert lower["env_steps"] == lower["evaluations"][1]["env_steps"]
-    assert lower["train_seconds"] == lower["evaluations"][1]["train_seconds"]
-    assert _checkpoint_steps(out / "ddpg") == steps
+    assert lower["seconds"] == lower["evaluations"][1]["policy_train_seconds"] == float(rows[1]["train_seconds"])
+    assert _checkpoint_steps(out / "ddpg" / "seed0") == steps
     with pytest.raises(ValueError, match="other eval_epochs"):
         run_skill(_tiny(out, eval_epochs=5))
 
@@ -123,29 +129,33 @@ def test_a_reached_target_stops_training_at_the_first_evaluation_past_it(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out, path = tmp_path / "b", tmp_path / "r" / "skill.json"
     argv = ["bench", "skill", "--algos", "ppo", "--target", "-1", "--eval-every", str(EVERY), "--eval-epochs", "4",
-            "--max-env-steps", str(10 * EVERY), "--out", str(out), "--json", str(path),
+            "--max-env-steps", str(10 * EVERY), "--out", str(out), "--json", str(path), "--seeds", "0",
             "--train.policies", "ant=random", "spider=random", "--train.steps-per-epoch", "20", "--train.n-envs",
-            "2", "--no-train.progress", "--no-train.tensorboard", "--train.ppo.hidden", "16", "16",
-            "--train.ppo.n-steps", "8", "--train.ppo.n-minibatches", "2", "--train.ppo.n-epochs", "2"]
+            "2", "--no-train.eval-background", "--no-train.progress", "--no-train.tensorboard",
+            "--train.ppo.hidden", "16", "16", "--train.ppo.n-steps", "8", "--train.ppo.n-minibatches", "2",
+            "--train.ppo.n-epochs", "2"]
     assert main(argv) == 0
     result = json.loads(path.read_text())
     assert result == json.loads((out / "skill.json").read_text())
-    entry = result["algos"]["ppo"]
+    entry = result["algos"]["ppo"]["runs"][0]
     assert entry["status"] == "reached" and entry["at"] == 0 and len(entry["evaluations"]) == 1
-    assert entry["env_steps"] == entry["evaluations"][0]["env_steps"] == max(_checkpoint_steps(out / "ppo"))
-    assert entry["train_seconds"] <= entry["wall_seconds"]
+    assert entry["env_steps"] == entry["evaluations"][0]["env_steps"] == max(_checkpoint_steps(out / "ppo" / "seed0"))
+    assert entry["seconds"] <= entry["wall_seconds"]
     table = capsys.readouterr().out
-    assert f"{'ppo':6s} {'yes':>11s} {entry['env_steps']:11,d}" in table
+    assert f"{'ppo':6s} {0:4d} {'yes':>11s} {entry['env_steps']:11,d}" in table
 
 
 def test_the_stop_rule_on_a_curve() -> None:
     cfg = SkillConfig(target=0.2, eval_every=10, max_env_steps=30)
 
     def curve(*mwrs: float) -> list[dict[str, Any]]:
-        return [{"env_steps": 10 * k + 3, "budget": 10 * k, "test_mwr": m, "train_seconds": float(k),
-                 "wall_seconds": 2.0 * k} for k, m in enumerate(mwrs, 1)]
+        return [{"env_steps": 10 * k + 3, "budget": 10 * k, "test_mwr": m, "policy_train_seconds": float(k),
+                 "train_seconds": 1.5 * k, "wall_seconds": 2.0 * k} for k, m in enumerate(mwrs, 1)]
 
     assert outcome(cfg, curve(0.1, 0.2, 0.5))["at"] == 1  # the first one at the target, not the best
+    # the time to skill is the training's clock when that policy was frozen, not when its result came back
+    assert outcome(cfg, curve(0.1, 0.2, 0.5))["seconds"] == 2.0
+    assert outcome(cfg, curve(0.1, 0.2, 0.5))["wall_seconds"] == 4.0
     assert outcome(cfg, curve(0.1, 0.19))["status"] == "running"
     done = outcome(cfg, curve(0.1, 0.19, 0.0))
     assert done["status"] == "not reached" and done["best_test_mwr"] == 0.19 and done["best_at_env_steps"] == 23
@@ -155,6 +165,9 @@ def test_the_stop_rule_on_a_curve() -> None:
 @pytest.mark.parametrize(("kw", "message"), [
     ({"target": 1.5}, "SkillConfig.target must be a test MWR in"),
     ({"algos": ("ddpg,a2c",)}, "SkillConfig.algos must be among"),
+    ({"seeds": (0, 1, 0)}, "SkillConfig.seeds must be non-empty and without repeats"),
+    ({"seeds": (0, -1)}, "SkillConfig.seeds must be a non-negative integer"),
+    ({"train": TrainConfig(seed=3)}, "SkillConfig.train.seed is set by the bench"),
     ({"eval_every": 0}, "SkillConfig.eval_every must be an int >= 1"),
     ({"max_env_steps": 10, "eval_every": 20}, "SkillConfig.max_env_steps"),
     ({"train": TrainConfig(name="mine")}, "SkillConfig.train.name is set by the bench"),
@@ -174,13 +187,14 @@ def test_background_evaluations_give_the_same_curve(tmp_path: Path,
 
     _, inline = not_reached
     cfg = _tiny(tmp_path / "bg", target=1.0, train=dataclasses.replace(TINY_TRAIN, eval_background=True))
-    background = run_skill(cfg)["algos"]["ddpg"]
+    background = run_skill(cfg)["algos"]["ddpg"]["runs"][0]
     keys = ("env_steps", "budget", "test_mwr", "test_mwr_lo", "test_mwr_hi", "n_win", "n_loss", "n_draw")
     assert [{k: e[k] for k in keys} for e in background["evaluations"]] == [
-        {k: e[k] for k in keys} for e in inline["algos"]["ddpg"]["evaluations"]]
+        {k: e[k] for k in keys} for e in inline["algos"]["ddpg"]["runs"][0]["evaluations"]]
     assert background["status"] == "not reached"
-    assert all(e["wall_seconds"] >= e["train_seconds"] for e in background["evaluations"])
-    more = run_skill(_tiny(tmp_path / "bg", target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]  # inline now
+    assert all(e["wall_seconds"] >= e["train_seconds"] >= e["policy_train_seconds"]
+               for e in background["evaluations"])
+    more = run_skill(_tiny(tmp_path / "bg", target=1.0, max_env_steps=4 * EVERY))["algos"]["ddpg"]["runs"][0]  # inline
     assert more["evaluations"][:3] == background["evaluations"] and len(more["evaluations"]) == 4
 
 
@@ -192,3 +206,71 @@ def test_the_progress_bar_counts_env_steps_to_the_budget(tmp_path: Path, capfd: 
     last = err.replace("\r", "\n").strip().splitlines()[-1]
     assert f"{EVERY:.1f}/{EVERY:.1f} [" in last and "step/s" in last, err[-800:]  # 40.0/40.0, scaled as 1.00M
     assert "1000000000" not in err and "epoch" not in err, err[-800:]
+
+
+def test_reference_seconds_of_a_recorded_bench() -> None:
+    """The recorded SAC bench of docs/runs (250,000 env steps after 348.229 s, reference collections of 0.6707 ms
+    before and 0.7196 ms after): on a box whose reference collection takes 0.7 ms per env step it is
+    348.229 * 0.7 / 0.69515 = 350.66 s."""
+    from triplesumo.train.machine import reference_seconds
+
+    record = json.loads((Path(__file__).parents[1] / "docs/runs/contest-v2/skill-sac32-ref/skill.json").read_text())
+    measured = record["machine"]["reference"]
+    assert (measured["before"]["ms_per_env_step"], measured["after"]["ms_per_env_step"]) == (0.6707, 0.7196)
+    seconds = record["algos"]["sac"]["wall_seconds"]
+    assert seconds == 348.229
+    by_hand = 348.229 * 0.7 / ((0.6707 + 0.7196) / 2)
+    assert reference_seconds(seconds, measured) == pytest.approx(by_hand, rel=1e-12)
+    assert round(reference_seconds(seconds, measured), 2) == 350.66
+    # a box twice as slow as the reference box: its seconds count half
+    assert reference_seconds(100.0, {"before": {"ms_per_env_step": 1.4}}) == pytest.approx(50.0)
+
+
+def test_the_median_and_spread_over_seeds_count_a_seed_not_reached_as_beyond_the_budget() -> None:
+    from triplesumo.benchmarks.skill import spread
+
+    assert spread([300, 100, 200]) == {"median": 200, "min": 100, "max": 300}
+    assert spread([100, None, 300]) == {"median": 300, "min": 100, "max": None}  # the middle seed: 300
+    assert spread([None, 100, None]) == {"median": None, "min": 100, "max": None}  # most not reached
+    assert spread([100, 200]) == {"median": 150, "min": 100, "max": 200}
+    assert spread([100, None]) == {"median": None, "min": 100, "max": None}
+    assert spread([None]) == {"median": None, "min": None, "max": None}
+
+
+def test_quick_writes_the_table_the_json_and_the_plot_over_three_seeds(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bench skill --quick``: the defaults (3 seeds, background evaluations, the shipped match) on a tiny budget;
+    with a target every policy meets, each seed stops at its first evaluation."""
+    import statistics
+
+    out, path = tmp_path / "q", tmp_path / "r" / "skill.json"
+    assert main(["bench", "skill", "--quick", "--algos", "sac", "--target", "-1", "--out", str(out),
+                 "--json", str(path)]) == 0
+    result = json.loads((out / "skill.json").read_text())
+    assert json.loads(path.read_text()) == result
+    assert (out / "skill.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert result["config"]["quick"] is True and result["eval_every"] == 40 and result["eval_background"] is True
+    runs = result["algos"]["sac"]["runs"]
+    assert [r["seed"] for r in runs] == result["seeds"] == [0, 1, 2]
+    for run in runs:
+        assert run["status"] == "reached" and run["at"] == 0 and 40 <= run["env_steps"] < 42
+        first = run["evaluations"][0]
+        assert run["seconds"] == first["policy_train_seconds"] <= first["train_seconds"] <= run["wall_seconds"]
+        config = json.loads((out / "sac" / f"seed{run['seed']}" / "config.json").read_text())
+        assert config["seed"] == run["seed"] and config["learn"] == ["bug=sac"]
+    # the median and spread over the seeds, in seconds and in reference seconds
+    summary = result["algos"]["sac"]["summary"]
+    assert summary["seeds"] == summary["reached"] == 3
+    seconds = [r["seconds"] for r in runs]
+    assert summary["seconds"] == {"median": statistics.median(seconds), "min": min(seconds), "max": max(seconds)}
+    assert summary["env_steps"]["median"] == statistics.median(r["env_steps"] for r in runs)
+    measured = result["machine"]["reference"]
+    ms = (measured["before"]["ms_per_env_step"] + measured["after"]["ms_per_env_step"]) / 2
+    assert result["reference"]["ms_per_env_step"] == pytest.approx(ms, abs=1e-4)
+    for run in runs:
+        assert run["reference_seconds"] == pytest.approx(run["seconds"] * 0.7 / ms, abs=1e-3)
+    assert summary["reference_seconds"]["median"] == statistics.median(r["reference_seconds"] for r in runs)
+    table = capsys.readouterr().out
+    assert f"{'sac':6s} {2:4d} {'yes':>11s} {runs[2]['env_steps']:11,d}" in table
+    assert "sac: median (min - max) over 3 seeds, 3 reached:" in table
+    assert f"reference collection after the bench: {measured['after']['ms_per_env_step']:.3f} ms" in table

@@ -59,6 +59,8 @@ def test_evaluations_leave_the_training_unchanged(tmp_path: Path) -> None:
         assert -1.0 <= float(row["test_mwr"]) <= 1.0
     seconds = [float(r["train_seconds"]) for r in rows]
     assert seconds == sorted(seconds) and seconds[0] > 0
+    # inline, the policy is frozen, played and written at one moment of the training's clock
+    assert [float(r["policy_train_seconds"]) for r in rows] == seconds
 
 
 def test_an_evaluation_plays_the_policy_file_on_the_evaluate_matches(tmp_path: Path) -> None:
@@ -87,7 +89,7 @@ def test_a_resumed_run_writes_the_evaluations_of_an_uninterrupted_one(tmp_path: 
     with (first.run_dir / "eval.csv").open("a") as fh:  # a row past the checkpoint (a kill after an evaluation)
         fh.write(",".join([str(len(made) + 1), *list(made[-1].values())[1:]]) + "\n")
     resumed = train(TrainConfig(), resume_dir=Path(cut.out) / cut.name, overrides={"epochs": 4 * E})
-    measured = ("train_seconds", "eval_seconds")
+    measured = ("policy_train_seconds", "train_seconds", "eval_seconds")
     same = [{k: v for k, v in r.items() if k not in measured} for r in _evals(whole.run_dir / "eval.csv")]
     assert [{k: v for k, v in r.items() if k not in measured}
             for r in _evals(resumed.run_dir / "eval.csv")] == same
@@ -130,7 +132,8 @@ def test_bad_evaluation_settings_name_the_field(tmp_path: Path, fields: dict, me
 
 def _figures(rows: list[dict[str, str]]) -> list[dict[str, str]]:
     """An evaluation's rows less the wall times (what depends on the machine and on where it played)."""
-    return [{k: v for k, v in r.items() if k not in ("train_seconds", "eval_seconds")} for r in rows]
+    return [{k: v for k, v in r.items() if k not in ("policy_train_seconds", "train_seconds", "eval_seconds")}
+            for r in rows]
 
 
 def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) -> None:
@@ -145,6 +148,9 @@ def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) ->
         inline.run_dir / "policy.safetensors").read_bytes()
     seconds = [float(r["train_seconds"]) for r in rows]
     assert seconds == sorted(seconds)
+    # each row gives the training's clock when its policy was frozen, and (later or at once) when it was written
+    frozen = [float(r["policy_train_seconds"]) for r in rows]
+    assert frozen == sorted(frozen) and all(f <= s for f, s in zip(frozen, seconds, strict=True))
     last = sorted((background.run_dir / "checkpoints").glob("epoch-*"))[-1]
     assert json.loads((last / "state.json").read_text())["pending_evaluations"] == []  # the end waited for them
     import multiprocessing
@@ -165,3 +171,27 @@ def test_an_evaluation_in_flight_at_a_checkpoint_is_played_by_the_resume(tmp_pat
     resumed = train(TrainConfig(), resume_dir=whole.run_dir, from_checkpoint=first.name,
                     overrides={"eval_background": False})  # played by the worker all the same
     assert _figures(_evals(resumed.run_dir / "eval.csv")) == made
+    # the checkpoint kept when that policy was frozen: the resume writes the same moment
+    assert _evals(resumed.run_dir / "eval.csv")[0]["policy_train_seconds"] == (
+        _evals(whole.run_dir / "eval.csv")[0]["policy_train_seconds"])
+
+
+def test_a_run_from_before_policy_train_seconds_resumes_with_the_column(tmp_path: Path) -> None:
+    """An eval CSV written before ``policy_train_seconds`` existed: a resume adds the column, empty in the old
+    rows (their policy's moment was not recorded), filled in the new ones."""
+    cut = tiny(tmp_path, "old", epochs=4 * E, eval_every=EVERY, eval_epochs=TESTS)
+    first = train(dataclasses.replace(cut, epochs=2 * E))
+    path = first.run_dir / "eval.csv"
+    made = _evals(path)
+    old = [c for c in EVAL_COLUMNS if c != "policy_train_seconds"]
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, old, extrasaction="ignore", lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(made)
+    resumed = train(TrainConfig(), resume_dir=first.run_dir, overrides={"epochs": 4 * E})
+    rows = _evals(resumed.run_dir / "eval.csv")
+    assert tuple(rows[0]) == EVAL_COLUMNS and len(rows) > len(made) >= 2
+    assert [{k: v for k, v in r.items() if k != "policy_train_seconds"} for r in rows[:len(made)]] == [
+        {k: v for k, v in r.items() if k != "policy_train_seconds"} for r in made]
+    assert [r["policy_train_seconds"] for r in rows[:len(made)]] == [""] * len(made)
+    assert all(float(r["policy_train_seconds"]) == float(r["train_seconds"]) for r in rows[len(made):])

@@ -137,7 +137,8 @@ class TrainConfig:
     league rates the learners)."""
     eval_background: bool = False
     """Play each evaluation in a worker process while the training goes on (a spare core), its row written
-    when it is back: the same figures, with train_seconds the training's clock at that moment. An evaluation
+    when it is back: the same figures, with train_seconds the training's clock at that moment
+    (policy_train_seconds: when its policy was frozen, as inline). An evaluation
     in flight at a checkpoint is saved with it and played again by a resume; the run's end waits for the
     last ones. Off: the training waits for each evaluation."""
     eval_epochs: int = 200

@@ -4,7 +4,9 @@ goes to its eval CSV. It draws on none of the training's generators: a run train
 
 An evaluation plays inline (the training waits for it) or, with ``eval_background``, in a worker process
 while the training goes on: its row is written when it comes back, with the same figures (the frozen policy
-and the test matches are the same; only the times differ). An evaluation still in flight at a checkpoint is
+and the test matches are the same; only the times differ). Each row gives the training's clock twice: when its
+policy was frozen (``policy_train_seconds``, the time to that skill) and when its row was written
+(``train_seconds``; the same inline, later in the background). An evaluation still in flight at a checkpoint is
 saved with it (the frozen weights it plays) and played again by a resume."""
 
 from __future__ import annotations
@@ -90,11 +92,13 @@ def _worker_init(parent: int) -> None:
 
 @dataclass
 class Pending:
-    """An evaluation handed to the worker, not yet written: its number, when it was made, what it plays."""
+    """An evaluation handed to the worker, not yet written: its number, when it was made (env steps, epochs and
+    the training's clock; None: restored from a checkpoint that did not record it), what it plays."""
 
     number: int
     env_steps: int
     epochs: int
+    train_seconds: float | None
     frozen: Frozen
     future: AsyncResult[tuple[list[tuple[str, dict[str, Any]]], float]] | None = None
 
@@ -146,7 +150,7 @@ class Evaluations:
         a learner that plays several agents (``share="team"``) is rated in its first agent's seat.
         Nothing of the training is touched: it trains the same with or without evaluations."""
         frozen: Frozen = {lr.name: (tuple(lr.spec.agents), *frozen_tensors(lr)) for lr in learners}
-        job = Pending(self.count + len(self.pending) + 1, env_steps, epochs, frozen)
+        job = Pending(self.count + len(self.pending) + 1, env_steps, epochs, train_seconds, frozen)
         if self.cfg.eval_background:
             self._submit(job)
             return False
@@ -186,6 +190,7 @@ class Evaluations:
         for name, stats in done:
             log.evaluated(name, {
                 "evaluation": job.number, "env_steps": job.env_steps, "epochs": job.epochs,
+                "policy_train_seconds": "" if job.train_seconds is None else round(job.train_seconds, 3),
                 "train_seconds": round(train_seconds, 3), "eval_seconds": round(self.seconds, 3),
                 "test_matches": cfg.eval_epochs, "test_mwr": float(stats["mean_lwr"]),
                 "test_mwr_lo": float(stats["mean_lwr_lo"]), "test_mwr_hi": float(stats["mean_lwr_hi"]),
@@ -209,7 +214,7 @@ class Evaluations:
                 learners[name] = {"agents": list(agents), "obs_norm": norm, "tensors": sorted(tensors)}
                 arrays |= {f"pending_eval{job.number}.{name}.{k}": v for k, v in tensors.items()}
             records.append({"number": job.number, "env_steps": job.env_steps, "epochs": job.epochs,
-                            "learners": learners})
+                            "train_seconds": job.train_seconds, "learners": learners})
         return records, arrays
 
     def restore(self, records: Sequence[Mapping[str, Any]], arrays: Mapping[str, np.ndarray]) -> None:
@@ -220,7 +225,9 @@ class Evaluations:
                                      {k: np.asarray(arrays[f"pending_eval{number}.{name}.{k}"])
                                       for k in entry["tensors"]}, bool(entry["obs_norm"]))
                               for name, entry in record["learners"].items()}
-            job = Pending(number, int(record["env_steps"]), int(record["epochs"]), frozen)
+            seconds = record.get("train_seconds")  # (None: a checkpoint from before it was kept)
+            job = Pending(number, int(record["env_steps"]), int(record["epochs"]),
+                          None if seconds is None else float(seconds), frozen)
             if job.number != self.count + len(self.pending) + 1:
                 raise ValueError(f"checkpoint: pending evaluation {number} does not follow the "
                                  f"{self.count} written")

@@ -30,8 +30,8 @@ from triplesumo.evaluation.metrics_csv import (
 )
 from triplesumo.rules.rewards import TERMS
 
-__all__ = ["COLUMNS", "EVAL_COLUMNS", "LEARNING_COLUMNS", "MetricsLog", "intact_rows", "learning_row_problem",
-           "repair_metrics_csv", "run_file"]
+__all__ = ["COLUMNS", "EVAL_ADDED", "EVAL_COLUMNS", "LEARNING_COLUMNS", "MetricsLog", "intact_rows",
+           "learning_row_problem", "repair_metrics_csv", "run_file"]
 
 LEARNING_COLUMNS = ("epoch", "updates", "actor_loss", "critic_loss", "q_mean", "entropy", "alpha", "alpha_loss",
                     "approx_kl", "clip_fraction")
@@ -57,13 +57,16 @@ def learning_row_problem(row: list[str], epoch: int) -> str | None:
     return None
 
 
-EVAL_COLUMNS = ("evaluation", "env_steps", "epochs", "train_seconds", "eval_seconds", "test_matches", "test_mwr",
-                "test_mwr_lo", "test_mwr_hi", "n_win", "n_loss", "n_draw")
+EVAL_COLUMNS = ("evaluation", "env_steps", "epochs", "policy_train_seconds", "train_seconds", "eval_seconds",
+                "test_matches", "test_mwr", "test_mwr_lo", "test_mwr_hi", "n_win", "n_loss", "n_draw")
 """Evaluation CSV schema (``TrainConfig.eval_every``): one row per evaluation of a learner, numbered from 1:
-the env steps and epochs trained when its policy was frozen, the training's wall time when the row was
-written (evaluations excluded, checkpoints included; ``eval_background``: the training went on while it
-played) and the time the training spent on evaluations, and the test MWR with its 95 % interval over the
-test matches."""
+the env steps and epochs trained when its policy was frozen, the training's wall time (evaluations excluded,
+checkpoints included) when its policy was frozen (``policy_train_seconds``) and when the row was written
+(``train_seconds``: the same inline; with ``eval_background`` the training went on while it played), the
+time the training spent on evaluations, and the test MWR with its 95 % interval over the test matches.
+``policy_train_seconds`` is empty in the rows of a run written before the column existed (resumed since)."""
+EVAL_ADDED = ("policy_train_seconds",)
+"""Columns of :data:`EVAL_COLUMNS` that older eval CSVs lack: a resume adds them, empty in the old rows."""
 
 
 def _eval_row_problem(row: list[str], number: int) -> str | None:
@@ -73,6 +76,8 @@ def _eval_row_problem(row: list[str], number: int) -> str | None:
     if row[0] != str(number):
         return f"evaluation {row[0]!r}, expected {number}"
     for name, value in zip(EVAL_COLUMNS[1:], row[1:], strict=True):
+        if name in EVAL_ADDED and value == "":  # (a row from before the column: not known)
+            continue
         try:
             float(value)  # (an interval of a single test match is nan)
         except ValueError:
@@ -84,13 +89,15 @@ class _Table:
     """One row-appended CSV of a run, cut back to the resumed epoch on resume."""
 
     def __init__(self, path: Path, columns: tuple[str, ...], row_problem: Callable[[list[str], int], str | None],
-                 resume_epoch: int | None, what: str, backfill: bool = False) -> None:
+                 resume_epoch: int | None, what: str, backfill: bool = False, added: tuple[str, ...] = ()) -> None:
         self.path, self.columns = path, columns
         header = _csv_bytes(columns)
         if resume_epoch is None:
             write_table(path, header)
         else:
             unpack_table(path)  # a packed table (NAME.csv.gz, triplesumo pack) goes back to its plain file
+            if added:
+                _add_columns(path, columns, added)
             if backfill and not path.exists():  # a run from before this table: its epochs get empty rows
                 blank = "".join(f"{e}{',' * (len(columns) - 1)}\n" for e in range(1, resume_epoch + 1))
                 with writing(path):
@@ -120,6 +127,31 @@ class _Table:
 
     def close(self) -> None:
         self._fh.close()
+
+
+def _add_columns(path: Path, columns: tuple[str, ...], added: tuple[str, ...]) -> None:
+    """A table written before the columns ``added`` existed (its header is ``columns`` without them) is rewritten,
+    atomically, with them, empty in its finished rows (a torn last line is left as it is, for the repair)."""
+    if not path.exists():
+        return
+    lines = path.read_bytes().decode("utf-8", errors="replace").split("\n")
+    old = tuple(c for c in columns if c not in added)
+    if tuple(next(csv.reader(lines[:1]), [])) != old:
+        return
+    where = [columns.index(c) for c in added]
+    out = [",".join(columns)]
+    for k, line in enumerate(lines[1:], start=1):
+        row = next(csv.reader([line]), [])
+        if k == len(lines) - 1 or len(row) != len(old):  # the torn tail, or a row the repair will judge
+            out.append(line)
+            continue
+        for i in where:
+            row.insert(i, "")
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="").writerow(row)
+        out.append(buf.getvalue())
+    with writing(path):
+        atomic_write_bytes(path, "\n".join(out).encode("utf-8"))
 
 
 def _csv_bytes(columns: tuple[str, ...] = COLUMNS) -> bytes:
@@ -161,7 +193,8 @@ class MetricsLog:
                          for n in learners}
         self.evals = {} if evaluations is None else {
             n: _Table(Path(run_dir) / run_file("eval", n, self.several, ".csv"), EVAL_COLUMNS, _eval_row_problem,
-                      None if resume_epoch is None else evaluations, "evaluation CSV") for n in learners}
+                      None if resume_epoch is None else evaluations, "evaluation CSV", added=EVAL_ADDED)
+            for n in learners}
         """Per learner its evaluations (``TrainConfig.eval_every``; none when off), cut back to the
         ``evaluations`` of the checkpoint resumed from."""
         self.path = self.metrics[agents[0]].path

@@ -3,6 +3,7 @@ records beside its times, since two machines with the same CPU name can differ i
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from triplesumo.envs.batch import VectorMatches
@@ -68,3 +69,24 @@ def reference_speed(train_cfg: TrainConfig, repeats: int = 3, seed: int = 0) -> 
     env_steps = REFERENCE_STEPS * train_cfg.n_envs
     return {"ms_per_env_step": round(1000 * min(times) / env_steps, 4), "env_steps": env_steps,
             "repeats": repeats, "n_envs": train_cfg.n_envs, "n_threads": train_cfg.n_threads}
+
+
+REFERENCE_MS_PER_ENV_STEP = 0.7
+"""The reference box of "reference seconds": its reference collection (:func:`reference_speed`) takes 0.7 ms per
+env step (an idle 2-core AMD EPYC box measured 0.67-0.72)."""
+
+
+def machine_ms_per_env_step(reference: Mapping[str, Mapping[str, Any]]) -> float:
+    """A machine's speed over a timed run: the mean ``ms_per_env_step`` of its reference collections
+    (``{"before": ..., "after": ...}``, each of :func:`reference_speed`; those measured so far)."""
+    values = [float(r["ms_per_env_step"]) for r in reference.values()]
+    if not values or not all(v > 0 for v in values):
+        raise ValueError(f"a reference speed needs ms_per_env_step > 0 measured at least once, got {dict(reference)}")
+    return sum(values) / len(values)
+
+
+def reference_seconds(seconds: float, reference: Mapping[str, Mapping[str, Any]]) -> float:
+    """``seconds`` measured on a machine with these reference collections, scaled to the reference box
+    (:data:`REFERENCE_MS_PER_ENV_STEP`): ``seconds * 0.7 / ms``, with ``ms`` the mean of the collections before and
+    after (:func:`machine_ms_per_env_step`). A time on a box twice as slow counts half: a slower box is not a miss."""
+    return seconds * REFERENCE_MS_PER_ENV_STEP / machine_ms_per_env_step(reference)
