@@ -29,7 +29,7 @@ import mujoco
 import numpy as np
 
 from triplesumo.agents.policy_file import atomic_write_bytes
-from triplesumo.envs.match import Match
+from triplesumo.envs.match import Match, StepResult
 from triplesumo.envs.seeding import check_seed
 from triplesumo.model.specs import PhysicsConfig, physics_record
 from triplesumo.rules.config import MatchConfig
@@ -181,16 +181,22 @@ def set_state(match: Match, state: np.ndarray) -> None:
 def resimulate(record: MatchFile) -> typing.Iterator[Match]:
     """Play ``record`` again from its seed and recorded actions, yielding the match after the reset
     and after each step; ``MatchFileError`` at the first state that differs by even one bit."""
+    for match, _ in resimulate_steps(record):
+        yield match
+
+
+def resimulate_steps(record: MatchFile) -> typing.Iterator[tuple[Match, StepResult | None]]:
+    """:func:`resimulate`, with what each step returned (its rewards and infos; ``None`` for the reset)."""
     match = Match(record.config)
     match.reset(seed=record.seed)
     _same(get_state(match), record.states[0], 0)
-    yield match
+    yield match, None
     for t, actions in enumerate(record.actions):
         if match.over:
             raise MatchFileError(f"the re-simulated match ended after {t} steps, the recording has {record.steps}")
-        match.step_array(actions)
+        result = match.step_array(actions)
         _same(get_state(match), record.states[t + 1], t + 1)
-        yield match
+        yield match, result
 
 
 def verify(record: MatchFile) -> int:
@@ -211,7 +217,7 @@ def render_frames(record: MatchFile, width: int = 480, height: int = 480,
     """
     from triplesumo.sim.render import FrameRenderer
 
-    matches = resimulate(record) if exact else _set_each_state(record)
+    matches = resimulate(record) if exact else recorded_matches(record)
     renderer: FrameRenderer | None = None
     try:
         for match in matches:
@@ -222,7 +228,8 @@ def render_frames(record: MatchFile, width: int = 480, height: int = 480,
             renderer.close()
 
 
-def _set_each_state(record: MatchFile) -> typing.Iterator[Match]:
+def recorded_matches(record: MatchFile) -> typing.Iterator[Match]:
+    """The match put in each recorded state in turn (``mj_setState`` + ``mj_forward``), without re-simulating."""
     match = Match(record.config)
     for state in record.states:
         set_state(match, state)
