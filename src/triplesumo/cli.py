@@ -116,6 +116,12 @@ def _parser() -> argparse.ArgumentParser:
                                            "checking it re-simulates bit for bit")
     replay.add_argument("file", help="match file (.npz)")
     _dcargs.add_arguments(replay, ReplayConfig)
+    from triplesumo.evaluation.viewer import ViewConfig
+
+    view = sub.add_parser("view", help="write a match file as one self-contained HTML page that replays it in a "
+                                       "browser, offline: play, scrub, orbit, follow an agent, reward terms")
+    view.add_argument("file", help="match file (.npz) from play/evaluate --record")
+    _dcargs.add_arguments(view, ViewConfig)
     bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train', 'bench ray', 'bench rllib' "
                                          "(RLlib's env steps/s per env runner) or 'bench skill' (time to skill per "
                                          "algorithm) (--help for each)")
@@ -204,6 +210,8 @@ def main(argv: list[str] | None = None) -> int:
                 summary = evaluate(cfg, runner)
             print(format_summary(summary))
             print(f"report: {cfg.out}/summary.json; plots: {cfg.out}/compare_mwr.png, {cfg.out}/*/plots/")
+            if cfg.record_html:
+                print(f"match pages: {cfg.out}/*/matches/epoch_*.html (open one in a browser)")
         elif args.command == "tournament":
             from triplesumo.evaluation.tournament import TournamentConfig, format_leaderboard, run_tournament
 
@@ -299,6 +307,10 @@ def main(argv: list[str] | None = None) -> int:
             from triplesumo.evaluation.recording import ReplayConfig, run_replay
 
             run_replay(Path(args.file), _dcargs.build(ReplayConfig, args))
+        elif args.command == "view":
+            from triplesumo.evaluation.viewer import ViewConfig, run_view
+
+            run_view(Path(args.file), _dcargs.build(ViewConfig, args))
         elif args.command == "bench":
             if args.which == "env":
                 from triplesumo.benchmarks.env import main as bench_env

@@ -324,6 +324,8 @@ class ReplayConfig:
 
     video: str | None = None
     """Render the recorded states as mp4 to this path."""
+    html: str | None = None
+    """Write a self-contained HTML page that replays the match in a browser to this path (as ``triplesumo view``)."""
     verify: bool = True
     """Re-simulate the match from its seed and actions, check every state is bit-identical, and render
     the re-simulation (exactly the frames ``play --video`` rendered); ``--no-verify`` renders the
@@ -336,6 +338,8 @@ class ReplayConfig:
     def __post_init__(self) -> None:
         if self.width < 16 or self.height < 16:
             raise ValueError("ReplayConfig.width and height must be >= 16")
+        if self.html is not None and not self.html.endswith(".html"):
+            raise ValueError(f"ReplayConfig.html must be a .html path, got {self.html!r}")
 
 
 def run_replay(path: Path, cfg: ReplayConfig) -> MatchFile:
@@ -363,7 +367,12 @@ def _replay(path: Path, record: MatchFile, cfg: ReplayConfig) -> None:
         fps = round(1.0 / (record.config.physics.timestep * record.config.physics.frame_skip))
         n = write_mp4(render_frames(record, cfg.width, cfg.height, exact=cfg.verify), Path(cfg.video), fps=fps)
         print(f"video: {cfg.video} ({n} frames)")
-    elif cfg.verify:
+    elif cfg.verify and cfg.html is None:
         verify(record)
+    if cfg.html is not None:  # (re-simulated and checked again there when cfg.verify)
+        from triplesumo.evaluation.viewer import write_page
+
+        page = write_page(record, Path(cfg.html), verify=cfg.verify, title=Path(path).name)
+        print(f"page: {page} (open it in a browser; no network needed)")
     if cfg.verify:
         print(f"verified: re-simulating the recorded actions gives all {record.steps + 1} states bit for bit")

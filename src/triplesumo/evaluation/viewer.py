@@ -219,10 +219,13 @@ def write_page(record: MatchFile, out: Path, verify: bool = True, stride: int = 
     try:
         text = build_page(record, verify, stride, title)
     except MatchFileError as exc:
-        raise MatchFileError(f"{source or 'match file'}: {exc}") from None
+        if source is None:
+            raise
+        raise MatchFileError(f"{source}: {exc}") from None
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
         atomic_write_bytes(out, text.encode("utf-8"))
+        out.chmod(0o644)  # a page to share or serve (the temp file it was renamed from was private)
     except OSError as exc:
         raise OSError(exc.errno, f"{out}: the page was not written ({exc.strerror or exc})") from exc
     return out
