@@ -216,7 +216,7 @@ def test_the_page_runs_in_chromium_with_its_controls_and_overlays(matches: dict[
     assert "\u00b7 ready</title>" in dom, done.stderr[-2000:]  # the script ran to its end without an exception
     assert "step 6 / 12" in dom
     assert dom.count('class="label"') == 4 and dom.count("<canvas") == 1 + 4  # the scene, a timeline per agent
-    assert "opponent_velocity" in dom
+    assert "opponent v" in dom and "outcome" in dom  # the reward terms beside the timelines
 
 
 @needs_chromium
@@ -263,3 +263,22 @@ def test_each_agent_lands_where_mujoco_renders_it(scenario: str, step: int, matc
         centroid = np.linalg.norm(np.argwhere(ours).mean(axis=0) - np.argwhere(theirs).mean(axis=0))
         assert iou >= 0.97, f"{agent}: silhouette IoU {iou:.3f}"
         assert centroid <= 0.5, f"{agent}: centroids {centroid:.2f} px apart"
+
+
+# --------------------------------------------------------------------------- the docs site's match
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def test_the_docs_page_embeds_the_shipped_teams_win_drawn_from_its_match_file() -> None:
+    page, source = DOCS / "matches" / "shipped-team-win.html", DOCS / "matches" / "shipped-team-win.npz"
+    assert page.stat().st_size < 1_500_000
+    assert 'src="matches/shipped-team-win.html' in (DOCS / "viewer.md").read_text(encoding="utf-8")
+    record = MatchFile.load(source)
+    assert record.policies == {"ant": "zoo:ant", "bug": "zoo:bug", "spider": "zoo:spider"}
+    assert record.outcomes == {"ant": "win", "bug": "win", "spider": "loss"}
+    data = read_page_data(page.read_text(encoding="utf-8"))
+    assert data["steps"] == record.steps
+    for t, match in enumerate(resimulate(record)):
+        ids = [match.model.body(name).id for name in data["bodies"]]
+        np.testing.assert_array_equal(data["poses"][t], np.concatenate(
+            [match.data.xpos[ids], match.data.xquat[ids]], axis=1).astype(np.float32))

@@ -57,6 +57,7 @@
   [0.1, 0.25, 0.5, 1, 2, 4].forEach((s) => el('option', { value: s, textContent: s + '\u00d7', selected: s === 1 },
     speedSel));
   const camSel = el('select', { title: 'camera' }, bar);
+  const termsBtn = el('button', { textContent: 'rewards', title: 'show or hide the reward terms' }, bar);
   const camChoices = [...Object.keys(D.cameras), 'free', ...D.agents.map((a) => 'follow:' + a.name)];
   camChoices.forEach((c) => el('option', { value: c, textContent: c === 'top' ? 'top-down' : c.replace('follow:',
     'follow ') }, camSel));
@@ -107,7 +108,8 @@
     else return;
     const colour = srgb(g.rgba);
     const mat = flat ? new THREE.MeshBasicMaterial({ color: colour })
-      : new THREE.MeshPhongMaterial({ color: colour, shininess: 40, specular: new THREE.Color(0.15, 0.15, 0.15) });
+      : g.type === 'plane' ? new THREE.MeshLambertMaterial({ color: colour })
+        : new THREE.MeshPhongMaterial({ color: colour, shininess: 40, specular: new THREE.Color(0.15, 0.15, 0.15) });
     const mesh = new THREE.Mesh(geo, mat);
     mesh.position.set(g.pos[0], g.pos[1], g.pos[2]);
     mesh.quaternion.set(g.quat[1], g.quat[2], g.quat[3], g.quat[0]); // MuJoCo quaternions are (w, x, y, z)
@@ -163,14 +165,17 @@
   // ---------------------------------------------------------------- rewards along the timeline
   const termColours = ['#ff8a65', '#4fc3f7', '#ba68c8', '#aed581', '#ffd54f', '#90a4ae'];
   const rewardPanels = [];
+  if (!rewards || bare) termsBtn.style.display = 'none';
   if (rewards && !bare) {
     const box = el('div', { id: 'rewards' }, document.body);
+    termsBtn.onclick = () => { box.style.display = box.style.display === 'none' ? '' : 'none'; };
+    if (window.innerWidth < 760) box.style.display = 'none';
     el('div', { textContent: 'reward terms, summed from the start (line: this step)' }, box);
     for (let a = 0; a < nAgents; a++) {
       const row = el('div', { className: 'agent' }, box);
       const nm = el('div', { className: 'name', textContent: D.agents[a].name }, row);
       nm.style.color = css(D.agents[a].rgba);
-      const cv = el('canvas', { width: 300, height: 56 }, row);
+      const cv = el('canvas', { width: 260, height: 44 }, row);
       const legend = el('div', { className: 'legend' }, row);
       // cumulative sums per term
       const cum = terms.map((_, k) => {
@@ -211,7 +216,7 @@
       const parts = terms.map((name, k) => {
         const now = step > 0 ? rewards[((step - 1) * nAgents + p.a) * terms.length + k] : 0;
         return '<span style="color:' + termColours[k % termColours.length] + '">' +
-          name.replace('reward_', '') + ' ' + p.cum[k][step].toFixed(1) + ' (' + (now >= 0 ? '+' : '') +
+          name.replace('reward_', '').replace('_velocity', ' v') + ' ' + p.cum[k][step].toFixed(1) + ' (' + (now >= 0 ? '+' : '') +
           now.toFixed(2) + ')</span>';
       });
       p.legend.innerHTML = parts.join(' ');
