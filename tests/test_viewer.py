@@ -237,9 +237,7 @@ def test_each_agent_lands_where_mujoco_renders_it(scenario: str, step: int, matc
     pixels = imageio.imread(shot)[..., :3].astype(np.int16)
     height, width = pixels.shape[:2]
     assert (height, width) == (320, 320)
-    for t, match in enumerate(resimulate(record)):
-        if t == step:
-            break
+    match = next(m for t, m in enumerate(resimulate(record)) if t == step)
     model = match.model
     with mujoco.Renderer(model, height, width) as renderer:
         renderer.enable_segmentation_rendering()

@@ -110,7 +110,7 @@ def _parser() -> argparse.ArgumentParser:
     zoo.add_argument("policy", nargs="?", help="publish: the run's policy file (e.g. runs/ant/policy)")
     zoo.add_argument("name", nargs="?", help="publish: the zoo name (e.g. ant)")
     zoo.add_argument("--evaluation", default=None, help="publish: a JSON file of evaluation results to record")
-    from triplesumo.evaluation.recording import ReplayConfig
+    from triplesumo.evaluation.replay import ReplayConfig
 
     replay = sub.add_parser("replay", help="re-render a match file from play/evaluate --record (--video FILE), "
                                            "checking it re-simulates bit for bit")
@@ -304,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(publish(Path(args.policy), args.name, evaluation))
         elif args.command == "replay":
 
-            from triplesumo.evaluation.recording import ReplayConfig, run_replay
+            from triplesumo.evaluation.replay import ReplayConfig, run_replay
 
             run_replay(Path(args.file), _dcargs.build(ReplayConfig, args))
         elif args.command == "view":

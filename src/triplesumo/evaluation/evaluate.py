@@ -415,7 +415,8 @@ def evaluate(cfg: EvaluateConfig, runner: TaskRunner | None = None) -> dict[str,
             with RowAppender(out / label / "metrics.csv", fresh=done == 0) as append:
                 play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.n_envs,
                                  cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress, first=done,
-                                 on_row=append, record=max(cfg.record, cfg.record_html), record_dir=out / label / "matches",
+                                 on_row=append, record=max(cfg.record, cfg.record_html),
+                                 record_dir=out / label / "matches",
                                  policy_names={**other_specs, cfg.learner: spec})
     curves, lwr = {}, {}
     for label, spec in candidates.items():
