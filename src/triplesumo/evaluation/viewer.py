@@ -95,6 +95,25 @@ def _geom_colour(model: mujoco.MjModel, g: int) -> list[float]:
     return [round(float(c), 4) for c in rgba]
 
 
+def _plane_texture(model: mujoco.MjModel, g: int, side: int = 20) -> dict[str, Any] | None:
+    """A plane's 2D texture (its material's), sampled down to at most ``side`` x ``side`` RGB pixels (MuJoCo's
+    builtin checker keeps its squares), with the material's repeat and colour; ``None`` if it has none."""
+    mat = int(model.geom_matid[g])
+    if mat < 0 or int(model.geom_type[g]) != int(mujoco.mjtGeom.mjGEOM_PLANE):
+        return None
+    tex = int(model.mat_texid[mat, mujoco.mjtTextureRole.mjTEXROLE_RGB])
+    if tex < 0 or int(model.tex_type[tex]) != int(mujoco.mjtTexture.mjTEXTURE_2D):
+        return None
+    w, h, nc = int(model.tex_width[tex]), int(model.tex_height[tex]), int(model.tex_nchannel[tex])
+    pixels = model.tex_data[int(model.tex_adr[tex]):int(model.tex_adr[tex]) + w * h * nc].reshape(h, w, nc)[..., :3]
+    step_y, step_x = max(1, h // side), max(1, w // side)
+    small = np.ascontiguousarray(pixels[step_y // 2::step_y, step_x // 2::step_x], dtype=np.uint8)
+    return {"width": int(small.shape[1]), "height": int(small.shape[0]),
+            "rgb": base64.b64encode(small.tobytes()).decode("ascii"),
+            "repeat": [float(r) for r in model.mat_texrepeat[mat]],
+            "rgba": [round(float(c), 4) for c in model.mat_rgba[mat]]}
+
+
 def scene_description(model: mujoco.MjModel, agents: tuple[str, ...]) -> dict[str, Any]:
     """The static scene: bodies that move, every visible geom with its body, local pose, type, size and colour,
     and the model's cameras. ``ValueError`` names a geom of a type a page cannot draw."""
@@ -114,7 +133,7 @@ def scene_description(model: mujoco.MjModel, agents: tuple[str, ...]) -> dict[st
                       "agent": agents.index(owner) if owner in agents else -1,
                       "size": [round(float(s), 6) for s in model.geom_size[g]],
                       "pos": [float(p) for p in model.geom_pos[g]], "quat": [float(q) for q in model.geom_quat[g]],
-                      "rgba": _geom_colour(model, g)})
+                      "rgba": _geom_colour(model, g), "texture": _plane_texture(model, g)})
     cameras = {}
     for c in range(model.ncam):
         cameras[model.camera(c).name] = {"pos": [float(p) for p in model.cam_pos[c]],

@@ -42,10 +42,9 @@
   });
   el('div', { textContent: 'seed ' + D.seed + ', ' + D.steps + ' steps at ' + Math.round(D.fps) + ' steps/s' +
     (D.verified ? ', re-simulated bit for bit' : ', recorded states (not re-simulated)') }, info);
-  const help = el('div', { id: 'help', textContent:
+  el('div', { id: 'help', textContent:
     'space: play/pause \u00b7 \u2190 \u2192: frame \u00b7 drag: orbit \u00b7 right-drag: pan \u00b7 wheel: zoom' },
   document.body);
-  void help;
 
   const bar = el('div', { id: 'bar' }, document.body);
   const playBtn = el('button', { textContent: '\u25B6 play', title: 'play / pause (space)' }, bar);
@@ -91,6 +90,21 @@
       scene.add(light);
     });
   }
+  function texture(t) { // a plane's texture from the model (MuJoCo's pixels, sampled down), repeated as there
+    const rgb = Uint8Array.from(atob(t.rgb), (c) => c.charCodeAt(0));
+    const rgba = new Uint8Array(t.width * t.height * 4);
+    for (let i = 0; i < t.width * t.height; i++) {
+      rgba.set(rgb.subarray(3 * i, 3 * i + 3), 4 * i);
+      rgba[4 * i + 3] = 255;
+    }
+    const tex = new THREE.DataTexture(rgba, t.width, t.height, THREE.RGBAFormat);
+    tex.colorSpace = THREE.SRGBColorSpace;
+    tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
+    tex.magFilter = THREE.NearestFilter;
+    tex.repeat.set(t.repeat[0], t.repeat[1]);
+    tex.needsUpdate = true;
+    return tex;
+  }
   const bodies = D.bodies.map(() => {
     const g = new THREE.Group();
     scene.add(g);
@@ -108,6 +122,7 @@
     else return;
     const colour = srgb(g.rgba);
     const mat = flat ? new THREE.MeshBasicMaterial({ color: colour })
+      : g.texture ? new THREE.MeshLambertMaterial({ color: srgb(g.texture.rgba), map: texture(g.texture) })
       : g.type === 'plane' ? new THREE.MeshLambertMaterial({ color: colour })
         : new THREE.MeshPhongMaterial({ color: colour, shininess: 40, specular: new THREE.Color(0.15, 0.15, 0.15) });
     const mesh = new THREE.Mesh(geo, mat);
