@@ -210,10 +210,13 @@ def _chromium(tmp_path: Path, url: str, *args: str, size: int = 320) -> subproce
 
 @needs_chromium
 def test_the_page_runs_in_chromium_with_its_controls_and_overlays(matches: dict[str, Path], tmp_path: Path) -> None:
-    out, _ = _page(tmp_path, matches["2v2"])
+    title = "2v2 </script><!--<script> & co"  # text that would end or confuse an inline script, were it not escaped
+    out, data = _page(tmp_path, matches["2v2"], "--title", title)
+    assert data["title"] == title
     done = _chromium(tmp_path, f"{out.as_uri()}?frame=6&camera=follow:bug", "--dump-dom", size=900)
     dom = done.stdout
     assert "\u00b7 ready</title>" in dom, done.stderr[-2000:]  # the script ran to its end without an exception
+    assert "2v2 &lt;/script&gt;&lt;!--&lt;script&gt; &amp; co</h1>" in dom
     assert "step 6 / 12" in dom
     assert dom.count('class="label"') == 4 and dom.count("<canvas") == 1 + 4  # the scene, a timeline per agent
     assert "opponent v" in dom and "outcome" in dom  # the reward terms beside the timelines

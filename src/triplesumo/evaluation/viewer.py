@@ -200,7 +200,7 @@ def page_data(record: MatchFile, verify: bool = True, stride: int = 1, title: st
 def build_page(record: MatchFile, verify: bool = True, stride: int = 1, title: str = "match") -> str:
     """The page's HTML text (see the module's docstring)."""
     data = page_data(record, verify, stride, title)
-    payload = json.dumps(data, separators=(",", ":")).replace("</", "<\\/")
+    payload = json.dumps(data, separators=(",", ":")).replace("<", "\\u003c")  # no "</script" or "<!--" inside
     three = (WEB / "three.min.js").read_text(encoding="utf-8")
     script = (WEB / "viewer.js").read_text(encoding="utf-8")
     style = (WEB / "viewer.css").read_text(encoding="utf-8")
