@@ -27,6 +27,7 @@ from triplesumo.cli import main
 from triplesumo.demo import match_to_record
 from triplesumo.evaluation.evaluate import EvaluateConfig
 from triplesumo.evaluation.video import count_frames
+from triplesumo.evaluation.viewer import read_page_data
 from triplesumo.train.logger import COLUMNS
 
 PLOTS = ["mwr.png", "reward_terms.png", "rewards.png", "steps_to_win.png"]
@@ -82,10 +83,14 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
     frames = count_frames(out / "match.mp4")
     assert 1 < frames <= DEMO_STEPS + 1 and frames == steps + 1
     assert f"({frames} frames)" in printed
+    # ... and a page of the same match, its path printed
+    page = read_page_data((out / "match.html").read_text(encoding="utf-8"))
+    assert page["steps"] == steps and len(page["frames"]) == frames
+    assert f"page: {out / 'match.html'}" in printed
     # the end of the output says where everything is
     where = printed.split("where to look:")[1]
     for path in (out / "bug", out / "bug" / "plots", out / "evaluation", out / "evaluation" / "compare_mwr.png",
-                 out / "match.mp4"):
+                 out / "match.mp4", out / "match.html"):
         assert str(path) in where, path
     for label in ("trained", "zoo-bug", "passive", "random"):
         assert re.search(rf"^{label}\s", printed, re.M), label

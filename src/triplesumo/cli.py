@@ -111,12 +111,18 @@ def _parser() -> argparse.ArgumentParser:
     zoo.add_argument("policy", nargs="?", help="publish: the run's policy file (e.g. runs/ant/policy)")
     zoo.add_argument("name", nargs="?", help="publish: the zoo name (e.g. ant)")
     zoo.add_argument("--evaluation", default=None, help="publish: a JSON file of evaluation results to record")
-    from triplesumo.evaluation.recording import ReplayConfig
+    from triplesumo.evaluation.replay import ReplayConfig
 
     replay = sub.add_parser("replay", help="re-render a match file from play/evaluate --record (--video FILE), "
                                            "checking it re-simulates bit for bit")
     replay.add_argument("file", help="match file (.npz)")
     _dcargs.add_arguments(replay, ReplayConfig)
+    from triplesumo.evaluation.viewer import ViewConfig
+
+    view = sub.add_parser("view", help="write a match file as one self-contained HTML page that replays it in a "
+                                       "browser, offline: play, scrub, orbit, follow an agent, reward terms")
+    view.add_argument("file", help="match file (.npz) from play/evaluate --record")
+    _dcargs.add_arguments(view, ViewConfig)
     bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train', 'bench ray', 'bench rllib' "
                                          "(RLlib's env steps/s per env runner) or 'bench skill' (time to skill per "
                                          "algorithm) (--help for each)")
@@ -205,6 +211,8 @@ def main(argv: list[str] | None = None) -> int:
                 summary = evaluate(cfg, runner)
             print(format_summary(summary))
             print(f"report: {cfg.out}/summary.json; plots: {cfg.out}/compare_mwr.png, {cfg.out}/*/plots/")
+            if cfg.record_html:
+                print(f"match pages: {cfg.out}/*/matches/epoch_*.html (open one in a browser)")
         elif args.command == "tournament":
             from triplesumo.evaluation.tournament import TournamentConfig, format_leaderboard, run_tournament
 
@@ -299,9 +307,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(publish(Path(args.policy), args.name, evaluation))
         elif args.command == "replay":
 
-            from triplesumo.evaluation.recording import ReplayConfig, run_replay
+            from triplesumo.evaluation.replay import ReplayConfig, run_replay
 
             run_replay(Path(args.file), _dcargs.build(ReplayConfig, args))
+        elif args.command == "view":
+            from triplesumo.evaluation.viewer import ViewConfig, run_view
+
+            run_view(Path(args.file), _dcargs.build(ViewConfig, args))
         elif args.command == "bench":
             if args.which == "env":
                 from triplesumo.benchmarks.env import main as bench_env

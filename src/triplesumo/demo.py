@@ -85,7 +85,8 @@ class DemoConfig:
     learning_starts: int = 1000
     """Random warm-up transitions before Bug's first update."""
     video: bool = True
-    """Record one test match of the trained Bug as mp4."""
+    """Record one test match of the trained Bug as mp4, and as a page that replays it in a browser
+    (``match.html``, as ``triplesumo view``)."""
     video_size: int = 480
     """Width and height of the video in pixels."""
     progress: bool = True
@@ -144,11 +145,12 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
     if cfg.video:
         seed, why = match_to_record(out / "evaluation" / "zoo-bug" / "metrics.csv", eval_cfg.seed)
         print(f"[3/3] recording a test match of the shipped Bug with Ant against Spider: {why} (seed {seed})")
-        video = out / "match.mp4"
-        run_play(PlayConfig(seed=seed, video=str(video), max_steps=cfg.steps_per_epoch,
+        video, page = out / "match.mp4", out / "match.html"
+        run_play(PlayConfig(seed=seed, video=str(video), html=str(page), max_steps=cfg.steps_per_epoch,
                             width=cfg.video_size, height=cfg.video_size,
                             policies=("bug=zoo:bug", "ant=zoo:ant", "spider=zoo:spider")))
         paths["video"] = video
+        paths["page"] = page
     print("\nwhere to look:")
     for name, path in paths.items():
         print(f"  {name:16s} {path}")
@@ -179,11 +181,12 @@ def _run_scenario_demo(cfg: DemoConfig) -> dict[str, Path]:
              "evaluation": out / "evaluation", "comparison_plot": out / "evaluation" / "compare_mwr.png"}
     if cfg.video:
         print(f"[3/3] recording a test match of the trained {learner}")
-        video = out / "match.mp4"
-        run_play(PlayConfig(seed=eval_cfg.seed, video=str(video), max_steps=cfg.steps_per_epoch,
+        video, page = out / "match.mp4", out / "match.html"
+        run_play(PlayConfig(seed=eval_cfg.seed, video=str(video), html=str(page), max_steps=cfg.steps_per_epoch,
                             width=cfg.video_size, height=cfg.video_size, scenario=cfg.scenario,
                             policies=(f"{learner}={policy}", "*=random")))
         paths["video"] = video
+        paths["page"] = page
     print("\nwhere to look:")
     for name, path in paths.items():
         print(f"  {name:16s} {path}")

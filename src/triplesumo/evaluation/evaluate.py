@@ -121,6 +121,10 @@ class EvaluateConfig:
     record: int = 0
     """Write the first K test epochs of every candidate as replayable match files
     (``OUT/CANDIDATE/matches/epoch_00001.npz`` ...; ``triplesumo replay`` re-renders them)."""
+    record_html: int = 0
+    """Also write the first K test epochs of every candidate as self-contained HTML pages that replay them in a
+    browser, offline (``OUT/CANDIDATE/matches/epoch_00001.html`` ..., beside their match files, which are
+    written for them too; as ``triplesumo view``)."""
     scenario: str = "paper"
     """Named game (paper, ffa, pursuit, 2v2) with its default roster; policies may use *=POLICY
     for every other agent. Under elimination rules a test epoch ends when the learner is out."""
@@ -140,8 +144,10 @@ class EvaluateConfig:
 
     def __post_init__(self) -> None:
         check_seed(self.seed, "EvaluateConfig.seed")
-        if not isinstance(self.record, int) or isinstance(self.record, bool) or self.record < 0:
-            raise ValueError(f"EvaluateConfig.record must be an int >= 0, got {self.record!r}")
+        for name in ("record", "record_html"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+                raise ValueError(f"EvaluateConfig.{name} must be an int >= 0, got {value!r}")
         for name in ("epochs", "steps_per_epoch", "window", "n_envs", "n_threads", "ray_chunk", "workers"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -408,7 +414,7 @@ def _evaluate(cfg: EvaluateConfig, runner: TaskRunner | None) -> dict[str, Any]:
             play_candidates_on(
                 runner, {label: candidates[label] for label in todo}, other_specs, cfg.learner, cfg.epochs, cfg.seed,
                 match_cfg, firsts, cfg.ray_chunk, cfg.n_envs, lambda label, row: appenders[label](row),
-                record=cfg.record, record_dirs={label: out / label / "matches" for label in todo},
+                record=max(cfg.record, cfg.record_html), record_dirs={label: out / label / "matches" for label in todo},
                 progress=f"evaluate {len(todo)} candidates" if cfg.progress else None)
             todo = []
         for label in todo:
@@ -416,7 +422,8 @@ def _evaluate(cfg: EvaluateConfig, runner: TaskRunner | None) -> dict[str, Any]:
             with RowAppender(out / label / "metrics.csv", fresh=done == 0) as append:
                 play_test_epochs(policies[label], others, cfg.learner, cfg.epochs, cfg.seed, match_cfg, cfg.n_envs,
                                  cfg.n_threads, label=f"{cfg.learner}={spec}", progress=cfg.progress, first=done,
-                                 on_row=append, record=cfg.record, record_dir=out / label / "matches",
+                                 on_row=append, record=max(cfg.record, cfg.record_html),
+                                 record_dir=out / label / "matches",
                                  policy_names={**other_specs, cfg.learner: spec})
     curves, lwr = {}, {}
     for label, spec in candidates.items():
@@ -438,9 +445,26 @@ def _evaluate(cfg: EvaluateConfig, runner: TaskRunner | None) -> dict[str, Any]:
         }
     add_paired(summary, lwr)
     plot_comparison(curves, out, window=cfg.window)
+    for label in candidates:
+        _write_pages(out / label / "matches", cfg.record_html)
     _write_json(out / "summary.json", summary)
     _write_per_seed(out / PER_SEED_FILE, summary, record)
     return summary
+
+
+def _write_pages(matches: Path, n: int) -> list[Path]:
+    """The pages of the first ``n`` match files in ``matches`` (``epoch_00001.html`` beside ``epoch_00001.npz``;
+    fewer where fewer test epochs were recorded)."""
+    from triplesumo.evaluation.recording import MatchFile
+    from triplesumo.evaluation.viewer import write_page
+
+    pages = []
+    for k in range(1, n + 1):
+        source = matches / f"epoch_{k:05d}.npz"
+        if source.is_file():
+            pages.append(write_page(MatchFile.load(source), source.with_suffix(".html"),
+                                    title=f"{matches.parent.name}, test epoch {k}", source=source))
+    return pages
 
 
 PER_SEED_FILE = "per_seed.csv"

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from triplesumo.agents.zoo import check_policy_pairs, expand_pairs
 from triplesumo.envs.match import Match
 from triplesumo.envs.seeding import check_seed
+from triplesumo.evaluation.recording import MatchFile
 from triplesumo.evaluation.runner import MatchRecord, play_match
+from triplesumo.evaluation.viewer import check_html_path, write_page
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.rules.scenarios import get_scenario
 from triplesumo.zoo import policies_from_pairs
@@ -28,6 +31,9 @@ class PlayConfig:
     record: str | None = None
     """Write the match as a replayable match file (.npz: seed, config, actions, MuJoCo states) to this
     path; ``triplesumo replay FILE --video out.mp4`` re-renders it."""
+    html: str | None = None
+    """Write the match as one self-contained HTML page that replays it in a browser, offline (as
+    ``triplesumo view``) to this path."""
     max_steps: int = 500
     """Step limit of the match (a draw when reached)."""
     obs_mode: str = "paper"
@@ -52,6 +58,8 @@ class PlayConfig:
             raise ValueError("PlayConfig.width and height must be >= 16")
         if self.record is not None and not self.record.endswith(".npz"):
             raise ValueError(f"PlayConfig.record must be a .npz path, got {self.record!r}")
+        if self.html is not None:
+            check_html_path(self.html, "PlayConfig.html")
 
 
 def run_play(cfg: PlayConfig) -> MatchRecord:
@@ -70,8 +78,14 @@ def run_play(cfg: PlayConfig) -> MatchRecord:
     video = Path(cfg.video) if cfg.video else None
     file = Path(cfg.record) if cfg.record else None
     names = dict(pair.split("=") for pair in pairs)
-    played = play_match(policies, seed=cfg.seed, video=video, width=cfg.width, height=cfg.height, match=match,
-                        record=file, policy_names=names)
+    with tempfile.TemporaryDirectory() as scratch:
+        # a page is built from a match file: the one asked for, else one kept only until the page is written
+        source = file if file is not None or cfg.html is None else Path(scratch) / "match.npz"
+        played = play_match(policies, seed=cfg.seed, video=video, width=cfg.width, height=cfg.height, match=match,
+                            record=source, policy_names=names)
+        if cfg.html is not None and source is not None:
+            page = write_page(MatchFile.load(source), Path(cfg.html), title=f"{cfg.scenario} match, seed {cfg.seed}",
+                              source=source)
     who = ", ".join(f"{a}: {o} (place {played.places.get(a, 0)})" for a, o in played.outcomes.items())
     out = f"; out of the ring: {', '.join(played.out_of_ring)}" if played.out_of_ring else ""
     print(f"match seed {cfg.seed}: {played.steps} steps; {who}{out}")
@@ -80,4 +94,6 @@ def run_play(cfg: PlayConfig) -> MatchRecord:
         print(f"video: {video} ({played.frames} frames)")
     if file is not None:
         print(f"match file: {file} (replay: triplesumo replay {file} --video out.mp4)")
+    if cfg.html is not None:
+        print(f"page: {page} (open it in a browser; no network needed)")
     return played

@@ -29,7 +29,7 @@ import mujoco
 import numpy as np
 
 from triplesumo.agents.policy_file import atomic_write_bytes
-from triplesumo.envs.match import Match
+from triplesumo.envs.match import Match, StepResult
 from triplesumo.envs.seeding import check_seed
 from triplesumo.model.specs import PhysicsConfig, physics_record
 from triplesumo.rules.config import MatchConfig
@@ -181,16 +181,22 @@ def set_state(match: Match, state: np.ndarray) -> None:
 def resimulate(record: MatchFile) -> typing.Iterator[Match]:
     """Play ``record`` again from its seed and recorded actions, yielding the match after the reset
     and after each step; ``MatchFileError`` at the first state that differs by even one bit."""
+    for match, _ in resimulate_steps(record):
+        yield match
+
+
+def resimulate_steps(record: MatchFile) -> typing.Iterator[tuple[Match, StepResult | None]]:
+    """:func:`resimulate`, with what each step returned (its rewards and infos; ``None`` for the reset)."""
     match = Match(record.config)
     match.reset(seed=record.seed)
     _same(get_state(match), record.states[0], 0)
-    yield match
+    yield match, None
     for t, actions in enumerate(record.actions):
         if match.over:
             raise MatchFileError(f"the re-simulated match ended after {t} steps, the recording has {record.steps}")
-        match.step_array(actions)
+        result = match.step_array(actions)
         _same(get_state(match), record.states[t + 1], t + 1)
-        yield match
+        yield match, result
 
 
 def verify(record: MatchFile) -> int:
@@ -211,7 +217,7 @@ def render_frames(record: MatchFile, width: int = 480, height: int = 480,
     """
     from triplesumo.sim.render import FrameRenderer
 
-    matches = resimulate(record) if exact else _set_each_state(record)
+    matches = resimulate(record) if exact else recorded_matches(record)
     renderer: FrameRenderer | None = None
     try:
         for match in matches:
@@ -222,7 +228,8 @@ def render_frames(record: MatchFile, width: int = 480, height: int = 480,
             renderer.close()
 
 
-def _set_each_state(record: MatchFile) -> typing.Iterator[Match]:
+def recorded_matches(record: MatchFile) -> typing.Iterator[Match]:
+    """The match put in each recorded state in turn (``mj_setState`` + ``mj_forward``), without re-simulating."""
     match = Match(record.config)
     for state in record.states:
         set_state(match, state)
@@ -309,54 +316,3 @@ def _value(hint: Any, value: Any, where: str) -> Any:
             return tuple(_value(inner, v, f"{where}[{i}]") for i, v in enumerate(value))
         return tuple(_value(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True)))
     return value
-
-
-@dataclass(frozen=True)
-class ReplayConfig:
-    """Options of ``triplesumo replay FILE``."""
-
-    video: str | None = None
-    """Render the recorded states as mp4 to this path."""
-    verify: bool = True
-    """Re-simulate the match from its seed and actions, check every state is bit-identical, and render
-    the re-simulation (exactly the frames ``play --video`` rendered); ``--no-verify`` renders the
-    recorded states alone."""
-    width: int = 480
-    """Video width in pixels."""
-    height: int = 480
-    """Video height in pixels."""
-
-    def __post_init__(self) -> None:
-        if self.width < 16 or self.height < 16:
-            raise ValueError("ReplayConfig.width and height must be >= 16")
-
-
-def run_replay(path: Path, cfg: ReplayConfig) -> MatchFile:
-    """Load, optionally verify, and optionally render a match file; prints what it did."""
-    from triplesumo.evaluation.video import check_writable
-
-    if cfg.video is not None:
-        check_writable(Path(cfg.video))
-    record = MatchFile.load(Path(path))
-    try:
-        _replay(path, record, cfg)
-    except MatchFileError as exc:  # the re-simulation parted from the file: say which file
-        raise MatchFileError(f"{path}: {exc}") from None
-    return record
-
-
-def _replay(path: Path, record: MatchFile, cfg: ReplayConfig) -> None:
-    """:func:`run_replay` after the file is loaded."""
-    from triplesumo.evaluation.video import write_mp4
-
-    who = ", ".join(f"{a}={p}" for a, p in record.policies.items()) or "unnamed policies"
-    ends = ", ".join(f"{a}: {o}" for a, o in record.outcomes.items())
-    print(f"{path}: seed {record.seed}, {record.steps} steps, {who}; {ends}")
-    if cfg.video is not None:
-        fps = round(1.0 / (record.config.physics.timestep * record.config.physics.frame_skip))
-        n = write_mp4(render_frames(record, cfg.width, cfg.height, exact=cfg.verify), Path(cfg.video), fps=fps)
-        print(f"video: {cfg.video} ({n} frames)")
-    elif cfg.verify:
-        verify(record)
-    if cfg.verify:
-        print(f"verified: re-simulating the recorded actions gives all {record.steps + 1} states bit for bit")
