@@ -61,6 +61,7 @@ from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.metrics_csv import open_table, table_exists
 from triplesumo.train import checkpoint
 from triplesumo.train.config import ALGOS, TrainConfig
+from triplesumo.train.logger import policy_seconds
 from triplesumo.train.loop import train
 from triplesumo.train.machine import (
     REFERENCE_MS_PER_ENV_STEP,
@@ -191,11 +192,10 @@ def _curve(cfg: SkillConfig, run_dir: Path) -> list[dict[str, Any]]:
 
     def evaluation(r: dict[str, str]) -> dict[str, Any]:
         written = float(r["train_seconds"])
-        policy = r.get("policy_train_seconds") or r["train_seconds"]  # (a row from before the column: written)
         return {"env_steps": int(r["env_steps"]), "budget": int(r["env_steps"]) // cfg.eval_every * cfg.eval_every,
                 "test_mwr": float(r["test_mwr"]), "test_mwr_lo": number(r["test_mwr_lo"]),
                 "test_mwr_hi": number(r["test_mwr_hi"]), "n_win": int(r["n_win"]), "n_loss": int(r["n_loss"]),
-                "n_draw": int(r["n_draw"]), "policy_train_seconds": float(policy), "train_seconds": written,
+                "n_draw": int(r["n_draw"]), "policy_train_seconds": policy_seconds(r), "train_seconds": written,
                 "eval_seconds": float(r["eval_seconds"]),
                 "wall_seconds": round(written + float(r["eval_seconds"]), 3)}
 

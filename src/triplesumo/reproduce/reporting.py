@@ -16,6 +16,7 @@ from triplesumo.evaluation.compare import trial_group
 from triplesumo.evaluation.metrics_csv import table_exists
 from triplesumo.reproduce.config import PUSH_MIN, REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
 from triplesumo.reproduce.protocol import Protocol, _read_csv
+from triplesumo.train.logger import policy_seconds
 from triplesumo.train.sweep import Trial, finished, run_facts
 
 DOCS_BEGIN, DOCS_END = "<!-- reproduce:begin -->", "<!-- reproduce:end -->"
@@ -283,7 +284,8 @@ def _skill_section(protocol: Protocol) -> list[str]:
         return []
     first = runs[0][0].config
     lines = ["## Time to skill", "",
-             f"Env steps and training wall time (collection, learning, checkpoints; the evaluations apart) until "
+             f"Env steps and training wall time (collection, learning, checkpoints; the evaluations apart), when the "
+             f"policy was frozen, until "
              f"Bug's test MWR first reached {SKILL:+.2f}, from the evaluations stage 4 made while training: every "
              f"{first.eval_every:,} env steps, the current policy frozen on the first {first.eval_epochs} test "
              "matches of stage 5. Measured on the machine that ran each run, never projected; a resumed run adds "
@@ -301,10 +303,10 @@ def _skill_section(protocol: Protocol) -> list[str]:
         if hit is None:  # not within the env steps and training time so far
             last = rows[-1]
             lines.append(f"| {trial.name} | {'no' if finished(trial) else 'not yet'} | > {int(last['env_steps']):,} | "
-                         f"> {_duration(float(last['train_seconds']))} | {len(rows)} | {top} |")
+                         f"> {_duration(policy_seconds(last))} | {len(rows)} | {top} |")
         else:
             lines.append(f"| {trial.name} | yes | {int(hit['env_steps']):,} | "
-                         f"{_duration(float(hit['train_seconds']))} | {len(rows)} | {top} |")
+                         f"{_duration(policy_seconds(hit))} | {len(rows)} | {top} |")
     plot = _plot_curves(runs, out / "bug" / "test_mwr.png")
     return [*lines, "", f"![test MWR while training]({plot.relative_to(out)})", ""]
 

@@ -66,6 +66,13 @@ checkpoints included) when its policy was frozen (``policy_train_seconds``) and 
 time the training spent on evaluations, and the test MWR with its 95 % interval over the test matches.
 ``policy_train_seconds`` is empty in the rows of a run written before the column existed (resumed since)."""
 EVAL_ADDED = ("policy_train_seconds",)
+
+
+def policy_seconds(row: dict[str, str]) -> float:
+    """The training clock when an evaluation's policy was frozen (its time to that skill): ``policy_train_seconds``,
+    or in a row written before that column existed its ``train_seconds`` (the same inline; an upper bound for a
+    background evaluation, written when its result came back)."""
+    return float(row.get("policy_train_seconds") or row["train_seconds"])
 """Columns of :data:`EVAL_COLUMNS` that older eval CSVs lack: a resume adds them, empty in the old rows."""
 
 
