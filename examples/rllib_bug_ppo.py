@@ -1,6 +1,6 @@
 """Train TripleSumo agents with RLlib PPO (new API stack) on a local Ray.
 
-Two runs (see docs/RLLIB.md):
+Two runs (see docs/ray-rllib.md):
 
 - the paper's setup (default): Bug learns; Ant and Spider are the shipped zoo policies,
   frozen (acting inside the env with the zoo's numpy policies: RLlib holds Bug only)::
