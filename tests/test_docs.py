@@ -56,7 +56,7 @@ def test_readme_is_a_short_front_door_starting_with_the_two_commands() -> None:
 def test_every_relative_link_resolves(page: Path) -> None:
     broken = []
     for target in relative_links(page):
-        path = (page.parent / target.split("#")[0]).resolve()
+        path = (page.parent / re.split(r"[#?]", target)[0]).resolve()  # (less an anchor or a query)
         rel = path.relative_to(ROOT).as_posix() if path.is_relative_to(ROOT) else None
         if not path.exists() and (rel is None or not any(t == rel or t.startswith(rel + "/") for t in tracked_files())):
             broken.append(target)
@@ -71,6 +71,11 @@ def test_relative_links_are_found() -> None:
     assert "../scenario_paper.mp4" in relative_links(DOCS / "environments" / "paper.md")
 
 
+OUT_OF_NAV = ("bench", "notes")
+"""Folders of docs/ whose pages are built but left out of the nav (mkdocs.yml's ``not_in_nav``): the benchmarks'
+raw pages, and the records behind the result pages."""
+
+
 def nav_pages() -> list[str]:
     """Every page named in mkdocs.yml's nav."""
     nav = (ROOT / "mkdocs.yml").read_text().split("\nnav:\n", 1)[1]
@@ -83,9 +88,55 @@ def test_nav_pages_exist_and_every_page_is_in_the_nav() -> None:
     missing = [p for p in nav if not (DOCS / p).is_file()]
     assert not missing, f"mkdocs.yml's nav names missing pages: {missing}"
     left_out = [p.relative_to(DOCS).as_posix() for p in site_pages()
-                if p.relative_to(DOCS).parts[0] != "bench" and p.relative_to(DOCS).as_posix() not in nav]
+                if p.relative_to(DOCS).parts[0] not in OUT_OF_NAV and p.relative_to(DOCS).as_posix() not in nav]
     assert not left_out, f"pages not in mkdocs.yml's nav: {left_out}"
 
+
+
+# ------------------------------------------------------------------ result pages, not diaries
+RESULT_PAGE_LIMIT = 20_000
+"""Bytes of a result page at most: the claim, the protocol, the tables, the figures and how to regenerate them."""
+RESULT_PAGES = {"CONTEST.md": "notes/contest-log.md", "LEAGUE.md": "notes/league-log.md",
+                "REPRODUCTION.md": "notes/reproduction-log.md"}
+"""Each result page and the record of how it was made (attempt by attempt, session by session) under docs/notes/."""
+
+
+@pytest.mark.parametrize("page", sorted(RESULT_PAGES))
+def test_a_result_page_is_short_and_links_its_record(page: str) -> None:
+    size = len((DOCS / page).read_bytes())
+    assert size <= RESULT_PAGE_LIMIT, (f"docs/{page}: {size} bytes, at most {RESULT_PAGE_LIMIT}: the "
+                                       f"attempt-by-attempt record goes to docs/{RESULT_PAGES[page]}")
+    assert (DOCS / RESULT_PAGES[page]).is_file()
+    links = {(DOCS / target.split("#")[0]).resolve() for target in relative_links(DOCS / page)}
+    assert (DOCS / RESULT_PAGES[page]).resolve() in links, f"docs/{page} must link docs/{RESULT_PAGES[page]}"
+    assert not re.search(r"^#+ .*\(20\d\d-\d\d-\d\d", (DOCS / page).read_text(), re.M), \
+        f"docs/{page}: a dated heading is a diary entry (docs/{RESULT_PAGES[page]})"
+
+
+def test_the_notes_are_built_linked_and_left_out_of_the_nav() -> None:
+    notes = sorted(p.relative_to(DOCS).as_posix() for p in (DOCS / "notes").glob("*.md"))
+    assert set(RESULT_PAGES.values()) <= set(notes), notes
+    assert not set(notes) & set(nav_pages()), "docs/notes/ pages stay out of mkdocs.yml's nav"
+    block = (ROOT / "mkdocs.yml").read_text().split("\nnot_in_nav: |\n", 1)[1].splitlines()
+    not_in_nav = [line.strip() for line in block[:next(i for i, x in enumerate(block) if not x.startswith("  "))]]
+    assert "/notes/*.md" in not_in_nav, "mkdocs.yml's not_in_nav must name /notes/*.md (else a strict build warns)"
+    linked = {(DOCS / page).parent.joinpath(target.split("#")[0]).resolve()
+              for page in nav_pages() for target in relative_links(DOCS / page)}
+    unlinked = [n for n in notes if (DOCS / n).resolve() not in linked]
+    assert not unlinked, f"notes no page of the nav links: {unlinked}"
+
+
+def test_the_reproduction_page_keeps_the_markers_reproduce_writes_between() -> None:
+    text = (DOCS / "REPRODUCTION.md").read_text()
+    begin, end = text.find("\n<!-- reproduce:begin -->\n"), text.find("\n<!-- reproduce:end -->\n")
+    assert 0 <= begin < end, "docs/REPRODUCTION.md: `triplesumo reproduce --docs` writes between these two lines"
+
+
+def test_the_learners_page_shows_a_runnable_example() -> None:
+    blocks = python_blocks(DOCS / "learners.md")
+    run = [b for b in blocks if b.marker is None and "agent.update(" in b.code]
+    assert run and not any(line.lstrip().startswith("#   ") for line in run[0].code.splitlines()), \
+        "docs/learners.md: a learner loop that runs (test_the_python_blocks_of_a_page_run), not pseudocode"
 
 def _docs_module(name: str) -> ModuleType:
     """A Python file of docs/ (not a package) as a module."""
@@ -172,13 +223,17 @@ def test_site_builds_strict(tmp_path: Path) -> None:
     # docs/hooks.py serves the linked files outside docs/ and under the excluded docs/runs/, and only those
     assert 'src="runs/reproduction-v1/compare/compare.png"' in (tmp_path / "site" / "REPRODUCTION.html").read_text()
     assert (tmp_path / "site" / "runs" / "reproduction-v1" / "compare" / "compare.png").is_file()
-    assert 'href="repo/examples/rllib_bug_ppo.py"' in (tmp_path / "site" / "RLLIB.html").read_text()  # outside docs/
+    # a file outside docs/
+    assert 'href="repo/examples/rllib_bug_ppo.py"' in (tmp_path / "site" / "ray-rllib.html").read_text()
     assert (tmp_path / "site" / "repo" / "examples" / "rllib_bug_ppo.py").is_file()
     assert 'src="runs/contest-v2/reproduce/bug/learn%3Dbug%3Dsac%2Cseed%3D0/plots/mwr.png"' in (
-        tmp_path / "site" / "index.html").read_text()  # the home page's figure, from docs/runs
+        tmp_path / "site" / "CONTEST.html").read_text()  # the contest page's figure, from docs/runs
     assert (tmp_path / "site" / "runs" / "contest-v2" / "reproduce" / "bug" / "learn=bug=sac,seed=0" / "plots" /
             "mwr.png").is_file()
     assert (tmp_path / "site" / "runs" / "league" / "leaderboard.png").is_file()
+    # the records behind the result pages are built, and the nav does not list them
+    assert (tmp_path / "site" / "notes" / "contest-log.html").is_file()
+    assert 'href="notes/' not in (tmp_path / "site" / "ratings.html").read_text().split('class="md-content"')[0]
     assert not (tmp_path / "site" / "runs" / "league" / "matches.csv").exists()
     # docs/griffe_roles.py: no Sphinx role is left literally in the API reference; a resolved one is a link
     api = {p.name: p.read_text() for p in (tmp_path / "site" / "api").glob("*.html")}

@@ -6,7 +6,7 @@ Ant trained against a random Spider learned nothing (a random Spider walks off t
 in 28 of 32 matches, so a passive Ant already "wins" 87.5 %), and a Spider then trained for
 20,000 epochs against that frozen Ant won 82 % with Bug passive. Learning together from scratch
 (env v2) ended in a standoff, and with a draw penalty the Ant learned to push while its Spider, shoved
-back by it, never did (docs/CONTEST.md: seven attempts and what they measured). The stages here
+back by it, never did (docs/notes/contest-log.md: seven attempts and what they measured). The stages here
 teach each side to push on its own, check that the pair is a contest, and only then train Bug:
 
 1. ``ant`` and ``spider``: each side alone learns (DDPG, ``train --learn ant=ddpg``) to push still

@@ -66,7 +66,7 @@ class RewardConfig:
     as 0 (:mod:`triplesumo.rules.rewards`). 0 (the paper's sign) keeps env v2's reward exactly. On the fair
     start Spider stands level with Ant in y and with Bug in x, so the sign of those axes is decided by 2 cm of
     reset noise: with 0, walking straight at Ant pays Spider either twice the single-opponent term or nothing
-    (measured on 200 starts: nothing in 106, double in 94; docs/CONTEST.md); a band wider than the noise (e.g.
+    (measured on 200 starts: nothing in 106, double in 94; docs/notes/contest-log.md); a band wider than the noise (e.g.
     0.25) pays it half on every start, as Ant is paid the whole term for walking at Spider."""
 
     opponents: str = "mean"
@@ -74,7 +74,7 @@ class RewardConfig:
     v2's reward unchanged) or ``sum``. With one opponent (Ant, Bug in the paper's match) both are the same. With
     ``mean`` Spider, whose two opponents are Ant and Bug, is paid half for approaching or shoving one of them what
     Ant is paid for approaching or shoving Spider; in the contest's stage 1, where Bug stands still, that halves
-    Spider's only signal toward the opponent that fights back (docs/CONTEST.md). ``sum`` pays each opponent at
+    Spider's only signal toward the opponent that fights back (docs/notes/contest-log.md). ``sum`` pays each opponent at
     full weight."""
 
     def __post_init__(self) -> None:
