@@ -13,6 +13,7 @@ import re
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 from packaging.requirements import Requirement
 
@@ -103,6 +104,18 @@ def test_the_commands_named_are_commands_and_their_extras_are_extras() -> None:
 ])
 def test_a_missing_module_names_the_extra_to_install(command: str, module: str, message: str | None) -> None:
     assert _extras.missing_message(command, module) == message
+
+
+def test_make_policy_plays_a_policy_file_with_torch_where_installed_or_numpy_on_request() -> None:
+    from triplesumo.agents.frozen import FrozenPolicy
+    from triplesumo.agents.networks import ActorPolicy
+    from triplesumo.zoo import make_policy
+
+    default, torch_actor, numpy_actor = (make_policy("zoo:ant", frozen=f) for f in (None, False, True))
+    assert isinstance(default, ActorPolicy) and isinstance(torch_actor, ActorPolicy)  # torch is installed here
+    assert isinstance(numpy_actor, FrozenPolicy)  # what a core install (no torch) gets by default
+    obs = np.random.default_rng(0).normal(size=(16, numpy_actor.obs_dim)).astype(np.float32)
+    np.testing.assert_allclose(numpy_actor(obs), torch_actor(obs), atol=1e-4)
 
 
 def test_require_passes_where_everything_is_installed() -> None:

@@ -27,11 +27,11 @@ COMMAND_EXTRAS: dict[str, tuple[str, ...]] = {
     "reproduce": ALL,
     "train": ("train",),
     "average": ("train",),
+    "plot": ("train",),  # (a run folder's plots: train.run_folder)
     "sweep": ("train",),  # (and Ray, which it names itself)
     "evaluate": ("eval",),
     "tournament": ("eval",),
     "compare": ("eval",),
-    "plot": ("eval",),
 }
 """Command -> the extras it needs whatever its options (``play`` and ``replay`` need none; ``--video`` needs
 ``[video]``)."""
