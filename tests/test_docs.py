@@ -34,7 +34,7 @@ README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 README_LIMIT = 15_000
 COMMANDS = (
-    "python3 -m venv .venv && . .venv/bin/activate && pip install -e . && triplesumo demo\n"
+    "python3 -m venv .venv && . .venv/bin/activate && pip install -e \".[all]\" && triplesumo demo\n"
     "python3 -m venv .venv && . .venv/bin/activate && pip install -e \".[test]\" && pytest -n 2 -q\n"
 )
 

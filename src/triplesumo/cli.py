@@ -11,27 +11,33 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from triplesumo import _dcargs
+from triplesumo import _dcargs, _extras
 from triplesumo._lock import FolderInUseError
 
 if TYPE_CHECKING:
     from triplesumo.evaluation.parallel import TaskRunner
 
 
-def _parser() -> argparse.ArgumentParser:
-    from triplesumo.evaluation.play import PlayConfig
+def _parser(command: str | None = None) -> argparse.ArgumentParser:
+    """Every command's options, or with ``command`` that one's only: the others are listed, their configs (and
+    the libraries those import, torch for ``train``) left unloaded, so that a core install runs ``play``."""
+
+    def wants(name: str) -> bool:
+        return command is None or command == name
 
     parser = argparse.ArgumentParser(prog="triplesumo", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    from triplesumo.demo import DemoConfig
-
     demo = sub.add_parser("demo", help="the main job: train Bug briefly in the shipped ongoing match, "
                                        "evaluate it against baselines, record a match")
-    _dcargs.add_arguments(demo, DemoConfig)
-    play = sub.add_parser("play", help="play one seeded match between policies; --video FILE records it")
-    _dcargs.add_arguments(play, PlayConfig)
-    from triplesumo.train.config import TrainConfig
+    if wants("demo"):
+        from triplesumo.demo import DemoConfig
 
+        _dcargs.add_arguments(demo, DemoConfig)
+    play = sub.add_parser("play", help="play one seeded match between policies; --video FILE records it")
+    if wants("play"):
+        from triplesumo.evaluation.play import PlayConfig
+
+        _dcargs.add_arguments(play, PlayConfig)
     train = sub.add_parser("train", help="train learning agents (DDPG, TD3, SAC or PPO; the others follow given "
                                               "policies)")
     train.add_argument("--resume", metavar="RUN_DIR", default=None,
@@ -51,40 +57,49 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument("--start-over", action="store_true",
                        help="train afresh although OUT/NAME already holds a run: that run is first moved aside to "
                             "OUT/NAME.old-K (without this, training refuses such a folder and changes nothing)")
-    _dcargs.add_arguments(train, TrainConfig)
-    from triplesumo.evaluation.evaluate import EvaluateConfig
+    if wants("train"):
+        from triplesumo.train.config import TrainConfig
 
+        _dcargs.add_arguments(train, TrainConfig)
     evaluate = sub.add_parser("evaluate", help="test epochs of a policy (no exploration) against passive and "
                                                "random baselines in the same matches")
-    _dcargs.add_arguments(evaluate, EvaluateConfig)
-    from triplesumo.evaluation.tournament import TournamentConfig
+    if wants("evaluate"):
+        from triplesumo.evaluation.evaluate import EvaluateConfig
 
+        _dcargs.add_arguments(evaluate, EvaluateConfig)
     tournament = sub.add_parser("tournament", help="seeded matches between named policies in every seat they can "
                                                    "take: openskill leaderboard and cross-play matrix")
-    _dcargs.add_arguments(tournament, TournamentConfig)
-    from triplesumo.evaluation.compare import CompareConfig
+    if wants("tournament"):
+        from triplesumo.evaluation.tournament import TournamentConfig
 
+        _dcargs.add_arguments(tournament, TournamentConfig)
     compare = sub.add_parser("compare", help="statistics across seeds from evaluation folders: IQM with stratified "
                                              "bootstrap intervals, probability of improvement (rliable)")
     compare.add_argument("folders", nargs="+", help="evaluation folders (each holds per_seed.csv)")
-    _dcargs.add_arguments(compare, CompareConfig, skip=("folders",))
-    from triplesumo.train.sweep import SweepConfig
+    if wants("compare"):
+        from triplesumo.evaluation.compare import CompareConfig
 
+        _dcargs.add_arguments(compare, CompareConfig, skip=("folders",))
     sweep = sub.add_parser("sweep", help="a grid of train runs (any TrainConfig field: --grid seed=0,1,2 --grid "
                                          "ddpg.actor_lr=1e-4,1e-3) as Ray tasks, resumable; one summary "
                                          "(needs the ray extra)")
-    sweep.add_argument("--grid", action="extend", nargs="+", default=argparse.SUPPRESS, metavar="FIELD=V1,V2",
-                       help=_dcargs.field_docs(SweepConfig)["grid"] + " (repeat --grid for more fields)")
-    _dcargs.add_arguments(sweep, SweepConfig, skip=("grid",))
-    # --eval-seed is the sweep's and its trials' (TrainConfig.eval_seed, read from the same option): one set of
-    # seeded test matches for the evaluations during training and after it
-    _dcargs.add_arguments(sweep, TrainConfig, skip=("out", "name", "eval_seed"))
-    from triplesumo.reproduce import ReproduceConfig
+    if wants("sweep"):
+        from triplesumo.train.config import TrainConfig
+        from triplesumo.train.sweep import SweepConfig
 
+        sweep.add_argument("--grid", action="extend", nargs="+", default=argparse.SUPPRESS, metavar="FIELD=V1,V2",
+                           help=_dcargs.field_docs(SweepConfig)["grid"] + " (repeat --grid for more fields)")
+        _dcargs.add_arguments(sweep, SweepConfig, skip=("grid",))
+        # --eval-seed is the sweep's and its trials' (TrainConfig.eval_seed, read from the same option): one set of
+        # seeded test matches for the evaluations during training and after it
+        _dcargs.add_arguments(sweep, TrainConfig, skip=("out", "name", "eval_seed"))
     reproduce = sub.add_parser("reproduce", help="the whole reproduction protocol (Ant, Spider, contest check, Bug per "
                                                  "algorithm x seed, evaluation, compare, REPRODUCTION.md), "
                                                  "resumable; --tiny for a smoke run")
-    _dcargs.add_arguments(reproduce, ReproduceConfig)
+    if wants("reproduce"):
+        from triplesumo.reproduce import ReproduceConfig
+
+        _dcargs.add_arguments(reproduce, ReproduceConfig)
     compact = sub.add_parser("compact", help="keep only what resuming a run needs (its newest checkpoint and the "
                                              "league members its pools and in-flight matches hold), e.g. before "
                                              "committing it; the evicted members deleted are listed in "
@@ -111,18 +126,20 @@ def _parser() -> argparse.ArgumentParser:
     zoo.add_argument("policy", nargs="?", help="publish: the run's policy file (e.g. runs/ant/policy)")
     zoo.add_argument("name", nargs="?", help="publish: the zoo name (e.g. ant)")
     zoo.add_argument("--evaluation", default=None, help="publish: a JSON file of evaluation results to record")
-    from triplesumo.evaluation.replay import ReplayConfig
-
     replay = sub.add_parser("replay", help="re-render a match file from play/evaluate --record (--video FILE), "
                                            "checking it re-simulates bit for bit")
     replay.add_argument("file", help="match file (.npz)")
-    _dcargs.add_arguments(replay, ReplayConfig)
-    from triplesumo.evaluation.viewer import ViewConfig
+    if wants("replay"):
+        from triplesumo.evaluation.replay import ReplayConfig
 
+        _dcargs.add_arguments(replay, ReplayConfig)
     view = sub.add_parser("view", help="write a match file as one self-contained HTML page that replays it in a "
                                        "browser, offline: play, scrub, orbit, follow an agent, reward terms")
     view.add_argument("file", help="match file (.npz) from play/evaluate --record")
-    _dcargs.add_arguments(view, ViewConfig)
+    if wants("view"):
+        from triplesumo.evaluation.viewer import ViewConfig
+
+        _dcargs.add_arguments(view, ViewConfig)
     bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train', 'bench ray', 'bench rllib' "
                                          "(RLlib's env steps/s per env runner) or 'bench skill' (time to skill per "
                                          "algorithm) (--help for each)")
@@ -146,9 +163,11 @@ def _runner(ray: bool, address: str) -> Iterator[TaskRunner | None]:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = _parser()
-    args = parser.parse_args(argv)
+    command = next((a for a in argv if not a.startswith("-")), "")  # (the only options before it are -h, --help)
     try:
+        args = _parser(command).parse_args(argv)
+        # the extras it needs (and --video's), checked before it starts, not when it writes its plots or video
+        _extras.require(command, ("video",) if getattr(args, "video", None) else ())
         if args.command == "demo":
             from triplesumo.demo import DemoConfig, run_demo
 
@@ -306,7 +325,6 @@ def main(argv: list[str] | None = None) -> int:
                 evaluation = json.loads(Path(args.evaluation).read_text()) if args.evaluation else None
                 print(publish(Path(args.policy), args.name, evaluation))
         elif args.command == "replay":
-
             from triplesumo.evaluation.replay import ReplayConfig, run_replay
 
             run_replay(Path(args.file), _dcargs.build(ReplayConfig, args))
@@ -335,8 +353,14 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.ray import main as bench_ray
 
                 bench_ray(args.rest)
+    except ModuleNotFoundError as exc:  # an optional library that is not installed: the extra that installs it
+        message = _extras.missing_message(command, exc.name or "")
+        if message is None:
+            raise
+        print(message, file=sys.stderr)
+        return 2
     except (ValueError, FileNotFoundError, PermissionError, OSError, FloatingPointError, FolderInUseError) as exc:
-        print(f"triplesumo {args.command}: error: {exc}", file=sys.stderr)
+        print(f"triplesumo {command}: error: {exc}", file=sys.stderr)
         return 2
     return 0
 

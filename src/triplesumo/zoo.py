@@ -53,12 +53,14 @@ def check_ring(spec: str, physics: PhysicsConfig, allow_other_ring: bool = False
 
 def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None,
                 action_size: int = ACTION_SIZE, expect_obs_dim: int | None = None,
-                expect_physics: PhysicsConfig | None = None, allow_other_ring: bool = False) -> Any:
+                expect_physics: PhysicsConfig | None = None, allow_other_ring: bool = False,
+                frozen: bool | None = None) -> Any:
     """:func:`triplesumo.agents.zoo.make_policy` (a policy callable from its name: built-in, ``zoo:NAME`` or a
-    policy-file path), for a match on ``expect_physics``: a policy file trained on another ring is refused
+    policy-file path; ``frozen`` picks the numpy or the torch actor, by default the torch one where torch is
+    installed), for a match on ``expect_physics``: a policy file trained on another ring is refused
     (:func:`check_ring`) unless ``allow_other_ring``. Without ``expect_physics`` the ring is not checked."""
     policy = _files.make_policy(spec, seed=seed, expect_obs_mode=expect_obs_mode, action_size=action_size,
-                                expect_obs_dim=expect_obs_dim)
+                                expect_obs_dim=expect_obs_dim, frozen=frozen)
     if expect_physics is not None:
         check_ring(spec, expect_physics, allow_other_ring)
     return policy

@@ -75,7 +75,7 @@ import numpy as np
 
 from triplesumo._lock import held
 from triplesumo.agents.builtin import BUILTIN
-from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_policy, seat_problem
+from triplesumo.agents.policy_file import LEAGUE_FORMAT, load_fixed_policy, seat_problem
 from triplesumo.agents.zoo import find_policy_file, make_policy, policy_fingerprint
 from triplesumo.envs.match import Match
 from triplesumo.envs.seeding import check_seed
@@ -266,7 +266,7 @@ def _manifest(spec: str, physics: PhysicsConfig | None = None, allow_other_ring:
     matches' simulation) a policy trained on another ring, unless ``allow_other_ring``."""
     if spec in BUILTIN:
         return None
-    manifest = load_policy(find_policy_file(spec))[1]  # the weights too: a broken file is refused before any match
+    manifest = load_fixed_policy(find_policy_file(spec))[1]  # the weights too (numpy): a broken file is refused early
     if physics is not None:
         check_ring(spec, physics, allow_other_ring)
     return manifest

@@ -7,7 +7,6 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import imageio.v2 as imageio
 import numpy as np
 
 
@@ -38,6 +37,8 @@ def write_mp4(frames: Iterable[np.ndarray], path: Path, fps: int) -> int:
     stderr, so a truncated file would otherwise pass as written. ``OSError`` names ``path``, and any earlier
     file there is left as it was.
     """
+    import imageio.v2 as imageio  # (the video extra: imported when a video is written)
+
     path = check_writable(Path(path))
     tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
     n = 0
@@ -69,6 +70,8 @@ def write_mp4(frames: Iterable[np.ndarray], path: Path, fps: int) -> int:
 
 def count_frames(path: Path) -> int:
     """Decode an mp4 and count its frames (used to check recordings)."""
+    import imageio.v2 as imageio
+
     reader: Any = imageio.get_reader(path)
     with reader:
         return sum(1 for _ in reader)

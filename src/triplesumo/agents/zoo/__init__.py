@@ -12,6 +12,7 @@ path to a policy file (``runs/x/policy`` or ``runs/x/policy.json``).
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import re
 from importlib import resources
@@ -184,21 +185,27 @@ def publish_alias(name: str, target: str, zoo_dir: Path | None = None, extra: di
 
 
 def make_policy(spec: str, seed: int | None = None, expect_obs_mode: str | None = None,
-                action_size: int = ACTION_SIZE, expect_obs_dim: int | None = None) -> Any:
+                action_size: int = ACTION_SIZE, expect_obs_dim: int | None = None,
+                frozen: bool | None = None) -> Any:
     """A policy callable from its name: built-in, ``zoo:NAME`` or a policy-file path.
 
     ``action_size`` sizes a built-in policy's actions (the agent's motors); trained
     policies have theirs in their file. ``expect_obs_dim`` (the match's observation size for
     the agent) makes a policy file that expects another size fail here, with both sizes named.
-    Trained policies come as torch actors (:func:`load_policy`), whose float32 results
-    the recorded trainings and evaluations replay bit for bit; :func:`load` gives the
-    numpy one that the Gymnasium ids use (fork-safe, differs by float rounding, ~1e-5).
+
+    A trained policy comes as the torch actor (:func:`load_policy`, ``frozen=False``), whose float32 results the
+    recorded trainings and evaluations replay bit for bit, or as the numpy
+    :class:`~triplesumo.agents.frozen.FrozenPolicy` (:func:`load_fixed_policy`, ``frozen=True``: fork-safe, the
+    same actions but for float rounding, ~1e-5), which the Gymnasium ids use. By default (``None``) it is the torch
+    actor where torch is installed, else the numpy one: ``pip install triplesumo`` (no torch) plays every policy file.
     """
     if spec in BUILTIN:
         cls = BUILTIN[spec]
         return cls(seed, action_size=action_size) if spec == "random" else cls(action_size=action_size)
-    # The torch actor: recorded trainings and evaluations replay its float32 arithmetic exactly.
-    return load_policy(find_policy_file(spec), expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
+    if frozen is None:
+        frozen = importlib.util.find_spec("torch") is None
+    load = load_fixed_policy if frozen else load_policy
+    return load(find_policy_file(spec), expect_obs_mode=expect_obs_mode, expect_obs_dim=expect_obs_dim)[0]
 
 
 def policy_fingerprint(spec: str) -> str:
