@@ -406,6 +406,7 @@ def test_a_contest_stops_on_its_first_decided_check_and_a_passing_pair_plays_eve
     (docs/runs/contest-v2), is never stopped and its verdict is the shipped record; a hopeless match stops early."""
     from triplesumo.evaluation.metrics_csv import open_table
     from triplesumo.reproduce.protocol import contest_can_pass, contest_verdict, format_contest, play_contest
+    from triplesumo.reproduce.reporting import _contest_section
 
     played: list[tuple[str, int]] = []
 
@@ -441,6 +442,7 @@ def test_a_contest_stops_on_its_first_decided_check_and_a_passing_pair_plays_eve
     assert 3 < len(played) < 20  # in blocks, a few per check
     record = json.loads((shipped / "contest.json").read_text())
     assert contest_verdict(counts, record["ant"], record["spider"], matches=1000) == record
+    assert "\n".join(_contest_section(record, 20_000)) in (shipped.parent / "REPRODUCTION.md").read_text()  # as before
 
     hopeless = {**real, "match": ["win"] * 820 + ["loss"] * 40 + ["draw"] * 140}  # the v1 pair: Spider won 82 %
     played.clear()

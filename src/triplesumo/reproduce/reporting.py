@@ -165,8 +165,7 @@ def _contest_section(c: dict[str, Any], seed: int) -> list[str]:
         rows.append(f"| {what} | {shown} | {bound} | {state} |")
     return [f"On {c['matches']:,} held-out starts each (seed {seed}): each side must push a passive opponent out in "
             f"at least {c['push_min']:.0%} of them, and with Bug passive the team's MWR must lie in [{lo:+.2f}, "
-            f"{hi:+.2f}]. The checks are played in this order, in blocks; the first that can no longer pass, whatever "
-            "its other starts give, decides the contest and stops it.", "",
+            f"{hi:+.2f}].", "",
             "| check | value | bound | |", "| --- | ---: | ---: | --- |", *rows, "", f"Verdict: {verdict}.", ""]
 
 
