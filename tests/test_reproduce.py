@@ -372,24 +372,128 @@ def test_the_contest_rule_checks_each_side_and_the_band() -> None:
     assert lazy["failed"] == ["the Ant pushes a passive Spider out in 0.0% of the starts (at least 50%)"]
 
 
+def _counts(outcomes: list[str]) -> dict[str, int]:
+    return {"n": len(outcomes), **{f"n_{o}": outcomes.count(o) for o in ("win", "loss", "draw")}}
+
+
+def test_a_contest_check_is_decided_once_the_starts_left_cannot_change_it() -> None:
+    """The decision rule on scripted counts: a push check fails once its wins plus every start left are under 50%,
+    the match once every reachable team MWR lies outside the band; until then the next block ends where the starts
+    could first decide it (never sooner than the matches played at once)."""
+    from triplesumo.reproduce.protocol import contest_block, contest_can_pass
+
+    def c(n: int, win: int = 0, loss: int = 0) -> dict[str, int]:
+        return {"n": n, "n_win": win, "n_loss": loss, "n_draw": n - win - loss}
+
+    assert contest_can_pass("ant-pushes", c(500), 1000)  # 500 wins in the 500 left: exactly 50 %
+    assert not contest_can_pass("ant-pushes", c(501), 1000)  # decided: at most 499 of 1,000
+    assert contest_can_pass("spider-pushes", c(900, win=450), 1000) and not contest_can_pass(
+        "spider-pushes", c(1000, win=499), 1000)
+    # the match on 100 starts (the band: team wins - losses in [-50, -10]), from the Spider's seat
+    assert contest_can_pass("match", c(70, win=60), 100)  # team -60 so far, 30 left: [-90, -30] meets the band
+    assert not contest_can_pass("match", c(81, win=81), 100)  # hopeless: at best -81 + 19 = -62
+    assert not contest_can_pass("match", c(60, loss=60), 100)  # too easy: at worst +60 - 40 = +20
+    assert contest_can_pass("match", c(100, win=50, loss=0), 100)  # -0.50: the band's end is included
+    # the next block ends where the starts could first decide the check
+    assert contest_block("ant-pushes", c(0), 1000) == 501 and contest_block("ant-pushes", c(0), 10, least=2) == 6
+    assert contest_block("ant-pushes", c(501, win=300), 1000, least=16) == 801  # 300 more without a win: 499 at most
+    assert contest_block("match", c(0), 1000) == 451  # 451 team wins would leave the team above -0.10
+    assert contest_block("ant-pushes", c(990, win=495), 1000, least=16) == 1000  # no block smaller than least left
+    assert contest_block("ant-pushes", c(600, win=590), 1000, least=16) == 1000  # passed already: play it out
+
+
+def test_a_contest_stops_on_its_first_decided_check_and_a_passing_pair_plays_every_start() -> None:
+    """play_contest on scripted outcomes: a passive pair stops after the Ant's first block (the other checks are not
+    played, and the record says so); the pair env v2's zoo ships, on its real 1,000 starts per check
+    (docs/runs/contest-v2), is never stopped and its verdict is the shipped record; a hopeless match stops early."""
+    from triplesumo.evaluation.metrics_csv import open_table
+    from triplesumo.reproduce.protocol import contest_can_pass, contest_verdict, format_contest, play_contest
+    from triplesumo.reproduce.reporting import _contest_section
+
+    played: list[tuple[str, int]] = []
+
+    def player(outcomes: dict[str, list[str]]) -> Any:
+        def play(check: str, end: int) -> dict[str, int]:
+            played.append((check, end))
+            return _counts(outcomes[check][:end])
+        return play
+
+    passive = dict.fromkeys(("ant-pushes", "spider-pushes", "match"), ["draw"] * 1000)
+    counts = play_contest(player(passive), 1000, least=16)
+    assert played == [("ant-pushes", 501)] and list(counts) == ["ant-pushes"]
+    facts = contest_verdict(counts, "passive", "passive", matches=1000)
+    assert facts["contest"] is False and facts["matches"] == 1000
+    assert facts["stopped"] == {"check": "ant-pushes", "after": 501}
+    assert facts["not_played"] == ["spider-pushes", "match"] and facts["spider_pushes"] is facts["team_mwr"] is None
+    assert facts["failed"] == ["the Ant pushes a passive Spider out in 0 of the first 501 of 1,000 starts, so in at "
+                               "most 49.9% of them (at least 50%)"]
+    text = format_contest(facts)
+    assert text.count("not played: the contest failed on an earlier check") == 2 and "0.0% of the first 501" in text
+    with pytest.raises(ValueError, match="a contest stops at its first check that can no longer pass"):
+        contest_verdict({"ant-pushes": _counts(["draw"] * 500)}, "a", "s", matches=1000)  # it could still pass
+
+    shipped = Path(__file__).parents[1] / "docs" / "runs" / "contest-v2" / "reproduce" / "contest"
+    real = {}
+    for check in ("ant-pushes", "spider-pushes", "match"):
+        with open_table(shipped / check / "trained" / "metrics.csv") as fh:
+            real[check] = [r["outcome"] for r in csv.DictReader(fh)]
+        assert all(contest_can_pass(check, _counts(real[check][:k]), 1000) for k in range(1001))  # at every start
+    played.clear()
+    counts = play_contest(player(real), 1000, least=16)
+    assert {check: end for check, end in played} == dict.fromkeys(real, 1000)  # each check to its last start
+    assert 3 < len(played) < 20  # in blocks, a few per check
+    record = json.loads((shipped / "contest.json").read_text())
+    assert contest_verdict(counts, record["ant"], record["spider"], matches=1000) == record
+    assert "\n".join(_contest_section(record, 20_000)) in (shipped.parent / "REPRODUCTION.md").read_text()  # as before
+
+    hopeless = {**real, "match": ["win"] * 820 + ["loss"] * 40 + ["draw"] * 140}  # the v1 pair: Spider won 82 %
+    played.clear()
+    counts = play_contest(player(hopeless), 1000, least=16)
+    assert [check for check, _ in played].count("match") >= 1 and played[-1][0] == "match"
+    n = counts["match"]["n"]
+    assert n < 1000 and not contest_can_pass("match", counts["match"], 1000)
+    assert contest_can_pass("match", _counts(hopeless["match"][:n - 1]), 1000)  # one start sooner: undecided
+    facts = contest_verdict(counts, "a", "s", matches=1000)
+    assert facts["not_played"] == [] and facts["stopped"] == {"check": "match", "after": n}
+    assert facts["failed"][0].startswith(f"with Bug passive the team's MWR is -1.000 on the first {n:,} of 1,000")
+
+
 def test_the_bug_stage_refuses_a_pair_that_is_no_contest(tmp_path: Path) -> None:
-    """A scripted pair, both passive: nobody pushes anybody (all draws), so every check fails, the contest is
-    recorded as failed and the Bug stage refuses to start, naming each failed check and the file; no Bug trains."""
+    """A scripted pair, both passive: nobody pushes anybody (all draws). The contest stops after the first block of
+    the Ant's check, the fewest starts that decide it (6 of 10: at most 4 wins left), plays neither the Spider's
+    check nor the match (30 matches before the contest stopped early), and is recorded as failed; the Bug stage
+    refuses to start, naming the failed check and the file; no Bug trains."""
     from triplesumo.reproduce import ContestError, run_reproduce
 
-    cfg = ReproduceConfig(out=str(tmp_path / "rep"), pair=("passive", "passive"), contest_epochs=4, n_envs=2,
+    cfg = ReproduceConfig(out=str(tmp_path / "rep"), pair=("passive", "passive"), contest_epochs=10, n_envs=2,
                           algos=("ddpg",), seeds=(0,), progress=False)
     with pytest.raises(ContestError, match=r"stage bug refused: the pair passive / passive failed the contest rule: "
-                                           r"the Ant pushes a passive Spider out in 0.0% .*the Spider pushes a "
-                                           r"passive Ant or Bug out \(its win\) in 0.0% .*team's MWR is \+0.000 "
-                                           r".*contest.json"):
+                                           r"the Ant pushes a passive Spider out in 0 of the first 6 of 10 starts, "
+                                           r"so in at most 40.0% of them \(at least 50%\) \(.*contest.json\)"):
         run_reproduce(cfg)
-    contest = json.loads((tmp_path / "rep" / "contest" / "contest.json").read_text())
-    assert contest["contest"] is False and contest["draws"] == 1.0 and contest["matches"] == 4
+    contest_dir = tmp_path / "rep" / "contest"
+    contest = json.loads((contest_dir / "contest.json").read_text())
+    assert contest["contest"] is False and contest["matches"] == 10
+    assert contest["counts"] == {"ant-pushes": {"n": 6, "n_win": 0, "n_loss": 0, "n_draw": 6}}
+    assert contest["stopped"] == {"check": "ant-pushes", "after": 6}
+    assert contest["not_played"] == ["spider-pushes", "match"]
+    metrics = contest_dir / "ant-pushes" / "trained" / "metrics.csv"
+    assert len(read_table_bytes(metrics).decode().splitlines()) == 1 + 6  # the header and 6 matches
+    assert not (contest_dir / "spider-pushes").exists() and not (contest_dir / "match").exists()
     assert not (tmp_path / "rep" / "bug").exists()
-    assert _record(tmp_path / "rep")["stages"].keys() == {"contest"}
-    with pytest.raises(ContestError):  # and again on a re-run: the recorded verdict stands
+    record = _record(tmp_path / "rep")
+    assert record["stages"].keys() == {"contest"}
+    [command] = record["stages"]["contest"]["commands"]  # the Ant's check, to the start that decided it
+    assert "--learner ant " in command and f"{command} ".count("--epochs 6 ") == 1
+    played = metrics.stat().st_mtime_ns
+    with pytest.raises(ContestError):  # and again on a re-run: the recorded verdict stands, nothing is played again
         run_reproduce(cfg)
+    assert metrics.stat().st_mtime_ns == played and json.loads((contest_dir / "contest.json").read_text()) == contest
+    run_reproduce(dataclasses.replace(cfg, status=True))  # the report: the checks not played, and why
+    stage2 = (tmp_path / "rep" / "REPRODUCTION.md").read_text().split("## Stage 2")[1].split("## Stage 3")[0]
+    assert "| Ant pushes a passive Spider out | 0.0% on the first 6 | >= 50% | failed: could no longer pass |" in stage2
+    assert stage2.count("| not played: the contest failed on an earlier check |") == 2
+    assert "decided by `ant-pushes` after 6 of its 10 starts" in stage2
 
 
 def test_the_checkpoint_rule_takes_the_earliest_screen_that_pushes_half() -> None:

@@ -23,8 +23,10 @@ teach each side to push on its own, check that the pair is a contest, and only t
    the Bug's test starts), three evaluations (``OUT/contest``): the Ant against a passive Spider,
    the Spider against a passive Ant and Bug (each must push an opponent out in at least
    :data:`PUSH_MIN` of the matches), and the match with Bug passive, whose team MWR must lie in
-   :data:`CONTEST_BAND` (the team loses without Bug's help, but not hopelessly). ``contest.json``
-   holds each check and the verdict.
+   :data:`CONTEST_BAND` (the team loses without Bug's help, but not hopelessly). The checks are played
+   in that order, in blocks (:func:`~triplesumo.reproduce.protocol.play_contest`): the first that can no
+   longer pass, whatever its other starts give, stops the contest, and the checks after it are not
+   played; a pair that passes plays every start. ``contest.json`` holds each check and the verdict.
 3. ``bug``: Bug trained with each algorithm x seed in that match, as the trials of
    :mod:`triplesumo.train.sweep` run here one after another (``OUT/bug/learn=bug=ALGO,seed=S``).
    **It refuses to start on a pair that failed the contest rule** (:class:`ContestError`); with

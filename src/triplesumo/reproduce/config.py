@@ -133,7 +133,8 @@ class ReproduceConfig:
     """Test matches of each evaluation during stage 4."""
     contest_epochs: int = 1000
     """Stage 2: held-out starts of each contest check (Ant vs passive Spider, Spider vs passive Ant, the match
-    with Bug passive)."""
+    with Bug passive). A check that can no longer pass stops the contest sooner (a passive pair: after 501 of
+    1,000 starts of the first check); a pair that passes plays them all."""
     contest_seed: int = 20_000
     """Contest start i resets with contest_seed + i: held out from training and from the Bug's test starts."""
     eval_epochs: int = 2000

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import json
 import shlex
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -50,38 +52,161 @@ def _rows_in(path: Path) -> int:
     return max(read_table_bytes(path).count(b"\n") - 1, 0)
 
 
-def contest_verdict(counts: dict[str, dict[str, int]], ant: str, spider: str) -> dict[str, Any]:
-    """The contest rule on stage 2's counts (``{"ant-pushes" | "spider-pushes" | "match": {n, n_win, n_loss,
-    n_draw}}``, each from the learner's seat): every check with its value and bound, ``failed`` (one line per
-    failed check) and the verdict ``contest``."""
-    ant_push = counts["ant-pushes"]["n_win"] / counts["ant-pushes"]["n"]
-    spider_push = counts["spider-pushes"]["n_win"] / counts["spider-pushes"]["n"]
-    m = counts["match"]
-    team_mwr = (m["n_loss"] - m["n_win"]) / m["n"]  # the Spider's losses are the team's wins
+CONTEST_CHECKS = ("ant-pushes", "spider-pushes", "match")
+"""Stage 2's checks, in the order they are played: the Ant against a passive Spider, the Spider against a passive
+Ant and Bug, and the match with Bug passive (from the Spider's seat)."""
+NOT_PLAYED = "not played: the contest failed on an earlier check"
+
+
+@functools.lru_cache(maxsize=8)
+def _band_range(matches: int) -> tuple[int, int]:
+    """The least and the most team wins minus team losses over ``matches`` starts whose MWR (computed as
+    :func:`contest_verdict` does) lies in :data:`CONTEST_BAND`; (1, 0) when none does."""
     lo, hi = CONTEST_BAND
-    failed = []
-    if ant_push < PUSH_MIN:
-        failed.append(f"the Ant pushes a passive Spider out in {ant_push:.1%} of the starts (at least {PUSH_MIN:.0%})")
-    if spider_push < PUSH_MIN:
-        failed.append(f"the Spider pushes a passive Ant or Bug out (its win) in {spider_push:.1%} of the starts "
-                      f"(at least {PUSH_MIN:.0%})")
-    if not lo <= team_mwr <= hi:
-        failed.append(f"with Bug passive the team's MWR is {team_mwr:+.3f} (the band is [{lo:+.2f}, {hi:+.2f}])")
-    return {"ant": ant, "spider": spider, "matches": m["n"], "counts": counts, "push_min": PUSH_MIN,
-            "band": list(CONTEST_BAND), "ant_pushes": ant_push, "spider_pushes": spider_push, "team_mwr": team_mwr,
-            "team_wins": m["n_loss"] / m["n"], "team_losses": m["n_win"] / m["n"], "draws": m["n_draw"] / m["n"],
-            "failed": failed, "contest": not failed}
+    inside = [k for k in range(-matches, matches + 1) if lo <= k / matches <= hi]
+    return (inside[0], inside[-1]) if inside else (1, 0)
+
+
+def contest_can_pass(check: str, counts: dict[str, int], matches: int) -> bool:
+    """Whether a contest check (:data:`CONTEST_CHECKS`) that gave ``counts`` (n, n_win, n_loss, n_draw, from the
+    learner's seat) on its first ``counts["n"]`` starts can still pass on all ``matches``, whatever the other starts
+    give; with every start played, whether it passed (the rule of :func:`contest_verdict`)."""
+    left = matches - counts["n"]
+    if left < 0:
+        raise ValueError(f"contest check {check}: {counts['n']} starts played, more than the {matches} it plays")
+    if check == "match":  # the reachable team wins minus team losses (the Spider's losses are the team's wins)
+        team = counts["n_loss"] - counts["n_win"]
+        least, most = _band_range(matches)
+        return max(team - left, least) <= min(team + left, most)
+    return (counts["n_win"] + left) / matches >= PUSH_MIN
+
+
+def contest_block(check: str, counts: dict[str, int], matches: int, least: int = 1) -> int:
+    """Where a contest check's next block of starts ends: after the fewest more starts that could decide it (every
+    one going against it: no win for a push check; all Spider wins, or all team wins, for the match), at least
+    ``least`` more (a block smaller than the matches played at once wastes them), and all ``matches`` when fewer than
+    ``least`` would be left."""
+    n, left = counts["n"], matches - counts["n"]
+    worst = ("n_win", "n_loss") if check == "match" else ("n_draw",)  # the outcomes that go against the check
+    for k in range(1, left + 1):
+        if not all(contest_can_pass(check, {**counts, "n": n + k, outcome: counts[outcome] + k}, matches)
+                   for outcome in worst):
+            end = min(n + max(k, least), matches)
+            return matches if matches - end < least else end  # (no tail block smaller than least)
+    return matches
+
+
+def play_contest(play: Callable[[str, int], dict[str, int]], matches: int, least: int = 1,
+                 stop: bool = True) -> dict[str, dict[str, int]]:
+    """The contest checks one after another, each in blocks (:func:`contest_block`): ``play(check, end)`` plays that
+    check's starts up to ``end`` and returns the counts of all it has played. With ``stop``, as soon as a check can no
+    longer pass (:func:`contest_can_pass`) the contest has failed and no further start or check is played; a check that
+    can still pass plays all ``matches`` starts. Returns the counts of the checks played, in order; without ``stop``
+    every check is played whole, in one block."""
+    counts: dict[str, dict[str, int]] = {}
+    for check in CONTEST_CHECKS:
+        so_far = {"n": 0, "n_win": 0, "n_loss": 0, "n_draw": 0}
+        while so_far["n"] < matches:
+            end = contest_block(check, so_far, matches, least) if stop else matches
+            so_far = counts[check] = play(check, end)
+            if so_far["n"] < end:
+                raise ValueError(f"contest check {check}: asked to play up to start {end}, it played {so_far['n']}")
+            if stop and not contest_can_pass(check, so_far, matches):
+                return counts
+    return counts
+
+
+def _failed_line(check: str, c: dict[str, int], matches: int) -> str:
+    """Why a check failed: on all its starts, or (stopped early) on its first ``c["n"]`` of ``matches``, after which
+    it could no longer pass."""
+    lo, hi = CONTEST_BAND
+    left = matches - c["n"]
+    if check == "match":
+        team = c["n_loss"] - c["n_win"]
+        if not left:
+            return f"with Bug passive the team's MWR is {team / c['n']:+.3f} (the band is [{lo:+.2f}, {hi:+.2f}])"
+        return (f"with Bug passive the team's MWR is {team / c['n']:+.3f} on the first {c['n']:,} of {matches:,} "
+                f"starts and can only end in [{(team - left) / matches:+.3f}, {(team + left) / matches:+.3f}], "
+                f"outside the band [{lo:+.2f}, {hi:+.2f}]")
+    who = ("the Ant pushes a passive Spider out" if check == "ant-pushes"
+           else "the Spider pushes a passive Ant or Bug out (its win)")
+    if not left:
+        return f"{who} in {c['n_win'] / c['n']:.1%} of the starts (at least {PUSH_MIN:.0%})"
+    return (f"{who} in {c['n_win']:,} of the first {c['n']:,} of {matches:,} starts, so in at most "
+            f"{(c['n_win'] + left) / matches:.1%} of them (at least {PUSH_MIN:.0%})")
+
+
+def _values(counts: dict[str, dict[str, int]]) -> dict[str, float | None]:
+    """Each check's value over the starts it played (None: not played)."""
+    m = counts.get("match")
+    push = {k.replace("-", "_"): counts[k]["n_win"] / counts[k]["n"] if k in counts else None
+            for k in ("ant-pushes", "spider-pushes")}
+    if m is None:
+        return {**push, "team_mwr": None, "team_wins": None, "team_losses": None, "draws": None}
+    return {**push, "team_mwr": (m["n_loss"] - m["n_win"]) / m["n"],  # the Spider's losses are the team's wins
+            "team_wins": m["n_loss"] / m["n"], "team_losses": m["n_win"] / m["n"], "draws": m["n_draw"] / m["n"]}
+
+
+def contest_verdict(counts: dict[str, dict[str, int]], ant: str, spider: str,
+                    matches: int | None = None) -> dict[str, Any]:
+    """The contest rule on stage 2's counts (``{"ant-pushes" | "spider-pushes" | "match": {n, n_win, n_loss,
+    n_draw}}``, each from the learner's seat) on ``matches`` starts each (default: the match's): every check with its
+    value and bound, ``failed`` (one line per failed check) and the verdict ``contest``.
+
+    A contest stopped early (:func:`play_contest`) has the counts of the checks it played: each before the last on
+    all ``matches`` starts (and passed), the last one a check that could no longer pass. Its record adds ``stopped``
+    (that check and the starts it played) and ``not_played`` (the checks after it, whose values are None);
+    ``ValueError`` on counts that no stopped contest gives."""
+    if matches is None:
+        if "match" not in counts:
+            raise ValueError("contest_verdict: a contest stopped before its match check needs matches= (the starts "
+                             "each check was to play)")
+        matches = counts["match"]["n"]
+    played = [check for check in CONTEST_CHECKS if check in counts]
+    if list(counts) != played or played != list(CONTEST_CHECKS[:len(played)]):
+        raise ValueError(f"contest counts: expected the checks {list(CONTEST_CHECKS)} in this order (the first ones "
+                         f"of a contest stopped early), got {list(counts)}")
+    facts = {"ant": ant, "spider": spider, "matches": matches, "counts": counts, "push_min": PUSH_MIN,
+             "band": list(CONTEST_BAND), **_values(counts)}
+    if len(played) == len(CONTEST_CHECKS) and all(c["n"] == matches for c in counts.values()):
+        failed = [_failed_line(check, counts[check], matches) for check in CONTEST_CHECKS
+                  if not contest_can_pass(check, counts[check], matches)]
+        return {**facts, "failed": failed, "contest": not failed}
+    last = played[-1] if played else ""
+    if not played or any(counts[c]["n"] != matches or not contest_can_pass(c, counts[c], matches)
+                         for c in played[:-1]) or contest_can_pass(last, counts[last], matches):
+        raise ValueError(f"contest counts on {matches} starts: a contest stops at its first check that can no longer "
+                         f"pass, after playing each earlier one on all its starts; got {counts}")
+    return {**facts, "failed": [_failed_line(last, counts[last], matches)], "contest": False,
+            "stopped": {"check": last, "after": counts[last]["n"]}, "not_played": list(CONTEST_CHECKS[len(played):])}
 
 
 def format_contest(facts: dict[str, Any]) -> str:
-    """The contest checks as lines of text."""
+    """The contest checks as lines of text (a check a contest stopped early did not play: :data:`NOT_PLAYED`)."""
     lo, hi = facts["band"]
-    return "\n".join([
-        f"  Ant pushes a passive Spider out: {facts['ant_pushes']:.1%} (at least {facts['push_min']:.0%})",
-        f"  Spider pushes a passive Ant or Bug out: {facts['spider_pushes']:.1%} (at least {facts['push_min']:.0%})",
-        f"  Bug passive: team wins {facts['team_wins']:.1%}, loses {facts['team_losses']:.1%}, draws "
-        f"{facts['draws']:.1%}; team MWR {facts['team_mwr']:+.3f} (band [{lo:+.2f}, {hi:+.2f}])",
-        f"  verdict: {'a contest' if facts['contest'] else 'NOT a contest'} ({facts['matches']:,} starts each)"])
+    skipped = facts.get("not_played", [])
+    stopped = facts.get("stopped")
+
+    def starts(check: str) -> str:  # how many starts a check played, when the contest stopped on it early
+        n = facts["counts"][check]["n"]
+        return f" of the first {n:,}" if stopped and stopped["check"] == check and n < facts["matches"] else ""
+
+    lines = [
+        "  Ant pushes a passive Spider out: " + (NOT_PLAYED if "ant-pushes" in skipped else
+                                                 f"{facts['ant_pushes']:.1%}{starts('ant-pushes')} (at least "
+                                                 f"{facts['push_min']:.0%})"),
+        "  Spider pushes a passive Ant or Bug out: " + (NOT_PLAYED if "spider-pushes" in skipped else
+                                                        f"{facts['spider_pushes']:.1%}{starts('spider-pushes')} "
+                                                        f"(at least {facts['push_min']:.0%})"),
+        "  Bug passive: " + (NOT_PLAYED if "match" in skipped else
+                             f"team wins {facts['team_wins']:.1%}, loses {facts['team_losses']:.1%}, draws "
+                             f"{facts['draws']:.1%}{starts('match')}; team MWR {facts['team_mwr']:+.3f} (band "
+                             f"[{lo:+.2f}, {hi:+.2f}])")]
+    if stopped:
+        return "\n".join([*lines, f"  verdict: NOT a contest, decided by {stopped['check']} after "
+                                   f"{stopped['after']:,} of its {facts['matches']:,} starts: {facts['failed'][0]}"])
+    return "\n".join([*lines, f"  verdict: {'a contest' if facts['contest'] else 'NOT a contest'} "
+                              f"({facts['matches']:,} starts each)"])
 
 
 class Protocol:
@@ -341,15 +466,23 @@ class Protocol:
         return path.exists() and json.loads(path.read_text()).get("matches") == self.epochs["contest"]
 
     def _contest(self) -> list[str]:
-        commands: list[str] = []
-        counts: dict[str, dict[str, int]] = {}
-        for name, ecfg in self.contest_configs().items():
-            commands += self._evaluate(ecfg)
-            counts[name] = counts_of(Path(ecfg.out) / "summary.json")
-        facts = contest_verdict(counts, *(self._in_out(p) for p in (self.ant_policy, self.spider_policy)))
+        """The checks in blocks (:func:`play_contest`), stopped as soon as one can no longer pass (tiny: each played
+        whole, the verdict recorded, not enforced); a block resumes its check's evaluation up to its end."""
+        configs = self.contest_configs()
+        commands: dict[str, list[str]] = {}
+
+        def play(check: str, end: int) -> dict[str, int]:
+            ecfg = configs[check]
+            done = _rows_in(Path(ecfg.out) / "trained" / "metrics.csv")  # (a run stopped mid-block, or before blocks)
+            commands[check] = self._evaluate(dataclasses.replace(ecfg, epochs=max(end, done)))
+            return counts_of(Path(ecfg.out) / "summary.json")
+
+        n = self.epochs["contest"]
+        counts = play_contest(play, n, least=self.n_envs, stop=not self.cfg.tiny)
+        facts = contest_verdict(counts, self._in_out(self.ant_policy), self._in_out(self.spider_policy), matches=n)
         print(format_contest(facts))
         atomic_write_bytes(self.out / "contest" / "contest.json", (json.dumps(facts, indent=2) + "\n").encode())
-        return commands
+        return [command for check in counts for command in commands[check]]
 
     def _in_out(self, policy: str) -> str:
         """A policy path relative to the folder when it lies in it (records that stay true when it moves)."""

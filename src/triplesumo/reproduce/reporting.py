@@ -15,7 +15,7 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.compare import trial_group
 from triplesumo.evaluation.metrics_csv import table_exists
 from triplesumo.reproduce.config import PUSH_MIN, REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
-from triplesumo.reproduce.protocol import Protocol, _read_csv
+from triplesumo.reproduce.protocol import NOT_PLAYED, Protocol, _read_csv, contest_can_pass
 from triplesumo.train.logger import policy_seconds
 from triplesumo.train.sweep import Trial, finished, run_facts
 
@@ -138,6 +138,38 @@ def _stage_one_section(protocol: Protocol) -> list[str]:
     return [*lines, ""]
 
 
+def _contest_section(c: dict[str, Any], seed: int) -> list[str]:
+    """Stage 2's table from ``contest.json``: each check's value, bound and state; a contest stopped early shows the
+    starts its deciding check played and the checks it did not play."""
+    lo, hi = c["band"]
+    stopped = c.get("stopped")
+    verdict = "a contest" if c["contest"] else "**not a contest**: the Bug stage refuses it"
+    if stopped:
+        verdict += (f" (decided by `{stopped['check']}` after {stopped['after']:,} of its {c['matches']:,} starts, "
+                    f"when it could no longer pass: {c['failed'][0]})")
+    rows = []
+    for check, what, value, bound in (
+            ("ant-pushes", "Ant pushes a passive Spider out", "ant_pushes", f">= {c['push_min']:.0%}"),
+            ("spider-pushes", "Spider pushes a passive Ant or Bug out", "spider_pushes", f">= {c['push_min']:.0%}"),
+            ("match", "team MWR, Bug passive", "team_mwr", f"[{lo:+.2f}, {hi:+.2f}]")):
+        if check in c.get("not_played", []):
+            rows.append(f"| {what} | - | {bound} | {NOT_PLAYED} |")
+            continue
+        counts = c["counts"][check]
+        shown = f"{c[value]:+.3f}" if check == "match" else f"{c[value]:.1%}"
+        if check == "match":
+            what += f" (wins {c['team_wins']:.1%}, losses {c['team_losses']:.1%}, draws {c['draws']:.1%})"
+        state = "ok" if contest_can_pass(check, counts, c["matches"]) else "failed"
+        if counts["n"] < c["matches"]:
+            shown += f" on the first {counts['n']:,}"
+            state = "failed: could no longer pass"
+        rows.append(f"| {what} | {shown} | {bound} | {state} |")
+    return [f"On {c['matches']:,} held-out starts each (seed {seed}): each side must push a passive opponent out in "
+            f"at least {c['push_min']:.0%} of them, and with Bug passive the team's MWR must lie in [{lo:+.2f}, "
+            f"{hi:+.2f}].", "",
+            "| check | value | bound | |", "| --- | ---: | ---: | --- |", *rows, "", f"Verdict: {verdict}.", ""]
+
+
 def _trial_group(trial: Trial) -> str:
     """The compare group of a trial's policy (``ddpg``, ``ddpg,ddpg.noise=gaussian``)."""
     return trial_group({"group": "trained", "algo": "", "policy": str(Path(trial.config.out) / trial.name / "policy")})
@@ -175,20 +207,7 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
     contest_path = out / "contest" / "contest.json"
     lines += ["## Stage 2: is it a contest?", ""]
     if contest_path.exists():
-        c = json.loads(contest_path.read_text())
-        lo, hi = c["band"]
-        verdict = "a contest" if c["contest"] else "**not a contest**: the Bug stage refuses it"
-        lines += [f"On {c['matches']:,} held-out starts each (seed {cfg.contest_seed}): each side must push a passive "
-                  f"opponent out in at least {c['push_min']:.0%} of them, and with Bug passive the team's MWR must lie "
-                  f"in [{lo:+.2f}, {hi:+.2f}].", "",
-                  "| check | value | bound | |", "| --- | ---: | ---: | --- |",
-                  f"| Ant pushes a passive Spider out | {c['ant_pushes']:.1%} | >= {c['push_min']:.0%} | "
-                  f"{'ok' if c['ant_pushes'] >= c['push_min'] else 'failed'} |",
-                  f"| Spider pushes a passive Ant or Bug out | {c['spider_pushes']:.1%} | >= {c['push_min']:.0%} | "
-                  f"{'ok' if c['spider_pushes'] >= c['push_min'] else 'failed'} |",
-                  f"| team MWR, Bug passive (wins {c['team_wins']:.1%}, losses {c['team_losses']:.1%}, draws "
-                  f"{c['draws']:.1%}) | {c['team_mwr']:+.3f} | [{lo:+.2f}, {hi:+.2f}] | "
-                  f"{'ok' if lo <= c['team_mwr'] <= hi else 'failed'} |", "", f"Verdict: {verdict}.", ""]
+        lines += _contest_section(json.loads(contest_path.read_text()), cfg.contest_seed)
     budget = "" if cfg.tiny else f" (budget {cfg.bug_env_steps:,} env steps per run)"
     schedule = [] if cfg.tiny else [
         "DDPG: the paper preset (one gradient step per 30 transitions); TD3 and SAC: one gradient step per "
