@@ -23,6 +23,9 @@ PACKAGE = ROOT / "src" / "triplesumo"
 MAX_BYTES = 20 * 1024 * 1024
 SHIPPED_DATA = {".xml", ".json", ".safetensors"}
 """What the package ships besides Python: the MJCF assets and the zoo's manifests and weights."""
+WEB = {"triplesumo/evaluation/web/" + name for name in ("three.min.js", "three-LICENSE", "viewer.js", "viewer.css")}
+"""The replay page's scripts and styles (three.js vendored with its licence), inlined into every page it writes; the
+script that vendors three.js stays in the source tree."""
 
 
 @pytest.fixture(scope="module")
@@ -39,9 +42,10 @@ def test_the_wheel_holds_the_package_and_the_zoo_only(wheel: Path) -> None:
     names = zipfile.ZipFile(wheel).namelist()
     tops = {n.split("/")[0] for n in names}
     assert tops == {"triplesumo", wheel.name.split("-py3")[0] + ".dist-info"}, tops
-    strays = [n for n in names if n.startswith("triplesumo/") and not n.endswith("/")
+    strays = [n for n in names if n.startswith("triplesumo/") and not n.endswith("/") and n not in WEB
               and Path(n).suffix not in {".py", *SHIPPED_DATA} and Path(n).name != "py.typed"]
     assert strays == []
+    assert WEB <= set(names)
     data = [n for n in names if Path(n).suffix in SHIPPED_DATA]
     assert all(n.startswith(("triplesumo/assets/", "triplesumo/agents/zoo/")) for n in data), data
 
