@@ -131,6 +131,7 @@ def test_physics_blow_up_in_one_match_truncates_only_that_match(backend: str, n_
         batch.reload(0)
         results = batch.step(np.zeros((N_MATCHES, 3, 8)))
     assert results[0].truncated and results[0].infos[0]["outcome"] == OUTCOME_CODES["error"]
+    assert [info["place"] for info in results[0].infos] == [0, 0, 0]  # an error decides no place
     assert "bad_qvel" in (batch.matches[0].physics_error or "")
     assert all(np.isfinite(o).all() for o in results[0].observations)
     assert [r.infos[0]["outcome"] for r in results[1:]] == [0, 0]
@@ -242,6 +243,7 @@ def test_step_arrays_with_a_physics_error_and_bad_actions(backend: str) -> None:
         got = batch.step_arrays(np.zeros((N_MATCHES, 3, 8)))
         assert got.truncated.tolist() == [False, False, True] and not got.terminated.any()
         assert got.infos["outcome"].tolist() == [[0] * 3, [0] * 3, [OUTCOME_CODES["error"]] * 3]
+        assert got.infos["place"].tolist() == [[0] * 3] * 3  # nothing decided: playing, and the error
         assert (got.rewards[2] == 0).all() and np.isfinite(got.observations).all()
         assert "bad_qvel" in (batch.matches[2].physics_error or "")
         assert got.infos["step"].tolist() == [1, 1, 1]

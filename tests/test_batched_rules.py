@@ -65,6 +65,18 @@ def test_outcomes_and_reward_terms_equal_the_per_match_rules(roster, dead_zone: 
     assert 3 in seen or len(set(team_of)) > 2
 
 
+@pytest.mark.parametrize("xp", [np, torch], ids=["numpy", "torch"])
+def test_first_out_places_of_every_outcome_code(xp) -> None:
+    """One definition of the place on every path (per match, vector, Warp): 1 for a win or a draw, 2 for a
+    loss, 0 while playing and after a physics error -- an error decides nothing, the place of reset's infos
+    (the batched copy once gave it place 1, the Warp copy 0)."""
+    assert B.first_out_places is O.first_out_places
+    codes = [O.OUTCOME_CODES[name] for name in ("playing", "win", "loss", "draw", "error")]
+    places = O.first_out_places(xp.asarray([codes, codes[::-1]]), xp)
+    assert places.tolist() == [[0, 1, 2, 1, 0], [0, 1, 2, 1, 0][::-1]]
+    assert places.dtype == (np.int64 if xp is np else torch.int64)
+
+
 def test_bad_state_flags_nan_inf_and_exploding_rows() -> None:
     ok = np.zeros((4, 5))
     bad = ok.copy()

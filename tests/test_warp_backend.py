@@ -98,7 +98,8 @@ def rollout() -> dict:
     obs, reward, terminated, truncated, infos = env.step(torch.zeros((N, 3, 8), device=env.device))
     flags = (terminated.cpu().numpy(), truncated.cpu().numpy(), infos["_final_obs"].cpu().numpy())
     record["error"] = {
-        "code": infos["outcome"].cpu().numpy(), "reward": reward.cpu().numpy(), "flags": flags,
+        "code": infos["outcome"].cpu().numpy(), "place": infos["place"].cpu().numpy(),
+        "reward": reward.cpu().numpy(), "flags": flags,
         "final_obs": infos["final_obs"].cpu().numpy(), "before": before,
         "obs_finite": bool(torch.isfinite(obs).all()), "step": infos["step"].cpu().numpy(),
         "terms": {n: infos[n].cpu().numpy() for n in TERMS}}
@@ -167,6 +168,7 @@ def test_physics_error_truncates_only_that_match_and_restarts_it(rollout: dict) 
     e = rollout["error"]
     terminated, truncated, final = e["flags"]
     assert e["code"][1].tolist() == [OUTCOME_CODES["error"]] * 3
+    assert e["place"][1].tolist() == [0] * 3  # an error decides no place, as on the CPU backends
     assert truncated[1].all() and not terminated[1].any() and final[1]
     assert not (e["code"][[0, 2]] == OUTCOME_CODES["error"]).any()
     assert (e["reward"][1] == 0).all() and all((e["terms"][n][1] == 0).all() for n in TERMS)

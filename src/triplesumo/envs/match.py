@@ -264,10 +264,12 @@ class Match:
         codes = rules_outcome.OUTCOME_CODES
         if results is not None:
             outcomes = [codes[results[t]] for t in self._team_of]
-            places = rules_outcome.first_out_places(results, self._team_of)
         else:
             outcomes = [rules_outcome.DRAW_CODE if timed_out else rules_outcome.PLAYING] * self.n_agents
-            places = [1 if timed_out else 0] * self.n_agents
+        if results is not None or timed_out:  # decided: once per match, off the per-step path
+            places = rules_outcome.first_out_places(np.array(outcomes), np).tolist()
+        else:
+            places = [0] * self.n_agents  # nothing decided yet
         keys, step = rules_rewards.REPORTED, self.steps
         infos = []
         rewards = []

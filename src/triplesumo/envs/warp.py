@@ -310,7 +310,7 @@ class WarpMatchBatch:
             truncated = (timed_out | trouble)[:, None].expand(e, n).contiguous()
             done = ended | timed_out | trouble
             left = out & ~error  # first-out rules: out of the ring is eliminated, as on the CPU backend
-            infos.update(outcome=code, place=_first_out_place(code), step=self.steps.clone(),
+            infos.update(outcome=code, place=rules_batched.first_out_places(code, torch), step=self.steps.clone(),
                          out_of_ring=left, eliminated=left.clone(), final_obs=obs, _final_obs=done)
             rows = torch.nonzero(done).flatten().cpu().numpy()  # the step's one host sync
             if len(rows) and self.config.on_physics_error == "raise" and bool(trouble.any()):
@@ -374,14 +374,6 @@ class WarpMatchBatch:
     def close(self) -> None:
         """Drop the captured graphs."""
         self._graphs.clear()
-
-
-def _first_out_place(code: torch.Tensor) -> torch.Tensor:
-    """``(E, n)`` place of every agent under the first-out rules (``infos["place"]``, as
-    :func:`triplesumo.rules.outcome.first_out_places`): 1 for a win or draw, 2 for a loss, 0 while the
-    match goes on (or on a physics error)."""
-    won = (code == rules_batched.WIN_CODE) | (code == rules_batched.DRAW_CODE)
-    return torch.where(code == rules_batched.LOSS_CODE, 2, torch.where(won, 1, 0))
 
 
 def set_warp_verbose(verbose: bool) -> None:

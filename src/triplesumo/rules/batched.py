@@ -27,6 +27,7 @@ from triplesumo.rules.outcome import ERROR_CODE as ERROR_CODE
 from triplesumo.rules.outcome import LOSS_CODE as LOSS_CODE
 from triplesumo.rules.outcome import PLAYING
 from triplesumo.rules.outcome import WIN_CODE as WIN_CODE
+from triplesumo.rules.outcome import first_out_places as first_out_places
 from triplesumo.rules.rewards import TERMS
 from triplesumo.rules.teams import Teams
 
@@ -178,13 +179,6 @@ def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRu
     dense = opponent + self_ + partner + still
     terms = dict(zip(TERMS, (opponent, self_, partner, xp.zeros_like(opponent) + still, sparse), strict=True))
     return {**terms, "dense_reward": dense, "sparse_reward": sparse, "reward": dense + sparse}
-
-
-def first_out_places(code: Any, xp: Any) -> Any:
-    """``(E, n)`` place of every agent under ``first_out`` from :func:`judge`'s codes (a time-out
-    already a draw): 1 for a win or draw, 2 for a loss, 0 while the match goes on
-    (:func:`triplesumo.rules.outcome.first_out_places`)."""
-    return xp.where(code == LOSS_CODE, 2, xp.where(code == GOES_ON, 0, 1))
 
 
 # ------------------------------------------------------------- observations

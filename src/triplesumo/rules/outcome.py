@@ -15,7 +15,8 @@ step (e.g. Spider and Bug leave together) nobody wins: the match ends as a draw
 (terminated, not truncated). Reaching the step limit with nobody out is a draw by
 truncation. With the paper's roster: Spider out -> the team (Ant, Bug) wins; Ant or
 Bug out -> Spider wins; Spider and Ant/Bug out together -> draw. Places: winners 1,
-losers 2; a draw shares place 1.
+losers 2; a draw shares place 1; a physics error decides no place (0)
+(:func:`first_out_places`).
 
 ``elimination`` (free-for-all, pursuit)
 An agent out *leaves*: it is eliminated on that step and plays no more. A team is in play
@@ -39,6 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 WIN, LOSS, DRAW = "win", "loss", "draw"
 ERROR = "error"
@@ -82,9 +84,18 @@ def judge(out: Sequence[bool], team_of: Sequence[int], n_teams: int) -> list[str
     return [LOSS if lost else WIN for lost in losing]
 
 
-def first_out_places(team_results: Sequence[str], team_of: Sequence[int]) -> list[int]:
-    """Per agent, its place under ``first_out``: 1 for a win or draw, 2 for a loss."""
-    return [2 if team_results[t] == LOSS else 1 for t in team_of]
+def first_out_places(code: Any, xp: Any) -> Any:
+    """Place of every agent under ``first_out`` from its outcome code (:data:`OUTCOME_CODES`): 1 for a win
+    or a draw (shared), 2 for a loss, 0 while the match goes on and after a physics error (nothing was
+    decided: the place of reset's infos, ``Match.reset_infos``).
+
+    ``code`` is an integer array of any shape in the namespace ``xp``: numpy for one match
+    (:class:`~triplesumo.envs.match.Match`, when its match ends) or many
+    (:mod:`.batched`), torch on the MuJoCo Warp backend's device. The one definition of the place
+    on every path.
+    """
+    won = (code == WIN_CODE) | (code == DRAW_CODE)
+    return xp.where(code == LOSS_CODE, 2, xp.where(won, 1, 0))
 
 
 def place_value(first: float, last: float, low: int, high: int, n_places: int) -> float:
