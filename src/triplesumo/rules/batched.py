@@ -1,4 +1,4 @@
-"""The rules of :mod:`triplesumo.rules` once more, over arrays of many matches at once.
+"""The rules of :mod:`triplesumo.rules` over arrays of many matches at once.
 
 Every function takes arrays shaped ``(num_envs, n_agents, ...)`` and an array namespace
 ``xp`` -- ``numpy`` or ``torch`` (this module never imports torch) -- and uses only what
@@ -8,7 +8,9 @@ methods ``sum``, ``any``, ``all``, ``reshape``,
 call them with ``torch`` on the device; ``tests/test_batched_rules.py`` holds them equal,
 on numpy, to the per-match rules that :class:`~triplesumo.envs.match.Match` uses
 (:mod:`.outcome`, :mod:`.rewards`, :mod:`.observations`), so the two never drift apart
-unnoticed.
+unnoticed. Rules that need no roster matrices are written once, over ``xp``, in the per-match
+modules and used from here: :func:`~.outcome.first_out_places`, :func:`~.observations.yaw_of`,
+:func:`~.observations.heading_quaternion`.
 
 Outcomes are integer codes per agent, :data:`~triplesumo.rules.outcome.OUTCOME_CODES`:
 0 the match goes on, 1 win, 2 loss, 3 draw, 4 physics error.
@@ -22,6 +24,8 @@ from typing import Any
 import numpy as np
 
 from triplesumo.rules.config import MatchConfig
+from triplesumo.rules.observations import heading_quaternion as heading_quaternion
+from triplesumo.rules.observations import yaw_of as yaw_of
 from triplesumo.rules.outcome import DRAW_CODE as DRAW_CODE
 from triplesumo.rules.outcome import ERROR_CODE as ERROR_CODE
 from triplesumo.rules.outcome import LOSS_CODE as LOSS_CODE
@@ -195,21 +199,6 @@ def paper_observation(pos: Any, vel: Any, forces: Any, qpos: Any, qvel: Any, rul
     e = pos.shape[0]
     parts = [pos.reshape(e, -1), vel.reshape(e, -1), clip(forces, rules.force_clip, xp).reshape(e, -1), qpos, qvel]
     return xp.concat(parts, axis=1)
-
-
-def yaw_of(quat: Any, xp: Any) -> Any:
-    """Heading about z of ``(..., 4)`` quaternions (w, x, y, z)."""
-    w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
-    return xp.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def heading_quaternion(quat: Any, yaw: Any, xp: Any) -> Any:
-    """``(..., 4)`` orientations (w, x, y, z) seen from the heading frame rotated by ``yaw``
-    about z, sign chosen so w >= 0 (:func:`triplesumo.rules.observations.heading_quaternion`)."""
-    c, s = xp.cos(yaw / 2.0), xp.sin(yaw / 2.0)
-    w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
-    q = xp.stack([c * w + s * z, c * x + s * y, c * y - s * x, c * z - s * w], axis=-1)
-    return xp.where(q[..., :1] < 0.0, -q, q)
 
 
 def egocentric_observation(pos: Any, vel: Any, quat: Any, angvel: Any, joint_pos: Any, joint_vel: Any,

@@ -34,25 +34,29 @@ torso blocks and its free joint's first three qpos and qvel entries; ``egocentri
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from triplesumo.rules.teams import Teams
 from triplesumo.sim.physics import Simulation
 
 
-def yaw_of(quat: np.ndarray) -> np.ndarray:
-    """Heading angle about z of ``(..., 4)`` quaternions (w, x, y, z)."""
+def yaw_of(quat: Any, xp: Any) -> Any:
+    """Heading angle about z of ``(..., 4)`` quaternions (w, x, y, z), in the namespace ``xp``
+    (numpy for one match or many, torch on the MuJoCo Warp backend's device)."""
     w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
-    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return xp.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
-def heading_quaternion(quat: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+def heading_quaternion(quat: Any, yaw: Any, xp: Any) -> Any:
     """``(..., 4)`` orientations ``quat`` (w, x, y, z, world frame) seen from the heading
-    frame that is rotated by ``yaw`` about z: ``conj(q_yaw) * quat``, sign chosen so w >= 0."""
-    c, s = np.cos(yaw / 2.0), np.sin(yaw / 2.0)
+    frame that is rotated by ``yaw`` about z: ``conj(q_yaw) * quat``, sign chosen so w >= 0.
+    In the namespace ``xp``, as :func:`yaw_of`."""
+    c, s = xp.cos(yaw / 2.0), xp.sin(yaw / 2.0)
     w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
-    q = np.stack([c * w + s * z, c * x + s * y, c * y - s * x, c * z - s * w], axis=-1)
-    return np.where(q[..., :1] < 0.0, -q, q)
+    q = xp.stack([c * w + s * z, c * x + s * y, c * y - s * x, c * z - s * w], axis=-1)
+    return xp.where(q[..., :1] < 0.0, -q, q)
 
 
 class ObservationBuilder:
@@ -133,8 +137,8 @@ class ObservationBuilder:
             return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
         forces = sim.contact_forces()
         pos, vel, quat = sim.torso_positions(), sim.torso_velocities(), sim.torso_quaternions()
-        yaw = yaw_of(quat)
-        orientation = heading_quaternion(quat, yaw)
+        yaw = yaw_of(quat, np)
+        orientation = heading_quaternion(quat, yaw, np)
         c, s_ = np.cos(yaw), np.sin(yaw)
         n = sim.n_agents
         rot = np.zeros((n, 3, 3))  # world -> heading frame of each agent
