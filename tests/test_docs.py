@@ -313,6 +313,11 @@ for name, line, code in json.loads(sys.stdin.read()):
 """
 
 
+PAGE_SECONDS = 480
+"""A page's examples, all of them, in one process: the Ray and RLlib page starts Ray for each of its blocks, which
+took over 240 s on a 2-core box shared with training runs."""
+
+
 @pytest.mark.parametrize("page", example_pages(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_the_python_blocks_of_a_page_run(page: Path, tmp_path: Path) -> None:
     """A page's unmarked blocks, each in a fresh namespace (so each has its own imports), in one fresh process
@@ -324,9 +329,9 @@ def test_the_python_blocks_of_a_page_run(page: Path, tmp_path: Path) -> None:
            "MUJOCO_GL": "egl", "OMP_NUM_THREADS": "1", "RAY_DEDUP_LOGS": "0"}
     try:
         proc = subprocess.run([sys.executable, "-c", _RUN_BLOCKS], input=json.dumps(blocks), capture_output=True,
-                              text=True, timeout=240, env=env, cwd=tmp_path)
+                              text=True, timeout=PAGE_SECONDS, env=env, cwd=tmp_path)
     except subprocess.TimeoutExpired as exc:
-        raise AssertionError(f"{page.relative_to(ROOT)}: the examples did not finish in 240 s") from exc
+        raise AssertionError(f"{page.relative_to(ROOT)}: the examples did not finish in {PAGE_SECONDS} s") from exc
     ran = re.findall(r"^--- (\S+)$", proc.stdout, re.M)
     assert proc.returncode == 0, (f"{ran[-1] if ran else page}: the example failed\n--- stderr ---\n"
                                   f"{proc.stderr[-4000:]}")

@@ -454,7 +454,7 @@ def test_tournament_seats_the_runs_egocentric_networks_and_snapshots_in_every_se
     for stem, seats in ((both_run.run_dir / "policy-ant+bug", ["ant", "bug"]),
                         (both_run.league.root / member.policies["bug"], ["ant", "bug"]),
                         (both_run.run_dir / "policy-spider", ["spider"])):
-        manifest = _manifest(str(stem), "egocentric")
+        manifest = _manifest(str(stem))
         assert manifest is not None and manifest["obs_mode"] == "egocentric"
         assert eligible_seats(str(stem), manifest, match) == seats, stem
         assert manifest["partners"] == len(seats) - 1  # the trained seat's partners, recorded at training
