@@ -306,7 +306,7 @@ class Protocol:
     def side(self, role: str) -> Side:
         """A side's training in legs with its screens (:class:`~triplesumo.reproduce.pretrain.Side`)."""
         cfg = self.pretrain(role)
-        others = tuple(f"{a}=passive" for a in ("ant", "bug", "spider") if a != role)
+        others = cfg.policies  # every other agent passive, as in its training
 
         def train_to(epochs: int) -> int:
             leg = dataclasses.replace(cfg, epochs=epochs)
