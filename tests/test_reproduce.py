@@ -596,3 +596,26 @@ def test_the_cli_stops_a_refused_pair_with_rc_2_and_a_message(tmp_path: Path,
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "triplesumo reproduce: stopped: stage bug refused" in err and "Traceback" not in err
+
+
+def test_a_reproduction_grows_by_more_bug_runs_keeping_those_made_and_refuses_to_drop_any(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """More seeds (or algorithms) on a folder: the Bug runs made are kept as they are, the new ones train and
+    join the test on the same starts; fewer is refused (their runs would be orphans of the record)."""
+    out = tmp_path / "rep"
+    base = ["reproduce", "--tiny", "--out", str(out), "--no-progress"]
+    assert main([*base, "--algos", "ddpg", "--seeds", "0"]) == 0
+    made = out / "bug" / "learn=bug=ddpg,seed=0" / "metrics.csv"
+    before = made.read_bytes()
+    first = {r["candidate"]: r["test_mwr"]
+             for r in _csv_rows(out / "evaluation" / "per_seed.csv", header=True)}
+    assert main([*base, "--algos", "ddpg", "sac", "--seeds", "0", "1", "--ddpg-runs", "1"]) == 0
+    assert made.read_bytes() == before  # kept, not trained again
+    assert sorted(p.name for p in (out / "bug").iterdir() if "seed=" in p.name) == [
+        "learn=bug=ddpg,seed=0", "learn=bug=sac,seed=0", "learn=bug=sac,seed=1"]  # DDPG on the first 1 seed
+    rows = {r["candidate"]: r for r in _csv_rows(out / "evaluation" / "per_seed.csv", header=True)}
+    assert len(rows) == 5 and {k: rows[k]["test_mwr"] for k in first} == first  # same starts, same rows
+    capsys.readouterr()
+    assert main([*base, "--algos", "sac", "--seeds", "0", "1"]) == 2  # drops the DDPG run
+    err = capsys.readouterr().err
+    assert "other options" in err and "algos: ['ddpg', 'sac'] there, ['sac'] given" in err

@@ -358,6 +358,10 @@ def _evaluate(cfg: EvaluateConfig, runner: TaskRunner | None) -> dict[str, Any]:
     if len(seeds) < len(trained):
         raise ValueError(f"EvaluateConfig.policy names a policy twice: {list(trained)}")
     old = _read_record(out / RECORD_FILE) if cfg.resume else None
+    if old is not None:  # a policy the folder played keeps its label when more (or fewer) are named beside it
+        played = {c["policy"]: label for label, c in old["candidates"].items() if _is_seed_label(label)}
+        relabelled = {played.get(p, label): p for label, p in seeds.items()}
+        seeds = relabelled if len(relabelled) == len(seeds) else seeds
     baselines = cfg.baselines
     if baselines is None:  # a resume keeps the baselines its folder played (recorded under their own name)
         baselines = DEFAULT_BASELINES if old is None else _baselines_in(

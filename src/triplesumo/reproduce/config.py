@@ -82,8 +82,13 @@ class ReproduceConfig:
     """Algorithms Bug is trained with: DDPG (the paper preset) and the best of TD3/SAC/PPO, SAC, chosen by the rule
     fixed beforehand in docs/CONTEST.md (seed 0 of each in the contest's match, by the training MWR of its last 200
     training matches: SAC +0.445, TD3 +0.210, PPO -0.290). ``--algos ddpg td3 sac ppo`` reruns the comparison."""
-    seeds: tuple[int, ...] = (0, 1, 2)
-    """Training seeds of Bug, for every algorithm."""
+    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    """Training seeds of Bug, for every algorithm (DDPG: the first ``ddpg_runs`` of them): 5, the fewest runs an
+    interval across runs is drawn over. A folder resumes with more seeds (or algorithms) than it was made with: the
+    runs made are kept and the new ones trained and tested on the same starts."""
+    ddpg_runs: int = 3
+    """The paper-preset DDPG Bug trains on the first this many of ``seeds`` (0: all of them): the comparison with the
+    paper's algorithm, beside the best algorithm's headline."""
     ant_epochs: int = 10_000
     """Stage ``ant``: at most this many epochs of the Ant learning to push a still Spider, Bug still; it stops at its
     earliest screened checkpoint that pushes at least :data:`PUSH_MIN` of the screen's still opponents out (the pair
@@ -199,7 +204,7 @@ class ReproduceConfig:
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
             raise ValueError(f"ReproduceConfig.algos must be among {ALGOS}, got {bad}")
-        for name in ("bug_env_steps", "bug_learn_every", "bug_eval_every"):
+        for name in ("bug_env_steps", "bug_learn_every", "bug_eval_every", "ddpg_runs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 0, got {value!r}")
@@ -232,6 +237,12 @@ class ReproduceConfig:
         if (self.ray_address or self.num_cpus) and not self.ray:
             raise ValueError("ReproduceConfig.ray_address and num_cpus are options of ray (--ray)")
         check_ray("ReproduceConfig", self.ray, self.ray_address)
+
+
+def bug_runs(algos: Any, seeds: Any, ddpg_runs: int) -> list[tuple[str, int]]:
+    """The Bug runs (algorithm, seed) of a reproduction: every algorithm on every seed, DDPG on the first
+    ``ddpg_runs`` (0: all)."""
+    return [(a, s) for a in algos for s in (seeds[:ddpg_runs] if a == "ddpg" and ddpg_runs else seeds)]
 
 
 @dataclass(frozen=True)

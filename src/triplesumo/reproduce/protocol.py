@@ -23,7 +23,8 @@ from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.evaluation.metrics_csv import open_table, read_table_bytes, table_exists
 from triplesumo.evaluation.parallel import ProcessRunner
 from triplesumo.model.specs import PhysicsConfig
-from triplesumo.reproduce.config import CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation
+from triplesumo.reproduce.config import (CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation,
+                                        bug_runs)
 from triplesumo.reproduce.pretrain import PAIR_FILE, SCREENS_FILE, Side, counts_of, play_pair_rule, read_record
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.run_folder import command_for
@@ -363,9 +364,11 @@ class Protocol:
         return [f"the pair rule on {len(record['pairs'])} pair(s) played: Ant {pick['ant']['epoch']:,}, Spider "
                 f"{pick['spider']['epoch']:,} (pair/{PAIR_FILE})", *(self.side_commands(r) for r in ("ant", "spider"))]
 
-    def sweep(self) -> SweepConfig:
-        return SweepConfig(grid=("learn=" + ",".join(f"bug={a}" for a in self.cfg.algos),
-                                 "seed=" + ",".join(map(str, self.cfg.seeds))), out=str(self.out / "bug"))
+    def sweeps(self) -> list[SweepConfig]:
+        """One sweep per algorithm over its seeds (:func:`bug_runs`); trial names as in one grid over both."""
+        runs = bug_runs(self.cfg.algos, self.cfg.seeds, self.cfg.ddpg_runs)
+        return [SweepConfig(grid=(f"learn=bug={a}", "seed=" + ",".join(str(s) for b, s in runs if b == a)),
+                            out=str(self.out / "bug")) for a in self.cfg.algos]
 
     def bug_base(self) -> TrainConfig:
         base = self._base(name="bug", learner="bug", policies=(f"ant={self.ant_policy}",
@@ -384,7 +387,7 @@ class Protocol:
                                    sac=dataclasses.replace(base.sac, learn_every=k))
 
     def bug_trials(self) -> list[Trial]:
-        return trials(self.sweep(), self.bug_base())
+        return [t for sweep in self.sweeps() for t in trials(sweep, self.bug_base())]
 
     def ablation_trials(self) -> list[Trial]:
         """The DDPG Bug trials with each ablation (its own grid value), over the same seeds and budgets."""
@@ -392,7 +395,8 @@ class Protocol:
         for item in self.cfg.ablations:
             field_name, raw, _ = ablation(item)
             made += trials(SweepConfig(grid=("learn=bug=ddpg", f"{field_name}={raw}",
-                                             "seed=" + ",".join(map(str, self.cfg.seeds))),
+                                             "seed=" + ",".join(str(s) for _, s in bug_runs(
+                                                 ("ddpg",), self.cfg.seeds, self.cfg.ddpg_runs))),
                                        out=str(self.out / "ablations")), self.bug_base())
         return made
 

@@ -12,7 +12,7 @@ from typing import Any
 from triplesumo._lock import held
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.model.specs import PhysicsConfig
-from triplesumo.reproduce.config import RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig
+from triplesumo.reproduce.config import RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig, bug_runs
 from triplesumo.reproduce.protocol import Protocol
 from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status
 from triplesumo.train import legs
@@ -30,7 +30,7 @@ def code_version() -> str:
 
 def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:
     """``ValueError`` unless the reproduction recorded in ``out`` was made with ``cfg``'s options (:data:`RUN_OPTIONS`
-    aside);
+    aside, and the Bug runs' algorithms and seeds where ``cfg`` keeps every run the record names);
     an option added since the record was written counts as its default, what that run used."""
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
     defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
@@ -38,6 +38,10 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     # the folder by its place, however it was written; --status only reads, so a moved folder may be read
     config["out"], recorded["out"] = str(Path(config["out"]).resolve()), str(Path(recorded["out"]).resolve())
     ignore = (*RUN_OPTIONS, "out") if cfg.status else RUN_OPTIONS
+    runs = ("algos", "seeds", "ddpg_runs")  # may grow: the Bug runs made are kept, new ones train beside them
+    if set(bug_runs(recorded["algos"], recorded["seeds"], recorded["ddpg_runs"])) <= set(
+            bug_runs(cfg.algos, cfg.seeds, cfg.ddpg_runs)):
+        ignore = (*ignore, *runs)
     differ = sorted(k for k in {*config, *recorded} if k not in ignore and recorded.get(k) != config.get(k))
     if differ:
         raise ValueError(f"{out} holds a reproduction with other options ("
