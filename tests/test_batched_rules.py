@@ -1,8 +1,10 @@
-"""The batched rules (rules/batched.py, over arrays) equal the per-match rules Match uses.
+"""The rules, written once over arrays (one match, the CPU vector env and MuJoCo Warp call the same functions),
+equal an independent plain-Python reference (``tests/rules_reference.py``) and give the same on numpy and torch.
 
-On numpy, for several rosters: ring exits and outcome codes against ``outcome.judge``,
-every reward term against ``RewardRule.rows`` (bit for bit), and both observation modes against
-``ObservationBuilder.build`` over real rollouts of several matches stacked together.
+On numpy, for several rosters: ring exits and outcome codes against the reference ``judge``, every reward
+term against its ``rows`` (bit for bit), elimination's places, codes and rewards against its
+``judge_elimination`` and ``rows_in_play``; both observation modes of many matches stacked together against
+each match's own ``ObservationBuilder.build`` over real rollouts.
 """
 
 from __future__ import annotations
@@ -11,12 +13,13 @@ import numpy as np
 import pytest
 import torch
 
+import rules_reference as R
 from triplesumo.envs.match import Match
 from triplesumo.model import AgentSpec
 from triplesumo.rules import MatchConfig, RewardConfig, Teams
 from triplesumo.rules import batched as B
 from triplesumo.rules import outcome as O
-from triplesumo.rules.rewards import REPORTED, RewardRule
+from triplesumo.rules.rewards import REPORTED
 
 ROSTERS = {
     "paper": MatchConfig().agents,
@@ -36,7 +39,7 @@ def test_outcomes_and_reward_terms_equal_the_per_match_rules(roster, dead_zone: 
                                                          opponents=opponents))
     rules = B.BatchedRules.build(cfg, half_size=2.0)
     teams = Teams.from_agents(roster)
-    rule = RewardRule(teams, cfg.reward)
+    rule = R.ReferenceRewardRule(teams, cfg.reward)
     team_of = teams.team_of.tolist()
     rng = np.random.default_rng(7)
     e, n = 400, len(roster)
@@ -51,9 +54,9 @@ def test_outcomes_and_reward_terms_equal_the_per_match_rules(roster, dead_zone: 
     terms = B.reward_terms(pos, vel, code, timed_out, rules, np)
     seen = set()
     for k in range(e):
-        ref_out = O.agents_out(pos[k].tolist(), 2.0)
+        ref_out = R.agents_out(pos[k].tolist(), 2.0)
         assert out[k].tolist() == ref_out
-        results = O.judge(ref_out, team_of, len(teams.names))
+        results = R.judge(ref_out, team_of, len(teams.names))
         expected = [O.PLAYING if results is None else O.OUTCOME_CODES[results[t]] for t in team_of]
         assert code[k].tolist() == expected
         seen.update(expected)
@@ -143,3 +146,71 @@ def test_reward_terms_with_a_dead_zone_equal_on_torch_and_numpy() -> None:
         np.testing.assert_array_equal(got[name].numpy(), value, err_msg=name)
     plain = B.reward_terms(pos, vel, code, timed_out, B.BatchedRules.build(MatchConfig(), 2.0), np)
     assert not np.array_equal(plain["reward_self_velocity"], ref["reward_self_velocity"])  # the band acts
+
+
+ELIMINATION_ROSTERS = {"free-for-all": ROSTERS["free-for-all"], "2-vs-2": ROSTERS["2-vs-2"],
+                       "pursuit": ROSTERS["3-vs-1"],
+                       "four-alone": tuple(AgentSpec(c, c, 0.2) for c in "abcd")}
+
+
+@pytest.mark.parametrize("opponents", ["mean", "sum"])
+@pytest.mark.parametrize("roster", ELIMINATION_ROSTERS.values(), ids=list(ELIMINATION_ROSTERS))
+def test_elimination_equals_the_reference_and_torch(roster, opponents: str) -> None:
+    """Elimination, once over arrays: who leaves, who plays on, the places each shares, the outcome codes, the
+    placement rewards and every reward term (agents out of play get zeros) equal the plain-Python reference
+    for random states of many matches at once; torch gives the same bits."""
+    evader = roster[-1].name if len(roster) == 4 and roster[0].team == roster[1].team == roster[2].team else None
+    cfg = MatchConfig(agents=roster, rules="elimination", evader=evader,
+                      reward=RewardConfig(win=300.0, loss=-100.0, draw=0.0, opponents=opponents))
+    rules = B.BatchedRules.build(cfg, half_size=2.0)
+    teams = Teams.from_agents(roster)
+    team_of = teams.team_of.tolist()
+    timeout_team = team_of[cfg.agent_names.index(evader)] if evader else None
+    rng = np.random.default_rng(5)
+    e, n = 600, len(roster)
+    alive = rng.uniform(size=(e, n)) < 0.75
+    pos = rng.uniform(-2.4, 2.4, (e, n, 3))
+    vel = rng.normal(0.0, 1.0, (e, n, 3))
+    at_limit = rng.uniform(size=e) < 0.3
+    out = B.agents_out(pos, 2.0, np)
+    judged = B.judge_elimination(alive, out, at_limit, rules, np)
+    sparse = B.place_values(judged.low, judged.high, rules, np)
+    terms = B.reward_terms(pos, vel, None, None, rules, np, alive=alive, sparse=sparse)
+    reference = R.ReferenceRewardRule(teams, cfg.reward)
+    seen = set()
+    for k in range(e):
+        ref = R.judge_elimination(alive[k].tolist(), out[k].tolist(), team_of, bool(at_limit[k]), timeout_team)
+        assert judged.leaving[k].tolist() == ref.leaving
+        assert judged.alive[k].tolist() == ref.alive
+        assert bool(judged.over[k]) == ref.over
+        assert list(zip(judged.low[k].tolist(), judged.high[k].tolist(), strict=True)) == ref.spans
+        codes = [O.PLAYING if o is None else O.OUTCOME_CODES[o] for o in ref.outcomes]
+        assert judged.code[k].tolist() == codes
+        seen.update(codes)
+        ref_sparse = [R.place_value(300.0, -100.0, lo, hi, len(teams.names)) if lo else 0.0 for lo, hi in ref.spans]
+        assert sparse[k].tolist() == ref_sparse  # the same formula, bit for bit
+        rows = np.array(reference.rows_in_play(pos[k].tolist(), vel[k].tolist(), alive[k].tolist(), ref_sparse))
+        for j, name in enumerate(REPORTED):  # the reference divides after the weight: equal to rounding
+            np.testing.assert_allclose(terms[name][k], rows[:, j], rtol=1e-12, atol=1e-12, err_msg=name)
+    assert {O.PLAYING, O.WIN_CODE, O.LOSS_CODE} <= seen
+    on_torch = B.judge_elimination(torch.as_tensor(alive), torch.as_tensor(out), torch.as_tensor(at_limit),
+                                   rules.to(torch.as_tensor), torch)
+    for field in ("leaving", "alive", "over", "low", "high", "code"):
+        np.testing.assert_array_equal(getattr(on_torch, field).numpy(), getattr(judged, field), err_msg=field)
+    t_terms = B.reward_terms(torch.as_tensor(pos), torch.as_tensor(vel), None, None, rules.to(torch.as_tensor), torch,
+                             alive=torch.as_tensor(alive), sparse=torch.as_tensor(sparse))
+    for name, value in terms.items():
+        np.testing.assert_array_equal(t_terms[name].numpy(), value, err_msg=name)
+
+
+def test_one_match_calls_the_array_rules() -> None:
+    """No second copy of a rule: the match core's step reads the functions of the rules' modules."""
+    import inspect
+
+    from triplesumo.envs import match
+
+    source = inspect.getsource(match.Match)
+    for used in ("rules_outcome.agents_out", "rules_outcome.judge(", "rules_rewards.reward_terms",
+                 "rules_outcome.judge_elimination", "rules_outcome.place_values"):
+        assert used in source, used
+    assert B.reward_terms is __import__("triplesumo.rules.rewards", fromlist=["x"]).reward_terms

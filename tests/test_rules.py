@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from triplesumo.model import PAPER_AGENTS, AgentSpec, PhysicsConfig
-from triplesumo.rules import DENSE_TERMS, DRAW, LOSS, TERMS, WIN, ResetNoise, RewardConfig, Teams
+from triplesumo.rules import DENSE_TERMS, DRAW, LOSS, TERMS, WIN, MatchConfig, ResetNoise, RewardConfig, Teams
+from triplesumo.rules.batched import BatchedRules
 from triplesumo.rules.outcome import OUTCOME_CODES, agents_out, judge, outcome_name
-from triplesumo.rules.rewards import REPORTED, RewardRule, dense_terms
+from triplesumo.rules.rewards import REPORTED, RewardRule, dense_terms, reward_terms
 
 ANT, BUG, SPIDER = 0, 1, 2
 
@@ -316,13 +317,17 @@ def test_reward_rows_and_their_sums() -> None:
     ],
 )
 def test_judge_precedence(team_of, out, expected) -> None:
-    team_of_arr = np.array(team_of)
-    assert judge(np.array(out), team_of_arr, int(team_of_arr.max()) + 1) == expected
+    roster = tuple(AgentSpec(f"a{i}", f"t{t}", 0.2) for i, t in enumerate(team_of))
+    rules = BatchedRules.build(MatchConfig(agents=roster), half_size=2.0)
+    codes = judge(np.array([out]), rules, np)[0].tolist()
+    want = [OUTCOME_CODES["playing"]] * len(team_of) if expected is None else [OUTCOME_CODES[expected[t]]
+                                                                                 for t in team_of]
+    assert codes == want
 
 
 def test_agents_out_is_strict_and_uses_both_axes() -> None:
     xy = np.array([[2.0, 0.0], [2.0001, 0.0], [0.0, -2.0001], [-1.9, 1.9], [-2.5, 3.0]])
-    assert agents_out(xy, 2.0) == agents_out(xy.tolist(), 2.0) == [False, True, True, False, True]
+    assert agents_out(xy, 2.0, np).tolist() == [False, True, True, False, True]
 
 
 def test_outcome_term() -> None:
@@ -386,6 +391,8 @@ def test_opponents_sum_pays_spider_each_opponent_at_full_weight() -> None:
     rng = np.random.default_rng(5)
     teams = Teams.from_agents(PAPER_AGENTS)
     mean, total = RewardRule(teams, RewardConfig()), RewardRule(teams, RewardConfig(opponents="sum"))
+    sum_rules = BatchedRules.from_roster(teams, RewardConfig(opponents="sum"), 2.0, 0, 1.0)
+    mean_rules = BatchedRules.from_roster(teams, RewardConfig(), 2.0, 0, 1.0)
     spider = [a.name for a in PAPER_AGENTS].index("spider")
     for _ in range(50):
         pos, vel = rng.uniform(-2, 2, (3, 3)).tolist(), rng.normal(size=(3, 3)).tolist()
@@ -395,9 +402,14 @@ def test_opponents_sum_pays_spider_each_opponent_at_full_weight() -> None:
                 assert t[i][:2] == pytest.approx((2 * m[i][0], 2 * m[i][1])) and t[i][2] == m[i][2] == 0.0
             else:
                 assert t[i] == m[i]
-        assert total.dense_in_play(pos, vel, [True] * 3) == t
+        in_play = reward_terms(np.array([pos]), np.array([vel]), None, None, sum_rules, np,
+                               alive=np.ones((1, 3), bool), sparse=np.zeros((1, 3)))  # elimination, all in play
+        assert np.stack([in_play[k][0] for k in DENSE_TERMS[:3]], axis=1).tolist() == [list(row) for row in t]
         alive = [True] * 3
         alive[int(rng.integers(3))] = False  # one out: nobody has two opponents in play, so sum is mean
-        assert total.dense_in_play(pos, vel, alive) == mean.dense_in_play(pos, vel, alive)
+        in_play = [reward_terms(np.array([pos]), np.array([vel]), None, None, r, np, alive=np.array([alive]),
+                                sparse=np.zeros((1, 3))) for r in (sum_rules, mean_rules)]
+        for name in DENSE_TERMS:
+            assert in_play[0][name].tolist() == in_play[1][name].tolist()
     with pytest.raises(ValueError, match=r"RewardConfig.opponents must be one of \('mean', 'sum'\), got 'max'"):
         RewardConfig(opponents="max")

@@ -22,6 +22,7 @@ from triplesumo.envs.seeding import check_seed
 from triplesumo.model import build_model, ring_half_size
 from triplesumo.rules import outcome as rules_outcome
 from triplesumo.rules import rewards as rules_rewards
+from triplesumo.rules.batched import BatchedRules
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.observations import ObservationBuilder
 from triplesumo.rules.teams import Teams
@@ -55,8 +56,12 @@ class Match:
         self.teams = Teams.from_agents(self.config.agents)
         self._n_teams = len(self.teams.names)
         self._team_of = self.teams.team_of.tolist()
-        self.reward_rule = rules_rewards.RewardRule(self.teams, self.config.reward)
         self.half_size = ring_half_size(self.model)
+        self.rules = BatchedRules.build(self.config, self.half_size)
+        """The game as arrays: every rule of a step is :mod:`triplesumo.rules`' array function on ``E = 1``."""
+        self._playing_codes = np.full((1, self.n_agents), rules_outcome.PLAYING)
+        self._draw_codes = np.full((1, self.n_agents), rules_outcome.DRAW_CODE)
+        self._no_sparse = np.zeros((1, self.n_agents))
         self.observer = ObservationBuilder(
             self.sim, self.teams, self.config.obs_mode, self.half_size, self.config.contact_force_clip
         )
@@ -254,37 +259,44 @@ class Match:
         trouble = self.sim.new_warnings()
         if trouble:
             return self._physics_error(trouble)
-        pos, vel = self.sim.torso_positions().tolist(), self.sim.torso_velocities().tolist()
-        out = rules_outcome.agents_out(pos, self.half_size)
+        pos, vel = self.sim.torso_positions()[None], self.sim.torso_velocities()[None]
+        rules = self.rules
+        out = rules_outcome.agents_out(pos, rules.half_size, np)  # (1, n)
         if self.elimination:
             return self._finish_elimination(pos, vel, out)
-        results = rules_outcome.judge(out, self._team_of, self._n_teams)
-        timed_out = results is None and self.steps >= self.config.max_steps
-        rows = self.reward_rule.rows(pos, vel, results, timed_out)
-        codes = rules_outcome.OUTCOME_CODES
-        if results is not None:
-            outcomes = [codes[results[t]] for t in self._team_of]
-        else:
-            outcomes = [rules_outcome.DRAW_CODE if timed_out else rules_outcome.PLAYING] * self.n_agents
-        if results is not None or timed_out:  # decided: once per match, off the per-step path
-            places = rules_outcome.first_out_places(np.array(outcomes), np).tolist()
+        ended = bool(out.any())
+        timed_out = not ended and self.steps >= self.config.max_steps
+        if ended or timed_out:
+            code = rules_outcome.judge(out, rules, np) if ended else self._draw_codes
+            terms = rules_rewards.reward_terms(pos, vel, code, np.array([timed_out]), rules, np)
+        else:  # nobody out (most steps): what judge() gives then, and no sparse reward (the table's 0)
+            code = self._playing_codes
+            terms = rules_rewards.reward_terms(pos, vel, code, None, rules, np, sparse=self._no_sparse)
+        if ended or timed_out:  # decided: once per match, off the per-step path
+            places = rules_outcome.first_out_places(code[0], np).tolist()
         else:
             places = [0] * self.n_agents  # nothing decided yet
+        infos = self._infos(terms, code[0].tolist(), places, out[0].tolist(), out[0].tolist())
+        self.over = ended or timed_out
+        self._last_obs = self._observe()
+        return StepResult(self._last_obs, terms["reward"][0], ended, timed_out, infos)
+
+    def _infos(self, terms: dict[str, np.ndarray], outcomes: list[int], places: list[int], out: list[bool],
+               eliminated: list[bool]) -> list[dict[str, Any]]:
+        """Every agent's info of a step from the ``(1, n)`` arrays of :func:`~triplesumo.rules.rewards.reward_terms`
+        (plain Python numbers, the same types at reset and every step)."""
         keys, step = rules_rewards.REPORTED, self.steps
         infos = []
-        rewards = []
-        for row, result, place, is_out in zip(rows, outcomes, places, out, strict=True):
-            rewards.append(row[-2] + row[-1])  # dense + sparse: the terms summed in TERMS order
+        rows = zip(*(terms[k][0].tolist() for k in keys), strict=True)
+        for row, outcome, place, is_out, gone in zip(rows, outcomes, places, out, eliminated, strict=True):
             info: dict[str, Any] = dict(zip(keys, row, strict=True))
-            info["outcome"] = result
+            info["outcome"] = outcome
             info["out_of_ring"] = is_out
             info["step"] = step
             info["place"] = place
-            info["eliminated"] = is_out
+            info["eliminated"] = gone
             infos.append(info)
-        self.over = results is not None or timed_out
-        self._last_obs = self._observe()
-        return StepResult(self._last_obs, np.array(rewards), results is not None, timed_out, infos)
+        return infos
 
     def record_judged(self, over: bool, observations: list[np.ndarray]) -> None:
         """Take the result of a step judged outside the match: the batched rules of
@@ -294,47 +306,34 @@ class Match:
         self.over = over
         self._last_obs = observations
 
-    def _finish_elimination(self, pos: list[list[float]], vel: list[list[float]], out: list[bool]) -> StepResult:
+    def _finish_elimination(self, pos: np.ndarray, vel: np.ndarray, out: np.ndarray) -> StepResult:
         """:meth:`finish_step` under ``elimination`` rules."""
-        before = self.alive
-        judged = rules_outcome.judge_elimination(before, out, self._team_of, self.steps >= self.config.max_steps,
-                                                 self._timeout_team)
-        reward = self.config.reward
-        n_places = self._n_teams
-        sparse = [rules_outcome.place_value(reward.win, reward.loss, low, high, n_places) if low else 0.0
-                  for low, high in judged.spans]
-        rows = self.reward_rule.rows_in_play(pos, vel, before, sparse)
-        codes = rules_outcome.OUTCOME_CODES
-        keys, step = rules_rewards.REPORTED, self.steps
-        infos, rewards = [], []
-        for i, row in enumerate(rows):
-            rewards.append(row[-2] + row[-1])
-            info: dict[str, Any] = dict(zip(keys, row, strict=True))
-            info["out_of_ring"] = judged.leaving[i]
-            info["step"] = step
-            if before[i]:
-                decided = judged.outcomes[i]
-                info["outcome"] = rules_outcome.PLAYING if decided is None else codes[decided]
-                info["place"] = judged.places[i]
-            else:  # decided on an earlier step
-                info["outcome"], info["place"] = self._outcomes[i], self._places[i]
-            info["eliminated"] = not judged.alive[i]
-            infos.append(info)
-        self._places = [info["place"] for info in infos]
-        self._outcomes = [info["outcome"] for info in infos]
-        self.alive = judged.alive
-        self.over = judged.over
-        all_out = not any(judged.alive)
+        rules, before = self.rules, np.array([self.alive])
+        judged = rules_outcome.judge_elimination(before, out, np.array([self.steps >= self.config.max_steps]),
+                                                 rules, np)
+        sparse = rules_outcome.place_values(judged.low, judged.high, rules, np)
+        terms = rules_rewards.reward_terms(pos, vel, None, None, rules, np, alive=before, sparse=sparse)
+        decided, places = judged.code[0].tolist(), judged.low[0].tolist()
+        # an agent decided on an earlier step keeps its outcome and place
+        outcomes = [decided[i] if self.alive[i] else self._outcomes[i] for i in range(self.n_agents)]
+        places = [places[i] if self.alive[i] else self._places[i] for i in range(self.n_agents)]
+        leaving, alive = judged.leaving[0].tolist(), judged.alive[0].tolist()
+        infos = self._infos(terms, outcomes, places, leaving, [not a for a in alive])
+        self._places, self._outcomes = places, outcomes
+        self.alive = alive
+        over = bool(judged.over[0])
+        self.over = over
+        all_out = not any(alive)
         # a step that pays a decided result is terminal: the last team standing, or the evader surviving to the
         # limit (a win by the rules); only survivors sharing a draw at the limit are truncated
-        paid = any(judged.alive[i] and judged.outcomes[i] in (rules_outcome.WIN, rules_outcome.LOSS)
+        paid = any(alive[i] and decided[i] in (rules_outcome.WIN_CODE, rules_outcome.LOSS_CODE)
                    for i in range(self.n_agents))
-        terminated = judged.over and (all_out or paid or len({self._team_of[i] for i in range(self.n_agents)
-                                                                 if judged.alive[i]}) <= 1)
-        truncated = judged.over and not terminated
+        terminated = over and (all_out or paid or len({self._team_of[i] for i in range(self.n_agents)
+                                                       if alive[i]}) <= 1)
+        truncated = over and not terminated
         self._last_obs = self._observe()
-        return StepResult(self._last_obs, np.array(rewards), terminated, truncated, infos,
-                          judged.leaving if any(judged.leaving) else None)
+        return StepResult(self._last_obs, terms["reward"][0], terminated, truncated, infos,
+                          leaving if any(leaving) else None)
 
     def _physics_error(self, trouble: list[str]) -> StepResult:
         message = (f"MuJoCo reported {', '.join(trouble)} at step {self.steps}; "

@@ -25,6 +25,10 @@ origin at its torso centre):
 
 ``observation_structure(mode)`` gives the ordered block sizes.
 
+Both modes are written once, over arrays of ``E`` matches in an array namespace ``xp``
+(:func:`paper_observation`, :func:`egocentric_observation`): :class:`ObservationBuilder` calls them
+for one match (``E = 1``, numpy), the CPU vector env for many, the MuJoCo Warp backend with torch.
+
 Pursuit's "probabilistic observations": with an evader and ``sigma > 0``,
 :meth:`ObservationBuilder.add_evader_noise` adds Gaussian noise to every entry of an
 opponent's observation that holds the evader's torso position or velocity (``paper``: its
@@ -59,6 +63,60 @@ def heading_quaternion(quat: Any, yaw: Any, xp: Any) -> Any:
     return xp.where(q[..., :1] < 0.0, -q, q)
 
 
+def clip(values: Any, limit: float, xp: Any) -> Any:
+    """``values`` clipped to ``[-limit, limit]`` (a new array)."""
+    if xp is np:  # np.clip's dispatch costs several times more than the two ufuncs, on every step of a match
+        clipped = np.maximum(values, -limit)
+        return np.minimum(clipped, limit, out=clipped)
+    return xp.clip(values, -limit, limit)
+
+
+def paper_observation(pos: Any, vel: Any, forces: Any, qpos: Any, qvel: Any, rules: Any, xp: Any) -> Any:
+    """``(E, D)`` ``paper`` vector per match (the same for every agent): torso positions ``pos`` and velocities
+    ``vel`` ``(E, n, 3)``, contact forces ``forces`` ``(E, n_agent_geoms, 3)`` clipped to
+    ``+-rules.force_clip``, then ``qpos`` ``(E, nq)`` and ``qvel`` ``(E, nv)``; in the dtype of the inputs."""
+    e = pos.shape[0]
+    parts = [pos.reshape(e, -1), vel.reshape(e, -1), clip(forces, rules.force_clip, xp).reshape(e, -1), qpos, qvel]
+    return xp.concat(parts, axis=1)
+
+
+def heading_blocks(pos: Any, vel: Any, quat: Any, rules: Any, xp: Any) -> tuple[Any, Any, Any, Any, Any]:
+    """The ``egocentric`` blocks every body shares, ``(E, n, ...)``: ``self_orientation``, ``self_velocity``,
+    ``edge_distance``, the ``<other>_position``/``<other>_velocity`` pairs (``rules.others``' order), and
+    ``rot_t`` ``(E, n, 3, 3)``, which turns a row vector of the world frame into each agent's heading frame."""
+    e, n = pos.shape[0], pos.shape[1]
+    yaw = yaw_of(quat, xp)
+    c, s = xp.cos(yaw), xp.sin(yaw)
+    zero, one = xp.zeros_like(c), xp.ones_like(c)
+    rot = xp.stack([xp.stack([c, s, zero], axis=-1), xp.stack([-s, c, zero], axis=-1),
+                    xp.stack([zero, zero, one], axis=-1)], axis=-2)  # (E, n, 3, 3): world -> heading
+    rot_t = rot.swapaxes(-1, -2)
+    others = rules.others
+    rel_pos = (pos[:, others] - pos[:, :, None, :]) @ rot_t  # (E, n, n-1, 3)
+    rel_vel = (vel[:, others] - vel[:, :, None, :]) @ rot_t
+    edge = rules.half_size - xp.maximum(xp.abs(pos[..., 0]), xp.abs(pos[..., 1]))
+    own_vel = (rot @ vel[..., None])[..., 0]
+    rel = xp.concat([rel_pos, rel_vel], axis=-1).reshape(e, n, -1)
+    return heading_quaternion(quat, yaw, xp), own_vel, edge[..., None], rel, rot_t
+
+
+def egocentric_observation(pos: Any, vel: Any, quat: Any, angvel: Any, joint_pos: Any, joint_vel: Any,
+                           forces: Any, rules: Any, xp: Any) -> Any:
+    """``(E, n, D)`` ``egocentric`` observation of every agent, for rosters of one body kind.
+
+    ``pos``, ``vel``, ``angvel``: ``(E, n, 3)``; ``quat``: ``(E, n, 4)``; ``joint_pos``,
+    ``joint_vel``: ``(E, n, joints)``; ``forces``: ``(E, n, geoms_per_agent, 3)`` world frame, rotated
+    into each agent's heading frame and then clipped. ``rules`` gives ``half_size``, ``force_clip`` and
+    ``others`` (:class:`~triplesumo.rules.batched.BatchedRules`).
+    """
+    e, n = pos.shape[0], pos.shape[1]
+    orientation, own_vel, edge, rel, rot_t = heading_blocks(pos, vel, quat, rules, xp)
+    local_forces = clip(forces @ rot_t, rules.force_clip, xp)  # rotate, then clip
+    parts = [pos[..., 2:3], orientation, joint_pos, own_vel, angvel, joint_vel, edge, rel,
+             local_forces.reshape(e, n, -1)]
+    return xp.concat(parts, axis=-1)
+
+
 class ObservationBuilder:
     """Builds every agent's observation from a :class:`Simulation`."""
 
@@ -66,9 +124,10 @@ class ObservationBuilder:
         self.sim, self.teams, self.mode = sim, teams, mode
         self.half_size, self.force_clip = half_size, force_clip
         names = sim.agent_names
-        self._others = np.stack([np.concatenate([teams.partners[i], teams.opponents[i]]).astype(int)
-                                 for i in range(sim.n_agents)])
+        self.others = np.stack([np.concatenate([teams.partners[i], teams.opponents[i]]).astype(int)
+                                for i in range(sim.n_agents)])
         """``(n, n - 1)``: for each agent, every other agent, partners first, then opponents."""
+        self._others = self.others
         self._uniform = len(set(sim.action_sizes)) == 1 and len(set(sim.geom_counts)) == 1
         """Every agent has the same body size: one array op per block instead of one per agent."""
         self._joint_qpos = np.concatenate([a.joint_qpos for a in sim.agents])
@@ -124,10 +183,9 @@ class ObservationBuilder:
     def global_state(self) -> np.ndarray:
         """The ``paper`` vector (float32): the match's global state."""
         sim, data = self.sim, self.sim.data
-        forces = sim.contact_forces()
-        _clip(forces, self.force_clip)
-        return np.concatenate([sim.torso_positions().ravel(), sim.torso_velocities().ravel(), forces.ravel(),
-                               data.qpos, data.qvel], dtype=np.float32)
+        return paper_observation(sim.torso_positions()[None], sim.torso_velocities()[None],
+                                 sim.contact_forces()[None], data.qpos[None], data.qvel[None], self,
+                                 np)[0].astype(np.float32)
 
     def build(self) -> list[np.ndarray]:
         """float32 observation of every agent, roster order."""
@@ -135,41 +193,19 @@ class ObservationBuilder:
         if self.mode == "paper":
             obs = self.global_state()
             return [obs] + [obs.copy() for _ in range(sim.n_agents - 1)]
+        n, data = sim.n_agents, sim.data
         forces = sim.contact_forces()
-        pos, vel, quat = sim.torso_positions(), sim.torso_velocities(), sim.torso_quaternions()
-        yaw = yaw_of(quat, np)
-        orientation = heading_quaternion(quat, yaw, np)
-        c, s_ = np.cos(yaw), np.sin(yaw)
-        n = sim.n_agents
-        rot = np.zeros((n, 3, 3))  # world -> heading frame of each agent
-        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = c, s_, -s_, c, 1.0
-        rot_t = rot.transpose(0, 2, 1)
-        others = self._others
-        rel_pos = (pos[others] - pos[:, None, :]) @ rot_t
-        rel_vel = (vel[others] - vel[:, None, :]) @ rot_t
-        edge = self.half_size - np.abs(pos[:, :2]).max(axis=1)
-        data = sim.data
-        head_vel = (rot @ vel[:, :, None])[:, :, 0]
+        pos, vel, quat = sim.torso_positions()[None], sim.torso_velocities()[None], sim.torso_quaternions()[None]
         ang_vel = sim.torso_angular_velocities()
-        rel = np.concatenate([rel_pos, rel_vel], axis=2).reshape(n, -1)
         if self._uniform:
-            local = forces.reshape(n, -1, 3) @ rot_t  # rotate, then clip: every component within the clip
-            _clip(local, self.force_clip)
-            out = np.concatenate([
-                pos[:, 2:3], orientation, data.qpos[self._joint_qpos].reshape(n, -1), head_vel, ang_vel,
-                data.qvel[self._joint_qvel].reshape(n, -1), edge[:, None], rel, local.reshape(n, -1),
-            ], axis=1, dtype=np.float32)
-            return list(out)
+            return list(egocentric_observation(
+                pos, vel, quat, ang_vel[None], data.qpos[self._joint_qpos].reshape(1, n, -1),
+                data.qvel[self._joint_qvel].reshape(1, n, -1), forces.reshape(1, n, -1, 3), self, np,
+            )[0].astype(np.float32))
+        # bodies of several kinds: the same blocks, joints and forces joined per agent
+        orientation, own_vel, edge, rel, rot_t = (b[0] for b in heading_blocks(pos, vel, quat, self, np))
         qpos = np.split(data.qpos[self._joint_qpos], self._joint_split)
         qvel = np.split(data.qvel[self._joint_qvel], self._joint_split)
-        own = [f @ rot_t[i] for i, f in enumerate(np.split(forces, self._geom_split))]
-        for f in own:
-            _clip(f, self.force_clip)
-        return [np.concatenate([pos[i, 2:3], orientation[i], qpos[i], head_vel[i], ang_vel[i], qvel[i],
-                                edge[i:i + 1], rel[i], own[i].ravel()], dtype=np.float32) for i in range(n)]
-
-
-def _clip(values: np.ndarray, limit: float) -> None:
-    """Clip ``values`` to ``[-limit, limit]`` in place (``np.clip``'s dispatch costs several times more)."""
-    np.maximum(values, -limit, out=values)
-    np.minimum(values, limit, out=values)
+        own = [clip(f @ rot_t[i], self.force_clip, np) for i, f in enumerate(np.split(forces, self._geom_split))]
+        return [np.concatenate([pos[0, i, 2:3], orientation[i], qpos[i], own_vel[i], ang_vel[i], qvel[i],
+                                edge[i], rel[i], own[i].ravel()], dtype=np.float32) for i in range(n)]

@@ -1,6 +1,8 @@
 """Judging a match: who left the ring, and what that means for each side.
 
-Two rule sets (``MatchConfig.rules``), written once here over plain sequences.
+Two rule sets (``MatchConfig.rules``), each written once here over arrays of ``E`` matches in an array
+namespace ``xp`` (numpy for one match, ``E = 1``, and for the CPU vector env; torch on the MuJoCo Warp
+backend's device). The constant matrices of a roster they read are :class:`~triplesumo.rules.batched.BatchedRules`.
 
 ``first_out`` (the paper)
 
@@ -38,20 +40,23 @@ reset and every step so that tensor-based clients (TorchRL) can stack it;
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-WIN, LOSS, DRAW = "win", "loss", "draw"
-ERROR = "error"
-"""A physics error truncated the match (see ``MatchConfig.on_physics_error``)."""
+if TYPE_CHECKING:
+    from triplesumo.rules.roster import BatchedRules
 
-OUTCOME_CODES: dict[str, int] = {"playing": 0, WIN: 1, LOSS: 2, DRAW: 3, ERROR: 4}
-"""Int code of each outcome in infos: 0 while the match goes on, 1 win, 2 loss, 3 draw,
-4 physics error."""
-PLAYING, WIN_CODE, LOSS_CODE, DRAW_CODE, ERROR_CODE = OUTCOME_CODES.values()
-OUTCOME_NAMES: tuple[str, ...] = tuple(OUTCOME_CODES)
-"""``OUTCOME_NAMES[code]`` is the outcome's name (``"playing"`` for 0)."""
+from triplesumo.rules.codes import DRAW as DRAW
+from triplesumo.rules.codes import DRAW_CODE as DRAW_CODE
+from triplesumo.rules.codes import ERROR as ERROR
+from triplesumo.rules.codes import ERROR_CODE as ERROR_CODE
+from triplesumo.rules.codes import LOSS as LOSS
+from triplesumo.rules.codes import LOSS_CODE as LOSS_CODE
+from triplesumo.rules.codes import OUTCOME_CODES as OUTCOME_CODES
+from triplesumo.rules.codes import OUTCOME_NAMES as OUTCOME_NAMES
+from triplesumo.rules.codes import PLAYING as PLAYING
+from triplesumo.rules.codes import WIN as WIN
+from triplesumo.rules.codes import WIN_CODE as WIN_CODE
 
 
 def outcome_name(code: int) -> str:
@@ -62,26 +67,25 @@ def outcome_name(code: int) -> str:
 
 
 
-def agents_out(torso_xy: Sequence[Sequence[float]], half_size: float) -> list[bool]:
-    """Whose torso centre is outside the ring, per agent; ``torso_xy`` rows start with x, y.
+def agents_out(pos: Any, half_size: float, xp: Any) -> Any:
+    """``(..., n)`` bool: whose torso centre (``pos[..., :2]``) is outside the ring, ``max(|x|, |y|) > half_size``.
 
-    Plain Python on the rows (a list, or an array's ``tolist()``): for a handful of agents
-    this is several times faster than numpy's per-call overhead.
+    ``pos`` is ``(E, n, >=2)`` for ``E`` matches (``E = 1`` for one :class:`~triplesumo.envs.match.Match`), in the
+    namespace ``xp``: numpy on the CPU, torch on the MuJoCo Warp backend's device.
     """
-    return [abs(row[0]) > half_size or abs(row[1]) > half_size for row in torso_xy]
+    return xp.maximum(xp.abs(pos[..., 0]), xp.abs(pos[..., 1])) > half_size
 
 
-def judge(out: Sequence[bool], team_of: Sequence[int], n_teams: int) -> list[str] | None:
-    """Per-team result (``"win"``/``"loss"``/``"draw"``), or ``None`` while nobody is out."""
-    if not any(out):
-        return None
-    losing = [False] * n_teams
-    for is_out, team in zip(out, team_of, strict=True):
-        if is_out:
-            losing[team] = True
-    if all(losing):
-        return [DRAW] * n_teams
-    return [LOSS if lost else WIN for lost in losing]
+def judge(out: Any, rules: BatchedRules, xp: Any) -> Any:
+    """``(E, n)`` outcome code (:data:`OUTCOME_CODES`) of every agent under ``first_out`` rules, from
+    :func:`agents_out`'s flags: 0 while nobody is out; else every team with an agent out loses, the
+    others win, and if every team has an agent out the match is a draw for all."""
+    onehot = rules.team_onehot
+    losing = (xp.where(out, 1.0, 0.0) @ onehot) > 0  # (E, T): the team has an agent out
+    agent_lost = (xp.where(losing, 1.0, 0.0) @ onehot.T) > 0  # (E, n)
+    code = xp.where(agent_lost, LOSS_CODE, WIN_CODE)
+    code = xp.where(losing.all(-1)[:, None], DRAW_CODE, code)
+    return xp.where(out.any(-1)[:, None], code, PLAYING)
 
 
 def first_out_places(code: Any, xp: Any) -> Any:
@@ -98,9 +102,10 @@ def first_out_places(code: Any, xp: Any) -> Any:
     return xp.where(code == LOSS_CODE, 2, xp.where(won, 1, 0))
 
 
-def place_value(first: float, last: float, low: int, high: int, n_places: int) -> float:
+def place_value(first: float, last: float, low: Any, high: Any, n_places: int) -> Any:
     """Reward of sharing places ``low .. high`` of ``n_places``: the mean of the linear
-    interpolation from ``first`` (place 1) to ``last`` (place ``n_places``)."""
+    interpolation from ``first`` (place 1) to ``last`` (place ``n_places``). ``low`` and ``high``
+    are numbers or arrays of any namespace (elementwise)."""
     if n_places < 2:
         return first
     middle = (low + high) / 2.0
@@ -109,55 +114,66 @@ def place_value(first: float, last: float, low: int, high: int, n_places: int) -
 
 @dataclass(frozen=True)
 class Elimination:
-    """One step judged under ``elimination``, per agent in roster order."""
+    """One step of ``E`` matches judged under ``elimination``, per agent in roster order (arrays ``(E, n)``
+    unless said otherwise, in the namespace the judge ran in)."""
 
-    leaving: list[bool]
+    leaving: Any
     """Eliminated on this step (it was in play and its torso centre is out)."""
-    alive: list[bool]
+    alive: Any
     """Still in play after this step."""
-    over: bool
-    """The match ended on this step (one team or none left, or the step limit)."""
-    places: list[int]
-    """Place decided on this step (1 = winner), 0 where nothing was decided for the agent."""
-    spans: list[tuple[int, int]]
-    """``(low, high)``: the places an agent decided on this step shares (``(0, 0)`` if none)."""
-    outcomes: list[str | None]
-    """``win``, ``loss`` or ``draw`` where a place was decided on this step, else ``None``."""
+    over: Any
+    """``(E,)``: the match ended on this step (one team or none left, or the step limit)."""
+    low: Any
+    """The best place an agent decided on this step shares (1 = winner); 0 where nothing was decided."""
+    high: Any
+    """The worst place it shares (``low`` when it is alone in its place; 0 where nothing was decided)."""
+    code: Any
+    """Outcome code (:data:`OUTCOME_CODES`) decided on this step: win, loss or draw, else 0 (playing)."""
+
+    @property
+    def places(self) -> Any:
+        """Place decided on this step, 0 where nothing was decided (``low``)."""
+        return self.low
 
 
-def judge_elimination(alive: Sequence[bool], out: Sequence[bool], team_of: Sequence[int],
-                      at_limit: bool, timeout_team: int | None = None) -> Elimination:
-    """Judge one step: ``alive`` before it, ``out`` after it, ``at_limit`` if it is the last allowed."""
-    n = len(alive)
-    leaving = [bool(alive[i] and out[i]) for i in range(n)]
-    still = [bool(alive[i] and not out[i]) for i in range(n)]
-    before = {team_of[i] for i in range(n) if alive[i]}
-    after = {team_of[i] for i in range(n) if still[i]}
-    gone = before - after
-    places, spans = [0] * n, [(0, 0)] * n
-    outcomes: list[str | None] = [None] * n
-    for i in range(n):
-        if not leaving[i]:
-            continue
-        if team_of[i] in after:  # a team-mate plays on: alone in its place
-            low = high = 1 + len(after - {team_of[i]})
-        else:
-            low, high = len(after) + 1, len(after) + len(gone)
-        places[i], spans[i] = low, (low, high)
-        outcomes[i] = LOSS if low > 1 else (DRAW if high > 1 else WIN)
-    over = len(after) <= 1 or at_limit
-    if over and after:
-        if len(after) == 1 or timeout_team in after:
-            winner = next(iter(after)) if len(after) == 1 else timeout_team
-            rest = len(after) - 1
-            for i in range(n):
-                if still[i]:
-                    won = team_of[i] == winner
-                    spans[i] = (1, 1) if won else (2, 1 + rest)
-                    places[i] = spans[i][0]
-                    outcomes[i] = WIN if won else LOSS
-        else:
-            for i in range(n):
-                if still[i]:
-                    places[i], spans[i], outcomes[i] = 1, (1, len(after)), DRAW
-    return Elimination(leaving, still, over, places, spans, outcomes)
+def judge_elimination(alive: Any, out: Any, at_limit: Any, rules: BatchedRules, xp: Any) -> Elimination:
+    """Judge one step of ``E`` matches under ``elimination`` rules (see the module docstring): ``alive``
+    ``(E, n)`` before the step, ``out`` ``(E, n)`` after it (:func:`agents_out`), ``at_limit`` ``(E,)`` it is
+    the last step allowed. ``rules.evader_team`` (``-1``: none) is the team that wins at the step limit."""
+    member = rules.team_onehot > 0  # (n, T)
+
+    def count(flags: Any) -> Any:
+        return xp.where(flags, 1, 0).sum(-1)
+
+    def teams_with(agents: Any) -> Any:  # (E, n) -> (E, T): the team has such an agent
+        return (agents[..., None] & member).any(-2)
+
+    leaving = alive & out
+    still = alive & ~out
+    before, after = teams_with(alive), teams_with(still)  # teams in play before and after the step
+    n_after, n_gone = count(after)[:, None], count(before & ~after)[:, None]  # (E, 1)
+    team_on = (after[:, None, :] & member).any(-1)  # (E, n): the agent's team is still in play
+    over = (n_after[:, 0] <= 1) | at_limit
+    ended = over[:, None] & (n_after >= 1)  # survivors are placed
+    evader = rules.evader_team
+    evader_on = after[:, evader:evader + 1] if evader >= 0 else n_after < 0  # (E, 1)
+    decided = ended & ((n_after == 1) | evader_on)  # one winner among the survivors
+    is_evader = member[:, evader] if evader >= 0 else ~member[:, 0] & member[:, 0]  # (n,)
+    won = still & decided & ((n_after == 1) | is_evader)
+    lost = still & decided & ~won
+    drawn = still & ended & ~decided
+    # A leaving agent whose team plays on is alone in its place, behind the teams left; teams that leave
+    # together share the places they span.
+    low = xp.where(leaving, xp.where(team_on, n_after, n_after + 1), 0)
+    high = xp.where(leaving, xp.where(team_on, n_after, n_after + n_gone), 0)
+    low = xp.where(won | drawn, 1, xp.where(lost, 2, low))
+    high = xp.where(won, 1, xp.where(lost | drawn, n_after, high))
+    code = xp.where(low == 0, PLAYING, xp.where(low > 1, LOSS_CODE, xp.where(high > 1, DRAW_CODE, WIN_CODE)))
+    return Elimination(leaving, still, over, low, high, code)
+
+
+def place_values(low: Any, high: Any, rules: BatchedRules, xp: Any) -> Any:
+    """:func:`place_value` of every agent's places ``low .. high`` (:class:`Elimination`), with the win and
+    loss rewards of ``rules`` over its teams; 0 where nothing was decided (``low == 0``)."""
+    first, last = rules.outcome_values[0], rules.outcome_values[1]
+    return xp.where(low > 0, place_value(first, last, low, high, rules.team_onehot.shape[1]), 0.0)

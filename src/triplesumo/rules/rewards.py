@@ -1,5 +1,8 @@
 """The paper's hybrid reward, as named terms, for every agent from its own side's view.
 
+Written once, over arrays of ``E`` matches in an array namespace ``xp`` (:func:`reward_terms`): numpy for
+one match (``E = 1``) and the CPU vector env, torch on the MuJoCo Warp backend's device.
+
 With torso positions ``p`` and world-frame velocities ``v`` (x and y only) after the
 step, ``s(a, b) = sign(p_b - p_a)`` per axis (the direction from ``a`` to ``b``; 0 where
 ``|p_b - p_a| <= RewardConfig.axis_dead_zone`` on that axis, 0 m by default: the paper's sign), ``O_i``
@@ -30,12 +33,13 @@ all zeros.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
+from triplesumo.rules.codes import DRAW, DRAW_CODE, LOSS, PLAYING, WIN
 from triplesumo.rules.config import RewardConfig
-from triplesumo.rules.outcome import DRAW, LOSS, WIN
+from triplesumo.rules.roster import BatchedRules
 from triplesumo.rules.teams import Teams
 
 DENSE_TERMS = ("reward_opponent_velocity", "reward_self_velocity", "reward_partner_velocity", "reward_still")
@@ -48,103 +52,87 @@ REPORTED = (*TERMS, "dense_reward", "sparse_reward")
 """Entries of each agent's row of :meth:`RewardRule.rows`: every term, then ``dense`` and ``sparse``."""
 
 
-class RewardRule:
-    """The reward terms of every agent for one roster and :class:`RewardConfig`.
+def ordered_sum(values: Any, axis: int) -> Any:
+    """Sum over ``axis`` (a small one: the roster) index by index, ``((v_0 + v_1) + v_2) + ...``.
 
-    Built once per match: it lists the ordered (agent, opponent) pairs the terms need and,
-    per agent, which pairs its means run over. A step then computes each pair's
-    sign-times-velocity sums once, in plain Python floats (for a handful of agents that is
-    several times faster than numpy's per-call overhead), and averages them as the module
-    docstring says.
+    One association on every path and namespace (``sum`` or ``@`` may pair the terms in another
+    order on another backend or batch size), so that one match and many give the same bits. Masked
+    sums (zeros where an agent is not an opponent or partner) change nothing: adding an exact zero
+    is exact.
     """
+    if axis == -1:  # the common cases, indexed directly (this runs on every step of every match)
+        total = values[..., 0]
+        for j in range(1, values.shape[-1]):
+            total = total + values[..., j]
+        return total
+    index: list[Any] = [slice(None)] * (axis if axis >= 0 else values.ndim + axis)
+    total = values[(*index, 0)]
+    for j in range(1, values.shape[axis]):
+        total = total + values[(*index, j)]
+    return total
+
+
+def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRules, xp: Any, *,
+                 alive: Any = None, sparse: Any = None) -> dict[str, Any]:
+    """Every reward term of :data:`TERMS` as ``(E, n)`` arrays, plus ``dense_reward``, ``sparse_reward``
+    and ``reward`` (= dense + sparse, summed in that order, as the module docstring says).
+
+    ``pos``, ``vel``: ``(E, n, >=2)`` torso positions and world-frame velocities after the step.
+    ``first_out`` rules: ``code`` is :func:`~triplesumo.rules.outcome.judge`'s ``(E, n)`` codes and
+    ``timed_out`` ``(E,)`` the step limit reached (a draw). ``elimination`` rules: ``alive`` ``(E, n)``
+    bool, who is in play at the step's start (the opponents and partners the terms run over; all
+    zeros for an agent not in play), and ``sparse`` ``(E, n)`` the placement rewards
+    (:func:`~triplesumo.rules.outcome.place_values`), which replace ``code`` and ``timed_out``.
+    """
+    c1, c2, c3, still = rules.weights
+    xy, v = pos[..., :2], vel[..., :2]
+    d = xy[:, None] - xy[:, :, None]  # (E, a, o, 2): from a to o
+    s = xp.sign(d)  # the direction from a to o, per axis
+    if rules.axis_dead_zone > 0:  # 0 inside the band (at 0 the paper's sign, untouched)
+        s = xp.where(abs(d) > rules.axis_dead_zone, s, 0.0 * s)
+    toward = (s * v[:, :, None]).sum(-1)  # (E, a, o): a moving toward o (a sum of two: exact in any order)
+    away = (s * v[:, None]).sum(-1)  # (E, a, o): o moving away from a
+    if alive is None:
+        opp, partners_t, n_opp, n_par = rules.opponents, rules.partners.T, rules.n_opponents, rules.n_partners
+        opp_j = opp
+    else:  # only agents in play count as opponents and partners
+        playing = xp.where(alive, 1.0, 0.0)
+        opp = rules.opponents * playing[:, None, :]  # (E, i, o)
+        partners = rules.partners * playing[:, None, :]  # (E, i, j)
+        n_opp = opp.sum(-1) if rules.opponents_mean else playing * 0.0 + 1.0
+        n_opp = xp.where(n_opp > 0, n_opp, 1.0)  # no opponent left: the sums are 0
+        n_par = xp.maximum(partners.sum(-1), playing * 0.0 + 1.0)
+        partners_t = partners.swapaxes(-1, -2)  # (E, j, i)
+        opp_j, n_opp = opp[:, None], n_opp[:, None, :]  # broadcast over the partner axis j below
+    opponent = c1 * (ordered_sum(away * opp, -1) / (n_opp if alive is None else n_opp[:, 0]))
+    # [e, j, i] = sum over the opponents o of i of toward[e, j, o], over i's opponents' count
+    per_partner = ordered_sum(toward[:, :, None, :] * opp_j, -1) / n_opp
+    roster = list(range(rules.n_agents))
+    self_ = c2 * per_partner[:, roster, roster]
+    partner = c3 * (ordered_sum(per_partner * partners_t, 1) / n_par)
+    if sparse is None:
+        sparse = rules.outcome_table[xp.where(timed_out[:, None] & (code == PLAYING), DRAW_CODE, code)]
+    if alive is None:
+        still_term = xp.zeros_like(opponent) + still
+    else:  # an agent no longer in play gets all zeros
+        opponent, self_, partner = (xp.where(alive, t, 0.0) for t in (opponent, self_, partner))
+        still_term = xp.where(alive, still, 0.0)
+    dense = opponent + self_ + partner + still_term
+    terms = dict(zip(TERMS, (opponent, self_, partner, still_term, sparse), strict=True))
+    return {**terms, "dense_reward": dense, "sparse_reward": sparse, "reward": dense + sparse}
+
+
+class RewardRule:
+    """One match's view of :func:`reward_terms` for a roster and :class:`RewardConfig`: rows of plain
+    floats from plain sequences (hand-made scenarios, tests). :class:`~triplesumo.envs.match.Match`
+    calls :func:`reward_terms` itself."""
 
     def __init__(self, teams: Teams, cfg: RewardConfig) -> None:
         self.teams, self.cfg = teams, cfg
-        n = len(teams.team_of)
-        self.n_agents = n
-        pairs = [(a, int(o)) for a in range(n) for o in teams.opponents[a]]
-        self._pairs = pairs
-        pair_index = {pair: k for k, pair in enumerate(pairs)}
-        self._opponent_pairs = [[pair_index[i, int(o)] for o in teams.opponents[i]] for i in range(n)]
-        """``[i]``: the pairs (i, o) over the opponents ``o`` of ``i``."""
-        self._partner_pairs = [[[pair_index[int(j), int(o)] for o in teams.opponents[i]] for j in teams.partners[i]]
-                               for i in range(n)]
-        """``[i][j]``: the pairs (j, o) of partner ``j`` of ``i`` over the opponents ``o`` of ``i``."""
+        self.n_agents = len(teams.team_of)
         self._team_of = [int(t) for t in teams.team_of]
-        self._c = (float(cfg.opponent_velocity), float(cfg.self_velocity), float(cfg.partner_velocity))
-        self._still = float(cfg.still)
-        self._dead = float(cfg.axis_dead_zone)
-        self._mean = cfg.opponents == "mean"
+        self._rules = BatchedRules.from_roster(teams, cfg, half_size=np.inf, max_steps=0, force_clip=np.inf)
         self._value = {WIN: float(cfg.win), LOSS: float(cfg.loss), DRAW: float(cfg.draw)}
-
-    def dense(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]]) -> list[tuple[float, float, float]]:
-        """Per agent: the (opponent, self, partner) velocity terms. Rows of ``pos`` and ``vel``
-        (lists, e.g. an array's ``tolist()``) start with the x and y components."""
-        toward, away = [], []  # per pair (a, o): a moving toward o; o moving away from a
-        e = self._dead
-        for a, o in self._pairs:
-            pa, po, va, vo = pos[a], pos[o], vel[a], vel[o]
-            dx, dy = po[0] - pa[0], po[1] - pa[1]
-            sx, sy = (dx > e) - (dx < -e), (dy > e) - (dy < -e)
-            toward.append(sx * va[0] + sy * va[1])
-            away.append(sx * vo[0] + sy * vo[1])
-        c1, c2, c3 = self._c
-        out = []
-        for opponent_pairs, partner_pairs in zip(self._opponent_pairs, self._partner_pairs, strict=True):
-            n_opp = len(opponent_pairs) if self._mean else 1
-            sum_away = sum_toward = 0.0
-            for k in opponent_pairs:
-                sum_away += away[k]
-                sum_toward += toward[k]
-            par = 0.0
-            if partner_pairs:
-                for pairs in partner_pairs:
-                    sum_partner = 0.0
-                    for k in pairs:
-                        sum_partner += toward[k]
-                    par += sum_partner / n_opp
-                par = c3 * (par / len(partner_pairs))
-            out.append((c1 * (sum_away / n_opp), c2 * (sum_toward / n_opp), par))
-        return out
-
-    def dense_in_play(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]],
-                      alive: Sequence[bool]) -> list[tuple[float, float, float]]:
-        """:meth:`dense` over the agents in play only; ``(0, 0, 0)`` for an agent not in play."""
-        if all(alive):
-            return self.dense(pos, vel)
-        c1, c2, c3 = self._c
-        team_of = self._team_of
-        e = self._dead
-
-        def toward(a: int, o: int, mover: int) -> float:
-            dx, dy = pos[o][0] - pos[a][0], pos[o][1] - pos[a][1]
-            return ((dx > e) - (dx < -e)) * vel[mover][0] + ((dy > e) - (dy < -e)) * vel[mover][1]
-
-        out = []
-        for i in range(self.n_agents):
-            opponents = [o for o in range(self.n_agents) if alive[o] and team_of[o] != team_of[i]]
-            if not alive[i] or not opponents:
-                out.append((0.0, 0.0, 0.0))
-                continue
-            partners = [j for j in range(self.n_agents) if alive[j] and j != i and team_of[j] == team_of[i]]
-            n_opp = len(opponents) if self._mean else 1
-            opp = c1 * sum(toward(i, o, o) for o in opponents) / n_opp
-            slf = c2 * sum(toward(i, o, i) for o in opponents) / n_opp
-            par = 0.0
-            if partners:
-                par = c3 * sum(sum(toward(j, o, j) for o in opponents) / n_opp for j in partners) / len(partners)
-            out.append((opp, slf, par))
-        return out
-
-    def rows_in_play(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]], alive: Sequence[bool],
-                     sparse: Sequence[float]) -> list[tuple[float, ...]]:
-        """:meth:`rows` under ``elimination`` rules: ``alive`` at the step's start and each
-        agent's placement reward ``sparse``; all zeros for an agent not in play."""
-        rows: list[tuple[float, ...]] = []
-        for (opp, slf, par), outcome, playing in zip(self.dense_in_play(pos, vel, alive), sparse, alive, strict=True):
-            still = self._still if playing else 0.0
-            rows.append((opp, slf, par, still, outcome, opp + slf + par + still, outcome))
-        return rows
 
     def outcome(self, team_results: list[str] | None, timed_out: bool) -> list[float]:
         """Sparse reward per agent: its team's result, a draw on time-out, else zeros."""
@@ -152,26 +140,30 @@ class RewardRule:
             return [self._value[DRAW] if timed_out else 0.0] * self.n_agents
         return [self._value[team_results[t]] for t in self._team_of]
 
-    def rows(self, pos: Sequence[Sequence[float]], vel: Sequence[Sequence[float]], team_results: list[str] | None,
-             timed_out: bool) -> list[tuple[float, ...]]:
-        """Per agent, the :data:`REPORTED` values: each term, then dense and sparse.
+    def rows(self, pos: Any, vel: Any, team_results: list[str] | None, timed_out: bool) -> list[tuple[float, ...]]:
+        """Per agent, the :data:`REPORTED` values: each term, then dense and sparse; ``team_results`` per team
+        (``"win"``, ``"loss"``, ``"draw"``) or ``None`` while the match goes on."""
+        sparse = np.array([self.outcome(team_results, timed_out)])
+        terms = self._terms(pos, vel, sparse)
+        return [tuple(row) for row in np.stack([terms[k][0] for k in REPORTED], axis=1).tolist()]
 
-        ``dense = opponent + self + partner + still`` and ``sparse = outcome`` are summed
-        in that order, so ``dense + sparse`` is the sum of the terms in :data:`TERMS` order,
-        bit for bit.
-        """
-        still = self._still
-        rows: list[tuple[float, ...]] = []
-        for (opp, slf, par), sparse in zip(self.dense(pos, vel), self.outcome(team_results, timed_out), strict=True):
-            rows.append((opp, slf, par, still, sparse, opp + slf + par + still, sparse))
-        return rows
+    def _terms(self, pos: Any, vel: Any, sparse: np.ndarray) -> dict[str, Any]:
+        zeros = np.zeros((1, self.n_agents), np.int64)
+        terms = reward_terms(np.asarray(pos, float)[None], np.asarray(vel, float)[None], zeros,
+                             np.zeros(1, bool), self._rules, np)
+        dense = terms["dense_reward"]
+        return {**terms, "reward_outcome": sparse, "sparse_reward": sparse, "reward": dense + sparse}
+
+    def dense(self, pos: Any, vel: Any) -> list[tuple[float, float, float]]:
+        """Per agent: the (opponent, self, partner) velocity terms."""
+        terms = self._terms(pos, vel, np.zeros((1, self.n_agents)))
+        return [tuple(row) for row in np.stack([terms[k][0] for k in DENSE_TERMS[:3]], axis=1).tolist()]
 
 
 def dense_terms(pos: np.ndarray, vel: np.ndarray, teams: Teams, cfg: RewardConfig) -> dict[str, np.ndarray]:
     """Dense terms for every agent by name, as arrays; ``pos`` and ``vel`` are ``(n_agents, >=2)``.
 
-    A convenience around :class:`RewardRule` (which a match builds once).
+    A convenience around :func:`reward_terms` for one match.
     """
-    rule = RewardRule(teams, cfg)
-    terms = np.array(rule.dense(np.asarray(pos).tolist(), np.asarray(vel).tolist())).reshape(-1, 3).T
-    return {**dict(zip(DENSE_TERMS[:3], terms, strict=True)), "reward_still": np.full(rule.n_agents, rule._still)}
+    terms = RewardRule(teams, cfg)._terms(pos, vel, np.zeros((1, len(teams.team_of))))
+    return {name: terms[name][0] for name in DENSE_TERMS}
