@@ -185,7 +185,7 @@ def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str,
 def compare(cfg: CompareConfig) -> dict[str, Any]:
     """Group the per-seed rows, estimate, write ``compare.csv``, ``improvement.csv``, ``compare.json``
     and ``compare.png``; returns the table."""
-    from triplesumo.evaluation.league_plots import plot_compare
+    from triplesumo.evaluation.tournament_plots import plot_compare
 
     out = check_writable(Path(cfg.out), folder=True)
     grouped = read_per_seed(cfg.folders, cfg.by)

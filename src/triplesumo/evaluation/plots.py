@@ -5,8 +5,8 @@ A metrics CSV has one row per epoch and at least the columns of
 :data:`TERM_PREFIX` (``reward_opponent_velocity``, ``reward_still``, ...).
 
 Figures are built with :class:`matplotlib.figure.Figure` directly, never through the
-pyplot state machine, so plotting works under any backend (including ``Agg`` on a
-headless machine), never opens a window and never changes the global backend. Each
+pyplot state machine, so plotting works under any Matplotlib backend (including ``Agg`` on a
+headless machine), never opens a window and never changes Matplotlib's global backend. Each
 figure is cleared once written.
 
 All curves use the trailing window λ of :mod:`triplesumo.evaluation.metrics` with

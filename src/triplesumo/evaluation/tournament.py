@@ -585,7 +585,7 @@ def _write_outputs(out: Path, results: dict[str, Any], cfg: TournamentConfig) ->
     import io
 
     from triplesumo.agents.policy_file import atomic_write_bytes
-    from triplesumo.evaluation.league_plots import plot_crossplay, plot_ladder, plot_leaderboard
+    from triplesumo.evaluation.tournament_plots import plot_crossplay, plot_ladder, plot_leaderboard
 
     seats = results["seats"]
     tag = "" if cfg.rate_by == "policy" else "_by_seat"
