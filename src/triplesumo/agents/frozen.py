@@ -72,7 +72,7 @@ class FrozenPolicy:
         """From an actor's state dict as numpy arrays (``safetensors.numpy.load_file``), keys
         ``{prefix}net.{i}.weight`` / ``.bias``; with ``obs_norm_prefix``, the normaliser's
         ``{obs_norm_prefix}mean`` / ``var`` too."""
-        layers = sorted(int(k[len(prefix):].split(".")[1]) for k in tensors
+        layers = sorted(int(k.removeprefix(prefix).split(".")[1]) for k in tensors
                         if k.startswith(prefix + "net.") and k.endswith(".weight"))
         if not layers:
             raise KeyError(f"no actor weights with prefix {prefix!r} (expected '{prefix}net.0.weight')")

@@ -56,7 +56,7 @@ def raw_env_rate(steps: int, max_steps: int, seed: int) -> dict[str, Any]:
     from triplesumo.envs.parallel import parallel_env
 
     env = parallel_env(max_steps=max_steps)
-    policies = {agent: load(spec[4:])[0] for agent, spec in FROZEN.items()}
+    policies = {agent: load(spec.removeprefix("zoo:"))[0] for agent, spec in FROZEN.items()}
     rng = np.random.default_rng(seed)
     obs, _ = env.reset(seed=seed)
     start = time.perf_counter()

@@ -108,7 +108,7 @@ def policy_stem(spec: str | Path) -> Path:
     if isinstance(spec, str) and spec in BUILTIN:
         raise ValueError(f"{spec!r} is a built-in policy: it has no policy file")
     if isinstance(spec, str) and spec.startswith("zoo:"):
-        name = spec[4:]
+        name = spec.removeprefix("zoo:")
         if name in RETIRED and name not in available():
             raise retired_error(name)
         if name not in available():
@@ -241,7 +241,8 @@ def expand_pairs(pairs: tuple[str, ...], agents: list[str] | tuple[str, ...]) ->
     out: list[str] = []
     for pair in pairs:
         if pair.startswith("*="):
-            out += [f"{a}={pair[2:]}" for a in agents if a not in named and f"{a}={pair[2:]}" not in out]
+            policy = pair.removeprefix("*=")
+            out += [f"{a}={policy}" for a in agents if a not in named and f"{a}={policy}" not in out]
         else:
             out.append(pair)
     return tuple(out)
