@@ -60,7 +60,7 @@ def test_trajectories_equal_each_match_alone_bit_for_bit(backend: str, n_threads
     expected, expected_resets = _sequential(SHORT, actions, seed=11)
     assert expected_resets >= N_MATCHES  # every match ended and was reset at least once
     log, resets = [], 0
-    with MatchBatch(SHORT, N_MATCHES, n_threads, backend=backend) as batch:
+    with MatchBatch(SHORT, N_MATCHES, n_threads, stepper=backend) as batch:
         batch.reset_all(11)
         for t in range(N_STEPS):
             log.append(_record(batch.step(actions[t]), batch.matches))
@@ -85,7 +85,7 @@ def test_reset_all_seeds_match_k_with_seed_plus_k() -> None:
 @pytest.mark.parametrize(("backend", "n_threads"), VARIANTS)
 def test_a_finished_match_is_reported_over_until_reset(
         backend: str, n_threads: int, place: Callable[..., None]) -> None:
-    with MatchBatch(None, N_MATCHES, n_threads, backend=backend) as batch:
+    with MatchBatch(None, N_MATCHES, n_threads, stepper=backend) as batch:
         batch.reset_all(0)
         assert not batch.over.any()
         place(batch.matches[1], "spider", x=3.0, y=0.0)  # Spider's torso past the edge
@@ -112,7 +112,7 @@ def test_wrong_action_shape_is_a_value_error(shape: tuple[int, ...]) -> None:
 
 @pytest.mark.parametrize(("backend", "n_threads"), VARIANTS)
 def test_nan_action_names_match_and_agent_and_steps_nothing(backend: str, n_threads: int) -> None:
-    with MatchBatch(None, N_MATCHES, n_threads, backend=backend) as batch:
+    with MatchBatch(None, N_MATCHES, n_threads, stepper=backend) as batch:
         batch.reset_all(0)
         before = [m.data.qpos.copy() for m in batch.matches]
         actions = np.zeros((N_MATCHES, 3, 8))
@@ -125,7 +125,7 @@ def test_nan_action_names_match_and_agent_and_steps_nothing(backend: str, n_thre
 
 @pytest.mark.parametrize(("backend", "n_threads"), VARIANTS)
 def test_physics_blow_up_in_one_match_truncates_only_that_match(backend: str, n_threads: int) -> None:
-    with MatchBatch(None, N_MATCHES, n_threads, backend=backend) as batch:
+    with MatchBatch(None, N_MATCHES, n_threads, stepper=backend) as batch:
         batch.reset_all(0)
         batch.matches[0].data.qvel[:] = 1e12  # MuJoCo's bad-qvel warning and auto-reset
         batch.reload(0)
@@ -170,8 +170,8 @@ def test_bad_arguments_and_closed_batch() -> None:
         MatchBatch(None, 0)
     with pytest.raises(ValueError, match="n_threads"):
         MatchBatch(None, 2, 0)
-    with pytest.raises(ValueError, match="backend"):
-        MatchBatch(None, 2, 1, backend="rollout")
+    with pytest.raises(ValueError, match="stepper must be one of"):
+        MatchBatch(None, 2, 1, stepper="rollout")
     batch = MatchBatch(None, 2, 2)
     with pytest.raises(RuntimeError, match="call reset_one"):  # never started
         batch.step(np.zeros((2, 3, 8)))
@@ -204,7 +204,7 @@ def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig, bac
     n, width = alone[0].n_agents, alone[0].action_width
     actions = np.random.default_rng(4).uniform(-1.3, 1.3, (N_STEPS, N_MATCHES, n, width))
     ends = 0
-    with MatchBatch(config, N_MATCHES, 2, backend=backend) as batch:
+    with MatchBatch(config, N_MATCHES, 2, stepper=backend) as batch:
         batch.reset_all(11)
         for t in range(N_STEPS):
             got = batch.step_arrays(actions[t])
@@ -230,7 +230,7 @@ def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig, bac
 
 @pytest.mark.parametrize("backend", ["mujoco", "threads"])
 def test_step_arrays_with_a_physics_error_and_bad_actions(backend: str) -> None:
-    with MatchBatch(None, N_MATCHES, 2, backend=backend) as batch:
+    with MatchBatch(None, N_MATCHES, 2, stepper=backend) as batch:
         batch.reset_all(0)
         actions = np.zeros((N_MATCHES, 3, 8))
         actions[1, 2, 0] = np.inf
@@ -251,10 +251,35 @@ def test_step_arrays_with_a_physics_error_and_bad_actions(backend: str) -> None:
             batch.step_arrays(np.zeros((N_MATCHES, 3, 8)))
         batch.reset_one(2)
         assert batch.step_arrays(np.zeros((N_MATCHES, 3, 8))).infos["step"].tolist() == [2, 2, 1]
-    with MatchBatch(MatchConfig(on_physics_error="raise"), N_MATCHES, 2, backend=backend) as batch:
+    with MatchBatch(MatchConfig(on_physics_error="raise"), N_MATCHES, 2, stepper=backend) as batch:
         batch.reset_all(0)
         batch.matches[1].data.qvel[:] = 1e12
         batch.reload(1)
         with pytest.raises(PhysicsError, match="match 1: MuJoCo reported bad_qvel"):
             batch.step_arrays(np.zeros((N_MATCHES, 3, 8)))
         assert [m.steps for m in batch.matches] == [1, 1, 1]
+
+
+def test_old_names_still_work_with_a_deprecation_warning() -> None:
+    """``MatchBatch(backend=...)`` became ``stepper`` (``backend`` names the simulator, cpu or warp, of
+    ``vector_env``); the old spellings work for a release and warn."""
+    import importlib
+
+    from triplesumo.envs import batch as batch_module
+
+    with pytest.warns(DeprecationWarning, match="stepper"):
+        batch = MatchBatch(None, 2, 1, backend="threads")
+    with batch:
+        assert batch.stepper == "threads"
+        with pytest.warns(DeprecationWarning, match="MatchBatch.stepper"):
+            assert batch.backend == "threads"
+    with pytest.warns(DeprecationWarning, match="STEPPERS"):
+        assert batch_module.BACKENDS == batch_module.STEPPERS
+    import sys
+
+    sys.modules.pop("triplesumo.evaluation.league_plots", None)
+    with pytest.warns(DeprecationWarning, match="tournament_plots"):
+        old = importlib.import_module("triplesumo.evaluation.league_plots")
+    from triplesumo.evaluation import tournament_plots
+
+    assert old.plot_ladder is tournament_plots.plot_ladder

@@ -202,7 +202,7 @@ def test_a_batch_of_mixed_body_matches_steps_like_single_matches(backend: str) -
     cfg = MatchConfig(agents=BODIES_AGENTS, max_steps=30)
     actions = np.random.default_rng(1).uniform(-1, 1, (5, 2, 3, 16))
     singles = [Match(cfg) for _ in range(2)]
-    with MatchBatch(cfg, 2, 1, backend=backend) as batch:
+    with MatchBatch(cfg, 2, 1, stepper=backend) as batch:
         for k in range(2):
             batch.reset_one(k, seed=k)
             singles[k].reset(seed=k)

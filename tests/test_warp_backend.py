@@ -40,7 +40,7 @@ import warp as wp  # noqa: E402
 
 from triplesumo.envs.match import Match  # noqa: E402
 from triplesumo.envs.seeding import match_seeds  # noqa: E402
-from triplesumo.envs.warp import WarpMatchBatch, make_warp_vector_env  # noqa: E402
+from triplesumo.envs.warp import WarpVectorMatches, make_warp_vector_env  # noqa: E402
 from triplesumo.model import PhysicsConfig  # noqa: E402
 from triplesumo.rules import MatchConfig, ResetNoise  # noqa: E402
 from triplesumo.rules.outcome import OUTCOME_CODES  # noqa: E402
@@ -57,7 +57,7 @@ CONFIG = MatchConfig(reset_noise=ResetNoise(position=0.5), physics=PhysicsConfig
 
 @pytest.fixture(scope="module")
 def rollout() -> dict:
-    env = WarpMatchBatch(CONFIG, N, device=DEVICE)
+    env = WarpVectorMatches(CONFIG, N, device=DEVICE)
     obs, infos = env.reset(SEED)
     matches = [Match(CONFIG) for _ in range(N)]
     cpu_obs = [np.stack(m.reset(seed=s)[0]) for m, s in zip(matches, match_seeds(SEED, N), strict=True)]
@@ -187,12 +187,12 @@ def test_bad_actions_and_devices_are_refused(rollout: dict) -> None:
     with pytest.raises(ValueError, match="num_envs"):
         make_warp_vector_env(CONFIG, 0, device="cpu")
     with pytest.raises(ValueError, match="not available"):
-        WarpMatchBatch(CONFIG, 1, device="cuda:7")
+        WarpVectorMatches(CONFIG, 1, device="cuda:7")
 
 
 def test_egocentric_observations_of_the_starts_and_one_step_match_the_cpu() -> None:
     cfg = MatchConfig(obs_mode="egocentric")
-    env = WarpMatchBatch(cfg, 2, device=DEVICE)
+    env = WarpVectorMatches(cfg, 2, device=DEVICE)
     obs, _ = env.reset(5)
     matches = [Match(cfg) for _ in range(2)]
     first = np.stack([np.stack(m.reset(seed=s)[0]) for m, s in zip(matches, match_seeds(5, 2), strict=True)])
@@ -210,7 +210,7 @@ def test_public_vector_env_reaches_the_warp_backend_and_refuses_what_it_cannot_p
     import triplesumo
 
     env = triplesumo.vector_env(2, backend="warp", device="cpu", max_steps=3)
-    assert isinstance(env, WarpMatchBatch)
+    assert isinstance(env, WarpVectorMatches)
     obs, infos = env.reset(seed=0)
     assert isinstance(obs, torch.Tensor) and tuple(obs.shape) == (2, 3, env.obs_dim)
     cpu = triplesumo.vector_env(2, max_steps=3)
@@ -235,7 +235,7 @@ def test_the_border_rim_reaches_warp_with_the_compiled_model() -> None:
     from triplesumo.model import names
 
     cfg = MatchConfig(physics=PhysicsConfig(border_rim=True, layout="circle"), reset_noise=ResetNoise(0, 0, 0, 0))
-    env = WarpMatchBatch(cfg, 1, device=DEVICE)
+    env = WarpVectorMatches(cfg, 1, device=DEVICE)
     rim = [env.match.model.geom(n).id for n in names.BORDER_GEOMS]
     assert (env.m.geom_contype.numpy()[rim] == 1).all() and (env.m.geom_conaffinity.numpy()[rim] == 1).all()
     env.reset(0)
@@ -262,7 +262,7 @@ def test_the_box_rim_collides_alike_on_both_engines(layout: str) -> None:
 
     cfg = MatchConfig(physics=PhysicsConfig(layout=layout))
     n = 4
-    env = WarpMatchBatch(cfg, n, device=DEVICE)
+    env = WarpVectorMatches(cfg, n, device=DEVICE)
     env.reset([9 + k for k in range(n)])
     matches = []
     for k in range(n):
@@ -289,7 +289,7 @@ def test_a_snapshot_restored_into_a_fresh_batch_continues_bit_for_bit() -> None:
     starts -- while a state of qpos and qvel only (no warm start) does not."""
     cfg = MatchConfig(max_steps=6, reset_noise=ResetNoise(position=0.5))
     actions = torch.as_tensor(np.random.default_rng(2).uniform(-1, 1, (9, 2, 3, 8)), dtype=torch.float32)
-    env = WarpMatchBatch(cfg, 2, device=DEVICE)
+    env = WarpVectorMatches(cfg, 2, device=DEVICE)
     obs, _ = env.reset(7)
     for t in range(4):
         obs, *_ = env.step(actions[t].to(env.device))
@@ -297,11 +297,11 @@ def test_a_snapshot_restored_into_a_fresh_batch_continues_bit_for_bit() -> None:
             for s in env.snapshot()]  # as a checkpoint holds it: state.json and arrays.npz
     saved_obs = obs.cpu().numpy().copy()
     ahead = [env.step(actions[t].to(env.device)) for t in range(4, 9)]
-    again = WarpMatchBatch(cfg, 2, device=DEVICE)
+    again = WarpVectorMatches(cfg, 2, device=DEVICE)
     again.restore(snap, saved_obs)
     assert again.steps.tolist() == [4, 4]
     assert bool(ahead[1][4]["_final_obs"].all())  # the matches ended (step 6) and restarted from their streams
-    cold = WarpMatchBatch(cfg, 2, device=DEVICE)
+    cold = WarpVectorMatches(cfg, 2, device=DEVICE)
     cold.restore(snap, saved_obs)
     # Bit for bit only on Warp's CPU device: on CUDA, MuJoCo Warp gathers contacts with atomics (its
     # opt.deterministic is off), so two batches stepping one state may differ in rounding (an H200 did at
@@ -337,3 +337,11 @@ def test_both_backends_give_the_same_info_keys_dtypes_and_shapes(capfd: pytest.C
         other = on_warp[key].cpu().numpy()
         assert (np.asarray(value).dtype, np.asarray(value).shape) == (other.dtype, other.shape), key
     assert "Module" not in capfd.readouterr().out  # no "Module ... load" lines without verbose
+
+
+def test_the_old_class_name_is_a_deprecated_alias() -> None:
+    """``WarpMatchBatch`` is ``WarpVectorMatches`` (the Warp backend of ``VectorMatches``' contract) for a release."""
+    from triplesumo.envs import warp
+
+    with pytest.warns(DeprecationWarning, match="WarpVectorMatches"):
+        assert warp.WarpMatchBatch is WarpVectorMatches

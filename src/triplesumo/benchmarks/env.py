@@ -17,7 +17,7 @@ Variants, each on its own compiled model of the same :class:`MatchConfig`:
     ``--scenario`` below).
 ``match_core``
     The bare match core, ``Match.step_array`` on an ``(n_agents, 8)`` array.
-``batch_<backend>_<n>t``
+``batch_<stepper>_<n>t``
     :class:`~triplesumo.envs.batch.MatchBatch` of ``n_matches`` matches on ``n`` threads
     (``mujoco``: ``mujoco.batch``; ``threads``: a Python thread pool), ``reset_one`` on
     every finished match; about ``steps`` env steps in total. ``batch_threads_1t`` is
@@ -59,7 +59,7 @@ import mujoco
 import numpy as np
 
 from triplesumo.benchmarks import report, versions
-from triplesumo.envs.batch import BACKENDS, MatchBatch, VectorMatches
+from triplesumo.envs.batch import STEPPERS, MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.envs.parallel import TripleSumoParallelEnv
 from triplesumo.model.specs import PhysicsConfig
@@ -105,9 +105,9 @@ def run_env_benchmark(steps: int = 3000, n_matches: int = 16, n_threads: int = 2
         "match_core": _MatchCore(config, steps, seed),
     }
     per_match = max(1, steps // n_matches)
-    for backend, threads in _batch_variants(n_threads):
-        batch = MatchBatch(config, n_matches, threads, backend=backend)
-        variants[f"batch_{backend}_{threads}t"] = _Batch(batch, per_match, seed)
+    for stepper, threads in _batch_variants(n_threads):
+        batch = MatchBatch(config, n_matches, threads, stepper=stepper)
+        variants[f"batch_{stepper}_{threads}t"] = _Batch(batch, per_match, seed)
     variants[f"raw_batch_{n_threads}t"] = _RawBatch(config, n_matches, n_threads, per_match, seed)
     variants[f"vector_env_{n_threads}t"] = _VectorEnv(VectorMatches(n_matches, config, n_threads), per_match, seed)
     load = os.getloadavg()
@@ -227,7 +227,7 @@ class _RawPhysics(_Variant):
             data.ctrl[:] = ctrl[t]
             mujoco.mj_step(model, data, nstep=frame_skip)
             self.episode_length += 1
-            if self.episode_length >= limit or any(rules_outcome.agents_out(data.qpos[torso].tolist(), half)):
+            if self.episode_length >= limit or bool(rules_outcome.agents_out(data.qpos[torso], half, np).any()):
                 match.sim.reset(*match.start_state(self.rng))
                 self.episodes += 1
                 self.episode_length = 0
@@ -365,8 +365,8 @@ SEQUENTIAL = "batch_threads_1t"
 
 
 def _batch_variants(n_threads: int) -> list[tuple[str, int]]:
-    """The same matches sequentially, then each backend on 1 and on ``n_threads`` threads."""
-    variants = [("threads", 1), ("mujoco", 1)] + [(backend, n_threads) for backend in BACKENDS]
+    """The same matches sequentially, then each stepper on 1 and on ``n_threads`` threads."""
+    variants = [("threads", 1), ("mujoco", 1)] + [(stepper, n_threads) for stepper in STEPPERS]
     return list(dict.fromkeys(variants))
 
 
@@ -387,9 +387,9 @@ def format_table(result: dict[str, Any]) -> str:
     ]
     for name, rate in rates.items():
         if name.startswith("batch_"):
-            _, backend, threads = name.split("_")
+            _, stepper, threads = name.split("_")
             label = (f"MatchBatch {setup['n_matches']} x {setup['steps_per_match']} steps, "
-                     f"{backend}, {threads[:-1]} thread{'s' if threads != '1t' else ''}")
+                     f"{stepper}, {threads[:-1]} thread{'s' if threads != '1t' else ''}")
             versus = f"{ratios[f'{name}_vs_one_match']:10.2f} {ratios[f'{name}_vs_sequential']:7.2f}"
         elif name.startswith(("raw_batch_", "vector_env_")):
             what = "raw mujoco.batch physics" if name.startswith("raw") else "triplesumo.vector_env"

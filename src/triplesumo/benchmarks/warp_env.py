@@ -3,7 +3,7 @@
 For each ``num_envs`` in ``--num-envs`` (default 1 to 16,384 matches) on one device:
 
 ``env``
-    :class:`~triplesumo.envs.warp.WarpMatchBatch` ``step`` with uniform random actions
+    :class:`~triplesumo.envs.warp.WarpVectorMatches` ``step`` with uniform random actions
     in [-1, 1] (a pool of 16 action tensors drawn on the device in advance and cycled):
     physics (``frame_skip`` ``mujoco_warp.step`` and ``rne_postconstraint``, one CUDA graph),
     ring exits, outcome codes, reward terms, observations with contact forces, physics

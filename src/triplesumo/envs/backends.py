@@ -1,7 +1,7 @@
 """The batched API's backends and the one function that picks between them: ``triplesumo.vector_env``.
 
 ``backend="cpu"`` is :class:`~triplesumo.envs.batch.VectorMatches` (MuJoCo, threaded, numpy arrays);
-``backend="warp"`` is :class:`~triplesumo.envs.warp.WarpMatchBatch` (MuJoCo Warp, torch tensors on a
+``backend="warp"`` is :class:`~triplesumo.envs.warp.WarpVectorMatches` (MuJoCo Warp, torch tensors on a
 device; the ``gpu`` extra). Both keep one contract (arrays ``(num_envs, n_agents, ...)`` in and out,
 Gymnasium SAME_STEP autoreset), held equal by tests.
 
@@ -32,7 +32,7 @@ def vector_env(num_envs: int, scenario: str = "paper", backend: str = "cpu", dev
     ``num_threads`` threads (default: one per usable CPU, at most ``num_envs``) and returns
     numpy arrays; results do not depend on it. ``backend="warp"`` steps MuJoCo Warp on
     ``device`` (``"cuda"``, or Warp's ``"cpu"``; default: a GPU when Warp sees one) and returns
-    torch tensors on it (:class:`triplesumo.envs.warp.WarpMatchBatch`: the same contract,
+    torch tensors on it (:class:`triplesumo.envs.warp.WarpVectorMatches`: the same contract,
     first-out rules with one body kind; the ``gpu`` extra).
     """
     if backend not in VECTOR_BACKENDS:

@@ -8,16 +8,18 @@ rewards, observations, MuJoCo warnings).
 
 Exactness: the trajectories are bit for bit those of stepping each match alone with
 :meth:`Match.step_array` (same qpos, qvel, observations and rewards; checked with
-``np.array_equal`` in ``tests/test_batch.py``), at any thread count, with either backend:
+``np.array_equal`` in ``tests/test_batch.py``), at any thread count, with either *stepper* (how the
+physics of the matches is spread over threads; ``backend`` is the word for the simulator, ``cpu`` or ``warp``,
+of :func:`~triplesumo.envs.backends.vector_env`):
 
-``backend="mujoco"`` (default)
+``stepper="mujoco"`` (default)
     ``mujoco.batch.Batch(model, n_matches, nthread=n_threads, persistent=True)``, MuJoCo
     4's native threaded stepping. Its state rows are ``mjSTATE_INTEGRATION`` (qpos, qvel,
     controls *and* the solver warm start) and a persistent batch keeps one ``MjData`` per
     simulation, so after a step ``Batch.get_data(k, match.data)`` hands match ``k`` its
     complete ``MjData``: contacts for the contact forces, warning counters, warm start;
     no ``mj_forward`` is needed.
-``backend="threads"``
+``stepper="threads"``
     A Python thread pool (the calling thread and ``n_threads - 1`` others) in which each
     thread runs whole steps (``sim.step`` then ``finish_step``) on the matches' own
     ``MjData``, taking the next match not yet taken until none is left (matches with more
@@ -31,7 +33,7 @@ state and ``mj_forward`` run for its contacts, which is not exact twice over: th
 start moves the solver's result, and ``mj_forward`` gives the contacts of the new state
 where ``mj_step`` leaves those of the last substep's start, so the observed contact forces
 change. Rollout also clears the warning counters and stops a trajectory at its first
-warning. How much each backend gains, and the measurements behind this paragraph, are in
+warning. How much each stepper gains, and the measurements behind this paragraph, are in
 ``docs/bench/index.md``.
 
 Finished matches are not reset here: after a step in which ``results[k]`` is terminated
@@ -39,8 +41,8 @@ or truncated, call :meth:`reset_one` for ``k`` before the next :meth:`step`.
 
 :meth:`MatchBatch.step_arrays` is the same step with its results as arrays over the
 matches (:class:`BatchStep`), the path of :class:`VectorMatches`. Under ``first_out`` rules
-it judges the matches together, with the rules written once over arrays for this backend
-and MuJoCo Warp (:mod:`triplesumo.rules.batched`): controls of all actions in one array
+it judges the matches together, with the very rule functions one match calls (on ``E = 1``) and MuJoCo
+Warp calls (with torch; :mod:`triplesumo.rules.batched` lists them): controls of all actions in one array
 operation; qpos, qvel and warning counters in ``(n_matches, ...)`` rows (the batch's own
 rows with ``mujoco``; with ``threads`` each thread copies its matches' states into them
 after their physics, and computes their contact forces); outcome, rewards, places, infos
@@ -48,8 +50,8 @@ and ``paper`` observations over ``(n_matches, n_agents, ...)`` arrays. Per match
 remain a few attribute updates, with ``mujoco`` the copy of its ``MjData`` out of the batch
 and its ``mj_rnePostConstraint``, and under ``egocentric`` observations the match's own
 :class:`~triplesumo.rules.observations.ObservationBuilder`. Results are bit for bit those
-of :meth:`step` (``tests/test_batch.py``): the batched reward sums run in
-:class:`~triplesumo.rules.rewards.RewardRule`'s order. A match with a new MuJoCo warning, a
+of :meth:`step` (``tests/test_batch.py``): the reward sums run in one order for any number of matches
+(:func:`~triplesumo.rules.rewards.ordered_sum`). A match with a new MuJoCo warning, a
 failed ``mj_step`` or a non-finite state is finished by :meth:`Match.finish_step` (its
 physics error); elimination rules, whose judgement carries per-match state, take
 :meth:`step` and gather its results. ``triplesumo bench env`` measures ``vector_env``
@@ -65,6 +67,7 @@ from __future__ import annotations
 import math
 import operator
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
@@ -84,7 +87,8 @@ from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import REPORTED
 from triplesumo.sim.physics import PhysicsError
 
-BACKENDS = ("mujoco", "threads")
+STEPPERS = ("mujoco", "threads")
+"""How :class:`MatchBatch` spreads the physics over threads: ``mujoco.batch``'s own pool, or Python threads."""
 _INTEGRATION = int(mujoco.mjtState.mjSTATE_INTEGRATION)
 _NO_STAGE = int(mujoco.mjtStage.mjSTAGE_NONE)
 
@@ -95,10 +99,10 @@ UNCOUNTED_BYTES = 512 * 1024
 resident memory, 0.38 MB of it its ``MjModel`` and ``MjData`` buffers; so the estimate stays below the truth)."""
 
 
-def match_bytes(match: Match, backend: str = "threads") -> int:
+def match_bytes(match: Match, stepper: str = "threads") -> int:
     """Bytes one more match like ``match`` takes in a :class:`MatchBatch`: its own ``MjModel`` and ``MjData``
-    buffers, :data:`UNCOUNTED_BYTES`, and with ``backend="mujoco"`` the batch's own ``MjData`` of it."""
-    data = match.data.nbuffer * (2 if backend == "mujoco" else 1)
+    buffers, :data:`UNCOUNTED_BYTES`, and with ``stepper="mujoco"`` the batch's own ``MjData`` of it."""
+    data = match.data.nbuffer * (2 if stepper == "mujoco" else 1)
     return match.model.nbuffer + data + UNCOUNTED_BYTES
 
 
@@ -127,11 +131,11 @@ def available_memory() -> int | None:
     return have
 
 
-def check_memory(first: Match, n_matches: int, backend: str = "threads") -> None:
+def check_memory(first: Match, n_matches: int, stepper: str = "threads") -> None:
     """``MemoryError`` (a ``ValueError`` too) naming ``n_matches`` and the estimate when ``n_matches`` matches
     like ``first`` would take more memory than this machine has available: checked before they are built, so
     that a batch too big for the machine is refused at once instead of filling memory for minutes."""
-    per_match = match_bytes(first, backend)
+    per_match = match_bytes(first, stepper)
     need, have = n_matches * per_match, available_memory()
     if have is not None and need > have:
         raise BatchMemoryError(
@@ -149,15 +153,19 @@ class MatchBatch:
     """``n_matches`` independent matches of one config, their physics stepped on ``n_threads`` threads."""
 
     def __init__(self, config: MatchConfig | None = None, n_matches: int = 16, n_threads: int = 2,
-                 backend: str = "mujoco") -> None:
+                 stepper: str = "mujoco", *, backend: str | None = None) -> None:
         if isinstance(n_matches, bool) or not isinstance(n_matches, int) or n_matches < 1:
             raise ValueError(f"n_matches must be an integer >= 1, got {n_matches!r}")
         if isinstance(n_threads, bool) or not isinstance(n_threads, int) or n_threads < 1:
             raise ValueError(f"n_threads must be an integer >= 1, got {n_threads!r}")
-        if backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        if backend is not None:
+            warnings.warn("MatchBatch(backend=...) is deprecated: it is MatchBatch(stepper=...) (``backend`` names the "
+                          "simulator, cpu or warp, of triplesumo.vector_env)", DeprecationWarning, stacklevel=2)
+            stepper = backend
+        if stepper not in STEPPERS:
+            raise ValueError(f"stepper must be one of {STEPPERS}, got {stepper!r}")
         first = Match(config)
-        check_memory(first, n_matches, backend)
+        check_memory(first, n_matches, stepper)
         self.matches = [first, *(Match(config) for _ in range(n_matches - 1))]
         self.config = first.config
         self.agents = first.agents
@@ -166,7 +174,8 @@ class MatchBatch:
         """Columns of each match's action array (see :attr:`Match.action_width`)."""
         self.n_matches = n_matches
         self.n_threads = n_threads
-        self.backend = backend
+        self.stepper = stepper
+        """How the physics is spread over threads: ``"mujoco"`` (``mujoco.batch``) or ``"threads"`` (Python)."""
         self._frame_skip = first.sim.frame_skip
         motors = first.sim.actuator_ids >= 0  # padding columns of smaller bodies drive nothing
         self._motor_columns = None if motors.all() else motors.ravel()
@@ -174,7 +183,7 @@ class MatchBatch:
         self._batch: mujoco.batch.Batch | None = None
         self._pool: ThreadPoolExecutor | None = None
         self._closed = False
-        if backend == "mujoco":
+        if stepper == "mujoco":
             # Every match compiles the same config to the same model; the batch steps a copy of it.
             self._batch = mujoco.batch.Batch(first.model, n_matches, nthread=n_threads, persistent=True)
             self._ctrl = self._batch.bind("ctrl")
@@ -198,7 +207,7 @@ class MatchBatch:
         self._body_forces = [(m.data.cfrc_ext[rows, 3:], m.data.xfrc_applied[rows, :3])
                              if paper and rows is not None else None for m in self.matches]
         """Per match: the views ``Simulation.contact_forces`` subtracts (``None``: call it)."""
-        if self._batch is None:  # the threads backend: each match's state gathered into rows after its step
+        if self._batch is None:  # the threads stepper: each match's state gathered into rows after its step
             self._qpos, self._qvel = np.empty((n_matches, first.model.nq)), np.empty((n_matches, first.model.nv))
             self._warnings_now = np.zeros((n_matches, *first.data.warning.number.shape), np.int32)
             self._warnings_seen = self._warnings_now.copy()
@@ -223,7 +232,7 @@ class MatchBatch:
         """Continue match ``k`` from its ``MjData`` as it is now.
 
         :meth:`reset_one` calls it; call it yourself after editing ``matches[k].data`` by
-        hand (a scenario test placing an agent), since the ``mujoco`` backend steps its own
+        hand (a scenario test placing an agent), since the ``mujoco`` stepper steps its own
         copy of each match's state and would otherwise overwrite the edit.
         """
         self._check_index(k)
@@ -310,7 +319,7 @@ class MatchBatch:
         return self._judge_together(self._warnings_now)
 
     def _physics_block(self, block: Any, ctrl: np.ndarray) -> None:
-        """The ``threads`` backend: step matches of ``block`` (an iterator shared by the pool's threads)
+        """The ``threads`` stepper: step matches of ``block`` (an iterator shared by the pool's threads)
         on their own ``MjData``, then copy each one's state into the rows :meth:`_judge_together`
         reads, and compute the contact forces of ``paper`` observations (``mj_rnePostConstraint``
         releases the GIL too)."""
@@ -395,7 +404,7 @@ class MatchBatch:
         own_obs: list[Any] = [None] * n
         """Observations built by each match itself (egocentric); the results of troubled matches."""
         steps = np.empty(n, np.int64)
-        if self._batch is None and forces is not None and not trouble.any():  # the threads backend's usual step
+        if self._batch is None and forces is not None and not trouble.any():  # the threads stepper's usual step
             for match in self.matches:
                 match.steps += 1
             steps[:] = [match.steps for match in self.matches]
@@ -449,7 +458,7 @@ class MatchBatch:
     def _count_steps(self, trouble: np.ndarray, own_obs: list[Any], steps: np.ndarray) -> None:
         """The general first half of :meth:`_judge_together`, match by match: a troubled match is
         finished alone (its result into ``own_obs``); the others count their step, take their state
-        from the ``mujoco`` backend's batch and their contact forces, or build their own
+        from the ``mujoco`` stepper's batch and their contact forces, or build their own
         (``egocentric``) observations into ``own_obs``."""
         forces = self._forces
         get_data = None if self._batch is None else self._batch.get_data
@@ -507,6 +516,12 @@ class MatchBatch:
         self._check_open()
         if not 0 <= k < self.n_matches:
             raise IndexError(f"match index must be in [0, {self.n_matches}), got {k}")
+
+    @property
+    def backend(self) -> str:
+        """Deprecated: :attr:`stepper`."""
+        warnings.warn("MatchBatch.backend is deprecated: it is MatchBatch.stepper", DeprecationWarning, stacklevel=2)
+        return self.stepper
 
     def __enter__(self) -> MatchBatch:
         return self
@@ -580,10 +595,10 @@ class VectorMatches:
 
     It grows :class:`MatchBatch` (threaded physics, bit for bit the trajectories of single
     matches) into the batched contract that the ``warp`` backend shares: arrays in, arrays
-    out, autoreset. Each step is :meth:`MatchBatch.step_arrays` on the ``threads`` backend:
+    out, autoreset. Each step is :meth:`MatchBatch.step_arrays` on the ``threads`` stepper:
     each thread steps its block of matches on their own ``MjData`` (``mj_step`` and
     ``mj_rnePostConstraint`` release the GIL) and copies their states into rows, then the
-    rules judge all matches over arrays. The ``mujoco`` backend (``mujoco.batch``) would
+    rules judge all matches over arrays. The ``mujoco`` stepper (``mujoco.batch``) would
     have to copy every match's whole ``MjData`` out of the batch after each step for its
     contact forces, which doubles the memory the physics runs through and slows it
     (``docs/bench/index.md``).
@@ -616,7 +631,7 @@ class VectorMatches:
             usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
             num_threads = max(1, min(num_envs, usable))
         try:
-            self.batch = MatchBatch(config, num_envs, num_threads or 1, backend="threads")
+            self.batch = MatchBatch(config, num_envs, num_threads or 1, stepper="threads")
         except ValueError as err:  # the same error (a BatchMemoryError stays one), in this class's words
             raise type(err)(str(err).replace("n_matches", "num_envs").replace("n_threads", "num_threads")) from None
         first = self.batch.matches[0]
@@ -727,3 +742,11 @@ class VectorMatches:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def __getattr__(name: str) -> Any:
+    if name == "BACKENDS":
+        warnings.warn("triplesumo.envs.batch.BACKENDS is deprecated: it is STEPPERS (MatchBatch's steppers)",
+                      DeprecationWarning, stacklevel=2)
+        return STEPPERS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

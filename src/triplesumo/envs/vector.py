@@ -28,17 +28,6 @@ BatchPolicy = Callable[[np.ndarray], np.ndarray]
 in [-1, 1] (the zoo's policies and trained actors take batches)."""
 
 
-class _LearnerMatches(VectorMatches):
-    """The matches of the vector view, whose autoresets draw seeds as ``TripleSumoEnv`` does."""
-
-    def __init__(self, view: TripleSumoVectorEnv, *args: Any) -> None:
-        super().__init__(*args)
-        self._view = view
-
-    def _next_seed(self, k: int) -> int | None:
-        return self._view._match_seed(k, None)
-
-
 class TripleSumoVectorEnv(gym.vector.VectorEnv):
     """``num_envs`` matches of :class:`~triplesumo.envs.single.TripleSumoEnv`, as one
     ``gymnasium.vector.VectorEnv``.
@@ -77,7 +66,8 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
             raise ValueError(f"scenario {scenario!r}: the single-learner vector view plays first-out rules only "
                              "(a learner eliminated mid-match would need its slot reset while the match goes "
                              "on); use gym.make(id) per match, or triplesumo.vector_env for every agent")
-        self.matches = _LearnerMatches(self, num_envs, config, num_threads)
+        self.matches = VectorMatches(num_envs, config, num_threads)
+        self.matches.reset_seed = self._autoreset_seed  # autoresets draw seeds as TripleSumoEnv.reset() does
         agents = self.matches.agents
         if learner not in agents:
             self.matches.close()
@@ -101,6 +91,10 @@ class TripleSumoVectorEnv(gym.vector.VectorEnv):
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.matches.matches[0].sim.dt)}
         self._env_rngs: list[np.random.Generator | None] = [None] * num_envs
         self._obs = np.zeros((num_envs, self.matches.n_agents, self.matches.obs_dim), np.float32)
+
+    def _autoreset_seed(self, k: int) -> int:
+        """Seed of slot ``k``'s next match at an autoreset (``VectorMatches.reset_seed``)."""
+        return self._match_seed(k, None)
 
     def _match_seed(self, k: int, seed: int | None) -> int:
         """Slot ``k``'s match seed for ``TripleSumoEnv.reset(seed=seed)`` (its seed chain)."""

@@ -1,11 +1,12 @@
 """Thousands of matches on one device: the MuJoCo Warp backend of the batched API.
 
-:class:`WarpMatchBatch` steps ``num_envs`` matches of one :class:`MatchConfig` with
+:class:`WarpVectorMatches` steps ``num_envs`` matches of one :class:`MatchConfig` with
 ``mujoco_warp`` (one Warp *world* per match) on ``device`` (``"cuda"``, ``"cuda:1"`` or
 Warp's ``"cpu"``), and computes their rules -- ring exits, outcome codes, reward terms,
-observations with per-geom contact forces -- batched on the device with the very
-functions of :mod:`triplesumo.rules.batched` (``xp=torch``) that the tests hold equal to
-the per-match rules of :class:`~triplesumo.envs.match.Match`. Warp's arrays are read as
+observations with per-geom contact forces -- batched on the device with the very rule
+functions (``xp=torch``; :mod:`triplesumo.rules.batched` lists them) that
+:class:`~triplesumo.envs.match.Match` calls with numpy for one match. It is the Warp
+counterpart of :class:`~triplesumo.envs.batch.VectorMatches` (one contract). Warp's arrays are read as
 torch tensors without copies (``warp.to_torch``): the returned observations, rewards
 and flags are torch tensors on ``device``.
 
@@ -75,8 +76,9 @@ STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION) & ~int(mujoco.mjtState.mjSTATE_
 which MuJoCo Warp does not hold (the model has no plugins)."""
 
 
-class WarpMatchBatch:
-    """``num_envs`` matches of one config stepped together by MuJoCo Warp on ``device``."""
+class WarpVectorMatches:
+    """``num_envs`` matches of one config stepped together by MuJoCo Warp on ``device``: the batched API
+    of :class:`~triplesumo.envs.batch.VectorMatches` on the ``warp`` backend."""
 
     def __init__(self, config: MatchConfig | None = None, num_envs: int = 16, device: str = "cuda",
                  nconmax: int = 64, njmax: int = 320, graph: bool | None = None, seed: int | None = None,
@@ -384,9 +386,19 @@ def set_warp_verbose(verbose: bool) -> None:
 
 
 def make_warp_vector_env(config: MatchConfig | None, num_envs: int, device: str | None = None,
-                         seed: int | None = None) -> WarpMatchBatch:
+                         seed: int | None = None) -> WarpVectorMatches:
     """The ``backend="warp"`` env of ``triplesumo.vector_env``: ``device`` defaults to ``"cuda"``
     when Warp sees a GPU, else Warp's ``"cpu"``; ``seed`` seeds the first ``reset()``."""
     if device is None:
         device = "cuda" if wp.is_cuda_available() else "cpu"
-    return WarpMatchBatch(config, num_envs, device=device, seed=seed)
+    return WarpVectorMatches(config, num_envs, device=device, seed=seed)
+
+
+def __getattr__(name: str) -> Any:
+    if name == "WarpMatchBatch":
+        import warnings
+
+        warnings.warn("triplesumo.envs.warp.WarpMatchBatch is deprecated: it is WarpVectorMatches (the Warp backend "
+                      "of the batched API, VectorMatches' counterpart)", DeprecationWarning, stacklevel=2)
+        return WarpVectorMatches
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
