@@ -96,21 +96,24 @@ def reward_terms(pos: Any, vel: Any, code: Any, timed_out: Any, rules: BatchedRu
     moves = xp.concat([s * v[:, :, None], s * v[:, None]], axis=1)  # (E, 2n, o, 2)
     moves = moves[..., 0] + moves[..., 1]
     if alive is None:
-        opp, partners_t, n_opp, n_par = rules.opponents, rules.partners.T, rules.n_opponents, rules.n_partners
+        opp, partners, n_opp, n_par = rules.opponents, rules.partners, rules.n_opponents, rules.n_partners
+        opp2, n_opp2 = rules.opponents_twice, rules.n_opponents_twice
     else:  # only agents in play count as opponents and partners
         playing = xp.where(alive, 1.0, 0.0)
-        opp = (rules.opponents * playing[:, None, :])[:, None]  # (E, 1, i, o)
+        opp = rules.opponents * playing[:, None, :]  # (E, i, o)
         partners = rules.partners * playing[:, None, :]  # (E, i, j)
-        n_opp = opp[:, 0].sum(-1) if rules.opponents_mean else playing * 0.0 + 1.0
-        n_opp = xp.where(n_opp > 0, n_opp, 1.0)[:, None, :]  # no opponent left: the sums are 0
+        n_opp = opp.sum(-1) if rules.opponents_mean else playing * 0.0 + 1.0
+        n_opp = xp.where(n_opp > 0, n_opp, 1.0)  # no opponent left: the sums are 0
         n_par = xp.maximum(partners.sum(-1), playing * 0.0 + 1.0)
-        partners_t = partners.swapaxes(-1, -2)  # (E, j, i)
-    # [e, r, i] = sum over the opponents o of i of moves[e, r, o], over i's opponents' count
-    per_row = ordered_sum(moves[:, :, None, :] * opp, -1) / n_opp
-    # self and opponent terms: the diagonals of the two blocks, weighted
-    self_opp = per_row[:, rules.diagonal_rows, rules.diagonal_cols] * rules.diagonal_weights
+        opp2, n_opp2 = xp.concat([opp, opp], axis=1), xp.concat([n_opp, n_opp], axis=1)
+    # [e, r] = sum over the opponents o of agent r mod n of moves[e, r, o], over their count: row i of the
+    # first block is i's self term, row n + i of the second its opponent term (before the weights)
+    per_agent = ordered_sum(moves * opp2, -1) / n_opp2
+    self_opp = per_agent * rules.term_weights
     self_, opponent = self_opp[:, :n], self_opp[:, n:]
-    partner = c3 * (ordered_sum(per_row[:, :n] * partners_t, 1) / n_par)
+    # a partner j of i has i's opponents (teams partition the roster), so j's own per-opponent mean
+    # toward them is the one i's partner term averages
+    partner = c3 * (ordered_sum(per_agent[:, None, :n] * partners, -1) / n_par)
     if sparse is None:
         sparse = rules.outcome_table[xp.where(timed_out[:, None] & (code == PLAYING), DRAW_CODE, code)]
     if alive is None:

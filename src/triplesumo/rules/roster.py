@@ -55,11 +55,12 @@ class BatchedRules:
     """``RewardConfig.opponents == "mean"``: per-opponent sums are averaged (else summed)."""
     evader_team: int = -1
     """Team of ``MatchConfig.evader`` (it wins at the step limit under elimination rules); -1: none."""
-    diagonal_rows: Any = None
-    """``(2 n,)`` integer: ``0 .. n-1, n .. 2n-1``; with :attr:`diagonal_cols` (``0 .. n-1`` twice) the
-    self and opponent entries of :func:`~triplesumo.rules.rewards.reward_terms`' per-pair sums."""
-    diagonal_cols: Any = None
-    diagonal_weights: Any = None
+    opponents_twice: Any = None
+    """``(2 n, n)``: :attr:`opponents` stacked twice (the self rows, then the opponent rows, of
+    :func:`~triplesumo.rules.rewards.reward_terms`' per-agent sums)."""
+    n_opponents_twice: Any = None
+    """``(2 n,)``: :attr:`n_opponents` twice."""
+    term_weights: Any = None
     """``(2 n,)``: C2 for the self entries, then C1 for the opponent entries."""
 
     @classmethod
@@ -89,7 +90,8 @@ class BatchedRules:
                    np.maximum(partners.sum(1), 1.0), others,
                    (float(r.opponent_velocity), float(r.self_velocity), float(r.partner_velocity), float(r.still)),
                    (float(r.win), float(r.loss), float(r.draw)), table, float(r.axis_dead_zone), mean,
-                   int(evader_team), np.arange(2 * n), np.concatenate([np.arange(n)] * 2),
+                   int(evader_team), np.concatenate([opponents] * 2),
+                   np.concatenate([opponents.sum(1) if mean else np.ones(n)] * 2),
                    np.array([float(r.self_velocity)] * n + [float(r.opponent_velocity)] * n))
 
     def to(self, convert: Any) -> BatchedRules:
@@ -98,5 +100,5 @@ class BatchedRules:
                             convert(self.team_onehot), convert(self.opponents), convert(self.partners),
                             convert(self.n_opponents), convert(self.n_partners), convert(self.others),
                             self.weights, self.outcome_values, convert(self.outcome_table), self.axis_dead_zone,
-                            self.opponents_mean, self.evader_team, convert(self.diagonal_rows),
-                            convert(self.diagonal_cols), convert(self.diagonal_weights))
+                            self.opponents_mean, self.evader_team, convert(self.opponents_twice),
+                            convert(self.n_opponents_twice), convert(self.term_weights))
