@@ -192,7 +192,7 @@ class MatchBatch:
             """Every simulation's MuJoCo warning counters as of its last judged step."""
         elif n_threads > 1:
             self._pool = ThreadPoolExecutor(n_threads - 1, thread_name_prefix="MatchBatch")
-        self._rules = rules_batched.BatchedRules.build(self.config, first.half_size)
+        self._rules = first.game  # the rules as arrays, as each match holds them
         self._judged_together = self.config.rules == "first_out"
         """:meth:`step_arrays` judges the matches together with :mod:`triplesumo.rules.batched`
         (elimination rules keep per-match state: they are judged match by match)."""

@@ -57,7 +57,7 @@ class Match:
         self._n_teams = len(self.teams.names)
         self._team_of = self.teams.team_of.tolist()
         self.half_size = ring_half_size(self.model)
-        self.rules = BatchedRules.build(self.config, self.half_size)
+        self.game = BatchedRules.build(self.config, self.half_size)
         """The game as arrays: every rule of a step is :mod:`triplesumo.rules`' array function on ``E = 1``."""
         self._playing_codes = np.full((1, self.n_agents), rules_outcome.PLAYING)
         self._draw_codes = np.full((1, self.n_agents), rules_outcome.DRAW_CODE)
@@ -260,7 +260,7 @@ class Match:
         if trouble:
             return self._physics_error(trouble)
         pos, vel = self.sim.torso_positions()[None], self.sim.torso_velocities()[None]
-        rules = self.rules
+        rules = self.game
         out = rules_outcome.agents_out(pos, rules.half_size, np)  # (1, n)
         if self.elimination:
             return self._finish_elimination(pos, vel, out)
@@ -308,7 +308,7 @@ class Match:
 
     def _finish_elimination(self, pos: np.ndarray, vel: np.ndarray, out: np.ndarray) -> StepResult:
         """:meth:`finish_step` under ``elimination`` rules."""
-        rules, before = self.rules, np.array([self.alive])
+        rules, before = self.game, np.array([self.alive])
         judged = rules_outcome.judge_elimination(before, out, np.array([self.steps >= self.config.max_steps]),
                                                  rules, np)
         sparse = rules_outcome.place_values(judged.low, judged.high, rules, np)

@@ -142,7 +142,7 @@ class WarpVectorMatches:
         self._actuators = index(sim.actuator_ids.ravel())
         self._ctrl_mid = torch.as_tensor((sim.ctrl_high + sim.ctrl_low) / 2.0, dtype=torch.float32, device=dev)
         self._ctrl_half = torch.as_tensor((sim.ctrl_high - sim.ctrl_low) / 2.0, dtype=torch.float32, device=dev)
-        host_rules = rules_batched.BatchedRules.build(self.config, self.match.half_size)
+        host_rules = self.match.game  # the rules as arrays, copied to the device below
         self.rules = host_rules.to(lambda a: torch.as_tensor(
             a, dtype=torch.long if np.asarray(a).dtype.kind == "i" else torch.float32, device=dev))
         self.frame_skip = sim.frame_skip
