@@ -172,3 +172,17 @@ def test_no_tracked_text_file_cites_a_markdown_file_the_repository_lacks(files: 
               for cite in cited_markdown((ROOT / f).read_text(errors="replace"))
               if not cite_resolves(cite, f, files)]
     assert not broken, "citations of *.md files the repository does not have:\n" + "\n".join(broken)
+
+
+def test_the_fast_tier_is_a_registered_marker_that_ci_does_not_filter() -> None:
+    """``pytest -m "not slow"`` is the contributors' fast tier (CONTRIBUTING.md): ``slow`` is a registered marker
+    (an unregistered one would select nothing and warn), tests carry it, and CI runs the full suite unfiltered."""
+    import tomllib
+
+    markers = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["pytest"]["ini_options"]["markers"]
+    assert any(m.split(":")[0].strip() == "slow" for m in markers), markers
+    assert 'pytest -m "not slow"' in (ROOT / "CONTRIBUTING.md").read_text()
+    marked = [p.name for p in (ROOT / "tests").glob("test_*.py") if "mark.slow" in p.read_text()]
+    assert len(marked) >= 10, marked
+    ci = [line for line in (ROOT / ".ci" / "run").read_text().splitlines() if line.startswith("pytest")]
+    assert ci and all("-m" not in line.split() for line in ci), ci
