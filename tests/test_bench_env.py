@@ -99,6 +99,7 @@ def test_bad_sizes_are_value_errors() -> None:
         run_env_benchmark(steps=0)
 
 
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_warp_backend_reports_env_and_raw_rates_per_size(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("mujoco_warp", reason="mujoco-warp is not installed (pip install 'triplesumo[gpu]')")
     path = tmp_path / "warp.json"

@@ -43,6 +43,7 @@ def not_reached(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[st
     return out, run_skill(_tiny(out, target=1.0))  # 4 wins in 4 twenty-step matches: not within 120 steps
 
 
+@pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_curve(
         not_reached: tuple[Path, dict[str, Any]]) -> None:
     out, result = not_reached
@@ -90,6 +91,7 @@ def test_a_target_not_reached_within_the_budget_is_reported_so_with_the_whole_cu
             format_skill(result))
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_resume_raised_budget_lost_evaluation_and_lower_target(not_reached: tuple[Path, dict[str, Any]]) -> None:
     out, result = not_reached
     ev = result["algos"]["ddpg"]["runs"][0]["evaluations"]
@@ -179,6 +181,7 @@ def test_bad_options_name_the_field(kw: dict[str, Any], message: str) -> None:
         SkillConfig(**kw)
 
 
+@pytest.mark.slow  # 19 s alone on the shared 2-core box
 def test_background_evaluations_give_the_same_curve(tmp_path: Path,
                                                    not_reached: tuple[Path, dict[str, Any]]) -> None:
     """``--train.eval-background``: the evaluations play in a worker while Bug trains on; the curve in env
@@ -237,6 +240,7 @@ def test_the_median_and_spread_over_seeds_count_a_seed_not_reached_as_beyond_the
     assert spread([None]) == {"median": None, "min": None, "max": None}
 
 
+@pytest.mark.slow  # 51 s alone on the shared 2-core box
 def test_quick_writes_the_table_the_json_and_the_plot_over_three_seeds(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``bench skill --quick``: the defaults (3 seeds, background evaluations, the shipped match) on a tiny budget;

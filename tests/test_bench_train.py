@@ -44,6 +44,7 @@ def quick_no_sb3(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, di
     return rc, printed, json.loads(path.read_text())
 
 
+@pytest.mark.slow  # 45 s alone on the shared 2-core box
 def test_quick_prints_the_table_with_all_three_variants(quick: tuple) -> None:
     rc, printed, result, path = quick
     assert rc == 0
@@ -98,6 +99,7 @@ def test_quick_never_reports_an_epoch_longer_than_any_match_has_run(quick: tuple
     assert result["mean_epoch_steps"] is None or result["mean_epoch_steps"] <= longest_possible
 
 
+@pytest.mark.slow  # 15 s alone on the shared 2-core box
 def test_no_sb3_leaves_sb3_out(quick_no_sb3: tuple[int, str, dict[str, Any]]) -> None:
     rc, printed, result = quick_no_sb3
     assert rc == 0

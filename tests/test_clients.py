@@ -77,7 +77,12 @@ def test_every_guide_example_is_checked() -> None:
     assert set(guide_examples()) == set(CHECKS)
 
 
-@pytest.mark.parametrize("name", sorted(CHECKS))
+SLOW_GUIDES = ("sb3", "supersuit", "torchrl")
+"""Guide examples that train or wrap through another library: 9 to 11 s each alone on the shared 2-core box."""
+
+
+@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.slow) if n in SLOW_GUIDES else n
+                                  for n in sorted(CHECKS)])
 def test_guide_example_runs(name: str) -> None:
     code = guide_examples()[name]
     if name == "gymnasium-async":
@@ -91,6 +96,7 @@ def test_guide_example_runs(name: str) -> None:
     run_python(code + textwrap.dedent(CHECKS[name]) + "\nprint('checked')\n")
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_sb3_subproc_vec_env_with_fork_after_the_parent_built_the_env() -> None:
     out = run_python(textwrap.dedent("""
         import gymnasium as gym, numpy as np, torch, triplesumo

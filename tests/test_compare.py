@@ -36,6 +36,7 @@ def col(values: list[float]) -> np.ndarray:
     return np.asarray(values, dtype=np.float64)[:, None]
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_the_cli_parser_loads_rliable_only_when_statistics_are_computed() -> None:
     """rliable imports scipy.stats (about a second): ``triplesumo --help``, ``train`` and ``play`` need neither,
     and a machine without them (a GPU box given only the simulation's packages) still runs them."""
@@ -97,6 +98,7 @@ def test_stratified_resamples_draw_runs_within_each_task() -> None:
     assert set(np.unique(samples[:, :, 1])) == {100.0, 101.0, 102.0}
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_bootstrap_agrees_with_rliable_library_where_it_imports() -> None:
     try:
         from rliable import library as rly
@@ -130,6 +132,7 @@ def per_seed(folder: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow  # 17 s alone on the shared 2-core box
 def test_evaluate_writes_one_row_per_seed_and_compare_reads_them(seeds_eval: Path, tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     rows = per_seed(seeds_eval)

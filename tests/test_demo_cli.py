@@ -46,6 +46,7 @@ def zoo(tiny_zoo: TinyZoo, monkeypatch: pytest.MonkeyPatch) -> TinyZoo:
 
 
 # --------------------------------------------------------------------- the main job
+@pytest.mark.slow  # 22 s alone on the shared 2-core box
 def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:

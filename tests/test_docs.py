@@ -213,6 +213,7 @@ def test_sphinx_roles_become_optional_cross_references_shown_as_code() -> None:
 
 
 @pytest.mark.skipif(importlib.util.find_spec("mkdocs") is None, reason="needs the docs extra (mkdocs)")
+@pytest.mark.slow  # 11 s alone on the shared 2-core box
 def test_site_builds_strict(tmp_path: Path) -> None:
     proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
                           cwd=ROOT, capture_output=True, text=True, timeout=300,
@@ -319,6 +320,7 @@ took over 240 s on a 2-core box shared with training runs."""
 
 
 @pytest.mark.parametrize("page", example_pages(), ids=lambda p: str(p.relative_to(ROOT)))
+@pytest.mark.slow  # 98 s alone on the shared 2-core box
 def test_the_python_blocks_of_a_page_run(page: Path, tmp_path: Path) -> None:
     """A page's unmarked blocks, each in a fresh namespace (so each has its own imports), in one fresh process
     (imports are paid once) whose working folder is empty (what a block writes lands there)."""

@@ -82,6 +82,7 @@ class Recorder:
 
 
 # ----------------------------------------------------------------- play_test_epochs
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_rows_are_one_per_epoch_in_order_with_the_metrics_schema(tiny_zoo: TinyZoo, tmp_path: Path) -> None:
     bug = load_policy(tiny_zoo.bug_policy)[0]
     rows = play(bug, fixed_others(tiny_zoo.zoo_dir), epochs=5, n_envs=2)
@@ -183,6 +184,7 @@ def report(tiny_zoo: TinyZoo, tmp_path_factory: pytest.TempPathFactory) -> tuple
     return cfg, summary
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_evaluate_writes_summary_json_with_counts_and_intervals(report: tuple[EvaluateConfig, dict]) -> None:
     cfg, summary = report
     saved = json.loads((Path(cfg.out) / "summary.json").read_text())
@@ -258,6 +260,7 @@ def _kill_midway(folder: Path, keep: int) -> None:
     (folder / "summary.json").unlink()
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_a_killed_evaluation_resumes_to_exactly_the_uninterrupted_rows(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -273,6 +276,7 @@ def test_a_killed_evaluation_resumes_to_exactly_the_uninterrupted_rows(
         assert (folder / label / "metrics.csv").read_bytes() == (Path(cfg.out) / label / "metrics.csv").read_bytes()
 
 
+@pytest.mark.slow  # 13 s alone on the shared 2-core box
 def test_an_evaluation_killed_before_its_first_row_resumes_as_a_fresh_start(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -295,6 +299,7 @@ def test_an_evaluation_killed_before_its_first_row_resumes_as_a_fresh_start(
     assert again["candidates"] == summary["candidates"]
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_resume_extends_a_finished_evaluation_to_more_epochs(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -312,6 +317,7 @@ def test_resume_extends_a_finished_evaluation_to_more_epochs(
         evaluate(dataclasses.replace(cfg, out=str(folder), resume=True))
 
 
+@pytest.mark.slow  # 50 s alone on the shared 2-core box
 def test_workers_write_the_bytes_of_one_process_and_resume(tiny_zoo: TinyZoo, tmp_path: Path) -> None:
     # policy files, not zoo names: the worker processes do not see a monkeypatched ZOO_DIR
     others = (f"ant={tiny_zoo.zoo_dir / 'ant'}", f"spider={tiny_zoo.zoo_dir / 'spider'}")
@@ -329,6 +335,7 @@ def test_workers_write_the_bytes_of_one_process_and_resume(tiny_zoo: TinyZoo, tm
         assert got.count(b"\n") == 6
 
 
+@pytest.mark.slow  # 25 s alone on the shared 2-core box
 def test_candidates_on_worker_processes_hand_on_each_ones_rows_in_order_and_raise_a_tasks_error(
         tiny_zoo: TinyZoo, tmp_path: Path) -> None:
     others = {"ant": str(tiny_zoo.zoo_dir / "ant"), "spider": str(tiny_zoo.zoo_dir / "spider")}
@@ -376,6 +383,7 @@ def test_resume_refuses_what_would_change_the_rows(
         evaluate(dataclasses.replace(small, resume=True))
 
 
+@pytest.mark.slow  # 14 s alone on the shared 2-core box
 def test_a_resume_that_names_no_baselines_keeps_the_folders_own(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -406,6 +414,7 @@ def test_a_resume_that_names_no_baselines_keeps_the_folders_own(
     assert list(fresh["candidates"]) == ["trained", "passive", "random"]
 
 
+@pytest.mark.slow  # 23 s alone on the shared 2-core box
 def test_a_resume_keeps_every_finished_candidate_its_folder_recorded(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -448,6 +457,7 @@ def test_a_resume_keeps_every_finished_candidate_its_folder_recorded(
     assert evaluate(dataclasses.replace(small, compare=(), resume=True))["candidates"] == first["candidates"]
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_compare_takes_a_glob_of_snapshots_each_its_own_candidate(
         report: tuple[EvaluateConfig, dict], tiny_zoo: TinyZoo, tmp_path: Path,
         monkeypatch: pytest.MonkeyPatch) -> None:

@@ -52,6 +52,7 @@ def latest_epoch(run: Path) -> int:
     return int(json.loads((run / "checkpoints" / "latest.json").read_text())["epoch"])
 
 
+@pytest.mark.slow  # 16 s alone on the shared 2-core box
 def test_a_second_train_is_refused_naming_the_holder_and_a_kill_9_lets_a_resume_go_on(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = tmp_path / "CF"

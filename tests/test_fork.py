@@ -47,6 +47,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Trainer, Trainer]:
     return full, half
 
 
+@pytest.mark.slow  # 81 s alone on the shared 2-core box
 def test_a_fork_that_changes_only_the_budget_continues_as_the_uninterrupted_run(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     full, half = runs
@@ -88,6 +89,7 @@ def test_a_fork_that_changes_only_the_budget_continues_as_the_uninterrupted_run(
     assert train(cfg, resume_dir=fork_dir, overrides={"epochs": 18}).epochs >= 18
 
 
+@pytest.mark.slow  # 39 s alone on the shared 2-core box
 def test_a_packed_parent_forks_and_resumes_as_the_uninterrupted_run(runs: tuple[Trainer, Trainer],
                                                                      tmp_path: Path) -> None:
     """Its tables gzipped (``triplesumo pack``: metrics, learning, the league log), a self-play run forks and
@@ -110,6 +112,7 @@ def test_a_packed_parent_forks_and_resumes_as_the_uninterrupted_run(runs: tuple[
         assert (full.run_dir / "league/league.csv").read_text() == (run / "league/league.csv").read_text()
 
 
+@pytest.mark.slow  # 15 s alone on the shared 2-core box
 def test_a_fork_admits_by_its_own_league_rules_from_the_fork_epoch(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     full, half = runs
@@ -130,6 +133,7 @@ def test_a_fork_admits_by_its_own_league_rules_from_the_fork_epoch(
     assert "--league.snapshot-every 1000 --league.side-threshold team=0.95" in record["command"]
 
 
+@pytest.mark.slow  # 12 s alone on the shared 2-core box
 def test_a_fork_may_fine_tune_under_other_reward_weights_from_the_fork_epoch(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     """``--reward.still 0``: every step after the fork is scored without the time penalty, every step
@@ -159,6 +163,7 @@ def test_a_fork_may_fine_tune_under_other_reward_weights_from_the_fork_epoch(
     assert after  # some matches were played wholly after the fork
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_a_fork_may_fine_tune_the_learners_step_sizes_and_exploration(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     """``--ddpg.actor-lr``, ``--ddpg.noise-sigma`` and one learner's ``--learner-config``: the fork's learners
@@ -218,6 +223,7 @@ def test_what_a_fork_may_not_change_is_refused_by_name_and_nothing_is_written(
         fork_run(tmp_path / "nothing", base)
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_cli_fork_writes_beside_the_parent_and_needs_a_name(
         runs: tuple[Trainer, Trainer], capsys: pytest.CaptureFixture[str]) -> None:
     _, half = runs
@@ -235,6 +241,7 @@ def test_cli_fork_writes_beside_the_parent_and_needs_a_name(
         "team") == 0.5
 
 
+@pytest.mark.slow  # 66 s alone on the shared 2-core box
 def test_compact_keeps_what_resuming_needs_and_the_resumed_run_is_unchanged(
         runs: tuple[Trainer, Trainer], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     long = Trainer(both(tmp_path / "long", epochs=32), command=BOTH_COMMAND)  # pools of 3, 16 admission checks
@@ -291,6 +298,7 @@ def test_compact_of_a_read_only_run_fails_naming_the_path_and_removes_nothing(
     assert [p.name for p in (run / "checkpoints").glob("*epoch-*")] == ["epoch-000004"]
 
 
+@pytest.mark.slow  # 15 s alone on the shared 2-core box
 def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_them(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     _, half = runs
@@ -361,6 +369,7 @@ def test_a_fork_may_only_append_to_the_parents_zoo(runs: tuple[Trainer, Trainer]
             check_fork(parent, dataclasses.replace(fork, league=dataclasses.replace(parent.league, zoo=zoo)))
 
 
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_compact_drop_replay_leaves_a_checkpoint_that_resumes_with_an_empty_buffer(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A long run's resume state, committed: ``compact --drop-replay`` deletes the checkpoint's replay buffer and its

@@ -104,6 +104,7 @@ class SimulatedKill(BaseException):
 # ----------------------------------------------------------- 1. re-run into a run folder
 
 
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_rerun_into_a_run_folder_refuses_and_changes_nothing(killed_copy: Path,
                                                              capsys: pytest.CaptureFixture[str]) -> None:
     before = snapshot(killed_copy)
@@ -118,6 +119,7 @@ def test_rerun_into_a_run_folder_refuses_and_changes_nothing(killed_copy: Path,
     resume(killed_copy)  # the refused run is still resumable, as if nothing had happened
 
 
+@pytest.mark.slow  # 13 s alone on the shared 2-core box
 def test_start_over_moves_the_old_run_aside(killed_copy: Path, reference: Path) -> None:
     before = snapshot(killed_copy)
     result = train(tiny(killed_copy.parent, "ref"), start_over=True)
@@ -199,6 +201,7 @@ def test_torn_last_row_is_cut_off_on_resume(tmp_path: Path) -> None:
     assert len(metrics["epoch"]) == result.epochs >= 11
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_a_row_torn_at_the_checkpoints_epoch_resumes_from_the_checkpoint_before(tmp_path: Path,
                                                                                   capsys: pytest.CaptureFixture[str]
                                                                                   ) -> None:
@@ -469,6 +472,7 @@ def _mount_tmpfs(where: Path, size: int) -> bool:
     return done.returncode == 0
 
 
+@pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_full_tmpfs_while_saving(reference: Path, tmp_path: Path) -> None:
     """A real full disk: a small tmpfs (where this user may mount one) that fills up during a save."""
     disk = tmp_path / "disk"

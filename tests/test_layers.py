@@ -99,6 +99,7 @@ def test_a_planted_circle_breaks_the_acyclic_contract(tmp_path: Path) -> None:
     assert "No cycles are allowed in triplesumo.train." in result.stdout
 
 
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_evaluation_and_train_import_neither_ray_nor_the_integrations() -> None:
     """Parallel execution is handed down (a task runner): importing every module of evaluation and train, and
     running a tiny evaluation on a thread runner, imports neither Ray nor triplesumo.integrations."""

@@ -390,6 +390,7 @@ def test_bad_league_use_is_a_clear_error(tmp_path: Path) -> None:
         plot_league(tmp_path)
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_scripted_2v1_league_admits_stronger_snapshots_and_moves_ratings(tmp_path: Path) -> None:
     # draws count half: on the paper's rim a passive team often holds a random Spider to a draw
     cfg = LeagueConfig(threshold=0.5, window=6, snapshot_every=6, max_size=4, zoo=SEEDED, draw_score=0.5)

@@ -108,6 +108,7 @@ def member_manifests(trainer: Trainer) -> dict[str, dict[str, object]]:
             for pool in trainer.league.pools.values() for m in (*pool.members, *pool.evicted)}
 
 
+@pytest.mark.slow  # 69 s alone on the shared 2-core box
 def test_a_run_its_resume_an_older_resume_and_a_fork_record_their_legs(tmp_path: Path) -> None:
     run = Trainer(both(tmp_path, epochs=8), command=BOTH_COMMAND)
     run.run()

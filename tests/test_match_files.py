@@ -143,6 +143,7 @@ def test_evaluation_records_its_first_k_matches_and_they_replay(tmp_path: Path) 
         assert verify(record) == record.steps
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_evaluate_record_from_the_command_line(tmp_path: Path) -> None:
     out = tmp_path / "eval"
     assert main(["evaluate", "--policy", "random", "--policies", "ant=random", "spider=random", "--baselines",

@@ -37,6 +37,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return train(tiny(tmp_path_factory.mktemp("runs"))).run_dir
 
 
+@pytest.mark.slow  # 14 s alone on the shared 2-core box
 def test_a_packed_run_reads_and_plots_as_the_plain_one(run: Path, tmp_path: Path) -> None:
     packed = tmp_path / "packed"
     shutil.copytree(run, packed)
@@ -149,6 +150,7 @@ def test_a_torn_packed_table_is_unpacked_then_cut_back(run: Path, tmp_path: Path
     assert unpack_table(tmp_path / "metrics.csv") is False  # plain already
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_a_packed_evaluation_resumes_to_the_rows_of_an_uninterrupted_one(run: Path, tmp_path: Path) -> None:
     def cfg(out: Path, epochs: int, resume: bool = False) -> EvaluateConfig:
         return EvaluateConfig(learner="bug", policy=(str(run / "policy"),), baselines=(), epochs=epochs,

@@ -84,6 +84,7 @@ def test_play_schedules_queues_chunk_major_and_hands_on_each_schedules_rows_in_o
         play_schedules(runner, _span, {"a": ("a",), "c": ("c",)}, 7, {"c": 7})
 
 
+@pytest.mark.slow  # 29 s alone on the shared 2-core box
 def test_a_process_runner_plays_the_rows_of_a_thread_runner_in_order(monkeypatch: pytest.MonkeyPatch) -> None:
     for name in ONE_THREAD:
         monkeypatch.delenv(name, raising=False)
@@ -103,6 +104,7 @@ def test_a_process_runner_plays_the_rows_of_a_thread_runner_in_order(monkeypatch
         ProcessRunner(0)
 
 
+@pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_a_failing_chunk_in_a_process_raises_its_error_after_the_rows_before_it() -> None:
     seen: list[int] = []
     with pytest.raises(RuntimeError, match="chunk 4..6 failed"):
@@ -114,6 +116,7 @@ def _csv(path: Path) -> bytes:
     return path.read_bytes()
 
 
+@pytest.mark.slow  # 17 s alone on the shared 2-core box
 def test_evaluate_on_a_thread_runner_writes_the_bytes_of_a_local_run_and_resumes(tmp_path: Path) -> None:
     base = EvaluateConfig(policy=("random",), epochs=6, steps_per_epoch=40, n_envs=4, n_threads=1, progress=False,
                           baselines=("passive",), out=str(tmp_path / "local"))
@@ -200,6 +203,7 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads processes from /proc (Linux)")
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_evaluate_workers_and_their_resource_tracker_die_with_a_killed_evaluate(tmp_path: Path) -> None:
     import signal
     import subprocess

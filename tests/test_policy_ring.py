@@ -114,6 +114,7 @@ def test_the_shipped_zoo_and_the_policies_of_docs_runs_load_on_their_own_ring() 
         zoo.load("ant-selfplay", expect_physics=PhysicsConfig())
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_play_evaluate_and_train_refuse_another_ring_unless_allowed(tmp_path: Path, other: dict[str, str],
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     for label, spec in other.items():

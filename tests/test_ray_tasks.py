@@ -27,6 +27,7 @@ def ray_tasks(ray_session: Any) -> Any:
     return ray_tasks
 
 
+@pytest.mark.slow  # 19 s alone on the shared 2-core box
 def test_rows_on_ray_equal_a_local_run(ray_tasks: Any) -> None:
     cfg = MatchConfig(max_steps=40)
     local = play_test_epochs(make_policy("random", seed=3), {a: make_policy(s) for a, s in OTHERS.items()},
@@ -70,6 +71,7 @@ def _csv_rows(path: Path) -> list[bytes]:
     return path.read_bytes().splitlines()
 
 
+@pytest.mark.slow  # 14 s alone on the shared 2-core box
 def test_evaluate_on_ray_writes_the_bytes_of_a_local_run_and_resumes(ray_tasks: Any, tmp_path: Path) -> None:
     from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 

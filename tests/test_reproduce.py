@@ -29,6 +29,7 @@ def _record(out: Path) -> dict:
     return json.loads((out / "reproduce.json").read_text())
 
 
+@pytest.mark.slow  # 83 s alone on the shared 2-core box
 def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed_one(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     out, zoo = tmp_path / "rep", tmp_path / "zoo"
@@ -257,6 +258,7 @@ def test_bug_trials_give_td3_and_sac_the_shared_schedule_and_keep_ddpg_at_the_pa
     assert default["td3"].td3.learn_every == 1 and default["sac"].sac.learn_every == 1
 
 
+@pytest.mark.slow  # 109 s alone on the shared 2-core box
 def test_with_ray_the_bug_runs_train_as_ray_tasks_and_give_the_outputs_of_a_local_reproduction(
         ray_session: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--ray``: the stage-4 Bug runs train as Ray tasks (two at once here) and the test matches play as Ray tasks;
@@ -290,6 +292,7 @@ def _csv_rows(path: Path, header: bool = False) -> list[Any]:
         return list(csv.DictReader(fh)) if header else list(csv.reader(fh))[1:]
 
 
+@pytest.mark.slow  # 34 s alone on the shared 2-core box
 def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "rep"
@@ -598,6 +601,7 @@ def test_the_cli_stops_a_refused_pair_with_rc_2_and_a_message(tmp_path: Path,
     assert "triplesumo reproduce: stopped: stage bug refused" in err and "Traceback" not in err
 
 
+@pytest.mark.slow  # 43 s alone on the shared 2-core box
 def test_a_reproduction_grows_by_more_bug_runs_keeping_those_made_and_refuses_to_drop_any(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """More seeds (or algorithms) on a folder: the Bug runs made are kept as they are, the new ones train and

@@ -71,6 +71,7 @@ def run(whole: TrainResult, tmp_path: Path) -> Path:
     return copy
 
 
+@pytest.mark.slow  # 11 s alone on the shared 2-core box
 def test_resume_from_an_older_checkpoint_with_no_epoch_left_restores_the_folder_to_it(
         run: Path, whole: TrainResult, capsys: pytest.CaptureFixture[str]) -> None:
     restored = actor_of(checkpoint.find(run, f"epoch-{E:06d}"))

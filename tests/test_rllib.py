@@ -64,6 +64,7 @@ def _check_outcomes(rllib: Any, result: dict[str, Any]) -> None:
 
 
 @pytest.mark.usefixtures("local_ray")
+@pytest.mark.slow  # 18 s alone on the shared 2-core box
 def test_bug_learns_while_the_zoo_ant_and_spider_act_inside_the_env(rllib: Any, tmp_path: Any) -> None:
     """Issue 39, item 14: by default the frozen agents play inside the env, so RLlib's modules, episodes and
     dicts hold Bug only, each env runner plays ENVS_PER_RUNNER matches, and every outcome is still reported."""
@@ -283,6 +284,7 @@ def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
         rllib.TripleSumoMultiAgentEnv({"match_config": rllib.scenario_config(), "max_steps": 5})
 
 
+@pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_make_config_sets_one_torch_thread_unless_told_otherwise(rllib: Any) -> None:
     """The driver holds RLlib's learner; torch's default threads (one per core) stall on a busy 2-core box."""
     code = ("import torch; torch.set_num_threads(2); from triplesumo.integrations.rllib import make_config; "
@@ -294,6 +296,7 @@ def test_make_config_sets_one_torch_thread_unless_told_otherwise(rllib: Any) -> 
 
 
 @pytest.mark.usefixtures("local_ray")
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_a_gymnasium_id_without_its_module_builds_on_remote_env_runners_once_registered(rllib: Any) -> None:
     """A remote env runner has not imported triplesumo, so Gymnasium does not know "TripleSumo-Paper-v2" there
     (RLlib's driver then fails with an IndexError); register_envs() registers the Gymnasium ids with Tune too."""
@@ -387,6 +390,7 @@ def test_rllibs_env_checker_passes_every_scenario_without_a_warning(obs_mode: st
 
 
 @pytest.mark.usefixtures("local_ray")
+@pytest.mark.slow  # 21 s alone on the shared 2-core box
 def test_bench_rllib_reports_each_layouts_rate_beside_the_raw_env(tmp_path: Any,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
     """``triplesumo bench rllib --quick``: one row per layout, with RLlib's and the raw env's rates, their

@@ -68,6 +68,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow  # 29 s alone on the shared 2-core box
 def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_session: Any,
                                                                            tmp_path: Path) -> None:
     cfg = SweepConfig(grid=("seed=0,1", "ddpg.actor_lr=1e-3"), out=str(tmp_path / "sweep"), evaluate_epochs=2)
@@ -106,6 +107,7 @@ def _latest_epoch(latest: Path) -> int:
 
 
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds Ray's worker processes through /proc")
+@pytest.mark.slow  # 23 s alone on the shared 2-core box
 def test_a_trial_whose_worker_is_killed_resumes_from_its_checkpoint(ray_session: Any, tmp_path: Path) -> None:
     # long enough that the kill lands mid-run: on the rim of env v1 a tiny match often ends in a few steps
     base = TINY.__class__(**{**TINY.__dict__, "epochs": 120, "steps_per_epoch": 40})
@@ -171,6 +173,7 @@ def test_without_ray_sweep_and_ray_options_name_the_extra(tmp_path: Path) -> Non
     assert not (tmp_path / "s").exists()
 
 
+@pytest.mark.slow  # 24 s alone on the shared 2-core box
 def test_bench_ray_reports_rates_per_core_figures_and_a_labelled_projection(ray_session: Any, tmp_path: Path,
                                                                             capsys: pytest.CaptureFixture[str]) -> None:
     from triplesumo.benchmarks.ray import main

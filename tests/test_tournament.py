@@ -46,6 +46,7 @@ def rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+@pytest.mark.slow  # 11 s alone on the shared 2-core box
 def test_passive_ends_rated_above_random_with_non_overlapping_intervals(duel: tuple[Path, dict]) -> None:
     out, results = duel
     board = {e["policy"]: e for e in results["leaderboard"]}
@@ -118,6 +119,7 @@ def test_same_seed_same_rows_whatever_the_batch(duel: tuple[Path, dict], tmp_pat
     assert [r["steps"] for r in rows(other / "matches.csv")] != [r["steps"] for r in rows(tmp_path / "matches.csv")]
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_a_killed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(duel: tuple[Path, dict],
                                                                        tmp_path: Path) -> None:
     out, _ = duel
@@ -223,6 +225,7 @@ def ffa(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict]:
     return out, run_tournament(ffa_cfg(out))
 
 
+@pytest.mark.slow  # 10 s alone on the shared 2-core box
 def test_free_for_all_by_name_records_places_and_rates_the_passive_quadruped_first(ffa: tuple[Path, dict]) -> None:
     out, results = ffa
     assert results["scenario"] == "ffa" and results["seats"] == ["ant", "bug", "spider"]
@@ -273,6 +276,7 @@ def test_free_for_all_rates_a_quadruped_out_second_above_one_out_first(tmp_path:
     assert board == ["last", "second", "first"]
 
 
+@pytest.mark.slow  # 11 s alone on the shared 2-core box
 def test_free_for_all_tournament_resumes_to_the_same_rows(ffa: tuple[Path, dict], tmp_path: Path) -> None:
     part = tmp_path / "part"
     run_tournament(ffa_cfg(part, rounds=2))
@@ -286,6 +290,7 @@ def tiny_zoo_dir(tiny_zoo: TinyZoo, monkeypatch: pytest.MonkeyPatch) -> Path:
     return tiny_zoo.zoo_dir
 
 
+@pytest.mark.slow  # 10 s alone on the shared 2-core box
 def test_paper_seats_zoo_policies_where_they_were_trained_and_built_ins_anywhere(tiny_zoo_dir: Path) -> None:
     t = Tournament(TournamentConfig(progress=False))
     assert t.seats_of == {"ant": ["ant"], "bug": ["bug"], "spider": ["spider"],

@@ -108,6 +108,7 @@ def run_copy(uninterrupted: Trained, tmp_path: Path) -> Path:
 # ----------------------------------------------------------------- one tiny run
 
 
+@pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_tiny_run_learns_finite_losses(uninterrupted: Trained) -> None:
     trainer, result, ddpg = uninterrupted.trainer, uninterrupted.result, uninterrupted.cfg.ddpg
     assert result.epochs == trainer.epochs_done >= uninterrupted.cfg.epochs
@@ -345,6 +346,7 @@ def test_a_run_killed_before_latest_json_was_written_resumes_from_its_newest_che
     assert rows == list(range(1, len(rows) + 1))
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_a_resumed_run_keeps_the_run_id_its_checkpoint_records(uninterrupted: Trained, run_copy: Path) -> None:
     """Policy manifests name the run (``run_id``) by the id its checkpoint holds, not by a hash of the config
     as this version reads it (which options added since would move); a run whose checkpoint was written
@@ -575,6 +577,7 @@ CLI_TINY = ["--policies", "spider=random", "ant=zero", "--ddpg.hidden", "16", "1
             "--no-tensorboard"]
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_cli_train_resume_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = tmp_path / "cli"
     assert main(["train", "--out", str(tmp_path), "--name", "cli", "--epochs", "3", *CLI_TINY]) == 0
@@ -622,6 +625,7 @@ def test_resume_without_the_replay_buffer_needs_saying_so(run_copy: Path) -> Non
     assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_overlapped_learning_gives_the_same_run_as_serial_learning(tmp_path: Path) -> None:
     """Updates run in a thread while MuJoCo steps; they read the replay as it was before the
     step and their own sampling generator, so the run is bit for bit the serial one."""
@@ -667,6 +671,7 @@ def _as_one_learner_layout(run: Path) -> None:
     (run / "learning.csv").unlink()
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_a_run_of_the_one_learner_trainer_resumes_exactly(uninterrupted: Trained, tmp_path: Path) -> None:
     """Runs checkpointed before several learners existed (long runs resumed across sessions)."""
     killed = train(tiny(tmp_path, name="old", epochs=E)).run_dir

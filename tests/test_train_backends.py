@@ -67,6 +67,7 @@ def _same_policy(a: Path, b: Path) -> bool:
     return x.keys() == y.keys() and all(np.array_equal(x[k], y[k]) for k in x)
 
 
+@pytest.mark.slow  # 10 s alone on the shared 2-core box
 def test_a_checkpoint_of_the_previous_trainer_resumes_and_continues_its_run_exactly(tmp_path: Path) -> None:
     run = tmp_path / "run"
     shutil.copytree(OLD_RUN / "run", run)
@@ -130,6 +131,7 @@ def warp_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Trainer]:
 
 
 @pytest.mark.parametrize("algo", ["ddpg", "ppo"])
+@pytest.mark.slow  # 26 s alone on the shared 2-core box
 def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
         warp_runs: dict[str, Trainer], algo: str) -> None:
     trainer = warp_runs[algo]
@@ -162,6 +164,7 @@ def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
         assert all(int(e["n_win"]) + int(e["n_loss"]) + int(e["n_draw"]) == 2 for e in evals)
 
 
+@pytest.mark.slow  # 13 s alone on the shared 2-core box
 def test_a_killed_warp_run_resumes_exactly(warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
     """Killed after a checkpoint written 10 steps into its second matches (the loop writes one whenever an
     epoch ends, other matches under way) and resumed, a warp run writes the rows, learning rows and policy
@@ -181,6 +184,7 @@ def test_a_killed_warp_run_resumes_exactly(warp_runs: dict[str, Trainer], tmp_pa
     assert _same_policy(killed.run_dir / "policy.safetensors", whole.run_dir / "policy.safetensors")
 
 
+@pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_a_warp_checkpoint_without_match_states_still_resumes_restarting_its_matches(
         warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
     """Checkpoints written before warp resumed exactly hold no match state: their unfinished matches restart."""
@@ -198,6 +202,7 @@ def test_a_warp_checkpoint_without_match_states_still_resumes_restarting_its_mat
     assert all(int(r["steps"]) <= 20 for r in rows)
 
 
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_bench_train_measures_the_warp_trainer_rows(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("mujoco_warp", reason='backend warp needs the "gpu" extra (pip install "triplesumo[gpu]")')
     from triplesumo.benchmarks.train import main
@@ -254,6 +259,7 @@ def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
             trainer.env.close()
 
 
+@pytest.mark.slow  # 30 s alone on the shared 2-core box
 def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_exactly(tmp_path: Path) -> None:
     """``--self-play --backend warp`` (paper scenario, both sides learning, one network per seat): live and pool
     matches, snapshots admitted, the Spider pool's zoo member acting on the device, the team pool's random

@@ -40,6 +40,7 @@ def _metrics(run: Path) -> list[dict[str, str]]:
         return [{k: v for k, v in row.items() if k != "wall_time"} for row in csv.DictReader(fh)]
 
 
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_evaluations_leave_the_training_unchanged(tmp_path: Path) -> None:
     with_eval = train(tiny(tmp_path, "with", eval_every=EVERY, eval_epochs=TESTS))
     without = train(tiny(tmp_path, "without"))
@@ -81,6 +82,7 @@ def test_an_evaluation_plays_the_policy_file_on_the_evaluate_matches(tmp_path: P
             stats["n_win"], stats["n_loss"], stats["n_draw"])
 
 
+@pytest.mark.slow  # 14 s alone on the shared 2-core box
 def test_a_resumed_run_writes_the_evaluations_of_an_uninterrupted_one(tmp_path: Path) -> None:
     whole = train(tiny(tmp_path, "whole", epochs=4 * E, eval_every=EVERY, eval_epochs=TESTS))
     cut = tiny(tmp_path, "cut", epochs=4 * E, eval_every=EVERY, eval_epochs=TESTS)
@@ -136,6 +138,7 @@ def _figures(rows: list[dict[str, str]]) -> list[dict[str, str]]:
             for r in rows]
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) -> None:
     """In a worker process the evaluations play the same frozen policies on the same matches: the same rows
     (only the times differ), and the training is the same as without them."""
@@ -158,6 +161,7 @@ def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) ->
     assert multiprocessing.active_children() == []  # and the worker is gone with the run
 
 
+@pytest.mark.slow  # 11 s alone on the shared 2-core box
 def test_an_evaluation_in_flight_at_a_checkpoint_is_played_by_the_resume(tmp_path: Path) -> None:
     """The first checkpoint comes milliseconds after the first evaluation went to the worker (which takes
     seconds to start): it holds that evaluation's frozen weights, and a resume from it writes the rows of the
@@ -176,6 +180,7 @@ def test_an_evaluation_in_flight_at_a_checkpoint_is_played_by_the_resume(tmp_pat
         _evals(whole.run_dir / "eval.csv")[0]["policy_train_seconds"])
 
 
+@pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_a_run_from_before_policy_train_seconds_resumes_with_the_column(tmp_path: Path) -> None:
     """An eval CSV written before ``policy_train_seconds`` existed: a resume adds the column, empty in the old
     rows (their policy's moment was not recorded), filled in the new ones."""

@@ -92,6 +92,7 @@ def pair(tmp_path_factory: pytest.TempPathFactory) -> Run:
     return run(tiny(tmp_path_factory.mktemp("pair"), "pair", **PAIR))
 
 
+@pytest.mark.slow  # 12 s alone on the shared 2-core box
 def test_two_algorithms_learn_at_once(pair: Run) -> None:
     trainer, folder = pair.trainer, pair.result.run_dir
     assert [(lr.name, lr.spec.algo) for lr in trainer.learners] == [("ant", "sac"), ("bug", "td3")]
@@ -145,6 +146,7 @@ def _assert_same_run(a: Path, b: Path, learners: list[str], replay: bool) -> Non
         same_arrays(last_a / "replay.npz", last_b / "replay.npz")
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_resume_of_an_off_policy_pair_equals_uninterrupted(pair: Run, tmp_path: Path) -> None:
     killed = train(tiny(tmp_path, "pair", **PAIR | {"epochs": E})).run_dir
     result = train(TrainConfig(), resume_dir=killed, overrides={"epochs": 2 * E})
@@ -259,6 +261,7 @@ def test_trainer_rejects_bad_learners(tmp_path: Path, fields: dict[str, Any], na
     assert not (tmp_path / "bad").exists()
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_cli_learn_trains_two_learners_and_plots_each(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = ["train", "--out", str(tmp_path), "--name", "cli", "--epochs", "2", "--learn", "ant=sac", "bug=ppo",
             "--policies", "spider=random", "--sac.hidden", "8", "8", "--sac.learning-starts", "20",
@@ -276,6 +279,7 @@ def test_cli_learn_trains_two_learners_and_plots_each(tmp_path: Path, capsys: py
     assert "TrainConfig.learn" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_learner_config_gives_one_learner_its_own_values(tmp_path: Path) -> None:
     """``--learner-config bug.learn_every=1 bug.hidden="8 8"``: the Bug's TD3 learns on every step with
     8-unit networks while the Ant's TD3 keeps the shared --td3.* values (every 2nd step, 16 units)."""
@@ -343,6 +347,7 @@ def test_learner_config_names_a_shared_team_learner_by_its_name(tmp_path: Path) 
     assert not (tmp_path / "member").exists()
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_cli_learner_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     base = ["train", "--out", str(tmp_path), "--epochs", "2", "--learn", "ant=ddpg", "bug=ddpg",
             "--policies", "spider=random", "--ddpg.hidden", "8", "8", "--ddpg.learning-starts", "20",

@@ -80,6 +80,7 @@ def run_once(tmp_path: Path, name: str) -> dict[str, Any]:
 
 
 @pytest.mark.parametrize("name", list(RUNS))
+@pytest.mark.slow  # 8 s alone on the shared 2-core box
 def test_trainer_reproduces_the_recorded_run(tmp_path: Path, name: str) -> None:
     now = run_once(tmp_path, name)
     if os.environ.get("TRIPLESUMO_RECORD"):

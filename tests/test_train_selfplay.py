@@ -77,6 +77,7 @@ def assert_same_league(a: League, b: League) -> None:
         assert {k: v for k, v in x.items() if k != "legs"} == {k: v for k, v in y.items() if k != "legs"}, rel
 
 
+@pytest.mark.slow  # 13 s alone on the shared 2-core box
 def test_spider_learns_against_the_team_pool_and_its_snapshots_join_its_own(tmp_path: Path) -> None:
     trainer = Trainer(tiny(tmp_path, "spider", **SPIDER))
     trainer.run()
@@ -103,6 +104,7 @@ def test_spider_learns_against_the_team_pool_and_its_snapshots_join_its_own(tmp_
     assert json.loads((league.root / "pool.json").read_text())["pools"]["spider"]["members"][-1]["id"] == snap.id
 
 
+@pytest.mark.slow  # 27 s alone on the shared 2-core box
 def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) -> None:
     trainer = Trainer(tiny(tmp_path, "ffa", **FFA))
     trainer.run()
@@ -172,6 +174,7 @@ def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
     assert len(events.Scalars("league/evader/learner_mu")) == trainer.epochs_done
 
 
+@pytest.mark.slow  # 50 s alone on the shared 2-core box
 def test_resume_restores_the_league_exactly(tmp_path: Path) -> None:
     command = "triplesumo train --self-play"  # the same in both runs' manifests (it names --epochs otherwise)
     full = Trainer(tiny(tmp_path / "a", "run", **FFA), command=command)
@@ -263,6 +266,7 @@ def both_run(tmp_path_factory: pytest.TempPathFactory) -> Trainer:
     return trainer
 
 
+@pytest.mark.slow  # 20 s alone on the shared 2-core box
 def test_both_sides_learn_against_each_other_and_each_others_pools(both_run: Trainer) -> None:
     league, run = both_run.league, both_run.run_dir
     assert league is not None and both_run.epochs_done == 16
@@ -291,6 +295,7 @@ def test_both_sides_learn_against_each_other_and_each_others_pools(both_run: Tra
     assert (run / "plots" / "league.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_a_side_with_a_fixed_agent_learns_and_sits_out_only_its_learners_seats(tmp_path: Path) -> None:
     """The contest's stage 1 (docs/CONTEST.md): Ant and Spider learn, Bug stays passive, and each learner meets
     a still opponent (its pool's seed) in part of its matches. The team's pool holds Ant's role only; when the
@@ -371,6 +376,7 @@ def test_live_or_pool_draws_follow_live_share(tmp_path: Path) -> None:
     assert config_from_json(saved).league.live_share == LeagueConfig().live_share
 
 
+@pytest.mark.slow  # 24 s alone on the shared 2-core box
 def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Trainer, tmp_path: Path) -> None:
     half = Trainer(both(tmp_path, epochs=8), command=BOTH_COMMAND)
     half.run()

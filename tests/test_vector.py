@@ -126,6 +126,7 @@ def _compare_infos(x: dict, y: dict, where: str) -> None:
             assert x[key].dtype == y[key].dtype and np.array_equal(x[key], y[key]), (where, key)
 
 
+@pytest.mark.slow  # 10 s alone on the shared 2-core box
 def test_make_vec_is_the_native_vector_env_and_equals_a_seeded_sync_vector_env() -> None:
     """Same game as N single envs: observations, rewards, flags and infos, exit and time limit alike."""
     kwargs = {"max_steps": 200}

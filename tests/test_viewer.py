@@ -136,6 +136,7 @@ def test_play_and_replay_write_pages_of_the_match_they_played(tmp_path: Path,
     assert [p.name for p in alone.parent.iterdir()] == ["a.html"]
 
 
+@pytest.mark.slow  # 6 s alone on the shared 2-core box
 def test_evaluate_record_html_writes_pages_beside_the_match_files(tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "ev"
