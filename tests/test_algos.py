@@ -464,6 +464,7 @@ def test_off_policy_learners_solve_a_bandit(name: str) -> None:
     assert before > 0.2 and _bandit_error(agent) < 0.1
 
 
+@pytest.mark.slow  # 4 s alone on the shared 2-core box
 def test_ppo_solves_a_bandit() -> None:
     agent = PPO(1, 1, PPOConfig(hidden=(32, 32), n_steps=8, n_minibatches=4, n_epochs=4, lr=3e-3,
                                 log_std_init=-1.0), seed=0)

@@ -127,6 +127,7 @@ def test_resume_raised_budget_lost_evaluation_and_lower_target(not_reached: tupl
         run_skill(_tiny(out, eval_epochs=5))
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_a_reached_target_stops_training_at_the_first_evaluation_past_it(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out, path = tmp_path / "b", tmp_path / "r" / "skill.json"
@@ -201,6 +202,7 @@ def test_background_evaluations_give_the_same_curve(tmp_path: Path,
     assert more["evaluations"][:3] == background["evaluations"] and len(more["evaluations"]) == 4
 
 
+@pytest.mark.slow  # 18 s in the fast tier's run on the shared 2-core box
 def test_the_progress_bar_counts_env_steps_to_the_budget(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     # the bench's runs have an epoch backstop of 10**9; the bar counts what stops them: env steps to max_env_steps
     run_skill(_tiny(tmp_path / "b", target=1.0, max_env_steps=EVERY, train=dataclasses.replace(TINY_TRAIN,

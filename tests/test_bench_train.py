@@ -56,6 +56,7 @@ def test_quick_prints_the_table_with_all_three_variants(quick: tuple) -> None:
     assert printed.rstrip().endswith(f"wrote {path}")
 
 
+@pytest.mark.slow  # uses the module's quick fixture, 63 s to build
 def test_quick_json_rates_ratios_split_and_projection_follow_from_each_other(quick: tuple) -> None:
     _, _, result, _ = quick
     rates = result["rates"]
@@ -79,6 +80,7 @@ def test_quick_json_rates_ratios_split_and_projection_follow_from_each_other(qui
 ALGO_ROWS = ("train_td3", "train_sac", "train_ppo", "train_3_learners", "sb3_td3", "sb3_sac", "sb3_ppo")
 
 
+@pytest.mark.slow  # uses the module's quick fixture, 63 s to build
 def test_quick_measures_each_algorithm_three_learners_and_sb3s_same_algorithm(quick: tuple) -> None:
     _, printed, result, _ = quick
     rates, updates, ratios = result["rates"], result["updates_per_s"], result["ratios"]
@@ -93,6 +95,7 @@ def test_quick_measures_each_algorithm_three_learners_and_sb3s_same_algorithm(qu
     assert float(line.split()[-1]) == pytest.approx(updates["train_3_learners"], abs=0.05)
 
 
+@pytest.mark.slow  # uses the module's quick fixture, 63 s to build
 def test_quick_never_reports_an_epoch_longer_than_any_match_has_run(quick: tuple) -> None:
     _, _, result, _ = quick
     longest_possible = (QUICK_WARM_UP + QUICK_STEPS) / QUICK_ENVS  # steps any one match has taken
@@ -113,6 +116,7 @@ def test_no_sb3_leaves_sb3_out(quick_no_sb3: tuple[int, str, dict[str, Any]]) ->
     assert any(line.startswith(LABELS["train_paper"]) for line in printed.splitlines())
 
 
+@pytest.mark.slow  # uses the module's quick fixture, 63 s to build
 def test_quick_cpu_rates_and_the_update_profile_follow_from_each_other(quick: tuple) -> None:
     _, printed, result, _ = quick
     cpu = result["cpu_rates"]
@@ -136,9 +140,9 @@ def test_the_phase_timer_counts_backward_and_adam_and_puts_everything_back() -> 
 
     from triplesumo.benchmarks.train import _PhaseTimer
 
-    backward, step = torch.Tensor.backward, torch.optim.Adam.step
     w = torch.nn.Parameter(torch.ones(300, 300))
-    opt = torch.optim.Adam([w])
+    opt = torch.optim.Adam([w])  # the first optimizer of a process wraps Adam.step in torch's profiling hook
+    backward, step = torch.Tensor.backward, torch.optim.Adam.step
     with _PhaseTimer() as timer:
         for _ in range(20):
             (w @ w).square().sum().backward()

@@ -208,6 +208,7 @@ def test_evaluate_writes_summary_json_with_counts_and_intervals(report: tuple[Ev
         assert c["mean_total_reward"] == pytest.approx(c["mean_dense_reward"] + c["mean_sparse_reward"])
 
 
+@pytest.mark.slow  # uses the module's report fixture, 10 s to build
 def test_evaluate_writes_metrics_csv_and_plots_per_candidate(report: tuple[EvaluateConfig, dict]) -> None:
     cfg, summary = report
     out = Path(cfg.out)
@@ -227,6 +228,7 @@ def test_evaluate_writes_metrics_csv_and_plots_per_candidate(report: tuple[Evalu
         assert all((out / label / "plots" / p).read_bytes()[:8] == PNG for p in pngs)
 
 
+@pytest.mark.slow  # uses the module's report fixture, 10 s to build
 def test_the_baselines_play_the_same_matches_as_direct_calls(report: tuple[EvaluateConfig, dict],
                                                               tiny_zoo: TinyZoo) -> None:
     """The passive baseline's CSV is what play_test_epochs gives for the config's seed."""
@@ -493,6 +495,7 @@ def test_finished_rows_rejects_files_that_are_not_evaluation_csvs(tmp_path: Path
     assert finished_rows(tmp_path / "missing.csv", 5) == 0
 
 
+@pytest.mark.slow  # uses the module's report fixture, 10 s to build
 def test_every_later_candidate_gets_its_paired_difference_from_the_first(report: tuple[EvaluateConfig, dict]) -> None:
     cfg, summary = report
     lwr = {}
@@ -527,6 +530,7 @@ def test_pairing_separates_what_two_unpaired_intervals_leave_overlapping() -> No
         add_paired(summary, {"trained": reference, "better": better[:100]})
 
 
+@pytest.mark.slow  # uses the module's report fixture, 10 s to build
 def test_format_summary_has_a_header_and_one_line_per_candidate(report: tuple[EvaluateConfig, dict]) -> None:
     _, summary = report
     lines = format_summary(summary).splitlines()

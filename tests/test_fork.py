@@ -201,6 +201,7 @@ def test_a_fork_may_fine_tune_the_learners_step_sizes_and_exploration(
     assert [g["lr"] for g in trainer.learners[0].algo.actor_optimizer.param_groups] == [ddpg.actor_lr]
 
 
+@pytest.mark.slow  # uses the module's runs fixture, 40 s to build
 def test_what_a_fork_may_not_change_is_refused_by_name_and_nothing_is_written(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     _, half = runs
@@ -281,6 +282,7 @@ def test_compact_keeps_what_resuming_needs_and_the_resumed_run_is_unchanged(
 
 
 @pytest.mark.parametrize("frozen", [".", "checkpoints"])
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_compact_of_a_read_only_run_fails_naming_the_path_and_removes_nothing(
         tmp_path: Path, frozen: str, capsys: pytest.CaptureFixture[str]) -> None:
     run = train(tiny(tmp_path)).run_dir  # checkpoints at epochs 2 and 4
@@ -342,6 +344,7 @@ def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_the
     assert file_sha256(copied.with_suffix(".safetensors")) == seed_bytes
 
 
+@pytest.mark.slow  # uses the module's runs fixture, 40 s to build
 def test_a_seed_whose_policy_file_is_missing_is_refused_before_anything_is_written(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     _, half = runs
@@ -357,6 +360,7 @@ def test_a_seed_whose_policy_file_is_missing_is_refused_before_anything_is_writt
     assert not (tmp_path / "fresh").exists()
 
 
+@pytest.mark.slow  # uses the module's runs fixture, 40 s to build
 def test_a_fork_may_only_append_to_the_parents_zoo(runs: tuple[Trainer, Trainer]) -> None:
     _, half = runs
     parent = dataclasses.replace(half.cfg, league=dataclasses.replace(half.cfg.league, zoo=("spider=passive",)))

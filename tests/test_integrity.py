@@ -158,6 +158,7 @@ def test_cli_start_over_and_its_misuse(tmp_path: Path, capsys: pytest.CaptureFix
 # ------------------------------------------------ 2. a kill inside the metrics rewrite
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_kill_inside_the_metrics_rewrite_keeps_every_row(killed_copy: Path, reference: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     metrics = killed_copy / "metrics.csv"

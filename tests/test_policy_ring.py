@@ -163,6 +163,7 @@ def test_a_league_seed_of_another_ring_is_refused_unless_allowed_and_so_is_one_a
     assert fork_run(parent, dataclasses.replace(fork, allow_other_ring=True)).is_dir()
 
 
+@pytest.mark.slow  # 4 s alone on the shared 2-core box
 def test_evaluate_and_tournament_configs_take_the_flag(tmp_path: Path, other: dict[str, str]) -> None:
     spec = other["no-rim"]
     ecfg = EvaluateConfig(learner="ant", policy=(spec,), policies=("bug=passive", "spider=passive"), baselines=(),
@@ -205,6 +206,7 @@ def test_zoo_publish_refuses_an_invalid_layout_naming_the_field(tmp_path: Path) 
     assert zoo.publish(Path(good), "ant", zoo_dir=tmp_path / "zoo").is_file()
 
 
+@pytest.mark.slow  # 4 s alone on the shared 2-core box
 def test_resume_of_a_config_without_physics_refuses_the_checkpoints_other_physics(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """config.json without ``physics`` reads as env v0's; a checkpoint made on v2 is not trained on v0 physics."""

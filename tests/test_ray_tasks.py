@@ -38,6 +38,7 @@ def test_rows_on_ray_equal_a_local_run(ray_tasks: Any) -> None:
     assert {r["outcome"] for r in remote} <= {"win", "loss", "draw"}
 
 
+@pytest.mark.slow  # starts a Ray cluster for the module, 12 s
 def test_bad_arguments_are_named(ray_tasks: Any) -> None:
     with pytest.raises(ValueError, match="chunk must be an int >= 1"):
         ray_tasks.play_test_epochs_on_ray("zero", OTHERS, "bug", 4, 0, chunk=0)
@@ -46,6 +47,7 @@ def test_bad_arguments_are_named(ray_tasks: Any) -> None:
 
 
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="finds Ray's worker processes through /proc")
+@pytest.mark.slow  # starts a Ray cluster for the module, 12 s
 def test_a_killed_worker_is_retried_and_its_epochs_replay_exactly(ray_tasks: Any) -> None:
     cfg = MatchConfig(max_steps=150)
     result: dict[str, Any] = {}
@@ -88,6 +90,7 @@ def test_evaluate_on_ray_writes_the_bytes_of_a_local_run_and_resumes(ray_tasks: 
     assert summary["candidates"] == local["candidates"]
 
 
+@pytest.mark.slow  # starts a Ray cluster for the module, 12 s
 def test_tournament_on_ray_writes_the_rows_of_a_local_run_and_resumes(ray_tasks: Any, tmp_path: Path) -> None:
     from triplesumo.evaluation.tournament import TournamentConfig, run_tournament
     from triplesumo.model.specs import AgentSpec

@@ -461,6 +461,7 @@ def test_a_contest_stops_on_its_first_decided_check_and_a_passing_pair_plays_eve
     assert facts["failed"][0].startswith(f"with Bug passive the team's MWR is -1.000 on the first {n:,} of 1,000")
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_the_bug_stage_refuses_a_pair_that_is_no_contest(tmp_path: Path) -> None:
     """A scripted pair, both passive: nobody pushes anybody (all draws). The contest stops after the first block of
     the Ant's check, the fewest starts that decide it (6 of 10: at most 4 wins left), plays neither the Spider's

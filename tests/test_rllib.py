@@ -99,6 +99,7 @@ def test_bug_learns_while_the_zoo_ant_and_spider_act_inside_the_env(rllib: Any, 
 
 
 @pytest.mark.usefixtures("local_ray")
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_bug_learns_while_the_zoo_ant_and_spider_modules_stay_frozen(rllib: Any) -> None:
     """``frozen_in_env=False``: the old layout, the frozen agents as FrozenPolicyModules inside RLlib."""
     config = _tiny(rllib.make_config("paper", policies_to_train=["bug"], frozen=ZOO_FROZEN, max_steps=100,
@@ -129,6 +130,7 @@ def test_bug_learns_while_the_zoo_ant_and_spider_modules_stay_frozen(rllib: Any)
     _check_outcomes(rllib, result)
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_fixed_agents_act_exactly_as_the_zoos_numpy_policies(rllib: Any) -> None:
     """The env's ``fixed`` agents play the zoo's numpy policies (``triplesumo.zoo.load``) from their own
     observations: the same match, step for step, as the PettingZoo env driven by hand."""
@@ -156,6 +158,7 @@ def test_fixed_agents_act_exactly_as_the_zoos_numpy_policies(rllib: Any) -> None
     assert 0 < steps <= 60 and env.agents == []
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_an_episode_ends_once_no_rllib_agent_is_left_in_play(rllib: Any, place: Any) -> None:
     """Elimination rules (ffa): a fixed agent out stops acting and the episode goes on; the RLlib agent out
     ends the episode (terminated), reporting the outcomes so far, though the others still play."""
@@ -176,6 +179,7 @@ def test_an_episode_ends_once_no_rllib_agent_is_left_in_play(rllib: Any, place: 
     assert codes["spider"] != PLAYING and codes["ant"] == codes["beetle"] == PLAYING  # these two play on
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_fixed_random_agents_are_reseeded_by_reset(rllib: Any) -> None:
     env = rllib.make_env({"max_steps": 20, "fixed": {"ant": "random", "spider": "random"}})
 
@@ -196,11 +200,13 @@ def test_fixed_random_agents_are_reseeded_by_reset(rllib: Any) -> None:
     ({"ant": "no/such/policy"}, ValueError, r"fixed\['ant'\]: unknown policy 'no/such/policy'"),
     (["ant"], ValueError, "fixed must map agent names to policy specs"),
 ])
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_bad_fixed_entries_are_refused_naming_the_entry(rllib: Any, fixed: Any, exc: type, message: str) -> None:
     with pytest.raises(exc, match=message):
         rllib.make_env({"fixed": fixed})
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_a_fixed_policy_file_for_other_observations_is_refused(rllib: Any) -> None:
     with pytest.raises(ValueError, match=r"fixed\['ant'\]: .*trained with obs_mode 'paper'"):
         rllib.make_env({"fixed": {"ant": "zoo:ant"}, "obs_mode": "egocentric"})
@@ -209,6 +215,7 @@ def test_a_fixed_policy_file_for_other_observations_is_refused(rllib: Any) -> No
 
 
 @pytest.mark.usefixtures("local_ray")
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_self_play_team_module_against_spider_module_both_learn(rllib: Any) -> None:
     config = _tiny(rllib.make_config("paper", share="team", max_steps=60, obs_mode="egocentric"))
     config = config.training(train_batch_size_per_learner=128)
@@ -224,6 +231,7 @@ def test_self_play_team_module_against_spider_module_both_learn(rllib: Any) -> N
     assert _changed(before["team"], after["team"]) and _changed(before["spider"], after["spider"])
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_policy_mapping_per_agent_and_per_team(rllib: Any) -> None:
     per_agent = rllib.make_config("paper", policies_to_train=["bug"])
     per_team = rllib.make_config("paper", share="team", policies_to_train=["team"], frozen={"spider": "zero"},
@@ -243,6 +251,7 @@ def test_policy_mapping_per_agent_and_per_team(rllib: Any) -> None:
     assert egocentric.get_multi_rl_module_spec().rl_module_specs["ant"].observation_space.shape == (79,)
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_frozen_module_plays_the_zoo_policy_deterministically(rllib: Any) -> None:
     from gymnasium import spaces
     from ray.rllib.core.columns import Columns
@@ -266,6 +275,7 @@ def test_frozen_module_plays_the_zoo_policy_deterministically(rllib: Any) -> Non
                                  action_space=act_space, model_config={"policy": "zoo:ant"})
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_registered_env_plays_a_match_to_its_end(rllib: Any) -> None:
     assert rllib.register_envs() == [*(f"triplesumo_{name}_v2" for name in triplesumo.scenarios()),
                                      *triplesumo.envs.ENV_IDS]
@@ -317,6 +327,7 @@ def test_a_gymnasium_id_without_its_module_builds_on_remote_env_runners_once_reg
         algo.stop()
 
 
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_a_gymnasium_id_given_as_a_scenario_names_rllibs_names(rllib: Any) -> None:
     with pytest.raises(ValueError, match=r"'TripleSumo-Paper-v2' is a Gymnasium id.*register_envs\(\)"):
         rllib.env_id("TripleSumo-Paper-v2")
@@ -340,6 +351,7 @@ def test_a_gymnasium_id_given_as_a_scenario_names_rllibs_names(rllib: Any) -> No
     ({"threads": 0}, r"threads must be an int >= 1 \(torch.set_num_threads\) or None, got 0"),
     ({"max_step": 5}, r"unknown option\(s\) \['max_step'\]"),
 ])
+@pytest.mark.slow  # builds RLlib for the module, 13 s
 def test_make_config_rejects_bad_input_naming_the_problem(rllib: Any, kwargs: dict, message: str) -> None:
     with pytest.raises((ValueError, FileNotFoundError), match=message):
         rllib.make_config(**kwargs)

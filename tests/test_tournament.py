@@ -139,6 +139,7 @@ def test_a_killed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(duel: t
     assert (part / "matches.csv").read_bytes() == done
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_a_packed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(tmp_path: Path) -> None:
     """Its tables gzipped (``triplesumo pack``), a killed tournament resumes as a plain one does."""
     import gzip
@@ -158,6 +159,7 @@ def test_a_packed_tournament_resumes_to_the_rows_of_an_uninterrupted_one(tmp_pat
         assert (part / name).read_bytes() == (whole / name).read_bytes()
 
 
+@pytest.mark.slow  # 4 s alone on the shared 2-core box
 def test_a_tournament_killed_before_its_first_row_resumes_as_a_fresh_start(duel: tuple[Path, dict],
                                                                             tmp_path: Path) -> None:
     """Issue 39, item 16: killed before anything was written, a tournament leaves an empty record and an empty

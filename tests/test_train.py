@@ -198,6 +198,7 @@ def test_tiny_run_policy_file_acts_deterministically(uninterrupted: Trained) -> 
 
 
 @pytest.mark.parametrize("folder", ["clean", "rows-past-checkpoint", "packed"])
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_resume_equals_uninterrupted(uninterrupted: Trained, tmp_path: Path, folder: str) -> None:
     killed = train(tiny(tmp_path, name="B", epochs=E)).run_dir
     assert checkpoint.latest(killed).name == f"epoch-{E:06d}"
@@ -230,6 +231,7 @@ def test_a_resume_on_more_physics_threads_trains_what_the_run_would_have(uninter
     assert_same_run(uninterrupted.run, killed)
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_cli_resume_takes_n_threads_and_names_what_it_refuses(uninterrupted: Trained, tmp_path: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:
     killed = train(tiny(tmp_path, name="B", epochs=E)).run_dir
@@ -246,6 +248,7 @@ class SimulatedKill(Exception):
     """Stands for the process dying inside a checkpoint write."""
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_kill_during_save_keeps_previous_checkpoint(uninterrupted: Trained, tmp_path: Path,
                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     real = checkpoint.atomic_save_tensors

@@ -241,6 +241,7 @@ def test_a_frozen_policy_on_the_device_acts_as_on_the_host() -> None:
     np.testing.assert_allclose(on_device.numpy(), policy(obs), rtol=0, atol=1e-6)
 
 
+@pytest.mark.slow  # uses the module's warp_runs fixture, 70 s to build
 def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
         warp_runs: dict[str, Trainer], tmp_path: Path) -> None:
     cpu = Trainer(tiny(tmp_path, "cpu", n_envs=3))

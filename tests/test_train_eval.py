@@ -99,6 +99,7 @@ def test_a_resumed_run_writes_the_evaluations_of_an_uninterrupted_one(tmp_path: 
     assert seconds == sorted(seconds)  # the training time goes on across the resume
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_each_of_several_learners_is_evaluated_against_the_others(tmp_path: Path) -> None:
     result = train(tiny(tmp_path, "two", learn=("ant=ddpg", "bug=ddpg"), policies=("spider=random",),
                         eval_every=EVERY, eval_epochs=TESTS))

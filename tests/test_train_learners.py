@@ -114,6 +114,7 @@ def test_two_algorithms_learn_at_once(pair: Run) -> None:
         assert torch.equal(value, pair.frozen["spider"][key]), f"the fixed Spider's {key} changed"
 
 
+@pytest.mark.slow  # uses the module's pair fixture, 17 s to build
 def test_each_learning_agent_has_its_metrics_and_each_learner_its_policy_file(pair: Run) -> None:
     folder = pair.result.run_dir
     assert not (folder / "metrics.csv").exists() and not (folder / "policy.json").exists()
@@ -155,6 +156,7 @@ def test_resume_of_an_off_policy_pair_equals_uninterrupted(pair: Run, tmp_path: 
     _assert_same_run(pair.result.run_dir, killed, ["ant", "bug"], replay=True)
 
 
+@pytest.mark.slow  # 4 s alone on the shared 2-core box
 def test_ppo_learns_and_resumes_mid_rollout_exactly(tmp_path: Path) -> None:
     whole = run(tiny(tmp_path / "a", "ppo", **PPO_RUN))
     bug = whole.trainer.learners[0]

@@ -197,6 +197,7 @@ def test_resume_restores_the_league_exactly(tmp_path: Path) -> None:
             assert np.array_equal(x[key], y[key]), key
 
 
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_resume_through_train_and_config_round_trip(tmp_path: Path) -> None:
     cfg = tiny(tmp_path, "rt", epochs=2, checkpoint_every=2, **SPIDER)
     assert config_from_json(config_to_json(cfg)) == cfg
@@ -409,6 +410,7 @@ def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Tr
     assert run_id_of(dataclasses.replace(both_run.cfg, epochs=99, out="elsewhere")) == both_run.run_id
 
 
+@pytest.mark.slow  # uses the module's both_run fixture, 38 s to build
 def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(both_run: Trainer) -> None:
     """``--league RUN --league-snapshots 2``: each side's first and last own snapshot by epoch, a team
     member as one entry per role."""
@@ -425,6 +427,7 @@ def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(bot
     assert any(n.endswith(".ant") for n in expected) and any(n.endswith(".bug") for n in expected)
 
 
+@pytest.mark.slow  # uses the module's both_run fixture, 38 s to build
 def test_league_until_picks_only_the_snapshots_that_joined_by_then(both_run: Trainer) -> None:
     """``--league-until EPOCH``: the picks of the run as it stood at EPOCH, so a table made before the run
     was resumed names the same snapshots after it; an epoch before the first snapshot is an error."""
@@ -446,6 +449,7 @@ def test_league_until_picks_only_the_snapshots_that_joined_by_then(both_run: Tra
     assert sorted(parse_entries(cfg.policies)) == sorted(["p", *picked])
 
 
+@pytest.mark.slow  # uses the module's both_run fixture, 38 s to build
 def test_tournament_seats_the_runs_egocentric_networks_and_snapshots_in_every_seat_they_fit(
         both_run: Trainer) -> None:
     """Egocentric vectors are the seat's own, so a network (the team's shared one, its snapshots, the
