@@ -1,4 +1,4 @@
-"""The game: teams, outcome judging, observations, reward terms and their config."""
+"""The game: teams, outcome judging, observations, reward terms and their config; each rule written once over arrays."""
 
 from triplesumo.rules.config import MatchConfig, ResetNoise, RewardConfig
 from triplesumo.rules.outcome import DRAW, LOSS, WIN

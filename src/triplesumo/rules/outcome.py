@@ -2,7 +2,7 @@
 
 Two rule sets (``MatchConfig.rules``), each written once here over arrays of ``E`` matches in an array
 namespace ``xp`` (numpy for one match, ``E = 1``, and for the CPU vector env; torch on the MuJoCo Warp
-backend's device). The constant matrices of a roster they read are :class:`~triplesumo.rules.batched.BatchedRules`.
+backend's device). The constant matrices of a roster they read are :class:`~triplesumo.rules.roster.BatchedRules`.
 
 ``first_out`` (the paper)
 

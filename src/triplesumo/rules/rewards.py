@@ -49,7 +49,7 @@ TERMS = DENSE_TERMS + SPARSE_TERMS
 
 
 REPORTED = (*TERMS, "dense_reward", "sparse_reward")
-"""Entries of each agent's row of :meth:`RewardRule.rows`: every term, then ``dense`` and ``sparse``."""
+"""Entries of each agent's reward row (:meth:`RewardRule.rows`, ``Match`` infos): each term, then dense and sparse."""
 
 
 def ordered_sum(values: Any, axis: int) -> Any:
