@@ -93,7 +93,7 @@ def _result(curves: list[list[tuple[int, float, float]]], goal: float = 60.0) ->
     return summarize({"algo": "sac", "thresholds": [0.2, 0.4], "goal_seconds": goal, "n_envs": 4096,
                       "schedule": {"learn_every": 4096, "gradient_steps": 16, "batch_size": 4096,
                                    "learning_starts": 32768},
-                      "eval_every": 250_000, "eval_epochs": 200, "eval_background": True,
+                      "eval_every": 400_000, "eval_epochs": 200, "eval_background": True,
                       "max_env_steps": 20_000_000, "max_seconds": 240.0, "machine": machine,
                       "device": {"device": "cuda:0", "first_step_seconds": 30.0, "env_steps_per_s": 100_000.0},
                       "runs": runs})

@@ -112,8 +112,10 @@ class SkillGpuConfig:
     warmup_steps: int = 8
     """Steps of all the matches of random warm-up before the first update (learning_starts = warmup_steps x
     n_envs transitions)."""
-    eval_every: int = 250_000
-    """Env steps between evaluations (each at the step of all the matches that crosses a multiple of it)."""
+    eval_every: int = 400_000
+    """Env steps between evaluations (each at the step of all the matches that crosses a multiple of it). About 10 s
+    of training at 4,096 matches: an evaluation (200 test matches on 8 threads of the host) must take less, or
+    they queue up, and the run's end waits for every one in flight."""
     eval_epochs: int = 200
     """Seeded test matches per evaluation (the same as bench skill's)."""
     eval_seed: int = 10_000
