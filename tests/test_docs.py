@@ -246,7 +246,7 @@ def test_site_builds_strict(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ code examples
 _PY_BLOCK = re.compile(r"(?:^<!--[ \t]*(example|no-test):[ \t]*([^\n]*?)[ \t]*-->[ \t]*\n)?^```python\n(.*?)^```",
                        re.S | re.M)
-NOT_RUN_HERE = {"docs/gpu.md": 1}
+NOT_RUN_HERE = {"docs/gpu.md": 1, "docs/ray-rllib.md": 1}
 """Blocks marked ``<!-- no-test: REASON -->`` per page: a change here is a decision, not an accident."""
 RUN_WITH_CHECKS = {"docs/libraries.md": 6}
 """Blocks marked ``<!-- example: NAME -->``, run by tests/test_clients.py with checks of their results."""

@@ -3,8 +3,12 @@ episodes end with the game's outcomes; and Ray stays an optional import."""
 
 from __future__ import annotations
 
+import os
+import re
 import subprocess
 import sys
+import textwrap
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -325,6 +329,42 @@ def test_a_gymnasium_id_without_its_module_builds_on_remote_env_runners_once_reg
         assert algo.env_runner_group.num_healthy_remote_workers() == 1
     finally:
         algo.stop()
+
+
+RLLIB_PAGE = Path(__file__).resolve().parents[1] / "docs" / "ray-rllib.md"
+
+
+def _remote_runner_forms() -> str:
+    """The block of docs/ray-rllib.md that shows the forms of a Gymnasium id that remote env runners find."""
+    found = re.search(r"<!-- no-test: run by tests/test_rllib\.py[^\n]*-->\n```python\n(.*?)^```",
+                      RLLIB_PAGE.read_text(), re.S | re.M)
+    assert found, "docs/ray-rllib.md lost its block of the remote-runner forms"
+    return found.group(1)
+
+
+@pytest.mark.slow  # three local Rays of its own, each with a remote env runner: about two minutes on a 2-core box
+def test_the_documented_forms_of_a_gymnasium_id_build_on_remote_env_runners_and_the_bare_id_alone_fails(
+        rllib: Any) -> None:
+    """docs/ray-rllib.md, "A Gymnasium id on remote env runners", run as written in a process of its own (no
+    register_envs() anywhere): the id with its module, and the bare id under Ray's worker_process_setup_hook, build
+    PPO with one remote env runner (which makes the env); the bare id alone then fails as the page says."""
+    checks = textwrap.dedent("""
+        ray.shutdown()
+        ray.init()  # no hook, no register_envs(): the remote runner does not know the bare id
+        try:
+            PPOConfig().environment("TripleSumo-Paper-v2").env_runners(num_env_runners=1).build_algo()
+        except Exception as exc:
+            print("bare id alone:", type(exc).__name__)
+        else:
+            raise AssertionError("the bare id built on a remote env runner with nothing registering it")
+    """)
+    env = {k: v for k, v in os.environ.items() if k != "RAY_ADDRESS"}
+    env |= {"PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src") + os.pathsep + env.get("PYTHONPATH", ""),
+            "MUJOCO_GL": "egl", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-c", _remote_runner_forms() + checks], capture_output=True, text=True,
+                          timeout=600, env=env)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    assert "bare id alone: IndexError" in proc.stdout, proc.stdout  # RLlib's symptom, as the page names it
 
 
 @pytest.mark.slow  # builds RLlib for the module, 13 s

@@ -141,9 +141,10 @@ def _parser(command: str | None = None) -> argparse.ArgumentParser:
 
         _dcargs.add_arguments(view, ViewConfig)
     bench = sub.add_parser("bench", help="benchmarks: 'bench env', 'bench train', 'bench ray', 'bench rllib' "
-                                         "(RLlib's env steps/s per env runner) or 'bench skill' (time to skill per "
-                                         "algorithm) (--help for each)")
-    bench.add_argument("which", choices=["env", "train", "ray", "rllib", "skill"])
+                                         "(RLlib's env steps/s per env runner), 'bench skill' (time to skill per "
+                                         "algorithm) or 'bench skill-gpu' (time to skill on MuJoCo Warp, "
+                                         "thousands of matches on a GPU) (--help for each)")
+    bench.add_argument("which", choices=["env", "train", "ray", "rllib", "skill", "skill-gpu"])
     bench.add_argument("rest", nargs=argparse.REMAINDER, help="options of the benchmark")
     return parser
 
@@ -345,6 +346,10 @@ def main(argv: list[str] | None = None) -> int:
                 from triplesumo.benchmarks.skill import main as bench_skill
 
                 bench_skill(args.rest)
+            elif args.which == "skill-gpu":
+                from triplesumo.benchmarks.skill_gpu import main as bench_skill_gpu
+
+                bench_skill_gpu(args.rest)
             elif args.which == "rllib":
                 from triplesumo.benchmarks.rllib import main as bench_rllib
 

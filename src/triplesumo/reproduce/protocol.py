@@ -23,8 +23,7 @@ from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.evaluation.metrics_csv import open_table, read_table_bytes, table_exists
 from triplesumo.evaluation.parallel import ProcessRunner
 from triplesumo.model.specs import PhysicsConfig
-from triplesumo.reproduce.config import (CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation,
-                                        bug_runs)
+from triplesumo.reproduce.config import CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation, bug_runs
 from triplesumo.reproduce.pretrain import PAIR_FILE, SCREENS_FILE, Side, counts_of, play_pair_rule, read_record
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.run_folder import command_for

@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# The GPU check of issue 53 (time to skill on MuJoCo Warp) and the Warp env benchmark, in one device call.
+#
+# On the GPU machine, from the repository root, with $OUT set by the device tool (results come back from it):
+#     bash benchmarks/gpu_check.sh stage   # only copy the carried wheels (.whl/N) to /tmp/triplesumo-wheels
+#     bash benchmarks/gpu_check.sh         # stage the last ones, install, then measure (about 8 minutes)
+# The wheels come from benchmarks/gpu_wheels.sh, run beforehand on a machine with PyPI (it says how many calls).
+#
+# What it writes under $OUT (at most 8 files come back):
+#     log.txt              everything printed
+#     machine.txt          nvidia-smi, python, package versions
+#     skill_gpu.json/.txt  triplesumo bench skill-gpu (seconds and env steps to +0.2 and +0.4, the curve)
+#     skill_gpu.png        test MWR against env steps and against training seconds
+#     eval.csv             only when bench skill-gpu was stopped before writing its record: the evaluations so far
+#     env_warp.json/.txt   triplesumo bench env --backend warp (env and raw mujoco_warp steps/s per size)
+#
+# Knobs (environment): DEVICE (cuda; cpu runs the same steps on Warp's CPU device, a check of this script),
+# QUICK=1 (bench skill-gpu --quick, tiny sizes everywhere), SKILL_SECONDS (150: training budget of the seed),
+# TOTAL_SECONDS (480: the env benchmark gets what is left), N_ENVS (4096), ENV_SIZES (1024,4096,16384),
+# PYTHON (python3), SKIP_INSTALL=1 (packages already importable). Give the call about 560 s.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+OUT=${OUT:-/tmp/gpu_check_out}
+STAGE=/tmp/triplesumo-wheels
+PYTHON=${PYTHON:-python3}
+DEVICE=${DEVICE:-cuda}
+SKILL_SECONDS=${SKILL_SECONDS:-150}
+TOTAL_SECONDS=${TOTAL_SECONDS:-480}
+N_ENVS=${N_ENVS:-4096}
+ENV_SIZES=${ENV_SIZES:-1024,4096,16384}
+mkdir -p "$OUT" "$STAGE"
+exec > >(tee -a "$OUT/log.txt") 2>&1
+t_start=$(date +%s)
+elapsed() { echo $(( $(date +%s) - t_start )); }
+
+# 1. wheels: this call's carried folder(s) join those staged by earlier calls
+for d in .whl/*/; do [ -d "$d" ] && cp -f "$d"* "$STAGE"/ 2>/dev/null; done
+echo "staged: $(ls "$STAGE" | wc -l) files, $(du -sh "$STAGE" | cut -f1)"
+[ "${1:-run}" = "stage" ] && exit 0
+
+if [ "${SKIP_INSTALL:-0}" != "1" ]; then
+    for first in "$STAGE"/*.whl.part-00; do  # reassemble the wheels cut in parts
+        [ -e "$first" ] || continue
+        whl=${first%.part-00}
+        cat "$whl".part-* > "$whl"
+    done
+    (cd "$STAGE" && sha256sum -c --quiet SHA256SUMS) || { echo "wheels missing or damaged (sha256): stage every .whl/N first"; exit 3; }
+    "$PYTHON" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site \
+        "$STAGE"/*.whl || { echo "pip install of the wheels failed"; exit 3; }
+    export PYTHONPATH=/tmp/site:${PWD}/src
+else
+    export PYTHONPATH=${PWD}/src${PYTHONPATH:+:$PYTHONPATH}
+fi
+export PYTHONUNBUFFERED=1
+TS=("$PYTHON" -m triplesumo.cli)
+{
+    nvidia-smi -L 2>/dev/null || echo "no nvidia-smi"
+    echo "git $(git rev-parse --short HEAD 2>/dev/null || echo unknown)"
+    "$PYTHON" - <<'EOF'
+import importlib.metadata as md, platform
+print("python", platform.python_version())
+for p in ("torch", "numpy", "mujoco", "mujoco-warp", "warp-lang", "gymnasium", "pettingzoo", "openskill"):
+    try:
+        print(p, md.version(p))
+    except md.PackageNotFoundError:
+        print(p, "not installed")
+import torch, warp
+print("torch sees cuda:", torch.cuda.is_available(), torch.cuda.get_device_name(0) if torch.cuda.is_available() else "")
+EOF
+} > "$OUT/machine.txt" 2>&1
+cat "$OUT/machine.txt"
+echo "[$(elapsed) s] installed"
+
+# 2. time to skill on the device: SAC Bug, N_ENVS matches, evaluations in the background on the CPU (its device
+#    reference collection compiles Warp's kernels, cached in ~/.cache/warp for step 3)
+if [ "${QUICK:-0}" = "1" ]; then
+    SKILL_ARGS=(--quick --device "$DEVICE")
+else
+    SKILL_ARGS=(--device "$DEVICE" --n-envs "$N_ENVS" --max-seconds "$SKILL_SECONDS"
+                --eval-threads "$(( $(nproc) > 10 ? 8 : 1 ))")
+fi
+timeout $((SKILL_SECONDS + 120)) "${TS[@]}" bench skill-gpu "${SKILL_ARGS[@]}" --out /tmp/skill-gpu \
+    --json "$OUT/skill_gpu.json" | tee "$OUT/skill_gpu.txt"
+rc=${PIPESTATUS[0]}
+cp -f /tmp/skill-gpu/skill_gpu.png "$OUT/" 2>/dev/null
+echo "[$(elapsed) s] bench skill-gpu: rc $rc"
+# stopped before its record: the seed's own evaluations so far (test MWR, env steps, both clocks)
+[ -s "$OUT/skill_gpu.json" ] || cp -f /tmp/skill-gpu/*/seed0/eval.csv "$OUT/" 2>/dev/null
+
+# 3. the Warp env benchmark, in the time left of TOTAL_SECONDS
+if [ "${QUICK:-0}" = "1" ]; then ENV_SIZES=2; ENV_ARGS=(--steps 4 --rounds 1); else ENV_ARGS=(--steps 100 --rounds 2); fi
+left=$(( TOTAL_SECONDS - $(elapsed) ))
+if [ "$left" -ge 45 ]; then
+    timeout "$left" "${TS[@]}" bench env --backend warp --device "$DEVICE" --num-envs "$ENV_SIZES" "${ENV_ARGS[@]}" \
+        --json "$OUT/env_warp.json" | tee "$OUT/env_warp.txt"
+    echo "[$(elapsed) s] bench env --backend warp: rc ${PIPESTATUS[0]}"
+else
+    echo "[$(elapsed) s] bench env --backend warp: skipped, $left s left of $TOTAL_SECONDS"
+fi
+exit "$rc"
