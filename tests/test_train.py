@@ -110,7 +110,7 @@ def run_copy(uninterrupted: Trained, tmp_path: Path) -> Path:
 
 def test_tiny_run_learns_finite_losses(uninterrupted: Trained) -> None:
     trainer, result, ddpg = uninterrupted.trainer, uninterrupted.result, uninterrupted.cfg.ddpg
-    assert result.epochs == trainer.epochs_done >= uninterrupted.cfg.epochs
+    assert result.epochs == trainer.collector.epochs_done >= uninterrupted.cfg.epochs
     bug = trainer.learners[0]
     assert set(bug.last_stats) == {"critic_loss", "actor_loss", "q_mean"}
     assert all(math.isfinite(v) for v in bug.last_stats.values()), bug.last_stats
@@ -122,7 +122,7 @@ def test_tiny_run_learns_finite_losses(uninterrupted: Trained) -> None:
 def test_tiny_run_fills_replay_with_every_learner_transition(uninterrupted: Trained) -> None:
     trainer, result = uninterrupted.trainer, uninterrupted.result
     replay = trainer.learners[0].replay  # type: ignore[attr-defined]
-    assert result.env_steps == trainer.env_steps > 0
+    assert result.env_steps == trainer.collector.env_steps > 0
     _, rows = read_rows(uninterrupted.run)
     errors = sum(r["outcome"] == "error" for r in rows)  # a physics error's transition is dropped
     assert 0 < len(replay) == result.env_steps - errors <= result.env_steps
@@ -349,10 +349,10 @@ def test_a_resumed_run_keeps_the_run_id_its_checkpoint_records(uninterrupted: Tr
     """Policy manifests name the run (``run_id``) by the id its checkpoint holds, not by a hash of the config
     as this version reads it (which options added since would move); a run whose checkpoint was written
     before ids goes on without one (not splitting its files into two runs)."""
-    assert load_policy(uninterrupted.run / "policy")[1]["run_id"] == uninterrupted.trainer.run_id
+    assert load_policy(uninterrupted.run / "policy")[1]["run_id"] == uninterrupted.trainer.record.run_id
     state_path = _latest_file(run_copy, "state.json")
     state = json.loads(state_path.read_text())
-    assert state["run_id"] == uninterrupted.trainer.run_id == run_id_of(uninterrupted.cfg)
+    assert state["run_id"] == uninterrupted.trainer.record.run_id == run_id_of(uninterrupted.cfg)
     state["run_id"] = "started-under-an-older-version"
     state_path.write_text(json.dumps(state))
     _reseal(state_path.parent)
@@ -553,12 +553,12 @@ def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_v0_
     rim = Trainer(tiny(tmp_path))  # the default since env v1
     try:
         assert rim.match_cfg.physics.border_rim
-        model = rim.batch.matches[0].model
+        model = rim.collector.batch.matches[0].model
         border = [g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("border")]
         assert border and all(model.geom_contype[g] or model.geom_conaffinity[g] for g in border)  # solid rim
         assert rim.manifest(rim.learners[0])["physics"]["border_rim"] is True  # the policy file says which ring
     finally:
-        rim.batch.close()
+        rim.collector.batch.close()
     saved = config_to_json(tiny(tmp_path))
     del saved["physics"]  # a run folder written before the field existed: env v0's visual ring, as it ran
     assert config_from_json(saved).physics == V0_PHYSICS == PhysicsConfig(border_rim=False, layout="circle",
