@@ -52,7 +52,7 @@ def test_evaluate_and_train_configs_check_the_scenario() -> None:
 
 def test_trainer_ends_the_learners_epoch_when_it_is_eliminated(tmp_path: Path) -> None:
     tiny = DDPGConfig(hidden=(8, 8), buffer_size=200, learning_starts=1000, batch_size=4)
-    cfg = TrainConfig(out=str(tmp_path), name="ffa", scenario="ffa", learner="bug", policies=("*=random",),
+    cfg = TrainConfig(out=str(tmp_path), name="ffa", scenario="ffa", learn=("bug=ddpg",), policies=("*=random",),
                       epochs=1, steps_per_epoch=50, n_envs=2, ddpg=tiny, progress=False, tensorboard=False)
     trainer = Trainer(cfg)
     assert trainer.collector.batch.matches[0].config.rules == "elimination"

@@ -422,7 +422,7 @@ def test_checkpoint_lacking_a_key_names_the_file(run_copy: Path, damage: Any, na
 
 
 @pytest.mark.parametrize(("field", "changes"), [
-    ("learner", {"learner": "spider", "policies": ["ant=zero", "bug=random"]}),
+    ("learn", {"learn": ["spider=ddpg"], "policies": ["ant=zero", "bug=random"]}),
     ("obs_mode", {"obs_mode": "egocentric"}),
     ("ddpg", {"ddpg": {**json.loads(json.dumps(TINY_DDPG.__dict__)), "hidden": [8, 8]}}),
     ("learner_config", {"learner_config": ["bug.hidden=8 8"]}),
@@ -538,8 +538,26 @@ def test_config_errors_name_the_field(tmp_path: Path, fields: dict[str, Any], na
         tiny(tmp_path, **fields)
 
 
+def test_the_deprecated_learner_field_reads_as_a_one_ddpg_learner_learn() -> None:
+    """``learner`` (``--learner``) was the one DDPG learner beside ``learn``; it stays a deprecated alias, and a
+    config.json written while it was a field (``learn`` empty) reads as its ``learn``."""
+    with pytest.warns(DeprecationWarning, match="TrainConfig.learner is deprecated: use learn AGENT=ddpg"):
+        cfg = TrainConfig(learner="spider", policies=("ant=zero", "bug=random"))
+    assert cfg.learn == ("spider=ddpg",) and cfg.learner is None and cfg.learners() == {"spider": "ddpg"}
+    assert "learner" not in config_to_json(cfg)
+    both = r"TrainConfig.learner \(deprecated\) and learn"
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match=both):
+        TrainConfig(learner="spider", learn=("bug=sac",))
+    with pytest.raises(ValueError, match="TrainConfig.learn must name at least one"):
+        TrainConfig(learn=())
+    old = config_to_json(TrainConfig()) | {"learner": "spider", "learn": [], "policies": ["ant=zero", "bug=random"]}
+    assert config_from_json(old).learn == ("spider=ddpg",)
+    given = old | {"learn": ["bug=sac"], "policies": ["ant=zero", "spider=random"]}  # learn given: it replaced learner
+    assert config_from_json(given).learn == ("bug=sac",)
+
+
 @pytest.mark.parametrize(("fields", "named"), [
-    ({"learner": "dragon"}, "TrainConfig.learner.*dragon"),
+    ({"learn": ("dragon=ddpg",)}, "TrainConfig.learn.*dragon"),
     ({"policies": ("spider=random", "dragon=zero")}, "TrainConfig.policies.*dragon"),
     ({"policies": ("spider=random", "spider=zero")}, "'spider' given twice"),
     ({"policies": ("spider=telepathy",)}, "unknown policy 'telepathy'"),

@@ -66,10 +66,9 @@ def learner_specs(cfg: TrainConfig, roster: tuple[str, ...] | list[str], teams: 
     whose learning agents use different algorithms.
     """
     learning = cfg.learners()
-    field = "TrainConfig.learn" if cfg.learn else "TrainConfig.learner"
     unknown = [a for a in learning if a not in roster]
     if unknown:
-        raise ValueError(f"{field} names unknown agents {unknown}; agents are {list(roster)} "
+        raise ValueError(f"TrainConfig.learn names unknown agents {unknown}; agents are {list(roster)} "
                          f"(scenario {cfg.scenario!r})")
     if cfg.share == "none":  # (learner_config names only agents that learn here: checked by the config)
         return [LearnerSpec(agent, algo, (agent,)) for agent, algo in learning.items()]

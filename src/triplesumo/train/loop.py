@@ -4,7 +4,7 @@
 exploration, the fixed policies and league members for theirs; the off-policy updates due (``gradient_steps``
 every ``learn_every`` transitions) run in a thread beside the physics while the matches step; each learner stores
 its transitions; every finished match is one *epoch*: its rows are written, the league rates it, its next match
-seats the players drawn; PPO learns when its rollout is full. ``--learner bug`` (DDPG) is the paper's, bit for bit.
+seats the players drawn; PPO learns when its rollout is full. ``--learn bug=ddpg`` (the default) is the paper's.
 
 The parts, each usable without the others and each keeping its own state (``state_dict``):
 

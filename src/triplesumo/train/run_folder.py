@@ -49,7 +49,9 @@ class RunExistsError(FileExistsError):
 
 
 def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
-    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+    """``cfg`` as ``config.json`` holds it (without :data:`DEPRECATED_FIELDS`)."""
+    data = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    return {k: v for k, v in data.items() if k not in DEPRECATED_FIELDS}
 
 
 def write_run_config(run_dir: Path, cfg: TrainConfig) -> None:
@@ -88,10 +90,15 @@ def run_id_of(cfg: TrainConfig) -> str:
     return f"{cfg.name}-{digest[:12]}"
 
 
+DEPRECATED_FIELDS = ("learner",)
+"""TrainConfig fields kept only as deprecated aliases (``learner``: ``learn AGENT=ddpg``): a config never holds
+them (one written while they were fields is read as its ``learn``)."""
+
+
 def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValueError(f"{source}: {where or 'the file'} must be a JSON object, got {type(data).__name__}")
-    names = {f.name for f in dataclasses.fields(cls)}
+    names = {f.name for f in dataclasses.fields(cls)} - ({*DEPRECATED_FIELDS} if cls is TrainConfig else set())
     unknown, missing = sorted(set(data) - names), sorted(names - set(data))
     if unknown or missing:
         problems = [f"unknown key(s) {[where + k for k in unknown]}"] if unknown else []
@@ -129,6 +136,9 @@ def _with_added_later(data: Any, cls: type, added_later: tuple[str, ...]) -> Any
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
+    if isinstance(data, dict) and "learner" in data:  # written while learner named the one DDPG learner (learn empty)
+        data = {k: v for k, v in data.items() if k != "learner"} | {
+            "learn": data.get("learn") or [f"{data['learner']}=ddpg"]}
     if isinstance(data, dict):  # written before a field existed: that field's default, what the run used
         defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
@@ -236,8 +246,9 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
 
     run_dir = Path(run_dir)
     learner = "bug"
-    if (run_dir / "config.json").is_file():
-        learner = str(load_json(run_dir / "config.json").get("learner", learner))
+    if (run_dir / "config.json").is_file():  # (its one learner names metrics.csv's plots)
+        raw = load_json(run_dir / "config.json")
+        learner = str((raw.get("learn") or [f"{raw.get('learner', learner)}=ddpg"])[0]).split("=")[0]
     paths: list[Path] = []
     files = tables_in(run_dir, "metrics-*.csv") or [run_dir / "metrics.csv"]  # plain or packed
     for path in files:
@@ -343,7 +354,7 @@ def check_checkpoint_physics(run_dir: Path, physics: PhysicsConfig) -> None:
         return
 
 
-RESUMED_FIELDS = ("learner", "learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
+RESUMED_FIELDS = ("learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
                   "reward", "ddpg", "td3", "sac", "ppo", "learner_config", "seed", "self_play", "league", "backend")
 """The config fields a resume must share with its checkpoint (``save_replay`` may differ: resuming without the
 replay buffer is allowed, not exact)."""
