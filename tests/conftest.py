@@ -91,7 +91,7 @@ def _train_tiny(out: Path, learner: str, policies: tuple[str, ...]) -> Path:
     from triplesumo.train.loop import train
 
     tiny = DDPGConfig(hidden=(16, 16), buffer_size=2000, learning_starts=20, batch_size=8, learn_every=2)
-    result = train(TrainConfig(out=str(out), name=learner, learner=learner, policies=policies, epochs=2,
+    result = train(TrainConfig(out=str(out), name=learner, learn=(f"{learner}=ddpg",), policies=policies, epochs=2,
                                steps_per_epoch=20, n_envs=2, ddpg=tiny, progress=False, tensorboard=False))
     return result.run_dir
 
@@ -121,7 +121,7 @@ TINY_DDPG = DDPGConfig(hidden=(16, 16), buffer_size=5000, learning_starts=50, ba
 def tiny(out: Path, name: str = "run", **fields: Any) -> TrainConfig:
     """A training config small enough for a test: 2 matches of 30 steps, 16-unit networks."""
     values: dict[str, Any] = {
-        "name": name, "out": str(out), "learner": "bug", "policies": ("spider=random", "ant=zero"),
+        "name": name, "out": str(out), "learn": ("bug=ddpg",), "policies": ("spider=random", "ant=zero"),
         "epochs": 2 * E, "steps_per_epoch": 30, "n_envs": 2, "checkpoint_every": E, "seed": 0,
         "ddpg": TINY_DDPG, "progress": False, "tensorboard": False,
     }

@@ -17,7 +17,7 @@ from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t  # the same 
 from triplesumo.agents.networks import ActorPolicy, GaussianActor, gaussian_log_prob, tanh_log_det_jacobian
 from triplesumo.agents.normalizer import ObsNormalizer
 from triplesumo.agents.policy_file import load_policy, save_policy
-from triplesumo.algos.base import Algorithm, DivergedError
+from triplesumo.algos.base import Algorithm, DivergenceError
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.algos.ppo import PPO, PPOConfig, clipped_surrogate, gae
 from triplesumo.algos.replay import ReplayBuffer
@@ -391,13 +391,21 @@ def test_divergence_is_reported_with_the_update_index(name: str) -> None:
     agent.check_finite()
     bad = _batch(1)
     bad["rew"][0] = np.inf
-    with pytest.raises(DivergedError, match="update 1: critic_loss"):
+    with pytest.raises(DivergenceError, match="update 1: critic_loss"):
         agent.update(bad)
     agent = _make(name)
     with torch.no_grad():
         agent.critic.net[0].weight[0, 0] = float("nan")
-    with pytest.raises(DivergedError, match=r"critic\.net\.0\.weight"):
+    with pytest.raises(DivergenceError, match=r"critic\.net\.0\.weight"):
         agent.check_finite()
+
+
+def test_the_old_name_of_the_divergence_error_still_works_and_warns() -> None:
+    import triplesumo.algos.base as base
+
+    with pytest.warns(DeprecationWarning, match="DivergedError is deprecated: use DivergenceError"):
+        old = base.DivergedError
+    assert old is DivergenceError
 
 
 # --------------------------------------------------------------------------------- configs

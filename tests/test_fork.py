@@ -58,10 +58,10 @@ def test_a_fork_that_changes_only_the_budget_continues_as_the_uninterrupted_run(
     record = json.loads((fork_dir / "fork.json").read_text())
     assert record["epoch"] == 8 and record["checkpoint"] == "epoch-000008" and record["changes"] == {
         "name": ["both", "more"], "out": [half.cfg.out, str(tmp_path)], "epochs": [8, 16]}
-    assert record["parent_command"] == BOTH_COMMAND and record["parent_run_id"] == half.run_id
+    assert record["parent_command"] == BOTH_COMMAND and record["parent_run_id"] == half.record.run_id
     result = train(dataclasses.replace(cfg, epochs=1), resume_dir=fork_dir)  # the saved config is used
     assert result.epochs == 16
-    assert full.league is not None
+    assert full.seats.league is not None
     a, b = full.run_dir, fork_dir
     for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
         assert rows(a / name) == rows(b / name), name
@@ -83,8 +83,8 @@ def test_a_fork_that_changes_only_the_budget_continues_as_the_uninterrupted_run(
         _, manifest = load_policy(b / f"policy-{learner}")
         assert manifest["command"] == record["command"] and manifest["command"].startswith(
             f"triplesumo train --fork {half.run_dir} --name more")
-        assert manifest["forked_from"]["run_id"] == half.run_id and manifest["forked_from"]["epoch"] == 8
-        assert manifest["run_id"] != half.run_id
+        assert manifest["forked_from"]["run_id"] == half.record.run_id and manifest["forked_from"]["epoch"] == 8
+        assert manifest["run_id"] != half.record.run_id
     # the fork resumes like any run
     assert train(cfg, resume_dir=fork_dir, overrides={"epochs": 18}).epochs >= 18
 
@@ -116,8 +116,8 @@ def test_a_packed_parent_forks_and_resumes_as_the_uninterrupted_run(runs: tuple[
 def test_a_fork_admits_by_its_own_league_rules_from_the_fork_epoch(
         runs: tuple[Trainer, Trainer], tmp_path: Path) -> None:
     full, half = runs
-    assert full.league is not None
-    admitted_after = [m for p in full.league.pools.values() for m in (*p.members, *p.evicted) if m.epoch > 8]
+    assert full.seats.league is not None
+    admitted_after = [m for p in full.seats.league.pools.values() for m in (*p.members, *p.evicted) if m.epoch > 8]
     assert admitted_after  # uninterrupted, the threshold of 0 goes on admitting
     strict = dataclasses.replace(half.cfg.league, snapshot_every=1000, side_threshold=("team=0.95",))
     cfg = dataclasses.replace(half.cfg, name="strict", out=str(tmp_path), epochs=16, league=strict)
@@ -127,9 +127,10 @@ def test_a_fork_admits_by_its_own_league_rules_from_the_fork_epoch(
     assert record["changes"]["league.side_threshold"] == [[], ["team=0.95"]]
     trainer = Trainer(cfg, run_dir=fork_dir, resume=True)
     trainer.run()
-    assert trainer.league is not None and trainer.league.config == strict
-    assert trainer.league.pools["team"].threshold == 0.95 and trainer.league.pools["spider"].threshold == 0.0
-    assert not [m for p in trainer.league.pools.values() for m in (*p.members, *p.evicted) if m.epoch > 8]
+    league = trainer.seats.league
+    assert league is not None and league.config == strict
+    assert league.pools["team"].threshold == 0.95 and league.pools["spider"].threshold == 0.0
+    assert not [m for p in league.pools.values() for m in (*p.members, *p.evicted) if m.epoch > 8]
     assert "--league.snapshot-every 1000 --league.side-threshold team=0.95" in record["command"]
 
 
@@ -333,8 +334,8 @@ def test_a_fork_may_add_seeds_that_join_at_the_fork_epoch_and_keep_zoo_keeps_the
     assert config_from_json(json.loads((fork_dir / "config.json").read_text())) == cfg
     trainer = Trainer(cfg, run_dir=fork_dir, resume=True)  # (resuming seeds nothing again: files unchanged)
     trainer.run()
-    assert trainer.league is not None and trainer.epochs_done == 16
-    pools = trainer.league.pools
+    assert trainer.seats.league is not None and trainer.collector.epochs_done == 16
+    pools = trainer.seats.league.pools
     members = {m.id: m for p in pools.values() for m in p.members}
     assert set(seeded) <= set(members)  # keep_zoo: never evicted, though snapshots were
     assert any(m.epoch > 8 for p in pools.values() for m in (*p.members, *p.evicted))

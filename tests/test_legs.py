@@ -103,9 +103,9 @@ def test_legs_file_errors_name_the_file(tmp_path: Path) -> None:
 
 def member_manifests(trainer: Trainer) -> dict[str, dict[str, object]]:
     """Every league member's policy manifest (the first role's), by member id."""
-    assert trainer.league is not None
-    return {m.id: load_policy(trainer.league.root / next(iter(m.policies.values())))[1]
-            for pool in trainer.league.pools.values() for m in (*pool.members, *pool.evicted)}
+    assert trainer.seats.league is not None
+    return {m.id: load_policy(trainer.seats.league.root / next(iter(m.policies.values())))[1]
+            for pool in trainer.seats.league.pools.values() for m in (*pool.members, *pool.evicted)}
 
 
 @pytest.mark.slow  # 69 s alone on the shared 2-core box
@@ -114,7 +114,7 @@ def test_a_run_its_resume_an_older_resume_and_a_fork_record_their_legs(tmp_path:
     run.run()
     legs = read_legs(run.run_dir)
     assert [(leg["kind"], leg["epoch"], leg["env_steps"]) for leg in legs] == [("start", 0, 0)]
-    assert legs[0]["code"] == code_version() and legs[0]["run_id"] == run.run_id
+    assert legs[0]["code"] == code_version() and legs[0]["run_id"] == run.record.run_id
     assert legs[0]["budget"] == {"epochs": 8, "max_minutes": run.cfg.max_minutes, "max_env_steps": 0}
     assert legs[0]["command"] == BOTH_COMMAND
     assert load_policy(run.run_dir / "policy-spider")[1]["legs"] == legs

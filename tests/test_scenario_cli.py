@@ -52,17 +52,17 @@ def test_evaluate_and_train_configs_check_the_scenario() -> None:
 
 def test_trainer_ends_the_learners_epoch_when_it_is_eliminated(tmp_path: Path) -> None:
     tiny = DDPGConfig(hidden=(8, 8), buffer_size=200, learning_starts=1000, batch_size=4)
-    cfg = TrainConfig(out=str(tmp_path), name="ffa", scenario="ffa", learner="bug", policies=("*=random",),
+    cfg = TrainConfig(out=str(tmp_path), name="ffa", scenario="ffa", learn=("bug=ddpg",), policies=("*=random",),
                       epochs=1, steps_per_epoch=50, n_envs=2, ddpg=tiny, progress=False, tensorboard=False)
     trainer = Trainer(cfg)
-    assert trainer.batch.matches[0].config.rules == "elimination"
-    match = trainer.batch.matches[0]
+    assert trainer.collector.batch.matches[0].config.rules == "elimination"
+    match = trainer.collector.batch.matches[0]
     bug = match.sim.agents[match.agents.index("bug")]
     match.data.qpos[bug.root_qpos] = 2.6
     mujoco.mj_forward(match.model, match.data)
-    trainer.batch.reload(0)
-    trainer.collect_step()
-    assert trainer.epochs_done == 1
+    trainer.collector.batch.reload(0)
+    trainer.step()
+    assert trainer.collector.epochs_done == 1
     assert match.steps == 0 and all(match.alive)  # reset for the next epoch
     replay = trainer.learners[0].replay  # type: ignore[attr-defined]
     assert len(replay) == 2

@@ -111,7 +111,7 @@ def run_copy(uninterrupted: Trained, tmp_path: Path) -> Path:
 @pytest.mark.slow  # 7 s alone on the shared 2-core box
 def test_tiny_run_learns_finite_losses(uninterrupted: Trained) -> None:
     trainer, result, ddpg = uninterrupted.trainer, uninterrupted.result, uninterrupted.cfg.ddpg
-    assert result.epochs == trainer.epochs_done >= uninterrupted.cfg.epochs
+    assert result.epochs == trainer.collector.epochs_done >= uninterrupted.cfg.epochs
     bug = trainer.learners[0]
     assert set(bug.last_stats) == {"critic_loss", "actor_loss", "q_mean"}
     assert all(math.isfinite(v) for v in bug.last_stats.values()), bug.last_stats
@@ -123,7 +123,7 @@ def test_tiny_run_learns_finite_losses(uninterrupted: Trained) -> None:
 def test_tiny_run_fills_replay_with_every_learner_transition(uninterrupted: Trained) -> None:
     trainer, result = uninterrupted.trainer, uninterrupted.result
     replay = trainer.learners[0].replay  # type: ignore[attr-defined]
-    assert result.env_steps == trainer.env_steps > 0
+    assert result.env_steps == trainer.collector.env_steps > 0
     _, rows = read_rows(uninterrupted.run)
     errors = sum(r["outcome"] == "error" for r in rows)  # a physics error's transition is dropped
     assert 0 < len(replay) == result.env_steps - errors <= result.env_steps
@@ -354,10 +354,10 @@ def test_a_resumed_run_keeps_the_run_id_its_checkpoint_records(uninterrupted: Tr
     """Policy manifests name the run (``run_id``) by the id its checkpoint holds, not by a hash of the config
     as this version reads it (which options added since would move); a run whose checkpoint was written
     before ids goes on without one (not splitting its files into two runs)."""
-    assert load_policy(uninterrupted.run / "policy")[1]["run_id"] == uninterrupted.trainer.run_id
+    assert load_policy(uninterrupted.run / "policy")[1]["run_id"] == uninterrupted.trainer.record.run_id
     state_path = _latest_file(run_copy, "state.json")
     state = json.loads(state_path.read_text())
-    assert state["run_id"] == uninterrupted.trainer.run_id == run_id_of(uninterrupted.cfg)
+    assert state["run_id"] == uninterrupted.trainer.record.run_id == run_id_of(uninterrupted.cfg)
     state["run_id"] = "started-under-an-older-version"
     state_path.write_text(json.dumps(state))
     _reseal(state_path.parent)
@@ -427,7 +427,7 @@ def test_checkpoint_lacking_a_key_names_the_file(run_copy: Path, damage: Any, na
 
 
 @pytest.mark.parametrize(("field", "changes"), [
-    ("learner", {"learner": "spider", "policies": ["ant=zero", "bug=random"]}),
+    ("learn", {"learn": ["spider=ddpg"], "policies": ["ant=zero", "bug=random"]}),
     ("obs_mode", {"obs_mode": "egocentric"}),
     ("ddpg", {"ddpg": {**json.loads(json.dumps(TINY_DDPG.__dict__)), "hidden": [8, 8]}}),
     ("learner_config", {"learner_config": ["bug.hidden=8 8"]}),
@@ -543,8 +543,26 @@ def test_config_errors_name_the_field(tmp_path: Path, fields: dict[str, Any], na
         tiny(tmp_path, **fields)
 
 
+def test_the_deprecated_learner_field_reads_as_a_one_ddpg_learner_learn() -> None:
+    """``learner`` (``--learner``) was the one DDPG learner beside ``learn``; it stays a deprecated alias, and a
+    config.json written while it was a field (``learn`` empty) reads as its ``learn``."""
+    with pytest.warns(DeprecationWarning, match="TrainConfig.learner is deprecated: use learn AGENT=ddpg"):
+        cfg = TrainConfig(learner="spider", policies=("ant=zero", "bug=random"))
+    assert cfg.learn == ("spider=ddpg",) and cfg.learner is None and cfg.learners() == {"spider": "ddpg"}
+    assert "learner" not in config_to_json(cfg)
+    both = r"TrainConfig.learner \(deprecated\) and learn"
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match=both):
+        TrainConfig(learner="spider", learn=("bug=sac",))
+    with pytest.raises(ValueError, match="TrainConfig.learn must name at least one"):
+        TrainConfig(learn=())
+    old = config_to_json(TrainConfig()) | {"learner": "spider", "learn": [], "policies": ["ant=zero", "bug=random"]}
+    assert config_from_json(old).learn == ("spider=ddpg",)
+    given = old | {"learn": ["bug=sac"], "policies": ["ant=zero", "spider=random"]}  # learn given: it replaced learner
+    assert config_from_json(given).learn == ("bug=sac",)
+
+
 @pytest.mark.parametrize(("fields", "named"), [
-    ({"learner": "dragon"}, "TrainConfig.learner.*dragon"),
+    ({"learn": ("dragon=ddpg",)}, "TrainConfig.learn.*dragon"),
     ({"policies": ("spider=random", "dragon=zero")}, "TrainConfig.policies.*dragon"),
     ({"policies": ("spider=random", "spider=zero")}, "'spider' given twice"),
     ({"policies": ("spider=telepathy",)}, "unknown policy 'telepathy'"),
@@ -558,12 +576,12 @@ def test_the_physics_field_reaches_the_matches_and_old_config_json_means_the_v0_
     rim = Trainer(tiny(tmp_path))  # the default since env v1
     try:
         assert rim.match_cfg.physics.border_rim
-        model = rim.batch.matches[0].model
+        model = rim.collector.batch.matches[0].model
         border = [g for g in range(model.ngeom) if (model.geom(g).name or "").startswith("border")]
         assert border and all(model.geom_contype[g] or model.geom_conaffinity[g] for g in border)  # solid rim
         assert rim.manifest(rim.learners[0])["physics"]["border_rim"] is True  # the policy file says which ring
     finally:
-        rim.batch.close()
+        rim.collector.batch.close()
     saved = config_to_json(tiny(tmp_path))
     del saved["physics"]  # a run folder written before the field existed: env v0's visual ring, as it ran
     assert config_from_json(saved).physics == V0_PHYSICS == PhysicsConfig(border_rim=False, layout="circle",

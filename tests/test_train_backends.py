@@ -136,11 +136,11 @@ def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
         warp_runs: dict[str, Trainer], algo: str) -> None:
     trainer = warp_runs[algo]
     run = trainer.run_dir
-    assert isinstance(trainer.obs, torch.Tensor) and trainer.obs.device == torch.device("cpu")
+    assert isinstance(trainer.collector.obs, torch.Tensor) and trainer.collector.obs.device == torch.device("cpu")
     for name in ("config.json", "metrics.csv", "learning.csv", "policy.json", "policy.safetensors"):
         assert (run / name).is_file(), name
     rows = list(csv.DictReader((run / "metrics.csv").open()))
-    assert trainer.epochs_done >= 6 and len(rows) == trainer.epochs_done
+    assert trainer.collector.epochs_done >= 6 and len(rows) == trainer.collector.epochs_done
     assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
     assert {r["outcome"] for r in rows} <= set(OUTCOME_CODES) - {"error"}
     for r in rows:  # the game's rules: a match lasts at most 20 steps, a draw only at the limit,
@@ -149,18 +149,18 @@ def test_a_warp_run_trains_on_the_device_and_writes_the_usual_run_folder(
         expected = {"win": trainer.cfg.reward.win, "loss": trainer.cfg.reward.loss, "draw": trainer.cfg.reward.draw}
         assert float(r["sparse_reward"]) == pytest.approx(expected[r["outcome"]])
         assert float(r["total_reward"]) == pytest.approx(float(r["dense_reward"]) + float(r["sparse_reward"]))
-    assert trainer.env_steps == int(rows[-1]["env_steps"]) and trainer.env_steps % 3 == 0
+    assert trainer.collector.env_steps == int(rows[-1]["env_steps"]) and trainer.collector.env_steps % 3 == 0
     learner = trainer.learners[0]
-    assert trainer.updates > 0 and learner.algo.device == torch.device("cpu")
+    assert trainer.updates() > 0 and learner.algo.device == torch.device("cpu")
     if algo == "ddpg":
         replay = learner.replay  # type: ignore[attr-defined]
         assert isinstance(replay, TorchReplayBuffer) and isinstance(replay.obs, torch.Tensor)
-        assert len(replay) == trainer.env_steps  # every Bug step was stored (no physics errors)
+        assert len(replay) == trainer.collector.env_steps  # every Bug step was stored (no physics errors)
     else:
         assert all(v.device == torch.device("cpu") for v in learner.algo.rollout.values())  # type: ignore[attr-defined]
         # evaluations while training: the device policy, copied to the host, on CPU test matches
         evals = list(csv.DictReader((run / "eval.csv").open()))
-        assert len(evals) == trainer.env_steps // 30 >= 2
+        assert len(evals) == trainer.collector.env_steps // 30 >= 2
         assert all(int(e["n_win"]) + int(e["n_loss"]) + int(e["n_draw"]) == 2 for e in evals)
 
 
@@ -172,13 +172,15 @@ def test_a_killed_warp_run_resumes_exactly(warp_runs: dict[str, Trainer], tmp_pa
     whole = warp_runs["ddpg"]
     cfg = dataclasses.replace(whole.cfg, out=str(tmp_path))
     killed = Trainer(cfg)
-    while killed.env_steps < 30 * cfg.n_envs:
-        killed.collect_step()
+    while killed.collector.env_steps < 30 * cfg.n_envs:
+        killed.step()
     killed.save()
     killed.log.close()
-    assert killed.env.steps.tolist() == [10, 10, 10] and killed.epochs_done == 3  # the matches in progress
+    # the matches in progress
+    assert killed.collector.env.steps.tolist() == [10, 10, 10] and killed.collector.epochs_done == 3
     result = train(cfg, resume_dir=killed.run_dir)
-    assert (result.epochs, result.env_steps, result.updates) == (whole.epochs_done, whole.env_steps, whole.updates)
+    assert (result.epochs, result.env_steps, result.updates) == (
+        whole.collector.epochs_done, whole.collector.env_steps, whole.updates())
     assert _metrics(killed.run_dir / "metrics.csv") == _metrics(whole.run_dir / "metrics.csv")
     assert _metrics(killed.run_dir / "learning.csv") == _metrics(whole.run_dir / "learning.csv")
     assert _same_policy(killed.run_dir / "policy.safetensors", whole.run_dir / "policy.safetensors")
@@ -247,17 +249,18 @@ def test_both_backends_start_the_trainers_matches_from_the_same_seeded_states(
     cpu = Trainer(tiny(tmp_path, "cpu", n_envs=3))
     warp = Trainer(tiny(tmp_path, "warp", n_envs=3, backend="warp", device="cpu"))
     try:
-        assert isinstance(cpu.obs, np.ndarray) and isinstance(warp.obs, torch.Tensor)
-        np.testing.assert_allclose(warp.obs.numpy(), cpu.obs, rtol=0, atol=1e-4)  # float32 physics on Warp
+        assert isinstance(cpu.collector.obs, np.ndarray) and isinstance(warp.collector.obs, torch.Tensor)
+        # float32 physics on Warp
+        np.testing.assert_allclose(warp.collector.obs.numpy(), cpu.collector.obs, rtol=0, atol=1e-4)
         assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state  # the same seeds were drawn
         for trainer in (cpu, warp):  # a step: the random Spider and the warm-up draw the same numbers on both
-            trainer.collect_step()
+            trainer.step()
         assert cpu.rng.bit_generator.state == warp.rng.bit_generator.state
-        assert cpu.policies["spider"].rng.bit_generator.state == warp.policies["spider"].rng.bit_generator.state
+        assert cpu.seats.fixed["spider"].rng.bit_generator.state == warp.seats.fixed["spider"].rng.bit_generator.state
     finally:
         for trainer in (cpu, warp):
             trainer.log.close()
-            trainer.env.close()
+            trainer.collector.env.close()
 
 
 @pytest.mark.slow  # 30 s alone on the shared 2-core box
@@ -280,7 +283,7 @@ def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_ex
 
     whole = Trainer(both("whole", 6))
     whole.run()
-    lg = whole.league
+    lg = whole.seats.league
     assert lg is not None
     members = {m.id: m for pool in lg.pools.values() for m in (*pool.members, *pool.evicted)}
     assert any(m.source == "self" for m in members.values())  # snapshots admitted
@@ -292,10 +295,10 @@ def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_ex
     whole.seats.policies = [whole.seats.policies_of(members, seed) for members, seed in seats]
     whole.seats._groups = None
     twins = [whole.seats.policies_of(members, seed) for members, seed in seats]  # fresh generators, same seeds
-    host = [{i: act_batch(p, whole.obs[k, i][None].numpy())[0] for i, p in seated.items()}
+    host = [{i: act_batch(p, whole.collector.obs[k, i][None].numpy())[0] for i, p in seated.items()}
             for k, seated in enumerate(twins)]
     actions = torch.zeros((2, 3, 8))
-    whole.seats.act_on_device(actions, whole.obs)
+    whole.seats.act_on_device(actions, whole.collector.obs)
     for k, seat, action in ((0, 2, host[0][2]), (1, 0, host[1][0]), (1, 1, host[1][1])):
         np.testing.assert_allclose(actions[k, seat].numpy(), action, rtol=0, atol=1e-6)
     assert not actions[0, :2].any() and not actions[1, 2].any()
@@ -305,7 +308,7 @@ def test_both_sides_self_play_on_warp_seats_members_on_the_device_and_resumes_ex
     killed = tmp_path / "killed"  # the run again from its epoch-3 checkpoint (--from; the later files overwritten)
     shutil.copytree(run, killed)
     resumed = train(whole.cfg, resume_dir=killed, from_checkpoint="epoch-000003")
-    assert (resumed.epochs, resumed.env_steps) == (whole.epochs_done, whole.env_steps)
+    assert (resumed.epochs, resumed.env_steps) == (whole.collector.epochs_done, whole.collector.env_steps)
     assert (run / "league" / "league.csv").read_text() == (killed / "league" / "league.csv").read_text()
     for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant.csv", "learning-bug.csv",
                  "learning-spider.csv"):

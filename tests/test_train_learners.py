@@ -82,7 +82,7 @@ def run(cfg: TrainConfig) -> Run:
     trainer = Trainer(cfg)
     initial = {lr.name: lr.algo.state_dict() for lr in trainer.learners}
     frozen = {a: {k: v.clone() for k, v in p.actor.state_dict().items()}
-              for a, p in trainer.policies.items() if hasattr(p, "actor")}
+              for a, p in trainer.seats.fixed.items() if hasattr(p, "actor")}
     return Run(trainer, trainer.run(), initial, frozen)
 
 
@@ -109,7 +109,7 @@ def test_two_algorithms_learn_at_once(pair: Run) -> None:
         losses = [float(r["critic_loss"]) for r in table if r["critic_loss"]]
         assert losses and all(math.isfinite(x) for x in losses)
     assert "alpha" in trainer.learners[0].last_stats  # SAC reports its temperature
-    spider = trainer.policies["spider"]
+    spider = trainer.seats.fixed["spider"]
     for key, value in spider.actor.state_dict().items():
         assert torch.equal(value, pair.frozen["spider"][key]), f"the fixed Spider's {key} changed"
 
@@ -166,7 +166,7 @@ def test_ppo_learns_and_resumes_mid_rollout_exactly(tmp_path: Path) -> None:
     assert all(math.isfinite(v) for v in bug.last_stats.values())
     now = bug.algo.state_dict()
     assert not torch.equal(now["actor.net.0.weight"], whole.initial["bug"]["actor.net.0.weight"])
-    ant = whole.trainer.policies["ant"]
+    ant = whole.trainer.seats.fixed["ant"]
     assert all(torch.equal(v, whole.frozen["ant"][k]) for k, v in ant.actor.state_dict().items())
     assert load_policy(whole.result.run_dir / "policy")[1]["algo"] == "ppo"
 
@@ -198,23 +198,23 @@ def test_a_learner_out_of_an_elimination_match_stops_collecting_until_the_match_
     assert isinstance(ant, OffPolicyLearner) and isinstance(bug, PPOLearner)
 
     def push_out(agent: str) -> None:
-        match = trainer.batch.matches[0]
+        match = trainer.collector.batch.matches[0]
         body = match.sim.agents[match.agents.index(agent)]
         match.data.qpos[body.root_qpos] = 2.6
         mujoco.mj_forward(match.model, match.data)
-        trainer.batch.reload(0)
+        trainer.collector.batch.reload(0)
 
     push_out("ant")
-    trainer.collect_step()
-    assert trainer.epochs_done == 0 and ant.active.tolist() == [False, True]
+    trainer.step()
+    assert trainer.collector.epochs_done == 0 and ant.active.tolist() == [False, True]
     assert ant.replay.done[:2].tolist() == [1.0, 0.0]  # ant's exit is terminal
-    trainer.collect_step()
+    trainer.step()
     assert len(ant.replay) == 3  # only the ant still in match 1 collected
     assert bug.algo.rollout["valid"][:2].tolist() == [[1.0, 1.0], [1.0, 1.0]]
     push_out("bug")
-    trainer.collect_step()
-    assert trainer.epochs_done == 1  # every learning agent of match 0 is out: the epoch ends
-    assert ant.active.tolist() == [True, True] and trainer.batch.matches[0].steps == 0
+    trainer.step()
+    assert trainer.collector.epochs_done == 1  # every learning agent of match 0 is out: the epoch ends
+    assert ant.active.tolist() == [True, True] and trainer.collector.batch.matches[0].steps == 0
     trainer.log.close()
     for agent in ("ant", "bug"):
         (row,) = rows(trainer.run_dir / f"metrics-{agent}.csv")
@@ -371,18 +371,18 @@ def test_a_checkpoint_keeps_who_is_still_in_play(tmp_path: Path) -> None:
     cfg = tiny(tmp_path, "ffa", scenario="ffa", learn=("ant=sac", "bug=sac"), policies=("*=random",),
                steps_per_epoch=50, sac=SACConfig(hidden=(8, 8), buffer_size=200, learning_starts=1000))
     trainer = Trainer(cfg)
-    match = trainer.batch.matches[0]
+    match = trainer.collector.batch.matches[0]
     spider = match.sim.agents[match.agents.index("spider")]
     match.data.qpos[spider.root_qpos] = 2.6  # the non-learning spider leaves; ant and bug play on
     mujoco.mj_forward(match.model, match.data)
-    trainer.batch.reload(0)
-    trainer.collect_step()
-    assert match.alive == [True, True, False] and trainer.epochs_done == 0
+    trainer.collector.batch.reload(0)
+    trainer.step()
+    assert match.alive == [True, True, False] and trainer.collector.epochs_done == 0
     before = match.snapshot()
     folder = trainer.save()
     trainer.log.close()
     resumed = Trainer(TrainConfig(**{**cfg.__dict__}), run_dir=trainer.run_dir, resume=True)
-    again = resumed.batch.matches[0]
+    again = resumed.collector.batch.matches[0]
     assert again.alive == [True, True, False]
     after = again.snapshot()
     assert (after["places"], after["outcomes"], after["steps"]) == (before["places"], before["outcomes"],

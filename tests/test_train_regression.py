@@ -29,7 +29,7 @@ from triplesumo.train.loop import train
 FIXTURE = Path(__file__).parent / "data" / "train_regression.json"
 
 RUNS: dict[str, dict[str, Any]] = {
-    "ddpg": {"learner": "bug", "policies": ("spider=random", "ant=zero"), "epochs": 4, "steps_per_epoch": 30,
+    "ddpg": {"learn": ("bug=ddpg",), "policies": ("spider=random", "ant=zero"), "epochs": 4, "steps_per_epoch": 30,
              "n_envs": 2, "checkpoint_every": 2,
              "ddpg": DDPGConfig(hidden=(16, 16), buffer_size=5000, learning_starts=50, batch_size=16, learn_every=2)},
     "league": {"learn": ("spider=ddpg",), "policies": ("ant=random", "bug=random"), "epochs": 8,

@@ -81,12 +81,12 @@ def assert_same_league(a: League, b: League) -> None:
 def test_spider_learns_against_the_team_pool_and_its_snapshots_join_its_own(tmp_path: Path) -> None:
     trainer = Trainer(tiny(tmp_path, "spider", **SPIDER))
     trainer.run()
-    league = trainer.league
+    league = trainer.seats.league
     assert league is not None
     team, spider = league.pools["team"], league.pools["spider"]
     # the team seats come from the team pool, seeded from --policies (ant=random, bug=random)
     assert [m.policies for m in team.members] == [{"ant": "random", "bug": "random"}]
-    assert {tuple(seats) for seats in trainer.seat_members} == {("team-0001", "team-0001", None)}
+    assert {tuple(seats) for seats in trainer.seats.members} == {("team-0001", "team-0001", None)}
     assert team.members[0].games >= 8
     # the Spider learner's snapshots were admitted (its pool started empty) and are policy files
     assert len(spider) >= 2 and all(m.source == "self" for m in spider.members)
@@ -98,7 +98,7 @@ def test_spider_learns_against_the_team_pool_and_its_snapshots_join_its_own(tmp_
     me = league.ratings[League.learner("spider")]
     assert me.sigma < 25 / 3 - 1
     log = rows(league.root / "league.csv")
-    assert [int(r["epoch"]) for r in log if r["side"] == "spider"] == list(range(1, trainer.epochs_done + 1))
+    assert [int(r["epoch"]) for r in log if r["side"] == "spider"] == list(range(1, trainer.collector.epochs_done + 1))
     assert sum(int(r["admitted"]) for r in log if r["side"] == "spider") == len(spider) + len(spider.evicted)
     assert (trainer.run_dir / "plots" / "league.png").stat().st_size > 10_000
     assert json.loads((league.root / "pool.json").read_text())["pools"]["spider"]["members"][-1]["id"] == snap.id
@@ -108,7 +108,7 @@ def test_spider_learns_against_the_team_pool_and_its_snapshots_join_its_own(tmp_
 def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) -> None:
     trainer = Trainer(tiny(tmp_path, "ffa", **FFA))
     trainer.run()
-    league = trainer.league
+    league = trainer.seats.league
     assert league is not None and list(league.pools) == ["ffa"]
     pool = league.pools["ffa"]
     assert pool.members[0].source == "zoo" and pool.members[0].policies == {"ffa": "random"}
@@ -116,7 +116,7 @@ def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) 
     assert len(pool) <= LEAGUE.max_size and pool.members[0].id == "ffa-0001"  # FIFO keeps the first
     met = [m for m in (*pool.members, *pool.evicted) if m.source == "self" and m.games > 0]
     assert met, "no admitted snapshot was ever drawn to play"
-    for seats in trainer.seat_members:
+    for seats in trainer.seats.members:
         assert seats[0] is None and all(s is not None for s in seats[1:])
     assert league.ratings[League.learner("ffa")].mu != 25.0
     # The run's snapshots in a free-for-all tournament of their own (--league RUN): the first and the
@@ -135,14 +135,14 @@ def test_ffa_learner_meets_its_own_snapshots_in_the_other_seats(tmp_path: Path) 
     assert board[own[-1].id]["epochs"] == own[-1].epoch and board[own[-1].id]["trained"] == "ant"
     assert board["passive"]["epochs"] is None and board["passive"]["run"] is None
     # one line on the ladder: the snapshots and the run's own policy
-    assert board[own[0].id]["run"] == board[own[-1].id]["run"] == board["final"]["run"] == trainer.run_id
+    assert board[own[0].id]["run"] == board[own[-1].id]["run"] == board["final"]["run"] == trainer.record.run_id
     # a copy of the run's policy outside the run folder still names the run (the run_id of its manifest)
     from triplesumo.evaluation.tournament import _run_of
     (tmp_path / "copied").mkdir()
     for suffix in (".json", ".safetensors"):
         shutil.copyfile(trainer.run_dir / f"policy{suffix}", tmp_path / "copied" / f"policy{suffix}")
     assert _run_of(str(tmp_path / "copied" / "policy"), load_policy(tmp_path / "copied" / "policy")[1]) \
-        == trainer.run_id
+        == trainer.record.run_id
     assert (tmp_path / "ladder" / "ladder.png").stat().st_size > 10_000
     with pytest.raises(ValueError, match=rf"entries \['{own[0].id}'\] clash with the snapshots"):
         dataclasses.replace(cfg, policies=(f"{own[0].id}=passive", "random=random")).resolved()
@@ -156,11 +156,11 @@ def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
                                                                 "pursuer_2=passive")))
     trainer = Trainer(cfg)
     trainer.run()
-    league = trainer.league
+    league = trainer.seats.league
     assert league is not None
     assert [m.policies for m in league.pools["pursuers"].members] == [
         {"pursuer_0": "passive", "pursuer_1": "random", "pursuer_2": "passive"}]
-    assert {tuple(s) for s in trainer.seat_members} == {("pursuers-0001",) * 3 + (None,)}
+    assert {tuple(s) for s in trainer.seats.members} == {("pursuers-0001",) * 3 + (None,)}
     assert league.pools["pursuers"].members[0].games == 4
     # the manifest names the pool's seeds, not the --policies they replaced
     assert load_policy(trainer.run_dir / "policy")[1]["trained_against"] == [
@@ -170,8 +170,8 @@ def test_pursuit_evader_against_the_pursuers_pool(tmp_path: Path) -> None:
     events = EventAccumulator(str(trainer.run_dir / "tensorboard"))
     events.Reload()
     sizes = [e.value for e in events.Scalars("league/pursuers/pool_size")]
-    assert len(sizes) == trainer.epochs_done and set(sizes) == {1.0}
-    assert len(events.Scalars("league/evader/learner_mu")) == trainer.epochs_done
+    assert len(sizes) == trainer.collector.epochs_done and set(sizes) == {1.0}
+    assert len(events.Scalars("league/evader/learner_mu")) == trainer.collector.epochs_done
 
 
 @pytest.mark.slow  # 50 s alone on the shared 2-core box
@@ -182,13 +182,13 @@ def test_resume_restores_the_league_exactly(tmp_path: Path) -> None:
     half_cfg = tiny(tmp_path / "b", "run", epochs=4, **FFA)
     half = Trainer(half_cfg, command=command)
     half.run()
-    assert half.league is not None and len(half.league.pools["ffa"]) >= 2  # admitted before the checkpoint
+    assert half.seats.league is not None and len(half.seats.league.pools["ffa"]) >= 2  # admitted before the checkpoint
     resumed = Trainer(dataclasses.replace(half_cfg, epochs=8), run_dir=tmp_path / "b/run", resume=True,
                       command=command)
     resumed.run()
-    assert full.league is not None and resumed.league is not None
-    assert_same_league(full.league, resumed.league)
-    assert full.seat_members == resumed.seat_members
+    assert full.seats.league is not None and resumed.seats.league is not None
+    assert_same_league(full.seats.league, resumed.seats.league)
+    assert full.seats.members == resumed.seats.members
     assert (tmp_path / "a/run/league/league.csv").read_text() == (tmp_path / "b/run/league/league.csv").read_text()
     last = checkpoint.latest(tmp_path / "a/run")
     assert last.name == checkpoint.latest(tmp_path / "b/run").name
@@ -269,8 +269,8 @@ def both_run(tmp_path_factory: pytest.TempPathFactory) -> Trainer:
 
 @pytest.mark.slow  # 20 s alone on the shared 2-core box
 def test_both_sides_learn_against_each_other_and_each_others_pools(both_run: Trainer) -> None:
-    league, run = both_run.league, both_run.run_dir
-    assert league is not None and both_run.epochs_done == 16
+    league, run = both_run.seats.league, both_run.run_dir
+    assert league is not None and both_run.collector.epochs_done == 16
     for side, role in (("team", "ant"), ("spider", "spider")):
         pool = league.pools[side]
         assert pool.members and all(m.source == "self" for m in (*pool.members, *pool.evicted)), side
@@ -337,8 +337,8 @@ def test_a_side_with_a_fixed_agent_learns_and_sits_out_only_its_learners_seats(t
     assert {m[ant] for m in pool_ant} <= {"team-0001"} and {m[spider] for m in pool_spider} <= {"spider-0001"}
     run = trainer.run_dir
     ant_rows, spider_rows = (rows(run / f"metrics-{a}.csv") for a in ("ant", "spider"))
-    assert trainer.league is not None
-    pools = trainer.league.pools
+    assert trainer.seats.league is not None
+    pools = trainer.seats.league.pools
     pool_matches = sum(m.games for p in pools.values() for m in (*p.members, *p.evicted))
     assert 0 < pool_matches < 16 and len(ant_rows) + len(spider_rows) == 16 + (16 - pool_matches)
     assert len(ant_rows) < 16 and len(spider_rows) < 16
@@ -346,7 +346,7 @@ def test_a_side_with_a_fixed_agent_learns_and_sits_out_only_its_learners_seats(t
     assert team.roles == ("ant",) and pools["spider"].roles == ("spider",)
     snapshots = [m for m in team.members if m.source == "self"]
     assert snapshots and set(snapshots[0].policies) == {"ant"}
-    _, manifest = load_policy(trainer.league.root / snapshots[0].policies["ant"])  # (a snapshot: no zoo seeds)
+    _, manifest = load_policy(trainer.seats.league.root / snapshots[0].policies["ant"])  # (a snapshot: no zoo seeds)
     assert manifest["role"] == "ant" and manifest["side"] == "team"
 
 
@@ -381,12 +381,12 @@ def test_live_or_pool_draws_follow_live_share(tmp_path: Path) -> None:
 def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Trainer, tmp_path: Path) -> None:
     half = Trainer(both(tmp_path, epochs=8), command=BOTH_COMMAND)
     half.run()
-    assert half.league is not None and half.league.pools["spider"].members  # admitted before the checkpoint
+    assert half.seats.league is not None and half.seats.league.pools["spider"].members  # admitted before the checkpoint
     resumed = Trainer(both(tmp_path, epochs=16), run_dir=tmp_path / "both", resume=True, command=BOTH_COMMAND)
     resumed.run()
-    assert both_run.league is not None and resumed.league is not None
-    assert_same_league(both_run.league, resumed.league)
-    assert both_run.seat_members == resumed.seat_members
+    assert both_run.seats.league is not None and resumed.seats.league is not None
+    assert_same_league(both_run.seats.league, resumed.seats.league)
+    assert both_run.seats.members == resumed.seats.members
     a, b = both_run.run_dir, resumed.run_dir
     assert (a / "league/league.csv").read_text() == (b / "league/league.csv").read_text()
     for name in ("metrics-ant.csv", "metrics-spider.csv", "learning-ant+bug.csv", "learning-spider.csv"):
@@ -402,28 +402,28 @@ def test_both_sides_resume_restores_both_pools_and_learners_exactly(both_run: Tr
     # resume) name the id the run started with, the uninterrupted run's (the same experiment); another seed
     # is another run
     ids = {load_policy(b / f"policy-{learner}")[1]["run_id"] for learner in ("ant+bug", "spider")}
-    ids |= {load_policy(resumed.league.root / stem)[1]["run_id"]
-            for pool in resumed.league.pools.values() for m in (*pool.members, *pool.evicted)
+    ids |= {load_policy(resumed.seats.league.root / stem)[1]["run_id"]
+            for pool in resumed.seats.league.pools.values() for m in (*pool.members, *pool.evicted)
             for stem in m.policies.values()}
-    assert ids == {half.run_id} == {resumed.run_id} == {both_run.run_id}
-    assert run_id_of(dataclasses.replace(both_run.cfg, seed=1)) != both_run.run_id
-    assert run_id_of(dataclasses.replace(both_run.cfg, epochs=99, out="elsewhere")) == both_run.run_id
+    assert ids == {half.record.run_id} == {resumed.record.run_id} == {both_run.record.run_id}
+    assert run_id_of(dataclasses.replace(both_run.cfg, seed=1)) != both_run.record.run_id
+    assert run_id_of(dataclasses.replace(both_run.cfg, epochs=99, out="elsewhere")) == both_run.record.run_id
 
 
 @pytest.mark.slow  # uses the module's both_run fixture, 38 s to build
 def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(both_run: Trainer) -> None:
     """``--league RUN --league-snapshots 2``: each side's first and last own snapshot by epoch, a team
     member as one entry per role."""
-    assert both_run.league is not None
+    assert both_run.seats.league is not None
     expected: dict[str, str] = {}
-    for side, pool in both_run.league.pools.items():
+    for side, pool in both_run.seats.league.pools.items():
         own = sorted((m for m in (*pool.members, *pool.evicted) if m.source == "self"), key=lambda m: m.epoch)
         assert own, side
         for m in {m.id: m for m in (own[0], own[-1])}.values():  # one snapshot: itself
             for role, stem in m.policies.items():
-                expected[m.id if side == "spider" else f"{m.id}.{role}"] = str(both_run.league.root / stem)
+                expected[m.id if side == "spider" else f"{m.id}.{role}"] = str(both_run.seats.league.root / stem)
     assert league_entries(both_run.run_dir, 2) == expected
-    assert league_entries(both_run.league.root, 2) == expected  # the league folder itself works too
+    assert league_entries(both_run.seats.league.root, 2) == expected  # the league folder itself works too
     assert any(n.endswith(".ant") for n in expected) and any(n.endswith(".bug") for n in expected)
 
 
@@ -431,9 +431,9 @@ def test_league_entries_of_a_two_sided_run_name_each_role_of_a_team_snapshot(bot
 def test_league_until_picks_only_the_snapshots_that_joined_by_then(both_run: Trainer) -> None:
     """``--league-until EPOCH``: the picks of the run as it stood at EPOCH, so a table made before the run
     was resumed names the same snapshots after it; an epoch before the first snapshot is an error."""
-    assert both_run.league is not None
+    assert both_run.seats.league is not None
     firsts = {}
-    for side, pool in both_run.league.pools.items():
+    for side, pool in both_run.seats.league.pools.items():
         own = sorted((m for m in (*pool.members, *pool.evicted) if m.source == "self"), key=lambda m: m.epoch)
         firsts[side] = own[0]
     until = min(m.epoch for m in firsts.values())
@@ -458,11 +458,11 @@ def test_tournament_seats_the_runs_egocentric_networks_and_snapshots_in_every_se
     ones it would not."""
     from triplesumo.evaluation.tournament import _manifest, eligible_seats
 
-    assert both_run.league is not None
-    match = both_run.batch.matches[0]
-    member = both_run.league.pools["team"].members[0]
+    assert both_run.seats.league is not None
+    match = both_run.collector.batch.matches[0]
+    member = both_run.seats.league.pools["team"].members[0]
     for stem, seats in ((both_run.run_dir / "policy-ant+bug", ["ant", "bug"]),
-                        (both_run.league.root / member.policies["bug"], ["ant", "bug"]),
+                        (both_run.seats.league.root / member.policies["bug"], ["ant", "bug"]),
                         (both_run.run_dir / "policy-spider", ["spider"])):
         manifest = _manifest(str(stem))
         assert manifest is not None and manifest["obs_mode"] == "egocentric"

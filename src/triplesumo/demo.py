@@ -163,7 +163,7 @@ def _run_scenario_demo(cfg: DemoConfig) -> dict[str, Path]:
     out = check_writable(Path(cfg.out), folder=True)
     print(f"[1/3] training {learner} with DDPG (paper preset) in scenario {cfg.scenario!r} against random "
           f"others -> {out / learner}")
-    train_cfg = TrainConfig(name=learner, out=str(out), learner=learner, policies=("*=random",),
+    train_cfg = TrainConfig(name=learner, out=str(out), learn=(f"{learner}=ddpg",), policies=("*=random",),
                             scenario=cfg.scenario, epochs=cfg.train_epochs, max_minutes=cfg.max_minutes,
                             steps_per_epoch=cfg.steps_per_epoch, seed=cfg.seed, n_envs=cfg.n_envs,
                             progress=cfg.progress, checkpoint_every=max(cfg.train_epochs // 4, 1),

@@ -11,7 +11,7 @@ A learner names its networks in :attr:`Algorithm.modules` and its optimisers in
   JSON-able ``param_groups``, ``num_updates`` and the learner's own torch generator (the
   noise of TD3's smoothing, SAC's sampling and PPO's minibatches), so that loading both into a
   fresh learner continues the run bit for bit on CPU;
-- :meth:`check_finite`: raises :class:`DivergedError` naming the update and the tensor;
+- :meth:`check_finite`: raises :class:`DivergenceError` naming the update and the tensor;
 - :meth:`act`: the deterministic policy on numpy observations (normaliser frozen);
 - :meth:`export_actor`: that policy as a plain :class:`~triplesumo.agents.networks.Actor`
   for :func:`~triplesumo.agents.policy_file.save_policy` (with :attr:`obs_norm`).
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import math
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
@@ -37,8 +38,22 @@ from triplesumo.agents.normalizer import ObsNormalizer
 M = TypeVar("M", bound=nn.Module)
 
 
-class DivergedError(FloatingPointError):
-    """A learner produced a non-finite loss or weight (the message names the update and what)."""
+class DivergenceError(FloatingPointError):
+    """A learner's losses, parameters or actions are no longer finite: the message says what (the update and
+    the tensor), ``learner`` names the learner where one is known (the trainer adds its update count, where the
+    run stood and its last good checkpoint)."""
+
+    def __init__(self, message: str, learner: str | None = None) -> None:
+        super().__init__(message)
+        self.learner = learner
+
+
+def __getattr__(name: str) -> Any:
+    if name == "DivergedError":  # the name of DivergenceError until both were one
+        warnings.warn("triplesumo.algos.base.DivergedError is deprecated: use DivergenceError",
+                      DeprecationWarning, stacklevel=2)
+        return DivergenceError
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 class Algorithm:
@@ -113,12 +128,12 @@ class Algorithm:
         return torch.as_tensor(value, dtype=torch.float32, device=self.device)
 
     def finish_update(self, stats: dict[str, float]) -> dict[str, float]:
-        """Count the update and check its stats; ``DivergedError`` names the update and the stat."""
+        """Count the update and check its stats; ``DivergenceError`` names the update and the stat."""
         index = self.num_updates
         self.num_updates += 1
         for key, value in stats.items():
             if not math.isfinite(value):
-                raise DivergedError(f"{type(self).__name__} update {index}: {key} is {value}")
+                raise DivergenceError(f"{type(self).__name__} update {index}: {key} is {value}")
         return stats
 
     # ------------------------------------------------------------------------- acting
@@ -269,11 +284,11 @@ class Algorithm:
         self.num_updates = int(meta["num_updates"])
 
     def check_finite(self) -> None:
-        """Raise :class:`DivergedError` if any weight or statistic is NaN or infinite."""
+        """Raise :class:`DivergenceError` if any weight or statistic is NaN or infinite."""
         bad = not_finite([(f"{name}.{key}", value) for name in self.modules
                           for key, value in getattr(self, name).state_dict().items()])
         if bad:
-            raise DivergedError(f"{type(self).__name__} after {self.num_updates} updates: {bad[0]} is not finite")
+            raise DivergenceError(f"{type(self).__name__} after {self.num_updates} updates: {bad[0]} is not finite")
 
 
 def not_finite(named: Sequence[tuple[str, torch.Tensor]]) -> list[str]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import torch
@@ -88,7 +89,7 @@ class OffPolicyAlgorithm(Algorithm):
         """One gradient update on a replay sample; returns its finite-checked scalar stats.
 
         Raises:
-            DivergedError: A loss or statistic is not finite (names the update index).
+            DivergenceError: A loss or statistic is not finite (names the update index).
         """
         return self.finish_update(self.train_step(self.batch(batch)))
 
@@ -136,12 +137,14 @@ class OffPolicyAlgorithm(Algorithm):
 
     # ------------------------------------------------------------------------- acting
 
-    def explore(self, obs: np.ndarray, rng: np.random.Generator,
-                noise: ActionNoise | None = None) -> np.ndarray:
-        """Training action: ``clip(μ(s) + noise, -1, 1)`` (no noise: the deterministic action)."""
+    def explore(self, obs: Any, rng: np.random.Generator, noise: ActionNoise | None = None) -> Any:
+        """Training action: ``clip(μ(s) + noise, -1, 1)`` (no noise: the deterministic action); the noise is
+        drawn on the host from ``rng``. Observations on the device (a tensor) give a tensor there."""
         action = self.act(obs)
         if noise is None:
             return action
+        if isinstance(action, torch.Tensor):
+            return (action + self.tensor(noise.sample(rng))).clamp(-1.0, 1.0)
         return np.clip(action + noise.sample(rng), -1.0, 1.0)
 
 

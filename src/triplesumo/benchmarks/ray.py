@@ -91,13 +91,14 @@ def _trainer_ppo(budget: int, seed: int, out: str) -> dict[str, Any]:
     trainer = Trainer(cfg)
     try:
         start = time.perf_counter()
-        while trainer.env_steps < budget:
-            trainer.collect_step()
+        while trainer.collector.env_steps < budget:
+            trainer.step()
         wall = time.perf_counter() - start
     finally:
         trainer.log.close()
-        trainer.env.close()
-    return {"env_steps": trainer.env_steps, "seconds": wall, "env_steps_per_s": trainer.env_steps / wall}
+        trainer.collector.env.close()
+    steps = trainer.collector.env_steps
+    return {"env_steps": steps, "seconds": wall, "env_steps_per_s": steps / wall}
 
 
 def run_ray_benchmark(epochs: int = 24, steps: int = 300, eval_epochs: int = 32, num_cpus: int = 2,

@@ -153,7 +153,7 @@ class SkillConfig:
         if self.max_env_steps < self.eval_every:
             raise ValueError(f"SkillConfig.max_env_steps ({self.max_env_steps}) must be >= eval_every "
                              f"({self.eval_every}): no evaluation would be made")
-        set_here = [f"train.{name}" for name in ("out", "name", "seed", "learner", "learn", "epochs", "max_env_steps",
+        set_here = [f"train.{name}" for name in ("out", "name", "seed", "learn", "epochs", "max_env_steps",
                                                  "eval_every", "eval_epochs", "eval_seed", "eval_target")
                     if getattr(self.train, name) != getattr(TrainConfig(), name)]
         if set_here:

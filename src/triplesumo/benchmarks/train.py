@@ -104,14 +104,14 @@ class _TrainerVariant:
         return total
 
     def warm_up(self) -> None:
-        while self.trainer.env_steps < self.warm_up_steps:
-            self.trainer.collect_step()
+        while self.trainer.collector.env_steps < self.warm_up_steps:
+            self.trainer.step()
 
     def run(self, steps: int) -> tuple[int, float]:
-        start_steps, t0 = self.trainer.env_steps, time.perf_counter()
-        while self.trainer.env_steps - start_steps < steps:
-            self.trainer.collect_step()
-        return self.trainer.env_steps - start_steps, time.perf_counter() - t0
+        start_steps, t0 = self.trainer.collector.env_steps, time.perf_counter()
+        while self.trainer.collector.env_steps - start_steps < steps:
+            self.trainer.step()
+        return self.trainer.collector.env_steps - start_steps, time.perf_counter() - t0
 
 
 class _SB3Variant:
@@ -333,7 +333,7 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
         v.warm_up()
     trainer = variants["train_paper"].trainer
     timers0 = dict(trainer.timers)
-    epochs0 = trainer.epochs_done
+    epochs0 = trainer.collector.epochs_done
     per_round: dict[str, list[float]] = {name: [] for name in variants}
     update_rounds: dict[str, list[float]] = {name: [] for name in variants}
     load_before = os.getloadavg()
@@ -361,8 +361,8 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     profile = update_profile(variants, seed) if update_steps else {}
     spent = {k: trainer.timers[k] - timers0[k] for k in timers0}
     wall = spent["env"] + spent["act"] + spent["wait"]
-    epochs = trainer.epochs_done - epochs0
-    finished_steps = trainer.finished_epoch_steps[epochs0:]
+    epochs = trainer.collector.epochs_done - epochs0
+    finished_steps = trainer.collector.finished_epoch_steps[epochs0:]
     mean_epoch = float(np.mean(finished_steps)) if finished_steps else None
     ratios = {"train_vs_env": rates["train_paper"] / rates["env_only"]}
     if "sb3_ddpg" in rates:
@@ -457,7 +457,7 @@ def run_warp_train_benchmark(steps: int = 2048, n_envs: int = 1024, device: str 
             update_rounds[name].append((variant.gradient_steps() - grads[name]) / spent[name])
     trainer = variants["env_only"].trainer
     result = {
-        "setup": {"backend": "warp", "device": str(trainer.device), "steps": steps, "rounds": rounds,
+        "setup": {"backend": "warp", "device": str(trainer.collector.xp.device), "steps": steps, "rounds": rounds,
                   "chunk": chunk, "n_envs": n_envs, "policies": list(policies), "seed": seed,
                   "learning_starts": learning_starts,
                   "ddpg_schedule": {"learn_every": n_envs, "gradient_steps": gradient_steps, "batch_size": batch_size},
@@ -469,7 +469,7 @@ def run_warp_train_benchmark(steps: int = 2048, n_envs: int = 1024, device: str 
     }
     for v in variants.values():
         v.trainer.log.close()
-        v.trainer.env.close()
+        v.trainer.collector.env.close()
     tmp.cleanup()
     return result
 

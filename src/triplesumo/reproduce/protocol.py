@@ -370,8 +370,8 @@ class Protocol:
                             out=str(self.out / "bug")) for a in self.cfg.algos]
 
     def bug_base(self) -> TrainConfig:
-        base = self._base(name="bug", learner="bug", policies=(f"ant={self.ant_policy}",
-                                                               f"spider={self.spider_policy}"),
+        base = self._base(name="bug", learn=("bug=ddpg",), policies=(f"ant={self.ant_policy}",
+                                                                     f"spider={self.spider_policy}"),
                           epochs=self.epochs["bug"],
                           **({} if self.cfg.tiny else {"checkpoint_every": 500,
                                                        "max_env_steps": self.cfg.bug_env_steps}))

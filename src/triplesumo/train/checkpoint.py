@@ -18,6 +18,9 @@ by their recorded epoch, never by name. A failed write (disk full, read-only, no
 permission) is a :class:`CheckpointWriteError` naming the file and the cause; the
 half-written folder is removed and the previous checkpoint stays intact and pointed to.
 Nothing is ever unpickled (``np.load`` with ``allow_pickle=False``, safetensors for tensors).
+
+Every part of a run (the collector, each learner, the seats, the evaluations) gives its :class:`State`
+(``state_dict()``) and takes it back (``load_state_dict``); a checkpoint is their union.
 """
 
 from __future__ import annotations
@@ -26,7 +29,9 @@ import json
 import os
 import shutil
 import zipfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +57,95 @@ MANIFEST = "manifest.json"
 
 class CheckpointError(PolicyFileError):
     """A checkpoint is missing, truncated, corrupt or incompatible (the message names the file)."""
+
+
+@dataclass
+class State:
+    """What a part of a run keeps in a checkpoint, by the file it goes to."""
+
+    json: dict[str, Any] = field(default_factory=dict)
+    """``state.json``: counters, generator states, records."""
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    """``arrays.npz``: the matches' physics, noise and rollout state, frozen evaluation weights."""
+    tensors: dict[str, torch.Tensor] = field(default_factory=dict)
+    """``weights.safetensors``: networks and optimiser state."""
+    replay: Mapping[str, np.ndarray] | None = None
+    """``replay.npz`` (optional): replay buffers."""
+    folder: Path | None = None
+    """The checkpoint folder it was read from (named by the errors of :meth:`require`)."""
+
+    def require(self, arrays: Iterable[str]) -> None:
+        """:class:`CheckpointError` naming ``arrays.npz`` unless it holds every one of ``arrays``."""
+        missing = [key for key in arrays if key not in self.arrays]
+        if missing:
+            raise CheckpointError(f"{Path(self.folder or '.') / 'arrays.npz'}: missing arrays {missing[:5]}")
+
+    @staticmethod
+    def union(parts: Iterable[State]) -> State:
+        """The parts' states side by side (a key two parts share is an error; their ``learners`` entries
+        merge)."""
+        out = State()
+        for part in parts:
+            pairs: tuple[tuple[dict[str, Any], dict[str, Any]], ...] = (
+                (out.json, part.json), (out.arrays, part.arrays), (out.tensors, part.tensors))
+            for mine, theirs in pairs:
+                for key, value in theirs.items():
+                    if key == "learners" and key in mine:
+                        mine[key] = {**mine[key], **value}
+                        continue
+                    if key in mine:
+                        raise ValueError(f"checkpoint: two parts write {key!r}")
+                    mine[key] = value
+            if part.replay is not None:
+                out.replay = {**(out.replay or {}), **part.replay}
+        return out
+
+    def named(self, name: str) -> State:
+        """A learner's state inside a checkpoint: its files' keys prefixed ``NAME.``, its JSON under
+        ``learners.NAME``."""
+        def prefixed(values: Mapping[str, Any]) -> dict[str, Any]:
+            return {f"{name}.{k}": v for k, v in values.items()}
+        return State({"learners": {name: self.json}}, prefixed(self.arrays), prefixed(self.tensors),
+                     None if self.replay is None else prefixed(self.replay), self.folder)
+
+    def of(self, name: str) -> State:
+        """Learner ``name``'s part of a whole checkpoint (:meth:`named` undone; its replay read lazily)."""
+        prefix = f"{name}."
+
+        def mine(values: Mapping[str, Any]) -> dict[str, Any]:
+            return {k.removeprefix(prefix): v for k, v in values.items() if k.startswith(prefix)}
+        replay = None if self.replay is None else _Prefixed(self.replay, prefix)
+        return State(self.json["learners"][name], mine(self.arrays), mine(self.tensors), replay, self.folder)
+
+
+@contextmanager
+def restoring(state: State) -> Iterator[None]:
+    """Where the parts load ``state``: an entry missing or malformed there is a :class:`CheckpointError` naming
+    the checkpoint's files (``replay.npz`` when a replay array is missing)."""
+    try:
+        yield
+    except CheckpointError:
+        raise
+    except (KeyError, IndexError, TypeError, ValueError, RuntimeError) as exc:
+        where = "replay.npz" if state.replay is not None and "replay arrays" in str(exc) else (
+            "state.json / arrays.npz / replay.npz / weights.safetensors")
+        raise CheckpointError(f"{state.folder} ({where}): missing or malformed entry: {exc!r}") from exc
+
+
+class _Prefixed(Mapping[str, np.ndarray]):
+    """The members ``PREFIX<key>`` of a mapping, as ``<key>`` (read only when used)."""
+
+    def __init__(self, source: Mapping[str, np.ndarray], prefix: str) -> None:
+        self._source, self.prefix = source, prefix
+
+    def __getitem__(self, key: str) -> np.ndarray:
+        return self._source[self.prefix + key]
+
+    def __iter__(self) -> Iterator[str]:
+        return (k.removeprefix(self.prefix) for k in self._source if k.startswith(self.prefix))
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
 
 
 def _fsync_dir(path: Path) -> None:
@@ -217,6 +311,15 @@ def latest(run_dir: Path) -> Path:
     if not info.get("dir") or not folder.is_dir():
         raise CheckpointError(f"{pointer}: points to {folder}, which does not exist")
     return folder
+
+
+def last_good(run_dir: Path) -> str:
+    """Where a stopped run can go on from: its latest checkpoint, in words."""
+    try:
+        folder = latest(run_dir)
+    except CheckpointError:
+        return "no checkpoint was saved before it (no good one exists)"
+    return f"the last good checkpoint {folder} is intact; `triplesumo train --resume {run_dir}` continues from it"
 
 
 def find(run_dir: Path, name: str) -> Path:

@@ -1,7 +1,8 @@
-"""Collection over the batched matches: every learner acts for its agents (with exploration), the fixed
-policies and league members for theirs; the matches step; each learner is handed its transitions and, when
-due, learns (off-policy updates in a thread beside the physics, PPO when its rollout is full); every finished
-match is an *epoch* whose rows go to the metrics tables.
+"""Collection over the batched matches: the :class:`Collector` steps them with the actions it is given and
+returns a :class:`Step`, the transitions of every seat and a :class:`MatchEnd` record of every *epoch* (one
+match) that finished, with each learning agent's metrics row. It keeps where the matches stand (observations,
+each learning agent's sums of the epoch so far, who is still in play, the epochs and env steps done) and
+gives it as its :meth:`Collector.state_dict`; it learns nothing and writes nothing.
 
 The matches are the public batched API (``triplesumo.vector_env``'s contract): arrays ``(n_envs, n_agents,
 ...)`` in and out, Gymnasium SAME_STEP autoreset (a finished match's last observation, outcome codes and reward
@@ -12,16 +13,14 @@ is :class:`VectorMatches` (numpy), ``backend="warp"`` is MuJoCo Warp's ``WarpMat
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import torch
 
-from triplesumo.agents.builtin import RandomPolicy, ZeroPolicy, act_batch
-from triplesumo.algos.base import DivergedError
+from triplesumo.algos.base import DivergenceError
 from triplesumo.envs.batch import MatchBatch, VectorMatches
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics import local_winning_rate, moving_winning_rate
@@ -29,10 +28,10 @@ from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.outcome import ERROR_CODE, PLAYING
 from triplesumo.rules.outcome import outcome_name as code_name
 from triplesumo.rules.rewards import TERMS
+from triplesumo.train.arrays import Arrays, host
+from triplesumo.train.checkpoint import State
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.learners import Learner, OffPolicyLearner, PPOLearner, host
-from triplesumo.train.logger import MetricsLog
-from triplesumo.train.seats import Seats
+from triplesumo.train.learners import Learner
 
 ACC_KEYS = ("dense_reward", "sparse_reward", *TERMS)
 """What a learning agent's epoch sums (its metrics row's reward columns), in the order of ``state.json``'s ``acc``."""
@@ -41,9 +40,7 @@ SAT_OUT: dict[str, Any] = {"outcome": "", "step": 0, "sat_out": True}
 """The ``final`` entry of a learning agent whose seat a league member takes for a match (self-play
 with several learning sides): its epoch does not wait for it, and it writes no metrics row."""
 
-
-class DivergenceError(FloatingPointError):
-    """A learner's losses, parameters or actions are no longer finite (names learner, update, checkpoint)."""
+__all__ = ["ACC_KEYS", "Collector", "DivergenceError", "MatchEnd", "Step", "make_env", "outcome_label"]
 
 
 def outcome_label(code: int) -> str:
@@ -51,10 +48,18 @@ def outcome_label(code: int) -> str:
     return "" if int(code) == PLAYING else code_name(int(code))
 
 
-def make_env(cfg: TrainConfig, match_cfg: MatchConfig) -> Any:
+def make_env(cfg: TrainConfig, match_cfg: MatchConfig,
+             reset_seed: Callable[[int], int | None] | None = None) -> Any:
     """The run's matches through the batched API (``triplesumo.vector_env``'s contract):
     :class:`VectorMatches` (``backend="cpu"``, numpy) or ``WarpMatchBatch`` (``"warp"``,
-    torch tensors on the device). Errors name the option."""
+    torch tensors on the device), each finished match's next one seeded by ``reset_seed(k)``. Errors name the
+    option."""
+    env = _build_env(cfg, match_cfg)
+    env.reset_seed = reset_seed
+    return env
+
+
+def _build_env(cfg: TrainConfig, match_cfg: MatchConfig) -> Any:
     if cfg.backend == "warp":
         try:
             from triplesumo.envs.warp import make_warp_vector_env
@@ -73,38 +78,41 @@ def make_env(cfg: TrainConfig, match_cfg: MatchConfig) -> Any:
         raise type(exc)(f"TrainConfig (scenario {cfg.scenario!r}, obs_mode {cfg.obs_mode!r}): {said}") from None
 
 
-class Updates(threading.Thread):
-    """Runs the off-policy updates due at one collection step (every learner's, in turn), in a
-    thread beside the physics or inline."""
+def match_parts(on_device: bool, arrays: Mapping[str, np.ndarray]) -> tuple[str, ...]:
+    """The arrays of each match (``match<k>.<part>``) a checkpoint of this backend holds: cpu every
+    ``Match.snapshot`` array; warp (``on_device``) the world's state, or none in a checkpoint written before warp
+    resumed exactly (its matches then restart)."""
+    if not on_device:
+        return ("physics", "last_obs", "warnings", "obs")
+    return ("physics", "obs") if "match0.physics" in arrays else ()
 
-    def __init__(self, due: list[tuple[OffPolicyLearner, int]],
-                 diverged: Callable[[Learner, str], DivergenceError]) -> None:
-        super().__init__(name="offpolicy-updates", daemon=True)
-        self.due, self.diverged, self.seconds = due, diverged, 0.0
-        self.error: BaseException | None = None
-        self._launched = False
 
-    def start(self) -> None:
-        self._launched = True
-        super().start()
+@dataclass
+class MatchEnd:
+    """A finished epoch: match ``match`` ended (or every learning agent in it is out), the run's ``epoch``-th."""
 
-    def run(self) -> None:
-        t = time.perf_counter()
-        try:
-            for learner, due in self.due:
-                try:
-                    learner.run_updates(due)
-                except DivergedError as exc:
-                    raise self.diverged(learner, str(exc)) from None
-        except BaseException as exc:  # re-raised in the collecting thread by finish()
-            self.error = exc
-        self.seconds = time.perf_counter() - t
+    match: int
+    epoch: int
+    outcomes: np.ndarray
+    """Every seat's outcome code."""
+    places: np.ndarray
+    """Every seat's place."""
+    rows: dict[str, tuple[dict[str, Any], float]] = field(default_factory=dict)
+    """Each learning agent that played it: its metrics row and its MWR with it."""
 
-    def finish(self) -> None:
-        if self._launched:
-            self.join()
-        if self.error is not None:
-            raise self.error
+
+@dataclass
+class Step:
+    """One step of every match: ``(n_envs, n_agents, ...)`` arrays (a finished match's last observation in
+    ``next_obs``, already reset in :attr:`Collector.obs`) and the epochs it finished, in match order."""
+
+    next_obs: Any
+    reward: Any
+    terminated: Any
+    truncated: Any
+    error: Any
+    """A physics error ended the match: its transitions are never learned from."""
+    ended: list[MatchEnd]
 
 
 class Collector:
@@ -112,37 +120,29 @@ class Collector:
     of the epoch so far, who is still in play, the epochs and env steps done, every agent's local winning rates.
 
     One *epoch* is one match: it ends when the match is over or when every learning agent in it is out
-    (elimination rules); each learning agent then gets one row in its metrics table (self-play with both
-    sides learning: each agent that played it; one that sat it out has none). ``on_match_end(k, outcomes,
-    places)`` is called for every epoch of a self-play run (the league rates it); ``diverged`` makes the error
-    that stops a diverging learner.
+    (elimination rules); each learning agent then gets one row (self-play with both sides learning: each agent
+    that played it; one that sat it out has none). Every match is seeded from ``rng``, in match order.
     """
 
-    def __init__(self, cfg: TrainConfig, probe: Match, env: Any, device: torch.device | None,
-                 learners: Sequence[Learner], others: list[tuple[int, Any]], on_device: dict[int, Any],
-                 seats: Seats, rng: np.random.Generator, diverged: Callable[[Learner, str], DivergenceError]) -> None:
-        self.cfg, self.probe, self.env, self.device, self.seats = cfg, probe, env, device, seats
-        self.learners, self.rng, self.diverged = list(learners), rng, diverged
-        self.agents = [a for learner in learners for a in learner.spec.agents]
+    def __init__(self, cfg: TrainConfig, match_cfg: MatchConfig, probe: Match, agents: Sequence[str],
+                 rng: np.random.Generator) -> None:
+        self.cfg, self.probe, self.rng = cfg, probe, rng
+        self.env = make_env(cfg, match_cfg, reset_seed=lambda k: self.episode_seed())
+        """The matches (a finished one is reset by the env itself, seeded in match order)."""
+        self.xp = Arrays(getattr(self.env, "device", None) if cfg.backend == "warp" else None)
+        """Where the matches' arrays live (numpy, or torch tensors on the device of a ``warp`` run)."""
+        self.agents = list(agents)
         """The learning agents, learner by learner."""
         self.agent_index = [probe.agents.index(a) for a in self.agents]
         """Roster index of each learning agent."""
         self.elimination = probe.elimination
         """Elimination rules (ffa, pursuit): an agent may leave its match before the match ends."""
-        self.others = others
-        """Roster index and policy of every agent that does not learn."""
-        self.on_device = on_device
-        """Roster index -> a trained fixed policy acting on the device (``warp``; others act on the host)."""
-        env.reset_seed = lambda k: self.episode_seed()  # a finished match's next seed, in match order
-        self.log: MetricsLog | None = None
-        """Where epochs are written (set by the trainer once the run's tables are open)."""
-        self.on_match_end: Callable[[int, np.ndarray, np.ndarray], None] | None = None
         self.epochs_done = 0
         self.env_steps = 0
         self.lwr: dict[str, list[float]] = {a: [] for a in self.agents}
         self.finished_epoch_steps: list[int] = []
         """Length of every epoch finished by this process (not restored on resume)."""
-        self.acc: Any = self.zeros((cfg.n_envs, len(self.agents), len(ACC_KEYS)), float64=True)
+        self.acc: Any = self.xp.zeros((cfg.n_envs, len(self.agents), len(ACC_KEYS)), float64=True)
         """Each match's sums of :data:`ACC_KEYS` so far, per learning agent (on the device for warp)."""
         self.final: dict[str, list[dict[str, Any] | None]] = {a: [None] * cfg.n_envs for a in self.agents}
         """The last info (outcome, step) of a learning agent already out of a match still running."""
@@ -150,45 +150,34 @@ class Collector:
         """Per match, per learning agent: still in play (``final`` is None)."""
         self.obs: Any = None
         """Every match's current observations ``(n_envs, n_agents, obs_dim)`` (numpy, or a device tensor)."""
-        self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0, "wait": 0.0}
-        """Seconds collecting (physics and rules), acting, learning (off-policy updates run in a
-        thread: they overlap "env" when overlap_learning is on; PPO's run inline) and waiting
-        for learning."""
 
     # ------------------------------------------------------------------ matches
-    def start(self) -> None:
-        """Seat every match and reset them all (a new run)."""
-        n = self.cfg.n_envs
-        for k in range(n):
-            self.seat(k)
-        self.playing = np.array([[self.final[a][k] is None for a in self.agents] for k in range(n)],
-                                dtype=bool)  # False: the agent sits the match out
-        self.obs = self.env.reset(seed=[self.episode_seed() for _ in range(n)])[0]
+    def reset(self) -> None:
+        """Start every match (a new run), each from the next seed of the run's generator."""
+        self.obs = self.env.reset(seed=[self.episode_seed() for _ in range(self.cfg.n_envs)])[0]
 
-    def seat(self, k: int) -> None:
-        """Draw match ``k``'s league members (:meth:`Seats.draw`); a learner whose seats they take sits the match
-        out: its rows are out of play and it gets no metrics row for it."""
-        if self.seats.league is None:
-            return
-        self.seats.draw(k)
-        for learner in self.learners:
-            plays = self.seats.plays(learner, k)
-            learner.active[learner.rows_of(k)] = plays
-            for agent in learner.spec.agents:
-                self.final[agent][k] = None if plays else dict(SAT_OUT)
+    def begin_match(self, k: int, sitting_out: Sequence[str] = ()) -> None:
+        """Match ``k``'s epoch starts; the learning agents ``sitting_out`` (a league member takes their seats)
+        play no part in it and get no row for it."""
+        for j, agent in enumerate(self.agents):
+            self.final[agent][k] = dict(SAT_OUT) if agent in sitting_out else None
+            self.playing[k, j] = agent not in sitting_out
 
     def episode_seed(self) -> int:
         return int(self.rng.integers(2**31 - 1))
 
-    def zeros(self, shape: tuple[int, ...], float64: bool = False) -> Any:
-        """Zeros where the run's arrays live: numpy float64 on ``cpu``, a float32 (or float64) tensor on the device."""
-        if self.device is None:
-            return np.zeros(shape)
-        return torch.zeros(shape, dtype=torch.float64 if float64 else torch.float32, device=self.device)
-
     def rows(self, learner: Learner) -> Any:
         """The learner's observations, ``(n_envs x len(agents), obs_dim)``, match-major."""
         return self.obs[:, learner.index].reshape(-1, learner.obs_dim)
+
+    def actions(self, learners: Sequence[Learner], acted: Sequence[Any]) -> Any:
+        """The step's actions ``(n_envs, n_agents, action_width)``: each learner's in its columns, zeros in
+        every other seat (for the seats to fill)."""
+        n, probe = self.cfg.n_envs, self.probe
+        actions = self.xp.zeros((n, probe.n_agents, probe.action_width))
+        for learner, act in zip(learners, acted, strict=True):
+            actions[:, learner.index, :learner.act_dim] = act.reshape(n, len(learner.index), learner.act_dim)
+        return actions
 
     @property
     def batch(self) -> MatchBatch:
@@ -199,123 +188,38 @@ class Collector:
         return self.env.batch
 
     # -------------------------------------------------------------------- step
-    def step(self) -> int:
-        """Step every match once; returns the number of epochs that finished."""
-        cfg, n, probe = self.cfg, self.cfg.n_envs, self.probe
-        t0 = time.perf_counter()
-        actions = self.zeros((n, probe.n_agents, probe.action_width))
-        seen, acted = [], []
-        for learner in self.learners:
-            obs = self.rows(learner)
-            try:
-                act = learner.act(obs, self.rng)
-            except DivergedError as exc:
-                raise self.diverged(learner, str(exc)) from None
-            actions[:, learner.index, :learner.act_dim] = act.reshape(n, len(learner.index), learner.act_dim)
-            seen.append(obs)
-            acted.append(act)
-        for i, policy in self.others:
-            if i in self.seats.league_seats or (self.device is not None and isinstance(policy, ZeroPolicy)):
-                continue
-            if i in self.on_device:
-                actions[:, i, :probe.action_sizes[i]] = self.on_device[i](self.obs[:, i])
-            elif self.device is None:
-                actions[:, i, :probe.action_sizes[i]] = act_batch(policy, self.obs[:, i])
-            else:  # warp: drawn on the host from the policy's own generator (its cpu stream), one copy
-                fixed = policy.sample(n) if isinstance(policy, RandomPolicy) else act_batch(
-                    policy, host(self.obs[:, i]))
-                actions[:, i, :probe.action_sizes[i]] = torch.as_tensor(fixed, dtype=torch.float32,
-                                                                        device=self.device)
-        if self.device is None:
-            self.seats.act_on_host(actions, self.obs)
-        elif self.seats.league is not None:
-            self.seats.act_on_device(actions, self.obs)
-        t1 = time.perf_counter()
-        # The off-policy updates due at this step learn from the replay as it was before the
-        # step, so they can run while MuJoCo steps the matches (GIL released in mujoco.batch and
-        # in torch's kernels). Overlapped or not, the result is bit for bit the same.
-        due = [(lr, d) for lr in self.learners if isinstance(lr, OffPolicyLearner) and (d := lr.updates_due())]
-        updates = Updates(due, self.diverged)
-        if due and cfg.overlap_learning:
-            updates.start()
-        elif due:
-            updates.run()
+    def step(self, actions: Any) -> Step:
+        """Step every match once with ``actions``; the epochs that finished are accounted and their matches
+        already started again."""
         obs, _, terminated, truncated, infos = self.env.step(actions)  # finished matches are already reset
-        t2 = time.perf_counter()
-        updates.finish()
-        t_joined = time.perf_counter()
-        self.env_steps += n  # counted before epochs end, so their rows include this step
-        where = np.where if self.device is None else torch.where
+        self.env_steps += self.cfg.n_envs  # counted before epochs end, so their rows include this step
         done = infos["_final_obs"]
-        next_obs = where(done[:, None, None], infos["final_obs"], obs)  # a finished match's last observation
-        reward = infos["dense_reward"] + infos["sparse_reward"]
-        error = infos["outcome"] == ERROR_CODE
-        for learner, seen_obs, act in zip(self.learners, seen, acted, strict=True):
-            self._store(learner, seen_obs, act, next_obs, reward, terminated, truncated, error)
-        finished = self._account(obs, terminated, infos)
-        t3 = time.perf_counter()
-        for learner in self.learners:
-            if isinstance(learner, PPOLearner):
-                try:
-                    learner.update_if_full(self.rows(learner))
-                except DivergedError as exc:
-                    raise self.diverged(learner, str(exc)) from None
-        learned = time.perf_counter() - t3
-        self.timers["act"] += t1 - t0
-        self.timers["env"] += (t2 - t1) + (t3 - t_joined)
-        self.timers["learn"] += updates.seconds + learned  # the thread's part overlaps "env"
-        self.timers["wait"] += t_joined - t2
-        return finished
+        step = Step(next_obs=self.xp.where(done[:, None, None], infos["final_obs"], obs),
+                    reward=infos["dense_reward"] + infos["sparse_reward"], terminated=terminated,
+                    truncated=truncated, error=infos["outcome"] == ERROR_CODE, ended=[])
+        step.ended = self._account(obs, terminated, infos)
+        return step
 
-    def _store(self, learner: Learner, obs: Any, act: Any, next_obs: Any, reward: Any, terminated: Any,
-               truncated: Any, error: Any) -> None:
-        """Hand the learner its rows' step (``(n_envs, n_agents, ...)`` arrays of the whole batch):
-        rewards, next observations, ends, which rows played."""
-        idx = learner.index
-        rew = reward[:, idx].reshape(-1)
-        nxt = next_obs[:, idx].reshape(-1, learner.obs_dim)
-        term = terminated[:, idx].reshape(-1)  # the match was won or lost, or the agent left it
-        trunc = truncated[:, idx].reshape(-1) & ~term  # a draw by time limit bootstraps
-        valid = ~error[:, idx].reshape(-1)  # a physics error's transition is never learned from
-        active = learner.active
-        if not active.all():  # rows out of play (elimination rules, or sat out in self-play): nothing
-            on: Any = active if self.device is None else torch.as_tensor(active, device=self.device)
-            where: Any = np.where if self.device is None else torch.where
-            rew, term, trunc = where(on, rew, 0.0), term & on, trunc & on
-            valid, nxt = valid | ~on, where(on[:, None], nxt, obs)
-        learner.store(obs, act, rew, nxt, term, trunc, valid, active.copy())
-        if self.elimination:  # an agent that left stays out until its match is reset
-            learner.active &= ~term
-
-    def _account(self, obs: Any, terminated: Any, infos: Mapping[str, Any]) -> int:
+    def _account(self, obs: Any, terminated: Any, infos: Mapping[str, Any]) -> list[MatchEnd]:
         """Add the step to every learning agent's sums; end the epoch of each match that is over
-        (already reset by the env) or whose learning agents are all out (reset here). Returns how
-        many epochs ended."""
-        assert self.log is not None
-        league = self.seats.league
-        terms: Any
-        if self.device is None:
-            terms = np.stack([infos[key][:, self.agent_index] for key in ACC_KEYS], axis=-1)
-        else:
-            terms = torch.stack([infos[key][:, self.agent_index] for key in ACC_KEYS], dim=-1).double()
+        (already reset by the env) or whose learning agents are all out (restarted here)."""
+        xp = self.xp
+        terms = xp.stack([infos[key][:, self.agent_index] for key in ACC_KEYS], axis=-1)
         if self.playing.all():
             self.acc += terms
-        elif self.device is None:  # an agent out of a match still running adds nothing more to its epoch
-            self.acc += np.where(self.playing[..., None], terms, 0.0)
-        else:  # (or one sitting it out, self-play)
-            self.acc += torch.where(torch.as_tensor(self.playing[..., None], device=self.device), terms, 0.0)
+        else:  # an agent out of a match still running (or sitting it out) adds nothing more to its epoch
+            self.acc += xp.where(xp.put(self.playing[..., None]), terms, 0.0)
         self.obs = obs
         done = host(infos["_final_obs"])
         out = host(terminated[:, self.agent_index]) if self.elimination else None
         events = done | out.any(-1) if out is not None else done
         rows = np.flatnonzero(events)
         if not len(rows):
-            return 0
-        sel: Any = rows if self.device is None else torch.as_tensor(rows, device=self.device)
-        outcome, steps = host(infos["outcome"][sel]), host(infos["step"][sel])
-        places = host(infos["place"][sel]) if league is not None else None
+            return []
+        sel = xp.put(rows)
+        outcome, steps, places = (host(infos[key][sel]) for key in ("outcome", "step", "place"))
         sums = host(self.acc[sel])
-        ended = []
+        ended: list[MatchEnd] = []
         for r, k in enumerate(rows.tolist()):
             if out is not None:
                 for j, agent in enumerate(self.agents):
@@ -327,33 +231,23 @@ class Collector:
             if not over and any(self.final[a][k] is None for a in self.agents):
                 continue
             self.epochs_done += 1
+            end = MatchEnd(k, self.epochs_done, outcome[r], places[r])
             for j, agent in enumerate(self.agents):
                 code = outcome[r, self.agent_index[j]]
                 last = self.final[agent][k] or {"outcome": outcome_label(code), "step": int(steps[r])}
                 if "sat_out" not in last:  # a learner that sat the match out (self-play) has no row for it
-                    self._agent_row(agent, last, sums[r, j])
+                    end.rows[agent] = self._agent_row(agent, last, sums[r, j])
                 self.final[agent][k] = None
+            self.playing[k] = True
             self.finished_epoch_steps.append(int(steps[r]))
-            for learner in self.learners:
-                self.log.learned(learner.name, self.epochs_done, learner.algo.num_updates, learner.take_stats())
-            if league is not None:
-                assert places is not None and self.on_match_end is not None
-                self.on_match_end(k, outcome[r], places[r])
-                self.seat(k)
             if not over:  # every learning agent is out: the epoch ends before the match does
                 self.obs[k] = self.env.restart(k, self.episode_seed())
-            for learner in self.learners:
-                lrows = learner.rows_of(k)
-                learner.active[lrows] = self.seats.plays(learner, k) if league is not None else True
-                learner.reset_rows(lrows)
-            self.playing[k] = [self.final[a][k] is None for a in self.agents]  # False: sits this match out
-            ended.append(k)
+            ended.append(end)
         if ended:
-            self.acc[ended if self.device is None else torch.as_tensor(ended, device=self.device)] = 0.0
-        return len(ended)
+            self.acc[xp.put(np.array([e.match for e in ended]))] = 0.0
+        return ended
 
-    def _agent_row(self, agent: str, last: dict[str, Any], acc: np.ndarray) -> None:
-        assert self.log is not None
+    def _agent_row(self, agent: str, last: dict[str, Any], acc: np.ndarray) -> tuple[dict[str, Any], float]:
         sums = dict(zip(ACC_KEYS, acc.tolist(), strict=True))
         lwr = float(local_winning_rate([last["outcome"]])[0])
         self.lwr[agent].append(lwr)
@@ -361,7 +255,7 @@ class Collector:
         row = {"epoch": len(self.lwr[agent]), "outcome": last["outcome"], "local_winning_rate": lwr,
                "steps": last["step"], "total_reward": total, **sums, "env_steps": self.env_steps,
                "wall_time": round(time.time(), 3)}  # epoch: the agent's own matches (= the run's, unless it sat out)
-        self.log.epoch(agent, row, self.mwr(agent))
+        return row, self.mwr(agent)
 
     def mwr(self, agent: str | None = None) -> float:
         """MWR of ``agent`` (default: the first learning agent) over the last λ epochs (mean
@@ -370,3 +264,45 @@ class Collector:
         if not lwr:
             return 0.0
         return float(moving_winning_rate(np.array(lwr[-self.cfg.window:]), self.cfg.window)[-1])
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> State:
+        """Every match's exact state (the env's ``snapshot``: arrays apart, the rest in ``matches``), its
+        observations, the epoch sums so far, who is out, the counters and the local winning rates."""
+        snaps = self.env.snapshot()
+        obs, acc = host(self.obs), host(self.acc).tolist()
+        arrays: dict[str, np.ndarray] = {}
+        for k, s in enumerate(snaps):
+            arrays |= {f"match{k}.{key}": v for key, v in s.items() if isinstance(v, np.ndarray)}
+            arrays[f"match{k}.obs"] = np.array(obs[k])
+        arrays |= {f"lwr.{agent}": np.array(lwr) for agent, lwr in self.lwr.items()}
+        return State(json={
+            "epochs_done": self.epochs_done, "env_steps": self.env_steps,
+            "matches": [{key: v for key, v in s.items() if not isinstance(v, np.ndarray)}
+                        for s in snaps],  # steps, generator, who is still in play (elimination rules)
+            "acc": {agent: [dict(zip(ACC_KEYS, per_match[j], strict=True)) for per_match in acc]
+                    for j, agent in enumerate(self.agents)},
+            "final": self.final}, arrays=arrays)
+
+    def load_state_dict(self, state: State) -> bool:
+        """Restore :meth:`state_dict`: every match continues exactly where it was. A ``warp`` checkpoint written
+        before warp resumed exactly holds no matches: they start again (each from the next seed), and False
+        says so (their epochs in progress are dropped)."""
+        n, arrays, saved = self.cfg.n_envs, state.arrays, state.json
+        parts = match_parts(self.xp.on_device, arrays)
+        state.require([f"lwr.{a}" for a in self.agents] + [f"match{k}.{part}" for k in range(n) for part in parts])
+        continued = bool(parts)
+        if continued:
+            self.obs = self.xp.put(np.stack([np.asarray(arrays[f"match{k}.obs"], dtype=np.float32) for k in range(n)]))
+            self.env.restore([{part: arrays[f"match{k}.{part}"] for part in parts if part != "obs"}
+                              | saved["matches"][k] for k in range(n)], self.obs)
+            self.final = {a: saved["final"][a] for a in self.agents}
+            self.acc = self.xp.put(np.array([[[saved["acc"][a][k][key] for key in ACC_KEYS] for a in self.agents]
+                                             for k in range(n)], dtype=np.float64))
+        else:
+            self.reset()
+        self.playing = np.array([[self.final[a][k] is None for a in self.agents] for k in range(n)], dtype=bool)
+        self.epochs_done = int(saved["epochs_done"])
+        self.env_steps = int(saved["env_steps"])
+        self.lwr = {a: [float(x) for x in arrays[f"lwr.{a}"]] for a in self.agents}
+        return continued

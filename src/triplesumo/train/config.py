@@ -7,6 +7,7 @@ import math
 import os
 import types
 import typing
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,6 +27,8 @@ ALGOS = ("ddpg", "td3", "sac", "ppo")
 SHARE_MODES = ("none", "team")
 BACKENDS = ("cpu", "warp")
 DEVICES = (None, "cpu", "cuda")
+DEFAULT_LEARN = ("bug=ddpg",)
+"""The paper's one learner: Bug, with DDPG."""
 DEFAULT_POLICIES = ("ant=zoo:ant", "spider=zoo:spider")
 """The other agents of the paper's third stage: the ongoing match of the trained Ant and Spider."""
 
@@ -54,10 +57,10 @@ def typed_value(tp: Any, text: str, where: str) -> Any:
 class TrainConfig:
     """Learners trained in a match whose other agents follow given policies.
 
-    By default one DDPG learner (``learner``); ``learn`` names several, each with its
-    algorithm (``ant=sac bug=td3``), and ``share="team"`` gives the learning agents of a team
+    ``learn`` names the learners, each with its algorithm (by default ``bug=ddpg``, the paper's one
+    DDPG learner; ``ant=sac bug=td3`` two), and ``share="team"`` gives the learning agents of a team
     one shared network. The paper's stages are runs of the one-learner case with different
-    arguments: Ant first (learner ant, Spider random, Bug passive), then Spider against the
+    arguments: Ant first (learn ant=ddpg, Spider random, Bug passive), then Spider against the
     trained Ant, then Bug in the ongoing match of the trained Ant and Spider.
     """
 
@@ -65,11 +68,11 @@ class TrainConfig:
     """Run name: the run folder is OUT/NAME."""
     out: str = "runs"
     """Folder that holds run folders."""
-    learner: str = "bug"
-    """The agent trained with DDPG when learn is empty (the paper's one-learner case)."""
-    learn: tuple[str, ...] = ()
-    """AGENT=ALGO for every learning agent (algo: ddpg, td3, sac or ppo), e.g. ant=sac bug=sac;
-    empty: learner=ddpg. Given, it replaces learner."""
+    learn: tuple[str, ...] = DEFAULT_LEARN
+    """AGENT=ALGO for every learning agent (algo: ddpg, td3, sac or ppo), e.g. ant=sac bug=sac; the paper's
+    one-learner case is bug=ddpg."""
+    learner: str | None = None
+    """Deprecated, use learn AGENT=ddpg: the one agent trained with DDPG."""
     share: str = "none"
     """none: one network per learning agent; team: one shared network (and replay or rollout)
     per team, fed by all its learning agents (they must use the same algorithm)."""
@@ -173,6 +176,16 @@ class TrainConfig:
         for name in ("policies", "learn", "learner_config"):
             if isinstance(getattr(self, name), list):
                 object.__setattr__(self, name, tuple(getattr(self, name)))
+        if self.learner is not None:  # the deprecated name of a one-DDPG-learner learn
+            warnings.warn("TrainConfig.learner is deprecated: use learn AGENT=ddpg (--learn AGENT=ddpg)",
+                          DeprecationWarning, stacklevel=3)
+            if self.learn != DEFAULT_LEARN:
+                raise ValueError(f"TrainConfig.learner (deprecated) and learn both name the learners "
+                                 f"({self.learner!r}, {self.learn!r}): give learn only")
+            object.__setattr__(self, "learn", (f"{self.learner}=ddpg",))
+            object.__setattr__(self, "learner", None)
+        if not self.learn:
+            raise ValueError("TrainConfig.learn must name at least one learning agent (AGENT=ALGO)")
         if not self.name or self.name in (".", "..") or any(sep in self.name for sep in ("/", "\\", os.sep)):
             raise ValueError(f"TrainConfig.name must be a plain folder name inside out (no path separator, "
                              f"not . or ..), got {self.name!r}")
@@ -184,7 +197,7 @@ class TrainConfig:
         if len(set(agents)) < len(agents):
             twice = sorted({a for a in agents if agents.count(a) > 1})
             raise ValueError(f"TrainConfig.learn names an agent twice: {twice}")
-        if self.learn and self.policies == DEFAULT_POLICIES:
+        if self.policies == DEFAULT_POLICIES:
             learning = set(self.learners())
             object.__setattr__(self, "policies", tuple(p for p in self.policies if p.split("=")[0] not in learning))
         if self.share not in SHARE_MODES:
@@ -272,7 +285,5 @@ class TrainConfig:
                                reward=self.reward, physics=self.physics)
 
     def learners(self) -> dict[str, str]:
-        """Learning agent -> algorithm, in the order given (``{learner: "ddpg"}`` when learn is empty)."""
-        if not self.learn:
-            return {self.learner: "ddpg"}
+        """Learning agent -> algorithm, in the order given."""
         return {pair.split("=")[0]: pair.split("=")[1] for pair in self.learn}

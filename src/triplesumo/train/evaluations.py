@@ -24,6 +24,7 @@ import numpy as np
 from triplesumo.agents.frozen import FrozenPolicy
 from triplesumo.agents.zoo import policies_from_pairs
 from triplesumo.rules.config import MatchConfig
+from triplesumo.train.checkpoint import State
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.learners import Learner
 from triplesumo.train.logger import MetricsLog
@@ -204,8 +205,9 @@ class Evaluations:
         return cfg.eval_target is not None and all(float(stats["mean_lwr"]) >= cfg.eval_target for _, stats in done)
 
     # ------------------------------------------------------------------ checkpoints
-    def state(self) -> tuple[list[dict[str, Any]], dict[str, np.ndarray]]:
-        """The evaluations in flight, for a checkpoint: their records (state.json) and frozen weights (arrays)."""
+    def state_dict(self) -> State:
+        """The evaluations written and the time spent on them; those in flight, as records (state.json) and
+        frozen weights (arrays), which a resume hands to the worker again."""
         records: list[dict[str, Any]] = []
         arrays: dict[str, np.ndarray] = {}
         for job in self.pending:
@@ -215,11 +217,15 @@ class Evaluations:
                 arrays |= {f"pending_eval{job.number}.{name}.{k}": v for k, v in tensors.items()}
             records.append({"number": job.number, "env_steps": job.env_steps, "epochs": job.epochs,
                             "train_seconds": job.train_seconds, "learners": learners})
-        return records, arrays
+        return State(json={"evaluations": self.count, "eval_seconds": self.seconds, "pending_evaluations": records},
+                     arrays=arrays)
 
-    def restore(self, records: Sequence[Mapping[str, Any]], arrays: Mapping[str, np.ndarray]) -> None:
-        """Hand the evaluations in flight at the checkpoint to the worker again (after :attr:`count` is set)."""
-        for record in records:
+    def load_state_dict(self, state: State) -> None:
+        """Restore :meth:`state_dict` (0 evaluations for a checkpoint written before they were counted)."""
+        saved, arrays = state.json, state.arrays
+        self.count = int(saved.get("evaluations", 0))
+        self.seconds = float(saved.get("eval_seconds", 0.0))
+        for record in saved.get("pending_evaluations", []):
             number = int(record["number"])
             frozen: Frozen = {name: (tuple(entry["agents"]),
                                      {k: np.asarray(arrays[f"pending_eval{number}.{name}.{k}"])

@@ -3,13 +3,15 @@ learner acts, stores what it saw and learns.
 
 A :class:`Learner` drives one algorithm for one agent, or (``share="team"``) for all the
 learning agents of a team, in every match of the batch: its *rows* are the ``n_envs x
-len(agents)`` (match, agent) pairs, match-major. Off-policy learners (DDPG, TD3, SAC) store
-their rows' transitions in their own replay buffer and run the updates
-:meth:`~triplesumo.algos.offpolicy.OffPolicyAlgorithm.updates_due` says, in a thread beside
-the physics (:meth:`OffPolicyLearner.run_updates`); PPO records its rows into its ``(T, rows)``
-rollout and updates when the rollout is full (:meth:`PPOLearner.finish_step`). A row whose
-agent is out of its match (elimination rules) stays out until the match is reset: it adds no
-transition (PPO keeps it in the rollout's shape, marked invalid).
+len(agents)`` (match, agent) pairs, match-major. The training loop calls it: :meth:`Learner.act`,
+:meth:`Learner.store` (its columns of a collected :class:`~triplesumo.train.collect.Step`),
+:meth:`Learner.begin_match` when a match of its rows starts, and :meth:`Learner.learn`.
+Off-policy learners (DDPG, TD3, SAC) store their rows' transitions in their own replay buffer and
+run the updates :meth:`~triplesumo.algos.offpolicy.OffPolicyAlgorithm.updates_due` says, in a
+thread beside the physics (:class:`Updates`); PPO records its rows into its ``(T, rows)`` rollout
+and updates when the rollout is full. A row whose agent is out of its match (elimination rules)
+stays out until the match is reset: it adds no transition (PPO keeps it in the rollout's shape,
+marked invalid). Each learner keeps its own state (:meth:`Learner.state_dict`).
 
 On a device-resident collection (``train --backend warp``) observations, actions, rewards and
 flags arrive as torch tensors on the learner's ``device`` and stay there: the networks act on
@@ -21,14 +23,16 @@ the host generators, which keeps their streams and checkpoints those of the CPU 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+import threading
+import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
 
-from triplesumo.algos.base import Algorithm, DivergedError, not_finite
+from triplesumo.algos.base import Algorithm, DivergenceError, not_finite
 from triplesumo.algos.ddpg import DDPG
 from triplesumo.algos.noise import ActionNoise, make_noise
 from triplesumo.algos.offpolicy import OffPolicyAlgorithm
@@ -37,6 +41,8 @@ from triplesumo.algos.replay import FIELDS, ReplayBuffer, TorchReplayBuffer
 from triplesumo.algos.sac import SAC
 from triplesumo.algos.td3 import TD3
 from triplesumo.rules.config import check_shared_network
+from triplesumo.train.arrays import Arrays, finite, host
+from triplesumo.train.checkpoint import State
 from triplesumo.train.config import TrainConfig
 
 ALGORITHMS: dict[str, type[Algorithm]] = {"ddpg": DDPG, "td3": TD3, "sac": SAC, "ppo": PPO}
@@ -60,10 +66,9 @@ def learner_specs(cfg: TrainConfig, roster: tuple[str, ...] | list[str], teams: 
     whose learning agents use different algorithms.
     """
     learning = cfg.learners()
-    field = "TrainConfig.learn" if cfg.learn else "TrainConfig.learner"
     unknown = [a for a in learning if a not in roster]
     if unknown:
-        raise ValueError(f"{field} names unknown agents {unknown}; agents are {list(roster)} "
+        raise ValueError(f"TrainConfig.learn names unknown agents {unknown}; agents are {list(roster)} "
                          f"(scenario {cfg.scenario!r})")
     if cfg.share == "none":  # (learner_config names only agents that learn here: checked by the config)
         return [LearnerSpec(agent, algo, (agent,)) for agent, algo in learning.items()]
@@ -86,23 +91,37 @@ def learner_specs(cfg: TrainConfig, roster: tuple[str, ...] | list[str], teams: 
     return specs
 
 
+class Transitions(Protocol):
+    """One collected step of every match, ``(n_envs, n_agents, ...)`` arrays of the whole batch
+    (:class:`~triplesumo.train.collect.Step`)."""
+
+    next_obs: Any
+    reward: Any
+    terminated: Any
+    truncated: Any
+    error: Any
+
+
 class Learner:
     """One algorithm acting for ``spec.agents`` (match indices ``index``) in ``n_envs`` matches."""
 
     algo: Algorithm
 
     def __init__(self, spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig,
-                 obs_dim: int, act_dim: int, device: torch.device | None = None) -> None:
+                 obs_dim: int, act_dim: int, device: torch.device | None = None, elimination: bool = False) -> None:
         self.spec, self.name, self.index = spec, spec.name, index
         self.config: Any = cfg.algo_config(spec.name)
-        self.device = device
-        """Torch device of a device-resident collection (its inputs are tensors there); None: numpy."""
+        self.xp = Arrays(device)
+        """Where its inputs live: numpy, or tensors on the device of a device-resident collection."""
+        self.elimination = elimination
+        """Whether an agent may leave its match before the match ends (its rows then stay out until it is reset)."""
         self.algo = ALGORITHMS[spec.algo](obs_dim, act_dim, self.config, seed=cfg.seed + position,
                                           device=device or "cpu")
         self.obs_dim, self.act_dim = obs_dim, act_dim
         self.n_rows = cfg.n_envs * len(index)
         self.active = np.ones(self.n_rows, dtype=bool)
-        """Rows still in their match (False once the agent is out, until the match is reset)."""
+        """Rows in play: False once the agent is out of its match, or while a league member takes its seat,
+        until :meth:`begin_match`."""
         self.collected = 0
         """Transitions this learner has collected (its rows in play, step after step)."""
         self.parameters = [(f"{owner}.{name}", p) for owner, module in vars(self.algo).items()
@@ -118,18 +137,58 @@ class Learner:
         rows[match * len(self.index):(match + 1) * len(self.index)] = True
         return rows
 
-    def act(self, obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)``."""
+    def diverged(self, what: str) -> DivergenceError:
+        return DivergenceError(what, learner=self.name)
+
+    def act(self, obs: Any, rng: np.random.Generator) -> Any:
+        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)``, with its
+        exploration (drawn from ``rng``); :class:`DivergenceError` when they are not finite."""
+        self.algo.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
+        action = self._explore(obs, rng)
+        if not finite(action):
+            raise self.diverged("its actions are not finite")
+        return action
+
+    def _explore(self, obs: Any, rng: np.random.Generator) -> Any:
         raise NotImplementedError
 
-    def store(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
-              valid: Any, played: np.ndarray) -> None:
-        """Take the step of every row: ``played`` rows were in their match, ``valid`` ones are
-        real steps (no physics error); ``terminated`` rows end without a bootstrap."""
+    def store(self, obs: Any, action: Any, step: Transitions) -> None:
+        """Take its rows of a collected step: it acted ``action`` on ``obs`` (its rows). Rows out of play
+        add nothing; a physics error's transition is never learned from; a draw by time limit bootstraps. With
+        elimination rules an agent that left stays out until its match starts again (:meth:`begin_match`)."""
+        idx, xp = self.index, self.xp
+        reward = step.reward[:, idx].reshape(-1)
+        next_obs = step.next_obs[:, idx].reshape(-1, self.obs_dim)
+        terminated = step.terminated[:, idx].reshape(-1)  # the match was won or lost, or the agent left it
+        truncated = step.truncated[:, idx].reshape(-1) & ~terminated
+        valid = ~step.error[:, idx].reshape(-1)
+        if not self.active.all():  # rows out of play (elimination rules, or sat out in self-play): nothing
+            on = xp.put(self.active)
+            reward, terminated, truncated = xp.where(on, reward, 0.0), terminated & on, truncated & on
+            valid, next_obs = valid | ~on, xp.where(on[:, None], next_obs, obs)
+        played = self.active.copy()
+        self.collected += int(played.sum())
+        self._record(obs, action, reward, next_obs, terminated, truncated, valid, played)
+        if self.elimination:
+            self.active &= ~host(terminated)
+
+    def _record(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
+                valid: Any, played: np.ndarray) -> None:
+        """Keep the step of every row: ``played`` rows were in their match, ``valid`` ones are real steps."""
         raise NotImplementedError
 
-    def reset_rows(self, rows: np.ndarray) -> None:
-        """The matches of ``rows`` were reset (e.g. restart their exploration noise)."""
+    def begin_match(self, match: int, plays: bool = True) -> None:
+        """Match ``match`` starts again (its rows back in play, or out while a league member takes the seats:
+        ``plays`` False)."""
+        rows = self.rows_of(match)
+        self.active[rows] = plays
+        self._reset_rows(rows)
+
+    def _reset_rows(self, rows: np.ndarray) -> None:
+        """The matches of ``rows`` start again (e.g. restart their exploration noise)."""
+
+    def learn(self, obs: Any) -> None:
+        """Learn if its schedule says so after a step (``obs``: its rows' observations now)."""
 
     def add_stats(self, stats: dict[str, float]) -> None:
         self.last_stats = stats
@@ -143,30 +202,33 @@ class Learner:
         self._sums, self._counts = {}, {}
         return means
 
-    def check_parameters(self) -> str | None:
+    def check_parameters(self) -> None:
         bad = not_finite(self.parameters)
-        return f"its parameters are not finite: {bad[:4]}" if bad else None
+        if bad:
+            raise self.diverged(f"its parameters are not finite: {bad[:4]}")
 
     # ------------------------------------------------------------------ checkpoints
-    def tensors(self) -> dict[str, torch.Tensor]:
-        opt_tensors, _ = self.algo.optimizer_state()
-        return {**self.algo.state_dict(), **{f"optim.{k}": v for k, v in opt_tensors.items()}}
+    def state_dict(self, replay: bool = True) -> State:
+        """Its networks and optimiser (tensors), counters, stats and which rows are in play; ``replay`` is
+        the off-policy learners' buffer."""
+        opt_tensors, opt_state = self.algo.optimizer_state()
+        return State(json={"optimizer": opt_state, "collected": self.collected, "stats": [self._sums, self._counts]},
+                     arrays={"active": self.active.copy()},
+                     tensors={**self.algo.state_dict(), **{f"optim.{k}": v for k, v in opt_tensors.items()}})
 
-    def state(self) -> dict[str, Any]:
-        return {"optimizer": self.algo.optimizer_state()[1], "collected": self.collected,
-                "stats": [self._sums, self._counts]}
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {"active": self.active.copy()}
-
-    def load(self, tensors: Mapping[str, torch.Tensor], state: Mapping[str, Any],
-             arrays: Mapping[str, np.ndarray]) -> None:
+    def load_state_dict(self, state: State) -> None:
+        """Restore :meth:`state_dict` (its replay buffer only where ``state.replay`` holds it)."""
+        tensors = state.tensors
         self.algo.load_state_dict({k: v for k, v in tensors.items() if not k.startswith("optim.")})
-        self.algo.load_optimizer_state({k[6:]: v for k, v in tensors.items() if k.startswith("optim.")},
-                                       state["optimizer"])
-        self.collected = int(state["collected"])
-        self._sums, self._counts = (dict(x) for x in state["stats"])
-        self.active = np.asarray(arrays["active"], dtype=bool).copy()
+        self.algo.load_optimizer_state({k.removeprefix("optim."): v for k, v in tensors.items()
+                                        if k.startswith("optim.")}, state.json["optimizer"])
+        self.collected = int(state.json["collected"])
+        self._sums, self._counts = (dict(x) for x in state.json["stats"])
+        self.active = np.asarray(state.arrays["active"], dtype=bool).copy()
+
+    def all_in_play(self) -> None:
+        """Every row in play (its matches all restarted)."""
+        self.active[:] = True
 
 
 class OffPolicyLearner(Learner):
@@ -175,8 +237,8 @@ class OffPolicyLearner(Learner):
     algo: OffPolicyAlgorithm
 
     def __init__(self, spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig,
-                 obs_dim: int, act_dim: int, device: torch.device | None = None) -> None:
-        super().__init__(spec, index, position, cfg, obs_dim, act_dim, device)
+                 obs_dim: int, act_dim: int, device: torch.device | None = None, elimination: bool = False) -> None:
+        super().__init__(spec, index, position, cfg, obs_dim, act_dim, device, elimination)
         c = self.config
         self.replay = (ReplayBuffer(c.buffer_size, obs_dim, act_dim) if device is None
                        else TorchReplayBuffer(c.buffer_size, obs_dim, act_dim, device))
@@ -187,81 +249,62 @@ class OffPolicyLearner(Learner):
         self.sample_rng = np.random.default_rng([cfg.seed, 1 + position])
         """Replay sampling only (used by the update thread; never shared with collection)."""
 
-    def act(self, obs: Any, rng: np.random.Generator) -> Any:
-        self.algo.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
-        if self.collected < self.config.learning_starts:
-            warm = rng.uniform(-1.0, 1.0, (self.n_rows, self.act_dim))  # warm-up
-            return warm if self.device is None else self.algo.tensor(warm)
-        if self.noise is None:
-            action = self.algo.explore(obs, rng)
-            if not _finite(action):
-                raise DivergedError("its actions are not finite")
-            return action
-        raw = self.algo.act(obs)
-        if not _finite(raw):
-            raise DivergedError("its actions are not finite")
-        if self.device is not None:
-            return (raw + self.algo.tensor(self.noise.sample(rng))).clamp(-1.0, 1.0)
-        return np.clip(raw + self.noise.sample(rng), -1.0, 1.0)
+    def _explore(self, obs: Any, rng: np.random.Generator) -> Any:
+        if self.collected < self.config.learning_starts:  # warm-up
+            return self.xp.put(rng.uniform(-1.0, 1.0, (self.n_rows, self.act_dim)), float32=True)
+        return self.algo.explore(obs, rng, self.noise)
 
     def updates_due(self) -> int:
         """Updates due at this step: they read the replay as it is before the step."""
         return self.algo.updates_due(self.collected, self.collected + int(self.active.sum()), len(self.replay))
 
     def run_updates(self, due: int) -> None:
-        """``due`` gradient updates on replay samples; ``DivergedError`` says what is not finite."""
+        """``due`` gradient updates on replay samples; :class:`DivergenceError` says what is not finite."""
         for _ in range(due):
             batch = self.replay.sample(self.config.batch_size, self.sample_rng)
             try:
                 stats = self.algo.update(batch)
-            except DivergedError as exc:  # the learner's own finite check of its update stats
-                raise DivergedError(f"its losses are not finite ({exc})") from None
+            except DivergenceError as exc:  # the algorithm's own finite check of its update stats
+                raise self.diverged(f"its losses are not finite ({exc})") from None
             bad = {k: v for k, v in stats.items() if not math.isfinite(v)}
             if bad:
-                raise DivergedError(f"its losses are not finite: {bad}")
+                raise self.diverged(f"its losses are not finite: {bad}")
             self.add_stats(stats)
-        if due and (problem := self.check_parameters()):
-            raise DivergedError(problem)
+        if due:
+            self.check_parameters()
 
-    def store(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
-              valid: Any, played: np.ndarray) -> None:
-        """Store the rows that played this step (``played``) and are real steps (``valid``):
-        done = terminated (a draw by time limit bootstraps)."""
+    def _record(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
+                valid: Any, played: np.ndarray) -> None:
+        """Store the rows that played this step and are real steps: done = terminated (a draw by time limit
+        bootstraps)."""
         del truncated
-        self.collected += int(played.sum())
-        if self.device is not None:  # tensors on the device: the rows kept are gathered there
-            keep_t = valid & torch.as_tensor(played, device=self.device)
-            self.replay.add_batch(obs[keep_t], action[keep_t], reward[keep_t], next_obs[keep_t],
-                                  terminated[keep_t].to(torch.float32))
-            return
-        keep = valid & played
-        if keep.any():
-            self.replay.add_batch(obs[keep], action[keep], reward[keep], next_obs[keep],
-                                  terminated[keep].astype(np.float64))
+        keep = valid & self.xp.put(played)  # (on the device the rows kept are gathered there)
+        self.replay.add_batch(obs[keep], action[keep], reward[keep], next_obs[keep], terminated[keep])
 
-    def reset_rows(self, rows: np.ndarray) -> None:
+    def _reset_rows(self, rows: np.ndarray) -> None:
         if self.noise is not None:
             self.noise.reset(rows)
 
-    def state(self) -> dict[str, Any]:
-        return super().state() | {"sample_rng": self.sample_rng.bit_generator.state}
-
-    def arrays(self) -> dict[str, np.ndarray]:
+    def state_dict(self, replay: bool = True) -> State:
         noise = self.noise.state_dict() if self.noise is not None else {}
-        return super().arrays() | {f"noise.{k}": v for k, v in noise.items()}
+        state = super().state_dict()
+        state.json["sample_rng"] = self.sample_rng.bit_generator.state
+        state.arrays |= {f"noise.{k}": v for k, v in noise.items()}
+        state.replay = self.replay.state_dict() if replay else None
+        return state
 
-    def load(self, tensors: Mapping[str, torch.Tensor], state: Mapping[str, Any],
-             arrays: Mapping[str, np.ndarray]) -> None:
-        super().load(tensors, state, arrays)
-        self.sample_rng.bit_generator.state = state["sample_rng"]
+    def load_state_dict(self, state: State) -> None:
+        super().load_state_dict(state)
+        self.sample_rng.bit_generator.state = state.json["sample_rng"]
         if self.noise is not None:
-            self.noise.load_state_dict({k[6:]: v for k, v in arrays.items() if k.startswith("noise.")})
-
-    def load_replay(self, replay: Mapping[str, np.ndarray], prefix: str) -> None:
-        absent = [k for k in (*FIELDS, "pos", "size", "capacity") if f"{prefix}{k}" not in replay]
-        if absent:
-            raise KeyError(f"replay arrays {[prefix + k for k in absent]}")
-        self.replay.load_state_dict({k: replay[f"{prefix}{k}"] for k in (*FIELDS, "pos", "size", "capacity")})
+            self.noise.load_state_dict({k.removeprefix("noise."): v for k, v in state.arrays.items()
+                                        if k.startswith("noise.")})
+        if state.replay is not None:
+            keys = (*FIELDS, "pos", "size", "capacity")
+            absent = [k for k in keys if k not in state.replay]
+            if absent:
+                raise KeyError(f"replay arrays {[f'{self.name}.{k}' for k in absent]}")
+            self.replay.load_state_dict({k: state.replay[k] for k in keys})
 
 
 class PPOLearner(Learner):
@@ -269,58 +312,81 @@ class PPOLearner(Learner):
 
     algo: PPO
 
-    def act(self, obs: Any, rng: np.random.Generator) -> Any:
-        self.algo.observe(obs)
-        action = self.algo.explore(obs, rng)
-        if not _finite(action):
-            raise DivergedError("its actions are not finite")
-        return action
+    def _explore(self, obs: Any, rng: np.random.Generator) -> Any:
+        return self.algo.explore(obs, rng)
 
-    def store(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
-              valid: Any, played: np.ndarray) -> None:
+    def _record(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
+                valid: Any, played: np.ndarray) -> None:
         """Record the step of every row; rows out of play or with a physics error are invalid."""
         del obs, action
-        self.collected += int(played.sum())
-        if self.device is not None:  # tensors on the device
-            ok_t = valid & torch.as_tensor(played, device=self.device)
-            self.algo.record(torch.where(ok_t, reward, 0.0), torch.where(ok_t, terminated, True),
-                             torch.where(ok_t, truncated, False), next_obs, valid=ok_t)
-            return
-        ok = valid & played
-        self.algo.record(np.where(ok, reward, 0.0), np.where(ok, terminated, True), np.where(ok, truncated, False),
+        xp = self.xp
+        ok = valid & xp.put(played)
+        self.algo.record(xp.where(ok, reward, 0.0), xp.where(ok, terminated, True), xp.where(ok, truncated, False),
                          next_obs, valid=ok)
 
-    def update_if_full(self, next_obs: np.ndarray) -> bool:
-        """Train on the rollout if it is full (``next_obs``: the rows' observations now)."""
+    def learn(self, obs: Any) -> None:
+        """Train on the rollout if it is full (``obs``: the rows' observations now)."""
         if not self.algo.rollout_full:
-            return False
-        self.add_stats(self.algo.update(next_obs))
-        if problem := self.check_parameters():
-            raise DivergedError(problem)
-        return True
+            return
+        try:
+            stats = self.algo.update(obs)
+        except DivergenceError as exc:  # the algorithm's own finite check of its update stats
+            raise self.diverged(str(exc)) from None
+        self.add_stats(stats)
+        self.check_parameters()
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        return super().arrays() | {f"rollout.{k}": v for k, v in self.algo.rollout_state().items()}
+    def state_dict(self, replay: bool = True) -> State:
+        state = super().state_dict()
+        state.arrays |= {f"rollout.{k}": v for k, v in self.algo.rollout_state().items()}
+        return state
 
-    def load(self, tensors: Mapping[str, torch.Tensor], state: Mapping[str, Any],
-             arrays: Mapping[str, np.ndarray]) -> None:
-        super().load(tensors, state, arrays)
-        self.algo.load_rollout_state({k[8:]: v for k, v in arrays.items() if k.startswith("rollout.")})
+    def load_state_dict(self, state: State) -> None:
+        super().load_state_dict(state)
+        self.algo.load_rollout_state({k.removeprefix("rollout."): v for k, v in state.arrays.items()
+                                      if k.startswith("rollout.")})
 
 
-def make_learner(spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig,
-                 obs_dim: int, act_dim: int, device: torch.device | None = None) -> OffPolicyLearner | PPOLearner:
+def make_learner(spec: LearnerSpec, index: list[int], position: int, cfg: TrainConfig, obs_dim: int, act_dim: int,
+                 device: torch.device | None = None, elimination: bool = False) -> OffPolicyLearner | PPOLearner:
     """The learner for ``spec`` (``position``: its place among the run's learners, which offsets its seeds;
-    ``device``: where a device-resident collection keeps its tensors, None for numpy)."""
+    ``device``: where a device-resident collection keeps its tensors, None for numpy; ``elimination``: agents
+    may leave their match before it ends)."""
     cls = PPOLearner if spec.algo == "ppo" else OffPolicyLearner
-    return cls(spec, index, position, cfg, obs_dim, act_dim, device)
+    return cls(spec, index, position, cfg, obs_dim, act_dim, device, elimination)
 
 
-def host(x: Any) -> np.ndarray:
-    """``x`` as a numpy array (a device tensor is copied to the host)."""
-    return x.cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+class Updates(threading.Thread):
+    """The off-policy updates due at one collection step (every learner's, in turn), computed before the step
+    (they read the replay as it was): :meth:`begin` runs them in a thread beside the physics (``overlap``: the
+    GIL is released in MuJoCo's batch and in torch's kernels) or inline; :meth:`finish` waits for them and
+    raises what stopped them. Overlapped or not, the result is bit for bit the same."""
 
+    def __init__(self, learners: Sequence[Learner]) -> None:
+        super().__init__(name="offpolicy-updates", daemon=True)
+        self.due = [(lr, d) for lr in learners if isinstance(lr, OffPolicyLearner) and (d := lr.updates_due())]
+        self.seconds = 0.0
+        self.error: BaseException | None = None
+        self._launched = False
 
-def _finite(x: Any) -> bool:
-    """Whether every entry of ``x`` (a numpy array or a tensor) is finite."""
-    return bool(torch.isfinite(x).all()) if isinstance(x, torch.Tensor) else bool(np.isfinite(x).all())
+    def begin(self, overlap: bool) -> Updates:
+        if self.due and overlap:
+            self._launched = True
+            self.start()
+        elif self.due:
+            self.run()
+        return self
+
+    def run(self) -> None:
+        t = time.perf_counter()
+        try:
+            for learner, due in self.due:
+                learner.run_updates(due)
+        except BaseException as exc:  # re-raised in the collecting thread by finish()
+            self.error = exc
+        self.seconds = time.perf_counter() - t
+
+    def finish(self) -> None:
+        if self._launched:
+            self.join()
+        if self.error is not None:
+            raise self.error

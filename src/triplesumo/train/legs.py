@@ -29,6 +29,7 @@ from __future__ import annotations
 import datetime
 import json
 import subprocess
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +37,7 @@ import mujoco
 import torch
 
 import triplesumo.version
-from triplesumo.agents.policy_file import PolicyFileError, atomic_write_bytes, load_json
+from triplesumo.agents.policy_file import PolicyFileError, atomic_write_bytes, load_json, writing
 
 LEGS_FILE = "legs.json"
 LEGS_FORMAT = "triplesumo-legs/1"
@@ -116,3 +117,40 @@ def write_legs(run_dir: Path | str, legs: list[dict[str, Any]]) -> None:
     """Write ``RUN/legs.json`` atomically."""
     data = {"format": LEGS_FORMAT, "legs": legs}
     atomic_write_bytes(Path(run_dir) / LEGS_FILE, (json.dumps(data, indent=1) + "\n").encode())
+
+
+@dataclass
+class RunRecord:
+    """How a run was made, as every policy file it writes says (:meth:`fields`): its command, its id, a fork's
+    parent and its legs (this one's last once :meth:`start_leg` is called)."""
+
+    command: str
+    """The run's command (a fork's own, from ``fork.json``)."""
+    session_command: str
+    """What started this leg: the typed command line where the CLI gives it."""
+    run_id: str | None
+    """The run's id, kept by its checkpoints: every policy file it writes (its own and its league snapshots,
+    across resumes) names it, so copies of them still group by run. None for a run started before ids (its
+    checkpoint has none): its files go on without one, as its first ones did."""
+    forked_from: dict[str, Any] | None = None
+    """A fork's parent (``fork.json``); None for other runs."""
+    legs: list[dict[str, Any]] = field(default_factory=list)
+
+    def start_leg(self, run_dir: Path, resumed: bool, epoch: int, env_steps: int,
+                  budget: dict[str, Any]) -> dict[str, Any]:
+        """Append this leg to ``RUN/legs.json`` (cutting the legs of epochs trained again) and return it:
+        ``start`` for a new run, ``fork`` for a fork continued from its fork epoch, else ``resume``."""
+        kind = "start"
+        if resumed:
+            kind = "fork" if self.forked_from is not None and epoch == int(self.forked_from["epoch"]) else "resume"
+        leg = make_leg(kind, epoch, env_steps, self.run_id, budget, self.session_command)
+        self.legs = [*legs_before(read_legs(run_dir), epoch), leg]
+        with writing(Path(run_dir) / LEGS_FILE):
+            write_legs(run_dir, self.legs)
+        return leg
+
+    def fields(self) -> dict[str, Any]:
+        """What a policy manifest says of the run: command, id (where it has one), fork parent (a fork's), legs."""
+        return {"command": self.command, **({"run_id": self.run_id} if self.run_id else {}),
+                **({"forked_from": self.forked_from} if self.forked_from else {}),
+                "legs": self.legs}  # which code trained which epochs, leg by leg

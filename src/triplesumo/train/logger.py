@@ -259,3 +259,11 @@ class MetricsLog:
             table.close()
         if self._tb is not None:
             self._tb.close()
+
+
+def progress_bar(total: int, initial: int, steps: bool, desc: str) -> Any:
+    """A tqdm bar to a run's budget: ``total`` env steps (``steps``) or epochs, from ``initial``."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=min(initial, total), unit="step" if steps else "epoch", unit_scale=steps,
+                desc=desc, dynamic_ncols=True)

@@ -13,10 +13,11 @@ import dataclasses
 import hashlib
 import json
 import shlex
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
 import torch
 
@@ -26,14 +27,17 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
+from triplesumo.envs.match import Match
 from triplesumo.evaluation.metrics_csv import table_exists, tables_in
-from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, physics_record
-from triplesumo.rules.config import RewardConfig
+from triplesumo.model.specs import V0_PHYSICS, PhysicsConfig, describe_ring, physics_record
+from triplesumo.rules.config import MatchConfig, RewardConfig
 from triplesumo.train import checkpoint
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.league_config import LeagueConfig
 from triplesumo.train.league_plots import plot_league
+from triplesumo.train.learners import LearnerSpec
 from triplesumo.train.logger import COLUMNS, LEARNING_COLUMNS, intact_rows, learning_row_problem, run_file
+from triplesumo.version import ENV_VERSION, __version__
 
 RUN_FILES = ("config.json", "metrics.csv", "checkpoints", "policy.json", "policy.safetensors")
 """What makes a folder hold a run: training never writes into such a folder afresh (with
@@ -45,7 +49,9 @@ class RunExistsError(FileExistsError):
 
 
 def config_to_json(cfg: TrainConfig) -> dict[str, Any]:
-    return json.loads(json.dumps(dataclasses.asdict(cfg)))
+    """``cfg`` as ``config.json`` holds it (without :data:`DEPRECATED_FIELDS`)."""
+    data = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    return {k: v for k, v in data.items() if k not in DEPRECATED_FIELDS}
 
 
 def write_run_config(run_dir: Path, cfg: TrainConfig) -> None:
@@ -84,10 +90,15 @@ def run_id_of(cfg: TrainConfig) -> str:
     return f"{cfg.name}-{digest[:12]}"
 
 
+DEPRECATED_FIELDS = ("learner",)
+"""TrainConfig fields kept only as deprecated aliases (``learner``: ``learn AGENT=ddpg``): a config never holds
+them (one written while they were fields is read as its ``learn``)."""
+
+
 def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValueError(f"{source}: {where or 'the file'} must be a JSON object, got {type(data).__name__}")
-    names = {f.name for f in dataclasses.fields(cls)}
+    names = {f.name for f in dataclasses.fields(cls)} - ({*DEPRECATED_FIELDS} if cls is TrainConfig else set())
     unknown, missing = sorted(set(data) - names), sorted(names - set(data))
     if unknown or missing:
         problems = [f"unknown key(s) {[where + k for k in unknown]}"] if unknown else []
@@ -125,6 +136,9 @@ def _with_added_later(data: Any, cls: type, added_later: tuple[str, ...]) -> Any
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
+    if isinstance(data, dict) and "learner" in data:  # written while learner named the one DDPG learner (learn empty)
+        data = {k: v for k, v in data.items() if k != "learner"} | {
+            "learn": data.get("learn") or [f"{data['learner']}=ddpg"]}
     if isinstance(data, dict):  # written before a field existed: that field's default, what the run used
         defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
@@ -232,8 +246,9 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
 
     run_dir = Path(run_dir)
     learner = "bug"
-    if (run_dir / "config.json").is_file():
-        learner = str(load_json(run_dir / "config.json").get("learner", learner))
+    if (run_dir / "config.json").is_file():  # (its one learner names metrics.csv's plots)
+        raw = load_json(run_dir / "config.json")
+        learner = str((raw.get("learn") or [f"{raw.get('learner', learner)}=ddpg"])[0]).split("=")[0]
     paths: list[Path] = []
     files = tables_in(run_dir, "metrics-*.csv") or [run_dir / "metrics.csv"]  # plain or packed
     for path in files:
@@ -277,15 +292,6 @@ def checkpoint_within_rows(run_dir: Path, folder: Path, agents: list[str], learn
     return chosen
 
 
-def match_parts(on_device: bool, arrays: Mapping[str, np.ndarray]) -> tuple[str, ...]:
-    """The arrays of each match (``match<k>.<part>``) a checkpoint of this backend holds: cpu every
-    ``Match.snapshot`` array; warp (``on_device``) the world's state, or none in a checkpoint written before warp
-    resumed exactly (its matches then restart)."""
-    if not on_device:
-        return ("physics", "last_obs", "warnings", "obs")
-    return ("physics", "obs") if "match0.physics" in arrays else ()
-
-
 def one_learner_checkpoint(name: str, n_envs: int, tensors: dict[str, torch.Tensor], state: dict[str, Any],
                            arrays: dict[str, np.ndarray], replay: Mapping[str, np.ndarray] | None) -> tuple[
         dict[str, torch.Tensor], dict[str, Any], dict[str, np.ndarray], Mapping[str, np.ndarray] | None]:
@@ -317,3 +323,152 @@ class Prefixed(Mapping[str, np.ndarray]):
 
     def __len__(self) -> int:
         return len(self.mapping)
+
+
+def physics_mismatch(state: Path, made: PhysicsConfig, config: Path, given: PhysicsConfig) -> str:
+    """Why a checkpoint (``state``, made on ``made``) cannot resume on the physics ``given`` that the run's
+    ``config`` says: a run never trains on another simulation than its checkpoint's. A ``config.json`` that
+    records no physics is read as env v0's (:data:`~triplesumo.model.specs.V0_PHYSICS`, what run folders made
+    before it was recorded ran); one whose checkpoint records other physics was written by hand or damaged."""
+    raw = load_json(config) if config.is_file() else {}
+    said = "records no physics, which reads as env v0's" if "physics" not in raw else "records other physics"
+    fields = [f.name for f in dataclasses.fields(PhysicsConfig) if getattr(made, f.name) != getattr(given, f.name)]
+    differ = ", ".join(f"physics.{f} {getattr(made, f)!r} there, {getattr(given, f)!r} here" for f in fields)
+    return (f"{state}: incompatible checkpoint: it was made on {describe_ring(made)} ({differ}), but {config} "
+            f"{said}: {describe_ring(given)}. Nothing was trained; to resume, set config.json's \"physics\" to the "
+            f"checkpoint's (the \"physics\" inside the \"config\" of {state})")
+
+
+def check_checkpoint_physics(run_dir: Path, physics: PhysicsConfig) -> None:
+    """:class:`~triplesumo.train.checkpoint.CheckpointError` (:func:`physics_mismatch`) unless the newest
+    checkpoint of ``run_dir`` whose ``state.json`` reads was made on ``physics``, before anything is loaded onto it
+    (every checkpoint of a run is made on its one simulation); a run without a readable one passes here."""
+    for _, folder in reversed(checkpoint.checkpoints(run_dir)):
+        try:
+            made = config_from_json(load_json(folder / "state.json")["config"]).physics
+        except (ValueError, KeyError, TypeError):
+            continue  # damaged: the resume names it, or goes on from an older one
+        if made != physics:
+            raise checkpoint.CheckpointError(physics_mismatch(folder / "state.json", made, run_dir / "config.json",
+                                                              physics))
+        return
+
+
+RESUMED_FIELDS = ("learn", "share", "scenario", "obs_mode", "n_envs", "steps_per_epoch", "policies",
+                  "reward", "ddpg", "td3", "sac", "ppo", "learner_config", "seed", "self_play", "league", "backend")
+"""The config fields a resume must share with its checkpoint (``save_replay`` may differ: resuming without the
+replay buffer is allowed, not exact)."""
+
+
+def check_resumable(checkpointed: checkpoint.State, cfg: TrainConfig, run_dir: Path) -> None:
+    """:class:`~triplesumo.train.checkpoint.CheckpointError` naming the file unless ``checkpointed`` can resume
+    the run of ``cfg``: every entry there, made on the same physics, with the same :data:`RESUMED_FIELDS`."""
+    folder, state = Path(checkpointed.folder or "."), checkpointed.json
+    need: tuple[str, ...] = ("config", "learners", "rng", "matches", "epochs_done", "env_steps", "acc", "final")
+    need += ("league", "seats", "seat_rngs") if cfg.self_play else ()
+    missing = [k for k in need if k not in state]
+    if missing:
+        raise checkpoint.CheckpointError(f"{folder / 'state.json'}: missing entries {missing}")
+    try:
+        saved = config_from_json(state["config"], f"{folder / 'state.json'} (its config)")
+    except ValueError as exc:
+        raise checkpoint.CheckpointError(str(exc)) from exc
+    if saved.physics != cfg.physics:
+        raise checkpoint.CheckpointError(physics_mismatch(folder / "state.json", saved.physics,
+                                                          run_dir / "config.json", cfg.physics))
+    for name in RESUMED_FIELDS:
+        if getattr(saved, name) != getattr(cfg, name):
+            raise checkpoint.CheckpointError(
+                f"{folder / 'state.json'}: incompatible checkpoint: it was made with {name}="
+                f"{getattr(saved, name)!r}, this run has {getattr(cfg, name)!r} (from config.json)")
+
+
+def forked_from(run_dir: Path) -> tuple[dict[str, Any] | None, str | None]:
+    """A fork's parent as its policy manifests name it (``fork.json``: run, id, checkpoint, epoch, command, changes)
+    and the fork's own command; None, None for a run that is no fork."""
+    if not (run_dir / FORK_FILE).is_file():
+        return None, None
+    fork = load_json(run_dir / FORK_FILE)
+    return {"run": fork["parent"], "run_id": fork["parent_run_id"], "checkpoint": fork["checkpoint"],
+            "epoch": fork["epoch"], "command": fork["parent_command"], "changes": fork["changes"]}, fork["command"]
+
+
+def load_to_resume(run_dir: Path, from_checkpoint: str | None, wants_replay: bool,
+                   within_rows: tuple[list[str], list[str]] | None, learner: str, n_envs: int) -> checkpoint.State:
+    """The checkpoint a resume continues (:attr:`~triplesumo.train.checkpoint.State.folder`), read: ``from_checkpoint``
+    (``epoch-N``), else the latest, stepped back to the newest within the tables' rows of ``within_rows`` (agents,
+    learners) where given; a damaged latest one names the newest intact one. One that holds no replay buffer
+    (saved without, or compacted of it) resumes with an empty one (``wants_replay``: said). A checkpoint of the
+    one-learner trainer is read in today's layout, its learner named ``learner`` (of ``n_envs`` matches)."""
+    def load(folder: Path) -> checkpoint.State:
+        need_replay = wants_replay and checkpoint.holds_replay(folder)
+        if wants_replay and not need_replay:
+            print(f"{folder}: the checkpoint holds no replay buffer (saved without or compacted of it): the "
+                  "run resumes with an empty one, not exactly as it would have gone on")
+        tensors, state, arrays, lazy = checkpoint.load(folder, need_replay=need_replay)
+        replay: Mapping[str, np.ndarray] | None = lazy
+        if "learners" not in state and "optimizer" in state:
+            tensors, state, arrays, replay = one_learner_checkpoint(learner, n_envs, tensors, state, arrays, replay)
+        return checkpoint.State(state, arrays, tensors, replay, folder)
+
+    if from_checkpoint is not None:
+        return load(checkpoint.find(run_dir, from_checkpoint))
+    try:
+        folder = checkpoint.latest(run_dir)
+        if within_rows is not None:
+            folder = checkpoint_within_rows(run_dir, folder, *within_rows)
+        return load(folder)
+    except checkpoint.CheckpointError as exc:
+        intact = checkpoint.newest_intact(run_dir)
+        if intact is None:
+            raise
+        raise checkpoint.CheckpointError(
+            f"{exc} -- the latest checkpoint is damaged or missing; the newest intact one is {intact.name} "
+            f"(epoch {checkpoint.recorded_epoch(intact)}): `triplesumo train --resume {run_dir} "
+            f"--from {intact.name}` continues from it (later epochs are trained again)") from exc
+
+
+def adopt_checkpoint(run_dir: Path, folder: Path, epochs_done: int, write_policies: Callable[[Path], None]) -> None:
+    """Make ``run_dir`` that of checkpoint ``folder``, which a resume restored, before any epoch is trained.
+
+    A resume from another checkpoint than the one ``latest.json`` names (``--from epoch-N``, or the newest
+    checkpoint within torn rows) has cut the tables back to its epoch; so that the folder never contradicts
+    itself, even when no epoch is left to train (``--epochs`` not past it), the policy files are written
+    from the restored learners (``write_policies``), then ``latest.json`` names the restored checkpoint, then the
+    checkpoints of later epochs are removed (the rows no longer reach them; the epochs trained next re-create
+    them, as the first checkpoint after a ``--from`` always pruned them). In that order, a kill in between leaves
+    ``latest.json`` beyond the rows, which the next plain ``--resume`` steps back from and adopts again.
+    """
+    try:
+        named: Path | None = checkpoint.latest(run_dir)
+    except checkpoint.CheckpointError:
+        named = None
+    if named is not None and named.resolve() == folder.resolve():
+        return
+    epoch = checkpoint.recorded_epoch(folder)
+    epoch = epochs_done if epoch is None else epoch
+    write_policies(folder)
+    with checkpoint.writing(run_dir / "checkpoints" / "latest.json"):
+        checkpoint.point_latest(run_dir, folder, epoch)
+    checkpoint.drop_after(run_dir, epoch)
+
+
+def policy_manifest(cfg: TrainConfig, probe: Match, match_cfg: MatchConfig, specs: Sequence[LearnerSpec],
+                    learner: LearnerSpec, progress: Mapping[str, int], record: Mapping[str, Any],
+                    trained_against: Sequence[str]) -> dict[str, Any]:
+    """What a policy file of ``learner`` says of itself: what it plays and how its actions scale, the versions,
+    the run's ``progress`` (epochs, env steps, updates) and ``record`` (:meth:`RunRecord.fields`), the policies
+    it was ``trained_against``, the scenario and the physics."""
+    spec = {a.name: a for a in match_cfg.agents}[learner.agents[0]]
+    return {
+        "agent": learner.name, "algo": learner.algo, "plays": list(learner.agents),
+        "learners": {s.name: s.algo for s in specs}, "obs_mode": cfg.obs_mode,
+        "action_scaling": f"normalised [-1, 1] scaled linearly to ctrl [-{spec.ctrl_range}, {spec.ctrl_range}]",
+        "ctrl_range": spec.ctrl_range, "env_version": ENV_VERSION, "triplesumo_version": __version__,
+        "mujoco_version": mujoco.__version__, "torch_version": torch.__version__, "seed": cfg.seed,
+        "epochs": progress["epochs"], "env_steps": progress["env_steps"], "updates": progress["updates"], **record,
+        "trained_against": list(trained_against),  # self-play: the seeds of the opponent pools
+        "agents": list(probe.agents), "scenario": cfg.scenario,
+        "partners": len(probe.teams.partners[probe.agents.index(spec.name)]),
+        "physics": dataclasses.asdict(cfg.physics),  # the simulation (e.g. the paper's solid rim)
+    }

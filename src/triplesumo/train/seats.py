@@ -1,5 +1,6 @@
 """Who sits in which seat of every match: the learners' seats, the fixed policies', and with ``self_play`` the
-league members drawn for the seats of the sides that do not learn.
+league members drawn for the seats of the sides that do not learn; :meth:`Seats.act` fills the actions of every
+seat a learner does not take.
 
 With ``self_play`` a :class:`~triplesumo.train.league.League` seats the agents that do not learn: at every match
 start one member of each such side's pool is drawn (in a free-for-all one per seat); at every match end its
@@ -7,8 +8,9 @@ players are rated, due learning sides are admitted (their actors written as poli
 When both sides learn, each match is live or one learner plays the other side's pool (``League.draw_live``); the
 learner whose seats a member takes sits the match out.
 
-:class:`Seats` knows the roster and the league, never the matches' arrays: the collector asks it who plays a
-match (:meth:`Seats.draw`, :meth:`Seats.plays`) and hands it each match's result (:meth:`Seats.match_end`).
+:class:`Seats` knows the roster, the fixed policies and the league, never the matches' state: the training loop
+draws a match's players when it starts (:meth:`Seats.draw`, :meth:`Seats.plays`) and hands it each finished
+match (:meth:`Seats.match_end`).
 """
 
 from __future__ import annotations
@@ -28,21 +30,39 @@ from triplesumo.agents.policy_file import load_fixed_policy
 from triplesumo.envs.match import Match
 from triplesumo.rules.config import MatchConfig, check_shared_network
 from triplesumo.rules.outcome import ERROR_CODE
+from triplesumo.train.arrays import Arrays, host
+from triplesumo.train.checkpoint import State
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.league import League
-from triplesumo.train.learners import Learner, LearnerSpec, host
+from triplesumo.train.learners import Learner, LearnerSpec
+from triplesumo.zoo import policies_from_pairs
 
 
 class Seats:
-    """The seats of ``n_envs`` matches: per match, per seat, the league member playing it (None: a learner's or a
-    fixed policy's seat) and that member's policy. Without ``self_play`` every seat is None and :attr:`league` is
+    """The seats of ``n_envs`` matches: the fixed policy of every agent that does not learn (:attr:`fixed`, built
+    from ``pairs``) and, with ``self_play``, per match, per seat, the league member playing it (None: a learner's or
+    a fixed policy's seat) and that member's policy. Without ``self_play`` every seat is None and :attr:`league` is
     None."""
 
     def __init__(self, cfg: TrainConfig, match_cfg: MatchConfig, probe: Match, specs: Sequence[LearnerSpec],
                  pairs: tuple[str, ...], run_dir: Path, league_seed: Callable[[], int], resume: bool,
                  device: torch.device | None) -> None:
-        self.cfg, self.match_cfg, self.probe, self.specs, self.device = cfg, match_cfg, probe, list(specs), device
+        self.cfg, self.match_cfg, self.probe, self.specs = cfg, match_cfg, probe, list(specs)
+        self.xp = Arrays(device)
         self.agents = [a for spec in specs for a in spec.agents]
+        try:
+            self.fixed: dict[str, Any] = policies_from_pairs(
+                pairs, cfg.seed, cfg.obs_mode, obs_dims=probe.observer.sizes,
+                action_sizes=dict(zip(probe.agents, probe.action_sizes, strict=True)),
+                teams={a.name: a.team for a in match_cfg.agents}, physics=cfg.physics,
+                allow_other_ring=cfg.allow_other_ring)
+            """Agent -> the fixed policy of every agent that does not learn."""
+        except ValueError as err:
+            raise ValueError(f"TrainConfig.policies (scenario {cfg.scenario!r}): {err}") from None
+        self._fixed = [(probe.agents.index(a), p) for a, p in self.fixed.items()]
+        self._fixed_on_device = {i: p.on_device(device) for i, p in self._fixed
+                                 if device is not None and isinstance(p, FrozenPolicy)}
+        """Roster index -> a trained fixed policy acting on the device (``warp``; others act on the host)."""
         self.league: League | None = None
         """The self-play league (``cfg.self_play``): pools whose members take the seats that do not learn."""
         self.members: list[list[str | None]] = [[None] * probe.n_agents for _ in range(cfg.n_envs)]
@@ -190,6 +210,22 @@ class Seats:
                 self._device_policies = {key: v for key, v in self._device_policies.items() if key in kept}
         return league.epoch_end(epoch)
 
+    def act(self, actions: Any, obs: Any) -> None:
+        """Every seat a learner does not take, into ``actions`` (``(n_envs, n_agents, width)``, zeros there):
+        the fixed policies (a trained one on the device where the run's arrays live there, the others on the
+        host from their own generators) and the league members."""
+        sizes, n = self.probe.action_sizes, self.cfg.n_envs
+        for i, policy in self._fixed:
+            if i in self.league_seats or isinstance(policy, ZeroPolicy):  # (a zero policy leaves the zeros)
+                continue
+            if i in self._fixed_on_device:
+                actions[:, i, :sizes[i]] = self._fixed_on_device[i](obs[:, i])
+                continue
+            fixed = policy.sample(n) if isinstance(policy, RandomPolicy) else act_batch(policy, host(obs[:, i]))
+            actions[:, i, :sizes[i]] = self.xp.put(fixed, float32=True)
+        if self.league is not None:
+            (self.act_on_device if self.xp.on_device else self.act_on_host)(actions, obs)
+
     def act_on_host(self, actions: np.ndarray, obs: np.ndarray) -> None:
         """The league members' actions of a ``cpu`` run, seat by seat, into ``actions``."""
         sizes = self.probe.action_sizes
@@ -211,45 +247,51 @@ class Seats:
                         groups.setdefault((i, id(policy)), (policy, []))[1].append(k)
                     elif not isinstance(policy, ZeroPolicy):
                         on_host.append((k, i, policy))
-            self._groups = ([(i, self._device_policy(p), torch.as_tensor(ks, device=self.device))
+            self._groups = ([(i, self._device_policy(p), self.xp.put(np.array(ks)))
                              for (i, _), (p, ks) in groups.items()], on_host)
         trained, on_host = self._groups
         sizes = self.probe.action_sizes
         for i, act, rows in trained:
             actions[rows, i, :sizes[i]] = act(obs[rows, i])
         if on_host:  # one copy to the device for all of them (and one of the observations only if one needs it)
-            ks, seats = (torch.as_tensor(v, device=self.device) for v in zip(*[(k, i) for k, i, _ in on_host],
-                                                                             strict=True))
+            ks, seats = (self.xp.put(np.array(v)) for v in zip(*[(k, i) for k, i, _ in on_host], strict=True))
             seen = None if all(isinstance(p, RandomPolicy) for *_, p in on_host) else host(obs[ks, seats])
             drawn = np.zeros((len(on_host), actions.shape[-1]), dtype=np.float32)
             for r, (_, i, policy) in enumerate(on_host):
                 drawn[r, :sizes[i]] = policy.sample(1)[0] if seen is None else policy(seen[r])
-            actions[ks, seats] = torch.as_tensor(drawn, device=self.device)
+            actions[ks, seats] = self.xp.put(drawn)
 
     def _device_policy(self, policy: FrozenPolicy) -> Any:
         """``policy.on_device`` (made once per member policy; dropped with the member)."""
         key = id(policy)
         if key not in self._device_policies:
-            self._device_policies[key] = (policy, policy.on_device(self.device))
+            self._device_policies[key] = (policy, policy.on_device(self.xp.device))
         return self._device_policies[key][1]
 
-    def state(self) -> dict[str, Any]:
-        """What a checkpoint keeps of the seats: the league, who sits where, the seated policies' generators."""
-        assert self.league is not None
-        self.league.save()
-        return {"league": self.league.state_dict(), "seats": self.members,
-                "seat_rngs": [{str(i): p.rng.bit_generator.state for i, p in seated.items() if hasattr(p, "rng")}
-                              for seated in self.policies]}
+    def state_dict(self) -> State:
+        """What a checkpoint keeps of the seats: the fixed policies' generators and, with a league, the league,
+        who sits where and the seated policies' generators."""
+        state: dict[str, Any] = {"policy_rngs": {a: p.rng.bit_generator.state for a, p in self.fixed.items()
+                                                 if hasattr(p, "rng")}}
+        if self.league is not None:
+            self.league.save()
+            state |= {"league": self.league.state_dict(), "seats": self.members,
+                      "seat_rngs": [{str(i): p.rng.bit_generator.state for i, p in seated.items() if hasattr(p, "rng")}
+                                    for seated in self.policies]}
+        return State(json=state)
 
-    def restore(self, state: Mapping[str, Any], epochs_done: int) -> None:
-        """The seats of :meth:`state` (the league's log cut back to ``epochs_done``)."""
-        assert self.league is not None
-        self.league.load_state_dict(state["league"])
+    def load_state_dict(self, state: State, epochs_done: int) -> None:
+        """The seats of :meth:`state_dict` (the league's log cut back to ``epochs_done``)."""
+        saved = state.json
+        for agent, rng_state in saved.get("policy_rngs", {}).items():
+            self.fixed[agent].rng.bit_generator.state = rng_state
+        if self.league is None:
+            return
+        self.league.load_state_dict(saved["league"])
         self.league.truncate_log(epochs_done)
-        self.members = [list(m) for m in state["seats"]]
+        self.members = [list(m) for m in saved["seats"]]
         for k, members in enumerate(self.members):
             self.policies[k] = self.policies_of(members, 0)
-            for i, rng_state in state["seat_rngs"][k].items():
+            for i, rng_state in saved["seat_rngs"][k].items():
                 self.policies[k][int(i)].rng.bit_generator.state = rng_state
         self._groups = None
-

@@ -292,7 +292,8 @@ def _evaluate(cfg: SweepConfig, out: Path, done: list[Trial],
         folder = out / "evaluation" / _safe(group)
         folder.mkdir(parents=True, exist_ok=True)  # (a name like ddpg.actor_lr=1e-4 looks like a file to evaluate)
         policies = {str(Path(t.config.out) / t.name / "policy"): t.name for t in members}
-        ecfg = EvaluateConfig(learner=first.learner, policy=tuple(policies), policies=first.policies, baselines=(),
+        learner = next(iter(first.learners()))  # (the seat each policy plays: the group's first learner)
+        ecfg = EvaluateConfig(learner=learner, policy=tuple(policies), policies=first.policies, baselines=(),
                               epochs=cfg.evaluate_epochs, seed=cfg.eval_seed, steps_per_epoch=first.steps_per_epoch,
                               obs_mode=first.obs_mode, scenario=first.scenario, window=first.window,
                               out=str(folder), n_threads=1, progress=False,
