@@ -7,7 +7,7 @@ gives it as its :meth:`Collector.state_dict`; it learns nothing and writes nothi
 The matches are the public batched API (``triplesumo.vector_env``'s contract): arrays ``(n_envs, n_agents,
 ...)`` in and out, Gymnasium SAME_STEP autoreset (a finished match's last observation, outcome codes and reward
 terms in ``infos``), each next match seeded from the run's generator through ``reset_seed``. ``backend="cpu"``
-is :class:`VectorMatches` (numpy), ``backend="warp"`` is MuJoCo Warp's ``WarpMatchBatch`` (torch tensors on
+is :class:`VectorMatches` (numpy), ``backend="warp"`` is MuJoCo Warp's ``WarpVectorMatches`` (torch tensors on
 ``device``, kept there by the learners). One collection path serves both.
 """
 
@@ -51,7 +51,7 @@ def outcome_label(code: int) -> str:
 def make_env(cfg: TrainConfig, match_cfg: MatchConfig,
              reset_seed: Callable[[int], int | None] | None = None) -> Any:
     """The run's matches through the batched API (``triplesumo.vector_env``'s contract):
-    :class:`VectorMatches` (``backend="cpu"``, numpy) or ``WarpMatchBatch`` (``"warp"``,
+    :class:`VectorMatches` (``backend="cpu"``, numpy) or ``WarpVectorMatches`` (``"warp"``,
     torch tensors on the device), each finished match's next one seeded by ``reset_seed(k)``. Errors name the
     option."""
     env = _build_env(cfg, match_cfg)
