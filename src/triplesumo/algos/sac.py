@@ -24,11 +24,14 @@ import numpy as np
 import torch
 from torch import nn
 
-from triplesumo.agents.networks import Critic, GaussianActor
+from triplesumo.agents.networks import FINAL_INIT, Critic, GaussianActor
 from triplesumo.algos.base import adam, descend, frozen
 from triplesumo.algos.config import OffPolicyConfig, flag, learning_rate, real, require
 from triplesumo.algos.noise import ActionNoise
 from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
+
+CRITIC_NORMS = ("none", "layer")
+"""The values of :attr:`SACConfig.critic_norm`."""
 
 
 @dataclass(frozen=True)
@@ -60,15 +63,41 @@ class SACConfig(OffPolicyConfig):
     target_entropy: float | None = None
     """Target entropy H̄ of the learned temperature; None means -act_dim (SAC v2)."""
 
+    critic_norm: str = "none"
+    """Normalisation inside both critics and their targets: none, or layer (LayerNorm after each hidden linear
+    layer, before its activation, as RLPD (Ball et al., 2023) and BRO (Nauman et al., 2024) do to keep Q bounded
+    at high update-to-data ratios). It makes the critics' tensors, so a fork keeps it."""
+
     TUNABLE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.TUNABLE, "alpha_lr", "target_entropy")
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        require(self, "critic_norm", self.critic_norm in CRITIC_NORMS,
+                f"must be one of {', '.join(CRITIC_NORMS)}, got {self.critic_norm!r}")
         require(self, "alpha", real(self, "alpha") > 0, "must be > 0")
         flag(self, "learn_alpha")
         learning_rate(self, "alpha_lr")
         if self.target_entropy is not None:
             real(self, "target_entropy")
+
+
+class LayerNormCritic(Critic):
+    """:class:`Critic` with a LayerNorm (learned gain and bias) after each hidden linear layer, before its leaky
+    ReLU: ``Linear -> LayerNorm -> LeakyReLU`` per hidden layer, then the small-init linear output. The features
+    the output reads have unit scale whatever the inputs and weights do, so Q cannot grow by feature growth alone."""
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256)) -> None:
+        nn.Module.__init__(self)
+        self.obs_dim, self.act_dim, self.hidden = obs_dim, act_dim, tuple(hidden)
+        layers: list[nn.Module] = []
+        width_in = obs_dim + act_dim
+        for width in self.hidden:
+            layers += [nn.Linear(width_in, width), nn.LayerNorm(width), nn.LeakyReLU()]
+            width_in = width
+        last = nn.Linear(width_in, 1)
+        nn.init.uniform_(last.weight, -FINAL_INIT, FINAL_INIT)
+        nn.init.uniform_(last.bias, -FINAL_INIT, FINAL_INIT)
+        self.net = nn.Sequential(*layers, last)
 
 
 class Temperature(nn.Module):
@@ -99,8 +128,9 @@ class SAC(OffPolicyAlgorithm):
         """Squashed Gaussian actor, twin critics with targets (no target actor), temperature."""
         hidden = self.config.hidden
         self.actor = GaussianActor(self.obs_dim, self.act_dim, hidden, state_dependent_std=True)
-        self.critic = Critic(self.obs_dim, self.act_dim, hidden)
-        self.critic2 = Critic(self.obs_dim, self.act_dim, hidden)
+        critic = LayerNormCritic if self.config.critic_norm == "layer" else Critic
+        self.critic = critic(self.obs_dim, self.act_dim, hidden)
+        self.critic2 = critic(self.obs_dim, self.act_dim, hidden)
         self.critic_target = self.target_copy(self.critic)
         self.critic2_target = self.target_copy(self.critic2)
         self.critics = [self.critic, self.critic2]

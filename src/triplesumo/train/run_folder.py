@@ -119,6 +119,9 @@ LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_thres
                       "zoo_share")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
+ALGO_ADDED_LATER = {"sac": ("critic_norm",)}
+"""Learner config fields newer than the first run folders of their algorithm, whose defaults are what every earlier
+run trained with (no LayerNorm in SAC's critics), likewise."""
 REWARD_ADDED_LATER = ("axis_dead_zone", "opponents")
 """RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs; how several
 opponents' terms combine), whose defaults are what every earlier run was paid by, likewise."""
@@ -152,7 +155,8 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         raise ValueError(f"{source}: {exc}") from exc
     for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
         try:
-            data[name] = cls(**_check_keys(data[name], cls, f"{name}.", source))
+            section = _with_added_later(data[name], cls, ALGO_ADDED_LATER.get(name, ()))
+            data[name] = cls(**_check_keys(section, cls, f"{name}.", source))
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: {exc}") from exc
     data["policies"] = tuple(data["policies"])

@@ -1,0 +1,148 @@
+"""SAC's learner options for time to skill (issue 53): each one's update, and resume equals uninterrupted.
+
+``critic_norm="layer"``: both critics and their targets put a LayerNorm after each hidden linear layer.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file, save_file
+from torch import nn
+
+from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t  # the same random batches
+from triplesumo.algos.sac import SAC, LayerNormCritic, SACConfig
+from triplesumo.train.config import TrainConfig
+from triplesumo.train.loop import train
+
+torch.set_num_threads(1)
+
+CFG = SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100, critic_norm="layer")
+
+
+def _layer_norms(module: nn.Module) -> list[nn.LayerNorm]:
+    return [m for m in module.modules() if isinstance(m, nn.LayerNorm)]
+
+
+def test_layer_norm_critics_and_targets_normalise_each_hidden_layer() -> None:
+    agent = SAC(OBS_DIM, ACT_DIM, CFG, seed=0)
+    for name in ("critic", "critic2", "critic_target", "critic2_target"):
+        critic = getattr(agent, name)
+        assert isinstance(critic, LayerNormCritic)
+        assert [ln.normalized_shape for ln in _layer_norms(critic)] == [(32,), (16,)], name
+    assert not _layer_norms(agent.actor)  # the actor (and so the exported policy) is unchanged
+    assert not _layer_norms(SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm="none"), seed=0).critic)
+    # the same seed builds the same actor with either critic
+    plain = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm="none"), seed=0)
+    assert torch.equal(plain.actor.net[0].weight, agent.actor.net[0].weight)
+
+
+def test_a_layer_norm_critic_does_not_grow_with_its_first_layer() -> None:
+    """Scaling the first layer's weights and bias by 50 leaves Q as it was (LayerNorm undoes the scale); a plain
+    critic's Q moves."""
+    obs, act = _t(_batch(0)["obs"]), _t(_batch(0)["act"])
+    for norm, same in (("layer", True), ("none", False)):
+        agent = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm=norm), seed=0)
+        _perturb(agent.critic, 3)  # away from the near-zero output initialisation
+        with torch.no_grad():
+            before = agent.critic(obs, act)
+            agent.critic.net[0].weight.mul_(50.0)
+            agent.critic.net[0].bias.mul_(50.0)
+            after = agent.critic(obs, act)
+        assert torch.allclose(before, after, atol=1e-4) == same, norm
+
+
+def test_a_layer_norm_update_steps_the_norms_and_their_targets_follow() -> None:
+    agent = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, tau=0.1), seed=0)
+    gain = _layer_norms(agent.critic)[0].weight.detach().clone()
+    gain_target = _layer_norms(agent.critic_target)[0].weight.detach().clone()
+    assert torch.equal(gain, gain_target)
+    stats = agent.update(_batch(1))
+    new_gain = _layer_norms(agent.critic)[0].weight.detach()
+    assert not torch.equal(new_gain, gain)  # the critics' Adam steps the LayerNorm gains
+    torch.testing.assert_close(_layer_norms(agent.critic_target)[0].weight, gain_target.lerp(new_gain, 0.1))
+    assert np.isfinite(list(stats.values())).all()
+    state = agent.state_dict()
+    assert {"critic.net.1.weight", "critic.net.1.bias", "critic2_target.net.4.weight"} <= set(state)
+
+
+def test_critic_norm_is_validated() -> None:
+    with pytest.raises(ValueError, match="SACConfig.critic_norm must be one of none, layer"):
+        SACConfig(critic_norm="batch")
+    assert SACConfig().critic_norm == "none"  # the default is unchanged
+    assert SACConfig(**json.loads(json.dumps(dataclasses.asdict(CFG)))) == CFG
+
+
+def test_a_layer_norm_learner_resumes_bit_for_bit(tmp_path: Path) -> None:
+    def make(seed: int = 0) -> SAC:
+        return SAC(OBS_DIM, ACT_DIM, CFG, seed=seed)
+
+    def steps(agent: SAC, rounds: range) -> list[dict[str, float]]:
+        out = []
+        for i in rounds:
+            agent.observe(_batch(100 + i)["obs"])
+            out.append(agent.update(_batch(i)))
+        return out
+
+    uninterrupted = make()
+    steps(uninterrupted, range(3))
+    tensors, meta = uninterrupted.optimizer_state()
+    save_file(uninterrupted.state_dict(), tmp_path / "w.safetensors")
+    save_file(tensors, tmp_path / "o.safetensors")
+    (tmp_path / "o.json").write_text(json.dumps(meta))
+    resumed = make(seed=7)
+    resumed.load_state_dict(load_file(tmp_path / "w.safetensors"))
+    resumed.load_optimizer_state(load_file(tmp_path / "o.safetensors"), json.loads((tmp_path / "o.json").read_text()))
+    assert steps(uninterrupted, range(3, 6)) == steps(resumed, range(3, 6))
+    for key, value in uninterrupted.state_dict().items():
+        assert torch.equal(resumed.state_dict()[key], value), key
+    # a plain critic's checkpoint lacks the norms
+    with pytest.raises(KeyError, match=r"missing key 'critic\.net\.1\.bias' \(8 missing\)"):
+        make().load_state_dict({k: v for k, v in uninterrupted.state_dict().items() if ".net.1." not in k})
+
+
+E = 2
+TINY = SACConfig(hidden=(16, 16), buffer_size=2000, learning_starts=40, batch_size=16, learn_every=2,
+                 critic_norm="layer")
+
+
+def _tiny(out: Path, name: str, epochs: int) -> TrainConfig:
+    return TrainConfig(name=name, out=str(out), learn=("bug=sac",), policies=("ant=zero", "spider=random"),
+                       epochs=epochs, steps_per_epoch=30, n_envs=2, checkpoint_every=E, seed=3, sac=TINY,
+                       progress=False, tensorboard=False)
+
+
+def test_a_layer_norm_training_run_resumed_equals_the_uninterrupted_one(tmp_path: Path) -> None:
+    whole = train(_tiny(tmp_path, "whole", 2 * E))
+    killed = train(_tiny(tmp_path, "killed", E))
+    resumed = train(TrainConfig(), resume_dir=killed.run_dir, overrides={"epochs": 2 * E})
+    assert (resumed.epochs, resumed.env_steps, resumed.updates) == (whole.epochs, whole.env_steps, whole.updates)
+    assert whole.updates > 0
+    a, b = load_file(str(whole.run_dir / "policy.safetensors")), load_file(str(killed.run_dir / "policy.safetensors"))
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    saved = json.loads((killed.run_dir / "config.json").read_text())
+    assert saved["sac"]["critic_norm"] == "layer"
+
+
+def test_a_config_json_written_before_critic_norm_reads_back_with_the_norm_it_trained_with() -> None:
+    """A run folder from before ``sac.critic_norm`` resumes as it trained (no norm); an unknown SAC key is still
+    refused by name."""
+    import dataclasses
+    import json
+
+    import pytest
+
+    from triplesumo.train.config import TrainConfig
+    from triplesumo.train.run_folder import config_from_json
+
+    data = json.loads(json.dumps(dataclasses.asdict(TrainConfig(learn=("bug=sac",)))))
+    del data["sac"]["critic_norm"]
+    assert config_from_json(data).sac.critic_norm == "none"
+    data["sac"]["critic_nrom"] = "layer"
+    with pytest.raises(ValueError, match="critic_nrom"):
+        config_from_json(data, "old/config.json")
