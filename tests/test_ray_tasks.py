@@ -121,3 +121,27 @@ def test_ray_options_without_ray_name_the_extra(monkeypatch: pytest.MonkeyPatch)
             cls(ray=True)
         with pytest.raises(ValueError, match="ray_address needs"):
             cls(ray_address="auto")
+
+
+def test_a_local_ray_started_by_session_runs_its_tasks_at_the_callers_priority() -> None:
+    """Ray lowers its workers by 15 by default, which starved the Bug trials of ``reproduce --ray`` on a busy box;
+    ``session`` starts a local Ray whose tasks run at the caller's niceness, and leaves the environment as it was."""
+    import os
+    import sys
+
+    ray = pytest.importorskip("ray", reason='the "ray" extra is not installed (pip install "triplesumo[ray]")')
+    from triplesumo.integrations import ray_tasks
+
+    if ray.is_initialized():
+        pytest.skip("a Ray is already running in this process")
+    assert "RAY_worker_niceness" not in os.environ
+    def niceness() -> int:
+        return os.nice(0)
+
+    ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])  # the test module is not importable on workers
+    try:
+        with ray_tasks.session(num_cpus=1):
+            assert ray.get(ray.remote(niceness).remote()) == os.nice(0)  # a worker's niceness: the caller's
+    finally:
+        ray.cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
+    assert "RAY_worker_niceness" not in os.environ

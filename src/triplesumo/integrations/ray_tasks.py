@@ -22,6 +22,7 @@ Needs the ``ray`` extra (``pip install "triplesumo[ray]"``).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -47,17 +48,33 @@ T = TypeVar("T")
 Row = dict[str, Any]
 
 
+NICENESS_VARIABLE = "RAY_worker_niceness"
+WORKER_NICENESS = 0
+"""How much a local Ray started by :func:`session` lowers its workers' priority below the caller's (Ray's default:
+15)."""
+
+
 @contextmanager
 def session(address: str = "", num_cpus: int | None = None) -> Iterator[None]:
     """Connected to Ray inside the block: the Ray already initialised, else ``ray.init(address)``
-    (empty: start a local Ray with ``num_cpus``, default all cores), shut down again at the end."""
+    (empty: start a local Ray with ``num_cpus``, default all cores), shut down again at the end.
+
+    A local Ray started here runs its tasks at this process's priority (:data:`WORKER_NICENESS`): Ray's own default
+    lowers its workers by 15, so on a machine doing other work the tasks, which are the work here, would wait for
+    everything else. ``RAY_worker_niceness`` set in the environment still wins."""
     if ray.is_initialized():
         yield
         return
     if address:
         ray.init(address=address, log_to_driver=False)
     else:
-        ray.init(num_cpus=num_cpus or None, include_dashboard=False, log_to_driver=False)
+        before = os.environ.get(NICENESS_VARIABLE)
+        os.environ.setdefault(NICENESS_VARIABLE, str(WORKER_NICENESS))  # read when ray.init starts the raylet
+        try:
+            ray.init(num_cpus=num_cpus or None, include_dashboard=False, log_to_driver=False)
+        finally:
+            if before is None:
+                os.environ.pop(NICENESS_VARIABLE, None)
     try:
         yield
     finally:
