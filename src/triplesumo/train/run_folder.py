@@ -95,6 +95,12 @@ DEPRECATED_FIELDS = ("learner",)
 them (one written while they were fields is read as its ``learn``)."""
 
 
+def saved_learn(data: Mapping[str, Any], learner: str = "") -> list[Any]:
+    """The learners a saved config names: its ``learn``, or, in one written while ``learner`` named the one DDPG
+    learner (``learn`` empty), ``[LEARNER=ddpg]`` (``learner`` when the config names none either)."""
+    return list(data.get("learn") or [f"{data.get('learner', learner)}=ddpg"])
+
+
 def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]:
     if not isinstance(data, dict):
         raise ValueError(f"{source}: {where or 'the file'} must be a JSON object, got {type(data).__name__}")
@@ -139,9 +145,8 @@ def _with_added_later(data: Any, cls: type, added_later: tuple[str, ...]) -> Any
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
     """The :class:`TrainConfig` saved as ``data``; ``ValueError`` names ``source`` and any unknown or
     missing key (a config written by another version, or edited by hand)."""
-    if isinstance(data, dict) and "learner" in data:  # written while learner named the one DDPG learner (learn empty)
-        data = {k: v for k, v in data.items() if k != "learner"} | {
-            "learn": data.get("learn") or [f"{data['learner']}=ddpg"]}
+    if isinstance(data, dict) and "learner" in data:
+        data = {k: v for k, v in data.items() if k != "learner"} | {"learn": saved_learn(data)}
     if isinstance(data, dict):  # written before a field existed: that field's default, what the run used
         defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
@@ -251,8 +256,7 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
     run_dir = Path(run_dir)
     learner = "bug"
     if (run_dir / "config.json").is_file():  # (its one learner names metrics.csv's plots)
-        raw = load_json(run_dir / "config.json")
-        learner = str((raw.get("learn") or [f"{raw.get('learner', learner)}=ddpg"])[0]).split("=")[0]
+        learner = str(saved_learn(load_json(run_dir / "config.json"), learner)[0]).split("=")[0]
     paths: list[Path] = []
     files = tables_in(run_dir, "metrics-*.csv") or [run_dir / "metrics.csv"]  # plain or packed
     for path in files:
