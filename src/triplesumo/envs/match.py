@@ -298,13 +298,23 @@ class Match:
             infos.append(info)
         return infos
 
-    def record_judged(self, over: bool, observations: list[np.ndarray]) -> None:
+    def record_judged(self, over: bool, observations: list[np.ndarray],
+                      standing: tuple[list[bool], list[int], list[int]] | None = None) -> None:
         """Take the result of a step judged outside the match: the batched rules of
         :meth:`MatchBatch.step_arrays <triplesumo.envs.batch.MatchBatch.step_arrays>`, which
         increment :attr:`steps` and judge many matches at once (what :meth:`finish_step`
-        does for one): whether the match ended, and its observations."""
+        does for one): whether the match ended, its observations and, under ``elimination``
+        rules, ``standing``: who is still in play, and every agent's place and outcome code so far."""
         self.over = over
         self._last_obs = observations
+        if standing is not None:
+            self.alive, self._places, self._outcomes = standing
+
+    @property
+    def standing(self) -> tuple[list[bool], list[int], list[int]]:
+        """Under ``elimination`` rules, where the match stands: who is in play, and every agent's place and
+        outcome code decided so far (0 while it plays on); :meth:`record_judged` takes it back."""
+        return self.alive, self._places, self._outcomes
 
     def _finish_elimination(self, pos: np.ndarray, vel: np.ndarray, out: np.ndarray) -> StepResult:
         """:meth:`finish_step` under ``elimination`` rules."""
@@ -321,16 +331,8 @@ class Match:
         infos = self._infos(terms, outcomes, places, leaving, [not a for a in alive])
         self._places, self._outcomes = places, outcomes
         self.alive = alive
-        over = bool(judged.over[0])
-        self.over = over
-        all_out = not any(alive)
-        # a step that pays a decided result is terminal: the last team standing, or the evader surviving to the
-        # limit (a win by the rules); only survivors sharing a draw at the limit are truncated
-        paid = any(alive[i] and decided[i] in (rules_outcome.WIN_CODE, rules_outcome.LOSS_CODE)
-                   for i in range(self.n_agents))
-        terminated = over and (all_out or paid or len({self._team_of[i] for i in range(self.n_agents)
-                                                       if alive[i]}) <= 1)
-        truncated = over and not terminated
+        self.over = bool(judged.over[0])
+        terminated, truncated = bool(judged.terminated[0]), bool(judged.truncated[0])
         self._last_obs = self._observe()
         return StepResult(self._last_obs, terms["reward"][0], terminated, truncated, infos,
                           leaving if any(leaving) else None)
