@@ -183,7 +183,8 @@ def test_elimination_equals_the_reference_and_torch(roster, opponents: str) -> N
         assert judged.leaving[k].tolist() == ref.leaving
         assert judged.alive[k].tolist() == ref.alive
         assert bool(judged.over[k]) == ref.over
-        assert (bool(judged.terminated[k]), bool(judged.truncated[k])) == (ref.terminated, ref.over and not ref.terminated)
+        ends = (bool(judged.terminated[k]), bool(judged.truncated[k]))
+        assert ends == (ref.terminated, ref.over and not ref.terminated)
         assert list(zip(judged.low[k].tolist(), judged.high[k].tolist(), strict=True)) == ref.spans
         codes = [O.PLAYING if o is None else O.OUTCOME_CODES[o] for o in ref.outcomes]
         assert judged.code[k].tolist() == codes

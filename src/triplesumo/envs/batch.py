@@ -56,9 +56,10 @@ failed ``mj_step`` or a non-finite state is finished by :meth:`Match.finish_step
 physics error). Under elimination rules the batch carries where each match stands in
 ``(n_matches, n_agents)`` arrays (who is in play, the places and outcomes decided so far): an agent
 out of play gets zero control in the one array operation, and
-:func:`~triplesumo.rules.outcome.judge_elimination` judges every match at once; each match takes its
-row back (:meth:`Match.record_judged`), as it takes its observations (and pursuit's evader noise, drawn from
-its own generator). ``triplesumo bench env`` measures ``vector_env`` against raw ``mujoco.batch`` physics of the same matches (``docs/bench/env_vector_cpu.md``).
+:func:`~triplesumo.rules.outcome.judge_elimination` judges every match at once; each match takes
+its row back (:meth:`Match.record_judged`), as it takes its observations (and pursuit's evader
+noise, drawn from its own generator). ``triplesumo bench env`` measures ``vector_env`` against raw
+``mujoco.batch`` physics of the same matches (``docs/bench/env_vector_cpu.md``).
 
 :class:`VectorMatches` (made by ``triplesumo.vector_env``) is the public face of a
 MatchBatch: arrays ``(num_envs, n_agents, ...)`` in and out, Gymnasium-style autoreset,
