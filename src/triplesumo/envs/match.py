@@ -331,8 +331,9 @@ class Match:
         infos = self._infos(terms, outcomes, places, leaving, [not a for a in alive])
         self._places, self._outcomes = places, outcomes
         self.alive = alive
-        self.over = bool(judged.over[0])
-        terminated, truncated = bool(judged.terminated[0]), bool(judged.truncated[0])
+        self.over = over = bool(judged.over[0])
+        terminated = bool(judged.terminated[0])
+        truncated = over and not terminated  # judged.truncated, without two array operations on one match
         self._last_obs = self._observe()
         return StepResult(self._last_obs, terms["reward"][0], terminated, truncated, infos,
                           leaving if any(leaving) else None)

@@ -178,7 +178,8 @@ def judge_elimination(alive: Any, out: Any, at_limit: Any, rules: BatchedRules, 
     low = xp.where(won | drawn, 1, xp.where(lost, 2, low))
     high = xp.where(won, 1, xp.where(lost | drawn, n_after, high))
     code = xp.where(low == 0, PLAYING, xp.where(low > 1, LOSS_CODE, xp.where(high > 1, DRAW_CODE, WIN_CODE)))
-    terminated = over & ((n_after[:, 0] <= 1) | (won | lost).any(-1))
+    # terminal: one team or none left, or a survivor paid a win or loss (decided implies the match is over)
+    terminated = ((n_after <= 1) | decided)[:, 0]
     return Elimination(leaving, still, over, low, high, code, terminated)
 
 
