@@ -186,7 +186,7 @@ def test_a_killed_warp_run_resumes_exactly(warp_runs: dict[str, Trainer], tmp_pa
     assert _same_policy(killed.run_dir / "policy.safetensors", whole.run_dir / "policy.safetensors")
 
 
-@pytest.mark.slow  # 108 s on the shared 2-core box under a load of 14
+@pytest.mark.slow  # 40 s on the shared 2-core box (108 s under a load of 14)
 def test_a_warp_free_for_all_run_plays_eliminations_and_resumes_exactly(tmp_path: Path) -> None:
     """Issue 54: the trainer plays the elimination scenarios on warp. Started 1.7 m out, agents leave mid-match and
     the learner (Spider) plays on while another is out; killed while an agent is out of a match still under way

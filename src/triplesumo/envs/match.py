@@ -54,8 +54,6 @@ class Match:
         self.sim = Simulation(self.model, self.agents, self.config.physics.frame_skip)
         self.data = self.sim.data
         self.teams = Teams.from_agents(self.config.agents)
-        self._n_teams = len(self.teams.names)
-        self._team_of = self.teams.team_of.tolist()
         self.half_size = ring_half_size(self.model)
         self.game = BatchedRules.build(self.config, self.half_size)
         """The game as arrays: every rule of a step is :mod:`triplesumo.rules`' array function on ``E = 1``."""
@@ -79,7 +77,6 @@ class Match:
         self._places = [0] * self.n_agents
         self._outcomes: list[int] = [rules_outcome.PLAYING] * self.n_agents
         self._evader = self.agents.index(self.config.evader) if self.config.evader is not None else None
-        self._timeout_team = self._team_of[self._evader] if self._evader is not None else None
         if self._evader is not None:
             self.observer.set_evader(self._evader)
         self._obs_noise = float(self.config.evader_obs_noise)
