@@ -64,6 +64,9 @@ class Elimination:
     """``(low, high)``: the places an agent decided on this step shares (``(0, 0)`` if none)."""
     outcomes: list[str | None]
     """``win``, ``loss`` or ``draw`` where a place was decided on this step, else ``None``."""
+    terminated: bool
+    """The match ended by its rules: every agent out, at most one team left, or a survivor paid a win or a loss
+    (the evader surviving to the limit); survivors sharing a draw at the limit are truncated instead."""
 
 
 def judge_elimination(alive: Sequence[bool], out: Sequence[bool], team_of: Sequence[int],
@@ -101,7 +104,9 @@ def judge_elimination(alive: Sequence[bool], out: Sequence[bool], team_of: Seque
             for i in range(n):
                 if still[i]:
                     places[i], spans[i], outcomes[i] = 1, (1, len(after)), DRAW
-    return Elimination(leaving, still, over, places, spans, outcomes)
+    paid = any(still[i] and outcomes[i] in (WIN, LOSS) for i in range(n))
+    terminated = over and (not any(still) or paid or len(after) <= 1)
+    return Elimination(leaving, still, over, places, spans, outcomes, terminated)
 
 
 class ReferenceRewardRule:

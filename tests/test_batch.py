@@ -194,18 +194,18 @@ ARRAY_CONFIGS = {
 }
 
 
-@pytest.mark.parametrize("backend", ["mujoco", "threads"])
-@pytest.mark.parametrize("config", ARRAY_CONFIGS.values(), ids=list(ARRAY_CONFIGS))
-def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig, backend: str) -> None:
-    """The matches judged together (first-out rules) or one by one (elimination) give Match's results."""
+def _step_arrays_against_alone(config: MatchConfig, backend: str, seed: int = 11,
+                               action_seed: int = 4) -> dict[str, int]:
+    """Step a MatchBatch with ``step_arrays`` and each match alone with ``Match.step_array``; assert every result
+    equal, bit for bit, at every step; count the matches ended, the agents that left and the ends by truncation."""
     alone = [Match(config) for _ in range(N_MATCHES)]
-    for match, s in zip(alone, match_seeds(11, N_MATCHES), strict=True):
+    for match, s in zip(alone, match_seeds(seed, N_MATCHES), strict=True):
         match.reset(s)
     n, width = alone[0].n_agents, alone[0].action_width
-    actions = np.random.default_rng(4).uniform(-1.3, 1.3, (N_STEPS, N_MATCHES, n, width))
-    ends = 0
+    actions = np.random.default_rng(action_seed).uniform(-1.3, 1.3, (N_STEPS, N_MATCHES, n, width))
+    seen = {"ends": 0, "left": 0, "truncated": 0}
     with MatchBatch(config, N_MATCHES, 2, stepper=backend) as batch:
-        batch.reset_all(11)
+        batch.reset_all(seed)
         for t in range(N_STEPS):
             got = batch.step_arrays(actions[t])
             for k, match in enumerate(alone):
@@ -221,11 +221,75 @@ def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig, bac
                     assert np.array_equal(value[k], column[0] if key == "step" else column), (where, key)
                 assert np.array_equal(batch.matches[k].data.qpos, match.data.qpos), where
                 assert batch.matches[k].over == match.over and batch.matches[k].steps == match.steps, where
+                assert batch.matches[k].standing == match.standing, where
+                assert np.array_equal(batch.matches[k].state(), match.state()), where
+                seen["left"] += sum(r.eliminated or [])
                 if match.over:
+                    seen["truncated"] += r.truncated
                     match.reset()
                     batch.reset_one(k)
-                    ends += 1
-    assert ends >= N_MATCHES
+                    seen["ends"] += 1
+    return seen
+
+
+@pytest.mark.parametrize("backend", ["mujoco", "threads"])
+@pytest.mark.parametrize("config", ARRAY_CONFIGS.values(), ids=list(ARRAY_CONFIGS))
+def test_step_arrays_equal_each_match_alone_bit_for_bit(config: MatchConfig, backend: str) -> None:
+    """The matches judged together give Match's results."""
+    assert _step_arrays_against_alone(config, backend)["ends"] >= N_MATCHES
+
+
+def _elimination_configs() -> dict[str, MatchConfig]:
+    """Every elimination scenario, started on the v1 circle with spread positions so that agents leave within
+    the steps (and the step limit cuts some matches), plus rosters and observations of other sizes."""
+    from triplesumo.model import PhysicsConfig
+    from triplesumo.registration import ELIMINATION_SCENARIOS
+    from triplesumo.rules import ResetNoise
+    from triplesumo.rules.scenarios import scenario_config
+
+    spread = {"max_steps": 30, "reset_noise": ResetNoise(position=0.5), "physics": PhysicsConfig(layout="circle")}
+    configs = {name: scenario_config(name, **spread) for name in ELIMINATION_SCENARIOS}
+    configs |= {"ffa-4-egocentric": scenario_config("ffa", n_agents=4, obs_mode="egocentric", **spread),
+                "pursuit-noise": scenario_config("pursuit", evader_obs_noise=0.2, **spread),
+                "pursuit-2-noise-egocentric": scenario_config("pursuit", n_pursuers=2, evader_obs_noise=0.2,
+                                                              obs_mode="egocentric", **spread)}
+    return configs
+
+
+ELIMINATION_CONFIGS = _elimination_configs()
+
+
+@pytest.mark.parametrize("seed", [11, 23])
+@pytest.mark.parametrize("backend", ["mujoco", "threads"])
+@pytest.mark.parametrize("config", ELIMINATION_CONFIGS.values(), ids=list(ELIMINATION_CONFIGS))
+def test_elimination_judged_together_equals_each_match_alone(config: MatchConfig, backend: str, seed: int) -> None:
+    """Issue 54: elimination judged over the batch axis at once (who leaves, zero control for the bodies out of
+    play, places kept, rewards over the agents in play, terminated or truncated, evader noise from each match's
+    own generator) gives each match's own results bit for bit, step for step, for every elimination scenario."""
+    seen = _step_arrays_against_alone(config, backend, seed, action_seed=seed)
+    assert seen["left"] >= 2 and seen["ends"] >= 2, seen
+
+
+def test_elimination_is_judged_over_the_batch_not_match_by_match(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No per-match judging is left on the batched path: with Match.finish_step out of reach, a batch of free-for-all
+    matches still plays through eliminations and ends."""
+    config = ELIMINATION_CONFIGS["ffa"]
+
+    def alone(self: Match) -> None:
+        raise AssertionError("a match was judged alone")
+
+    monkeypatch.setattr(Match, "finish_step", alone)
+    left = ends = 0
+    with MatchBatch(config, N_MATCHES, 2, stepper="threads") as batch:
+        batch.reset_all(11)
+        actions = np.random.default_rng(11).uniform(-1.3, 1.3, (N_STEPS, N_MATCHES, 3, 8))
+        for t in range(N_STEPS):
+            got = batch.step_arrays(actions[t])
+            left += int(got.leaving.sum())
+            for k in np.flatnonzero(got.terminated | got.truncated).tolist():
+                batch.reset_one(k)
+                ends += 1
+    assert left >= 2 and ends >= 2
 
 
 @pytest.mark.parametrize("backend", ["mujoco", "threads"])

@@ -183,6 +183,8 @@ def test_elimination_equals_the_reference_and_torch(roster, opponents: str) -> N
         assert judged.leaving[k].tolist() == ref.leaving
         assert judged.alive[k].tolist() == ref.alive
         assert bool(judged.over[k]) == ref.over
+        ends = (bool(judged.terminated[k]), bool(judged.truncated[k]))
+        assert ends == (ref.terminated, ref.over and not ref.terminated)
         assert list(zip(judged.low[k].tolist(), judged.high[k].tolist(), strict=True)) == ref.spans
         codes = [O.PLAYING if o is None else O.OUTCOME_CODES[o] for o in ref.outcomes]
         assert judged.code[k].tolist() == codes
@@ -195,7 +197,7 @@ def test_elimination_equals_the_reference_and_torch(roster, opponents: str) -> N
     assert {O.PLAYING, O.WIN_CODE, O.LOSS_CODE} <= seen
     on_torch = B.judge_elimination(torch.as_tensor(alive), torch.as_tensor(out), torch.as_tensor(at_limit),
                                    rules.to(torch.as_tensor), torch)
-    for field in ("leaving", "alive", "over", "low", "high", "code"):
+    for field in ("leaving", "alive", "over", "low", "high", "code", "terminated", "truncated"):
         np.testing.assert_array_equal(getattr(on_torch, field).numpy(), getattr(judged, field), err_msg=field)
     t_terms = B.reward_terms(torch.as_tensor(pos), torch.as_tensor(vel), None, None, rules.to(torch.as_tensor), torch,
                              alive=torch.as_tensor(alive), sparse=torch.as_tensor(sparse))

@@ -114,3 +114,6 @@ def test_warp_backend_reports_env_and_raw_rates_per_size(tmp_path: Path, capsys:
     assert "raw mujoco_warp" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="num-envs"):
         main(["--backend", "warp", "--num-envs", "1,x"])
+    # a named game reaches the Warp env too (elimination rules play there since issue 54)
+    assert main(["--backend", "warp", "--device", "cpu", "--quick", "--scenario", "ffa", "--json", str(path)]) == 0
+    assert json.loads(path.read_text())["setup"]["scenario"] == "ffa" and "scenario ffa" in capsys.readouterr().out

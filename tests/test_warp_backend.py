@@ -206,7 +206,7 @@ def test_egocentric_observations_of_the_starts_and_one_step_match_the_cpu() -> N
     np.testing.assert_allclose(obs.cpu().numpy()[..., :contact.start], after[..., :contact.start], atol=1e-3)
 
 
-def test_public_vector_env_reaches_the_warp_backend_and_refuses_what_it_cannot_play() -> None:
+def test_public_vector_env_reaches_the_warp_backend_and_refuses_mixed_bodies() -> None:
     import triplesumo
 
     env = triplesumo.vector_env(2, backend="warp", device="cpu", max_steps=3)
@@ -220,8 +220,6 @@ def test_public_vector_env_reaches_the_warp_backend_and_refuses_what_it_cannot_p
         obs, rewards, terminated, truncated, infos = env.step(torch.zeros((2, 3, env.act_dim)))
     assert tuple(rewards.shape) == (2, 3) and bool(truncated.all()) and bool(infos["_final_obs"].all())
     cpu.close()
-    with pytest.raises(NotImplementedError, match="rules='elimination'.*backend='cpu'"):
-        triplesumo.vector_env(2, scenario="ffa", backend="warp", device="cpu")
     with pytest.raises(NotImplementedError, match="one body kind"):
         triplesumo.vector_env(2, scenario="bodies", backend="warp", device="cpu")
     with pytest.raises(ValueError, match="num_threads is for backend='cpu'"):
@@ -345,3 +343,107 @@ def test_the_old_class_name_is_a_deprecated_alias() -> None:
 
     with pytest.warns(DeprecationWarning, match="WarpVectorMatches"):
         assert warp.WarpMatchBatch is WarpVectorMatches
+
+
+ELIMINATION_CASES = {"ffa": ("ffa", {}), "pursuit": ("pursuit", {}),
+                     "pursuit-noise": ("pursuit", {"evader_obs_noise": 0.2})}
+"""Every elimination scenario, and pursuit's evader noise (drawn on the host from each match's stream)."""
+
+
+@pytest.mark.parametrize("case", ELIMINATION_CASES.values(), ids=list(ELIMINATION_CASES))
+def test_elimination_scenarios_play_as_on_the_cpu_vector_path(case: tuple) -> None:
+    """Issue 54: Warp plays the elimination rules with the CPU's array rule. Teacher-forced as the rollout above
+    (each world set to its CPU match's state, warm start, step count and standing -- who is in play, places and
+    outcomes kept -- before every step), one step of ``VectorMatches`` and of Warp agree with the rollout's
+    tolerances: on steps whose margins are clear, who leaves, who is eliminated, outcome codes, places, each
+    agent's terminated and truncated flags, autoresets and the placement rewards exactly, the dense terms within
+    the rollout's bounds; observations (evader noise included) within 2e-2 on every step; restarted matches start
+    as the CPU's. An eliminated agent's motors get zero control on Warp as on the CPU."""
+    import triplesumo
+    from triplesumo.envs.batch import VectorMatches
+
+    name, extra = case
+    cfg = triplesumo.scenario_config(name, max_steps=30, reset_noise=ResetNoise(position=0.5),
+                                     physics=PhysicsConfig(layout="circle"), **extra)
+    n_envs, steps = 3, 60
+    env = WarpVectorMatches(cfg, n_envs, device=DEVICE)
+    cpu = VectorMatches(n_envs, cfg, 1)
+    n, half = env.n_agents, env.match.half_size
+    obs, _ = env.reset(SEED)
+    cpu_obs, _ = cpu.reset(SEED)
+    structure = cpu.matches[0].observer.structure[cpu.agents[0]]
+    bounds, at = {}, 0
+    for block, size in structure.items():
+        bounds[block] = slice(at, at + size)
+        at += size
+    state = np.ones(at, dtype=bool)
+    state[bounds["contact_force"]] = False
+    starts = [(obs.cpu().numpy(), cpu_obs)]
+    warmstart = wp.to_torch(env.d.qacc_warmstart)
+    actions = np.random.default_rng(SEED).uniform(-1, 1, (steps, n_envs, n, 8)).astype(np.float32)
+    clear = unclear = left = ended = truncated_ends = 0
+    dq, errors = [], []
+    for t in range(steps):
+        before = []
+        for k, m in enumerate(cpu.matches):
+            env._qpos[k] = torch.as_tensor(m.data.qpos, dtype=torch.float32)
+            env._qvel[k] = torch.as_tensor(m.data.qvel, dtype=torch.float32)
+            warmstart[k] = torch.as_tensor(m.data.qacc_warmstart, dtype=torch.float32)
+            alive, places, outcomes = m.standing
+            env._alive[k], env._places[k], env._outcomes[k] = (torch.as_tensor(v) for v in (alive, places, outcomes))
+            env.steps[k] = m.steps
+            before.append(list(alive))
+        w_obs, w_reward, w_term, w_trunc, w_infos = env.step(torch.as_tensor(actions[t], device=env.device))
+        c_obs, c_reward, c_term, c_trunc, c_infos = cpu.step(actions[t])
+        ctrl = env._ctrl[:, env._actuators].reshape(n_envs, n, 8).cpu().numpy()
+        w_final = w_infos["final_obs"].cpu().numpy()
+        for k, m in enumerate(cpu.matches):
+            where = f"step {t}, match {k}"
+            gone = ~np.array(before[k])
+            assert (ctrl[k][gone] == 0).all(), where  # an eliminated body no longer acts
+            c_done = bool(c_infos["_final_obs"][k])
+            c_last = c_infos["final_obs"][k] if c_done else c_obs[k]
+            pos = c_last[-1, bounds["torso_position"]].reshape(n, 3)  # the last agent's row: no evader noise on it
+            margin = np.abs(np.maximum(np.abs(pos[:, 0]), np.abs(pos[:, 1])) - half)[~gone].min()
+            for block in ("torso_position", "qpos"):
+                np.testing.assert_allclose(w_final[k][:, bounds[block]], c_last[:, bounds[block]], atol=2e-2,
+                                           err_msg=where)
+            if not c_done:
+                dq.append(np.abs(env._qpos[k].cpu().numpy() - m.data.qpos).max())
+            if margin <= 1e-2:
+                unclear += 1
+                continue
+            clear += 1
+            for key in ("outcome", "place", "out_of_ring", "eliminated"):
+                np.testing.assert_array_equal(w_infos[key][k].cpu().numpy(), c_infos[key][k], err_msg=f"{where} {key}")
+            np.testing.assert_array_equal(w_term[k].cpu().numpy(), c_term[k], err_msg=where)
+            np.testing.assert_array_equal(w_trunc[k].cpu().numpy(), c_trunc[k], err_msg=where)
+            assert bool(w_infos["_final_obs"][k]) == c_done, where
+            np.testing.assert_array_equal(w_infos["reward_outcome"][k].cpu().numpy(), c_infos["reward_outcome"][k])
+            np.testing.assert_allclose(w_reward[k].cpu().numpy(), sum(w_infos[key][k].cpu().numpy() for key in TERMS),
+                                       rtol=1e-6, atol=1e-4, err_msg=where)
+            lead = np.sort(pos[:, :2], axis=0)
+            if (np.diff(lead, axis=0) > 1e-3).all():  # s(a, b) flips closer: the velocity terms jump
+                errors += [np.abs(w_infos[key][k].cpu().numpy() - c_infos[key][k]) for key in TERMS]
+            left += int(c_infos["out_of_ring"][k].sum())
+            ended += c_done
+            truncated_ends += c_done and bool(c_trunc[k].any())
+            if c_done:
+                starts.append((w_obs[k].cpu().numpy(), c_obs[k]))
+    assert clear > 0.9 * (clear + unclear) and left >= 2 and ended >= 2, (clear, unclear, left, ended)
+    assert name != "ffa" or truncated_ends >= 1  # survivors sharing a draw at the step limit
+    assert max(dq) < 2e-2, max(dq)
+    errors = np.concatenate(errors)
+    assert np.median(errors) < 1e-3 and np.quantile(errors, 0.98) < 0.05 and errors.max() < 2.0, (
+        np.median(errors), np.quantile(errors, 0.98), errors.max())
+    for warp_obs, cpu_start in starts:  # starts drawn from the same streams (and the same evader noise)
+        np.testing.assert_allclose(warp_obs[..., state], cpu_start[..., state], rtol=0, atol=1e-5)
+    # restart (a trainer whose learners are all out) and snapshot carry the standing too
+    np.testing.assert_allclose(env.restart(1, 5).cpu().numpy()[..., state], cpu.restart(1, 5)[..., state], atol=1e-5)
+    env._alive[2, 0] = False
+    env._places[2, 0] = 3
+    again = WarpVectorMatches(cfg, n_envs, device=DEVICE)
+    again.restore(env.snapshot(), env._last_obs.cpu().numpy())
+    for part in ("_alive", "_places", "_outcomes", "steps"):
+        assert torch.equal(getattr(again, part), getattr(env, part)), part
+    cpu.close()

@@ -460,6 +460,6 @@ def _main_warp(args: argparse.Namespace) -> int:
         sizes, steps, rounds, warmup = (2,), 2, 1, 1
     result = warp_env.run_warp_benchmark(sizes=sizes, steps=steps, rounds=rounds, device=args.device,
                                          integrator=args.integrator, obs_mode=args.obs_mode, seed=args.seed,
-                                         warmup=warmup)
+                                         warmup=warmup, scenario=args.scenario)
     report(warp_env.format_table(result), result, args.json)
     return 0

@@ -31,6 +31,7 @@ import numpy as np
 
 from triplesumo.benchmarks import versions
 from triplesumo.rules import MatchConfig
+from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train.machine import cpu_name
 
 DEFAULT_SIZES = (1, 16, 256, 1024, 4096, 16384)
@@ -40,20 +41,21 @@ TARGET_ENV_VS_RAW = 0.7
 
 def run_warp_benchmark(sizes: tuple[int, ...] = DEFAULT_SIZES, steps: int = 200, rounds: int = 3,
                        device: str | None = None, integrator: str = "RK4", obs_mode: str = "paper",
-                       seed: int = 0, warmup: int = 10) -> dict[str, Any]:
-    """Measure env and raw rates for every size; a JSON-able dict."""
+                       seed: int = 0, warmup: int = 10, scenario: str = "paper") -> dict[str, Any]:
+    """Measure env and raw rates for every size; a JSON-able dict. ``scenario``: a named game
+    (``triplesumo.scenarios()`` with one body kind: elimination rules play on Warp too)."""
     import warp as wp
 
     from triplesumo.model.specs import PhysicsConfig
 
-    config = MatchConfig(physics=PhysicsConfig(integrator=integrator), obs_mode=obs_mode)
+    config = scenario_config(scenario, physics=PhysicsConfig(integrator=integrator), obs_mode=obs_mode)
     device = device or ("cuda" if wp.is_cuda_available() else "cpu")
     rows = [_measure(config, n, device, steps, rounds, seed, warmup) for n in sizes]
     best = max(rows, key=lambda r: r["env_steps_per_s"])
     return {
         "setup": {"backend": "warp", "device": device, "device_name": _device_name(device), "sizes": list(sizes),
                   "steps": steps, "rounds": rounds, "warmup": warmup, "seed": seed, "integrator": integrator,
-                  "obs_mode": obs_mode, "timestep": config.physics.timestep,
+                  "obs_mode": obs_mode, "scenario": scenario, "timestep": config.physics.timestep,
                   "frame_skip": config.physics.frame_skip, "versions": versions("mujoco-warp", "warp-lang", "torch"),
                   "platform": platform.platform()},
         "rows": rows,
@@ -141,7 +143,8 @@ def format_table(result: dict[str, Any]) -> str:
     """The readable table ``triplesumo bench env --backend warp`` prints."""
     s, v = result["setup"], result["setup"]["versions"]
     lines = [
-        f"TripleSumo env benchmark, backend warp on {s['device']} ({s['device_name']}): {s['obs_mode']} "
+        f"TripleSumo env benchmark, backend warp on {s['device']} ({s['device_name']}): scenario "
+        f"{s.get('scenario', 'paper')}, {s['obs_mode']} "
         f"observations, {s['integrator']}, timestep {s['timestep']}, frame_skip {s['frame_skip']}; median of "
         f"{s['rounds']} rounds of {s['steps']} env steps",
         f"mujoco {v['mujoco']}, mujoco-warp {v['mujoco-warp']}, warp-lang {v['warp-lang']}, torch {v['torch']}",

@@ -33,7 +33,7 @@ def vector_env(num_envs: int, scenario: str = "paper", backend: str = "cpu", dev
     numpy arrays; results do not depend on it. ``backend="warp"`` steps MuJoCo Warp on
     ``device`` (``"cuda"``, or Warp's ``"cpu"``; default: a GPU when Warp sees one) and returns
     torch tensors on it (:class:`triplesumo.envs.warp.WarpVectorMatches`: the same contract,
-    first-out rules with one body kind; the ``gpu`` extra).
+    either rule set, with one body kind; the ``gpu`` extra).
     """
     if backend not in VECTOR_BACKENDS:
         raise ValueError(f"backend must be one of {VECTOR_BACKENDS}, got {backend!r}")

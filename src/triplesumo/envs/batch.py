@@ -40,7 +40,7 @@ Finished matches are not reset here: after a step in which ``results[k]`` is ter
 or truncated, call :meth:`reset_one` for ``k`` before the next :meth:`step`.
 
 :meth:`MatchBatch.step_arrays` is the same step with its results as arrays over the
-matches (:class:`BatchStep`), the path of :class:`VectorMatches`. Under ``first_out`` rules
+matches (:class:`BatchStep`), the path of :class:`VectorMatches`. Under either rule set
 it judges the matches together, with the very rule functions one match calls (on ``E = 1``) and MuJoCo
 Warp calls (with torch; :mod:`triplesumo.rules.batched` lists them): controls of all actions in one array
 operation; qpos, qvel and warning counters in ``(n_matches, ...)`` rows (the batch's own
@@ -53,9 +53,13 @@ and its ``mj_rnePostConstraint``, and under ``egocentric`` observations the matc
 of :meth:`step` (``tests/test_batch.py``): the reward sums run in one order for any number of matches
 (:func:`~triplesumo.rules.rewards.ordered_sum`). A match with a new MuJoCo warning, a
 failed ``mj_step`` or a non-finite state is finished by :meth:`Match.finish_step` (its
-physics error); elimination rules, whose judgement carries per-match state, take
-:meth:`step` and gather its results. ``triplesumo bench env`` measures ``vector_env``
-against raw ``mujoco.batch`` physics of the same matches (``docs/bench/env_vector_cpu.md``).
+physics error). Under elimination rules the batch carries where each match stands in
+``(n_matches, n_agents)`` arrays (who is in play, the places and outcomes decided so far): an agent
+out of play gets zero control in the one array operation, and
+:func:`~triplesumo.rules.outcome.judge_elimination` judges every match at once; each match takes
+its row back (:meth:`Match.record_judged`), as it takes its observations (and pursuit's evader
+noise, drawn from its own generator). ``triplesumo bench env`` measures ``vector_env`` against raw
+``mujoco.batch`` physics of the same matches (``docs/bench/env_vector_cpu.md``).
 
 :class:`VectorMatches` (made by ``triplesumo.vector_env``) is the public face of a
 MatchBatch: arrays ``(num_envs, n_agents, ...)`` in and out, Gymnasium-style autoreset,
@@ -193,9 +197,17 @@ class MatchBatch:
         elif n_threads > 1:
             self._pool = ThreadPoolExecutor(n_threads - 1, thread_name_prefix="MatchBatch")
         self._rules = first.game  # the rules as arrays, as each match holds them
-        self._judged_together = self.config.rules == "first_out"
-        """:meth:`step_arrays` judges the matches together with :mod:`triplesumo.rules.batched`
-        (elimination rules keep per-match state: they are judged match by match)."""
+        self._elimination = first.elimination
+        """Elimination rules: :meth:`step_arrays` carries where each match stands in the arrays below."""
+        self._alive = np.ones((n_matches, first.n_agents), bool)
+        """``(n_matches, n_agents)``: who is in play at the next step's start (elimination rules; each match's
+        ``alive``, read by :meth:`reload` and written back after every step)."""
+        self._places = np.zeros((n_matches, first.n_agents), np.int64)
+        """Each agent's place decided so far (0 while it plays on): an agent out keeps it in later infos."""
+        self._outcomes = np.zeros((n_matches, first.n_agents), np.int64)
+        """Each agent's outcome code decided so far (0 while it plays on)."""
+        self._obs_noise = float(self.config.evader_obs_noise)
+        """Pursuit's evader noise: each match draws it from its own generator after its observation is built."""
         sim = first.sim
         self._torso_qpos, self._torso_qvel = sim.torso_qpos, sim.torso_qvel
         paper = self.config.obs_mode == "paper"
@@ -236,14 +248,16 @@ class MatchBatch:
         copy of each match's state and would otherwise overwrite the edit.
         """
         self._check_index(k)
+        match = self.matches[k]
         if self._batch is not None:
             # Clear the simulation's MjData (warning counters included), then load the match's state.
             self._batch.reset(ids=[k], stage=_NO_STAGE)
-            match = self.matches[k]
             mujoco.mj_getState(match.model, match.data, self._batch.state[k], _INTEGRATION)
             self._warnings_seen[k] = self._batch.warning[k]
         else:
-            self._warnings_seen[k] = self.matches[k].data.warning.number
+            self._warnings_seen[k] = match.data.warning.number
+        if self._elimination:
+            self._alive[k], self._places[k], self._outcomes[k] = match.standing
 
     @property
     def over(self) -> np.ndarray:
@@ -278,6 +292,9 @@ class MatchBatch:
             for future in others:
                 future.result()
             outcomes = found
+        if self._elimination:  # each match judged itself: take where it stands for step_arrays
+            for k, match in enumerate(self.matches):
+                self._alive[k], self._places[k], self._outcomes[k] = match.standing
         for k, outcome in enumerate(outcomes):
             if isinstance(outcome, PhysicsError):
                 raise PhysicsError(f"match {k}: {outcome}") from outcome
@@ -286,16 +303,13 @@ class MatchBatch:
     def step_arrays(self, actions: np.ndarray) -> BatchStep:
         """:meth:`step` with its results as arrays over the matches (:class:`BatchStep`), bit for bit.
 
-        Under ``first_out`` rules the matches are judged together (see the module docstring):
-        controls from all actions at once, states and warnings read from ``(n_matches, ...)``
-        rows, outcome, rewards and places by :mod:`triplesumo.rules.batched`, ``paper``
-        observations stacked over the matches. A match with a new MuJoCo warning, a failed
-        ``mj_step`` or a non-finite state takes :meth:`Match.finish_step` (its physics error).
-        Under elimination rules it is :meth:`step`, gathered into arrays. Every agent's
-        observation must have one size.
+        The matches are judged together (see the module docstring): controls from all actions
+        at once, states and warnings read from ``(n_matches, ...)`` rows, outcome (under
+        elimination rules who leaves, who plays on, the places each shares), rewards and places
+        by :mod:`triplesumo.rules.batched`, ``paper`` observations stacked over the matches. A
+        match with a new MuJoCo warning, a failed ``mj_step`` or a non-finite state takes
+        :meth:`Match.finish_step` (its physics error). Every agent's observation must have one size.
         """
-        if not self._judged_together:
-            return _gather(self.step(actions), self.n_agents)
         self._check_open()
         ctrl = self._controls(actions)
         if self._batch is not None:
@@ -379,7 +393,7 @@ class MatchBatch:
                     raise ValueError(f"match {k}: {err}") from None
 
     def _controls(self, actions: np.ndarray) -> np.ndarray:
-        """:meth:`Match.prepare` of every match at once (first-out rules: every agent in play)."""
+        """:meth:`Match.prepare` of every match at once: an agent out of play (elimination rules) gets zero control."""
         actions = self._checked_shape(actions)
         if self._pad is not None:  # columns past an agent's motors are ignored, whatever they hold
             actions = np.where(self._pad, actions, 0.0)
@@ -388,7 +402,10 @@ class MatchBatch:
             if bad.any():
                 k, i = (int(x) for x in np.argwhere(bad)[0])
                 raise ValueError(f"match {k}: action of {self.agents[i]!r} contains NaN or inf")
-        return scale_actions(actions, self._ctrl_half, self._ctrl_mid)
+        ctrl = scale_actions(actions, self._ctrl_half, self._ctrl_mid)
+        if self._elimination and not self._alive.all():  # an eliminated body no longer acts
+            ctrl[~self._alive] = 0.0
+        return ctrl
 
     def _judge_together(self, warnings: np.ndarray) -> BatchStep:
         """The second half of :meth:`step_arrays`: every match's step judged over arrays."""
@@ -414,13 +431,26 @@ class MatchBatch:
         with np.errstate(all="ignore") if trouble.any() else nullcontext():  # troubled rows are replaced below
             pos, vel = qpos[:, self._torso_qpos], qvel[:, self._torso_qvel]
             out = rules_batched.agents_out(pos, rules.half_size, xp)
-            ended = out.any(axis=1)
-            timed_out = ~ended & (steps >= rules.max_steps)
-            if ended.any() or timed_out.any():
-                code = xp.where(timed_out[:, None], rules_batched.DRAW_CODE, rules_batched.judge(out, rules, xp))
-            else:  # every match goes on (most steps): what judge() gives then
-                code = np.full((n, a), rules_batched.GOES_ON, np.int64)
-            terms = rules_batched.reward_terms(pos, vel, code, timed_out, rules, xp)
+            if self._elimination:
+                before = self._alive
+                judged = rules_batched.judge_elimination(before, out, steps >= rules.max_steps, rules, xp)
+                sparse = rules_batched.place_values(judged.low, judged.high, rules, xp)
+                terms = rules_batched.reward_terms(pos, vel, None, None, rules, xp, alive=before, sparse=sparse)
+                # an agent decided on an earlier step keeps its outcome and place
+                code = xp.where(before, judged.code, self._outcomes)
+                places = xp.where(before, judged.low, self._places)
+                ended, timed_out, leaving, over = judged.terminated, judged.truncated, judged.leaving, judged.over
+                out, gone = leaving.copy(), ~judged.alive
+            else:
+                ended = out.any(axis=1)
+                timed_out = ~ended & (steps >= rules.max_steps)
+                if ended.any() or timed_out.any():
+                    code = xp.where(timed_out[:, None], rules_batched.DRAW_CODE, rules_batched.judge(out, rules, xp))
+                else:  # every match goes on (most steps): what judge() gives then
+                    code = np.full((n, a), rules_batched.GOES_ON, np.int64)
+                terms = rules_batched.reward_terms(pos, vel, code, timed_out, rules, xp)
+                places, leaving, over, gone = rules_batched.first_out_places(code, xp), np.zeros((n, a), bool), \
+                    ended | timed_out, out.copy()
             if forces is not None:
                 obs = rules_batched.paper_observation(pos, vel, forces, qpos, qvel, rules, xp).astype(np.float32)
                 obs = np.repeat(obs[:, None], a, axis=1)
@@ -428,18 +458,24 @@ class MatchBatch:
                 obs = np.empty((n, a, self.matches[0].observer.sizes[self.agents[0]]), np.float32)
         infos: dict[str, np.ndarray] = {key: terms[key] for key in REPORTED}
         infos["sparse_reward"] = infos["sparse_reward"].copy()  # reward_terms gives reward_outcome the same array
-        infos.update(outcome=code, out_of_ring=out, place=rules_batched.first_out_places(code, xp),
-                     eliminated=out.copy(), step=steps)
+        infos.update(outcome=code, out_of_ring=out, place=places, eliminated=gone, step=steps)
         rewards = terms["reward"]
         truncated = timed_out
-        leaving = np.zeros((n, a), bool)
         errors = []
-        over = (ended | timed_out).tolist()
+        standing = None
+        if self._elimination:  # where each match stands after the step (a troubled match's row is its own, below)
+            self._alive, self._places, self._outcomes = judged.alive, places.copy(), code.copy()
+            standing = zip(judged.alive.tolist(), places.tolist(), code.tolist(), strict=True)
+        noise, over = self._obs_noise, over.tolist()
         for k, (match, own, bad) in enumerate(zip(self.matches, own_obs, trouble.tolist(), strict=True)):
+            where = None if standing is None else next(standing)
             if not bad:
                 if own is not None:
                     obs[k] = own
-                match.record_judged(over[k], list(obs[k]))
+                rows = list(obs[k])
+                if noise > 0:  # pursuit's evader noise, from the match's own generator, as Match._observe draws it
+                    match.observer.add_evader_noise(rows, match.np_random, noise)
+                match.record_judged(over[k], rows, where)
                 continue
             if isinstance(own, PhysicsError):
                 errors.append((k, own))
@@ -447,9 +483,12 @@ class MatchBatch:
             result: StepResult = own
             obs[k], rewards[k], ended[k], truncated[k] = result.observations, result.rewards, \
                 result.terminated, result.truncated
+            leaving[k] = result.eliminated or False
             for key, column in zip(_ARRAY_INFOS, zip(*(_array_infos(info) for info in result.infos),
                                                      strict=True), strict=True):
                 infos[key][k] = column
+            if self._elimination:
+                self._alive[k], self._places[k], self._outcomes[k] = match.standing
         if errors:
             k, err = errors[0]
             raise PhysicsError(f"match {k}: {err}") from err
@@ -549,19 +588,6 @@ class BatchStep:
     infos: dict[str, np.ndarray]
     """Every :data:`REPORTED` term ``(N, A)`` float64, ``outcome`` and ``place`` ``(N, A)`` int64,
     ``out_of_ring`` and ``eliminated`` ``(N, A)`` bool, ``step`` ``(N,)`` int64."""
-
-
-def _gather(results: list[StepResult], n_agents: int) -> BatchStep:
-    """``MatchBatch.step``'s results as one :class:`BatchStep`."""
-    leaving = np.zeros((len(results), n_agents), bool)
-    for k, r in enumerate(results):
-        if r.eliminated is not None:
-            leaving[k] = r.eliminated
-    return BatchStep(np.array([r.observations for r in results], np.float32),
-                     np.array([r.rewards for r in results], np.float64),
-                     np.array([r.terminated for r in results], bool),
-                     np.array([r.truncated for r in results], bool), leaving,
-                     _infos([r.infos for r in results], [r.infos[0]["step"] for r in results], n_agents))
 
 
 def _infos(per_match: list[list[dict[str, Any]]], steps: list[int], n_agents: int) -> dict[str, np.ndarray]:

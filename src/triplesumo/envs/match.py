@@ -54,8 +54,6 @@ class Match:
         self.sim = Simulation(self.model, self.agents, self.config.physics.frame_skip)
         self.data = self.sim.data
         self.teams = Teams.from_agents(self.config.agents)
-        self._n_teams = len(self.teams.names)
-        self._team_of = self.teams.team_of.tolist()
         self.half_size = ring_half_size(self.model)
         self.game = BatchedRules.build(self.config, self.half_size)
         """The game as arrays: every rule of a step is :mod:`triplesumo.rules`' array function on ``E = 1``."""
@@ -79,7 +77,6 @@ class Match:
         self._places = [0] * self.n_agents
         self._outcomes: list[int] = [rules_outcome.PLAYING] * self.n_agents
         self._evader = self.agents.index(self.config.evader) if self.config.evader is not None else None
-        self._timeout_team = self._team_of[self._evader] if self._evader is not None else None
         if self._evader is not None:
             self.observer.set_evader(self._evader)
         self._obs_noise = float(self.config.evader_obs_noise)
@@ -298,13 +295,23 @@ class Match:
             infos.append(info)
         return infos
 
-    def record_judged(self, over: bool, observations: list[np.ndarray]) -> None:
+    def record_judged(self, over: bool, observations: list[np.ndarray],
+                      standing: tuple[list[bool], list[int], list[int]] | None = None) -> None:
         """Take the result of a step judged outside the match: the batched rules of
         :meth:`MatchBatch.step_arrays <triplesumo.envs.batch.MatchBatch.step_arrays>`, which
         increment :attr:`steps` and judge many matches at once (what :meth:`finish_step`
-        does for one): whether the match ended, and its observations."""
+        does for one): whether the match ended, its observations and, under ``elimination``
+        rules, ``standing``: who is still in play, and every agent's place and outcome code so far."""
         self.over = over
         self._last_obs = observations
+        if standing is not None:
+            self.alive, self._places, self._outcomes = standing
+
+    @property
+    def standing(self) -> tuple[list[bool], list[int], list[int]]:
+        """Under ``elimination`` rules, where the match stands: who is in play, and every agent's place and
+        outcome code decided so far (0 while it plays on); :meth:`record_judged` takes it back."""
+        return self.alive, self._places, self._outcomes
 
     def _finish_elimination(self, pos: np.ndarray, vel: np.ndarray, out: np.ndarray) -> StepResult:
         """:meth:`finish_step` under ``elimination`` rules."""
@@ -321,16 +328,9 @@ class Match:
         infos = self._infos(terms, outcomes, places, leaving, [not a for a in alive])
         self._places, self._outcomes = places, outcomes
         self.alive = alive
-        over = bool(judged.over[0])
-        self.over = over
-        all_out = not any(alive)
-        # a step that pays a decided result is terminal: the last team standing, or the evader surviving to the
-        # limit (a win by the rules); only survivors sharing a draw at the limit are truncated
-        paid = any(alive[i] and decided[i] in (rules_outcome.WIN_CODE, rules_outcome.LOSS_CODE)
-                   for i in range(self.n_agents))
-        terminated = over and (all_out or paid or len({self._team_of[i] for i in range(self.n_agents)
-                                                       if alive[i]}) <= 1)
-        truncated = over and not terminated
+        self.over = over = bool(judged.over[0])
+        terminated = bool(judged.terminated[0])
+        truncated = over and not terminated  # judged.truncated, without two array operations on one match
         self._last_obs = self._observe()
         return StepResult(self._last_obs, terms["reward"][0], terminated, truncated, infos,
                           leaving if any(leaving) else None)

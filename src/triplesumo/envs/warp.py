@@ -21,6 +21,14 @@ motor's control range as :meth:`Match.prepare` does; ``frame_skip`` calls of
 is the contact force on each agent geom's body, as on CPU) run -- on CUDA as one
 captured CUDA graph, as are the resets' ``reset_data`` and ``forward`` --; then the rules.
 
+Both rule sets play as on CPU. Under ``elimination`` rules (``ffa``, ``pursuit``) who is in play, and the
+places and outcomes decided so far, are ``(num_envs, n_agents)`` tensors on the device: an eliminated agent's
+motors get zero control, as :meth:`Match.prepare` gives them (its body stays in the physics, inert, as on CPU:
+nothing in the model changes per world), and :func:`~triplesumo.rules.outcome.judge_elimination` judges every
+match at once; an agent out terminates on that step while the rest play on. Pursuit's evader noise
+(``evader_obs_noise > 0``) is drawn on the host from each match's own stream, the numbers the CPU backend draws
+(a host loop over the matches on every step: the one part of a step that does not stay on the device).
+
 Physics trouble is judged per match, as on CPU: a NaN, inf or entry beyond 1e10 in
 qpos, qvel or qacc (MuJoCo's bad-qpos/qvel/qacc warnings), or a Warp overflow flag of
 that world (contacts or constraints beyond ``nconmax``/``njmax``: MuJoCo's
@@ -92,9 +100,8 @@ class WarpVectorMatches:
         self.match = Match(config)
         """The host match: compiled model, element indices, start states (never stepped)."""
         self.config = self.match.config
-        if self.config.rules != "first_out":
-            raise NotImplementedError(f"backend='warp' plays the first-out rules (paper, 2v2, bodies, any team "
-                                      f"roster); rules={self.config.rules!r} (ffa, pursuit) runs on backend='cpu'")
+        self.elimination = self.match.elimination
+        """Elimination rules (ffa, pursuit): an agent out leaves, its body gets zero control, the rest play on."""
         if len(set(self.match.action_sizes)) != 1:
             raise NotImplementedError("backend='warp' needs one body kind for every agent (the batched "
                                       f"observation stacks their joints); action sizes {self.match.action_sizes} "
@@ -156,6 +163,16 @@ class WarpVectorMatches:
         self.steps = torch.zeros(num_envs, dtype=torch.long, device=dev)
         self._state_size = mujoco.mj_stateSize(model, STATE)
         self._last_obs = torch.zeros((num_envs, self.n_agents, self.obs_dim), dtype=torch.float32, device=dev)
+        self._alive = torch.ones((num_envs, self.n_agents), dtype=torch.bool, device=dev)
+        """Who is in play at the next step's start (elimination rules; all True under first-out rules)."""
+        self._places = torch.zeros((num_envs, self.n_agents), dtype=torch.long, device=dev)
+        """Each agent's place decided so far (elimination rules; 0 while it plays on)."""
+        self._outcomes = torch.zeros((num_envs, self.n_agents), dtype=torch.long, device=dev)
+        """Each agent's outcome code decided so far (elimination rules; 0 while it plays on)."""
+        self._obs_noise = float(self.config.evader_obs_noise)
+        self._noise_entries = [(i, index(idx)) for i, idx in self.match.observer.evader_entries.items()]
+        """Pursuit's evader noise: per opponent of the evader, its observation's entries that hold the evader's torso
+        position and velocity (what ``ObservationBuilder.add_evader_noise`` perturbs), in the order it draws them."""
 
     # ---------------------------------------------------------------- physics
     @contextlib.contextmanager
@@ -234,6 +251,26 @@ class WarpVectorMatches:
         self._qvel[index] = qvel
         self._launch("derive")
         self.steps[index] = 0
+        self._alive[index] = True
+        self._places[index] = 0
+        self._outcomes[index] = 0
+
+    def _add_noise(self, obs: torch.Tensor, rows: np.ndarray) -> torch.Tensor:
+        """Pursuit's evader noise (``evader_obs_noise > 0``) on the observations of the matches ``rows`` (host
+        indices), drawn on the host from each match's own stream as ``Match._observe`` draws it (the same numbers
+        as on the CPU backend: a host loop over those matches, and a copy to the device, on every step)."""
+        if self._obs_noise <= 0 or not len(rows):
+            return obs
+        widths = [len(idx) for _, idx in self._noise_entries]
+        draws = np.stack([self._rngs[k].normal(0.0, self._obs_noise, sum(widths)) for k in rows.tolist()])
+        noise = torch.as_tensor(draws.astype(np.float32), device=self.device)
+        at = torch.as_tensor(rows, device=self.device)[:, None]
+        obs = obs.clone()
+        start = 0
+        for (i, idx), width in zip(self._noise_entries, widths, strict=True):
+            obs[at, i, idx] += noise[:, start:start + width]
+            start += width
+        return obs
 
     # -------------------------------------------------------------------- API
     reset_seed: Callable[[int], int | None] | None = None
@@ -265,11 +302,12 @@ class WarpVectorMatches:
             if self._use_graph and "physics" not in self._graphs:
                 self.simulate()  # capture now, on the put_data state; the reset below overwrites it
             self._restart(np.arange(self.num_envs))
-            obs = self._observe(self._state())
+            obs = self._add_noise(self._observe(self._state()), np.arange(self.num_envs))
             self._last_obs = obs
             zeros = torch.zeros((self.num_envs, self.n_agents), device=self.device)
             infos = {name: zeros.clone() for name in (*TERMS, "dense_reward", "sparse_reward")}
             infos.update(step=self.steps.clone(), outcome=zeros.long(), place=zeros.long(), final_obs=obs.clone(),
+                         out_of_ring=zeros.bool(), eliminated=zeros.bool(),
                          _final_obs=torch.zeros(self.num_envs, dtype=torch.bool, device=self.device))
         return obs, infos
 
@@ -288,33 +326,60 @@ class WarpVectorMatches:
                 k, i = (int(v) for v in torch.nonzero(~finite)[0])
                 raise ValueError(f"action of {self.agents[i]!r} in match {k} contains NaN or inf")
             ctrl = act.clamp(-1.0, 1.0) * self._ctrl_half + self._ctrl_mid
+            if self.elimination:  # an eliminated body no longer acts
+                ctrl = torch.where(self._alive[..., None], ctrl, 0.0)
             self._ctrl[:, self._actuators] = ctrl.reshape(e, -1)
             self.simulate()
             self.steps += 1
             rules = self.rules
             state = self._state()
             trouble = rules_batched.bad_state(torch, self._qpos, self._qvel, self._qacc) | (self._overflow != 0)
-            out = rules_batched.agents_out(state["pos"], rules.half_size, torch)
-            ended = out.any(-1)
-            timed_out = ~ended & (self.steps >= rules.max_steps)
-            code = rules_batched.judge(out, rules, torch)
-            code = torch.where(timed_out[:, None], rules_batched.DRAW_CODE, code)
-            terms = rules_batched.reward_terms(state["pos"], state["vel"], code, timed_out, rules, torch)
-            obs = self._observe(state)
             error = trouble[:, None]
+            out = rules_batched.agents_out(state["pos"], rules.half_size, torch)
+            if self.elimination:
+                before = self._alive
+                judged = rules_batched.judge_elimination(before, out, self.steps >= rules.max_steps, rules, torch)
+                sparse = rules_batched.place_values(judged.low, judged.high, rules, torch)
+                terms = rules_batched.reward_terms(state["pos"], state["vel"], None, None, rules, torch, alive=before,
+                                                   sparse=sparse)
+                # an agent decided on an earlier step keeps its outcome and place
+                code = torch.where(before, judged.code, self._outcomes)
+                place = torch.where(before, judged.low, self._places)
+                self._alive, self._places, self._outcomes = judged.alive, place, code
+                ended, timed_out, over = judged.terminated, judged.truncated, judged.over
+                left = judged.leaving & ~error  # out of the ring on this step: terminated, never truncated
+                eliminated = torch.where(error, ~before, ~judged.alive)  # an error keeps who was in play
+                place = torch.where(error, 0, place)
+            else:
+                ended = out.any(-1)
+                timed_out = ~ended & (self.steps >= rules.max_steps)
+                over = ended | timed_out
+                code = rules_batched.judge(out, rules, torch)
+                code = torch.where(timed_out[:, None], rules_batched.DRAW_CODE, code)
+                terms = rules_batched.reward_terms(state["pos"], state["vel"], code, timed_out, rules, torch)
+                place = rules_batched.first_out_places(torch.where(error, rules_batched.ERROR_CODE, code), torch)
+                left = out & ~error  # first-out rules: out of the ring is eliminated, as on the CPU backend
+                eliminated = left.clone()
+            obs = self._observe(state)
             code = torch.where(error, rules_batched.ERROR_CODE, code)
             infos: dict[str, torch.Tensor] = {  # float64, as the CPU backend's (the terms of float32 physics)
                 name: torch.where(error, 0.0, terms[name]).double() for name in (*TERMS, "dense_reward",
                                                                                  "sparse_reward")}
             reward = torch.where(error, 0.0, terms["reward"])
+            # all agents of a match end together; under elimination rules an agent also terminates on the step it
+            # leaves (as VectorMatches.step)
+            terminated = (ended & ~trouble)[:, None] | left
+            truncated = (timed_out | trouble)[:, None] & ~left
+            done = over | trouble
+            if self._obs_noise > 0:  # the evader noise draws on the host: which matches observe, which restart
+                flags = torch.stack([done, trouble]).cpu().numpy()
+                rows = np.flatnonzero(flags[0])
+                obs = self._add_noise(obs, np.flatnonzero(~flags[1]))
+            else:
+                rows = torch.nonzero(done).flatten().cpu().numpy()  # the step's one host sync
             obs = torch.where(trouble[:, None, None], self._last_obs, obs)
-            terminated = (ended & ~trouble)[:, None].expand(e, n).contiguous()
-            truncated = (timed_out | trouble)[:, None].expand(e, n).contiguous()
-            done = ended | timed_out | trouble
-            left = out & ~error  # first-out rules: out of the ring is eliminated, as on the CPU backend
-            infos.update(outcome=code, place=rules_batched.first_out_places(code, torch), step=self.steps.clone(),
-                         out_of_ring=left, eliminated=left.clone(), final_obs=obs, _final_obs=done)
-            rows = torch.nonzero(done).flatten().cpu().numpy()  # the step's one host sync
+            infos.update(outcome=code, place=place, step=self.steps.clone(), out_of_ring=left, eliminated=eliminated,
+                         final_obs=obs, _final_obs=done)
             if len(rows) and self.config.on_physics_error == "raise" and bool(trouble.any()):
                 k = int(torch.nonzero(trouble)[0])
                 raise PhysicsError(f"MuJoCo Warp: bad state or overflow in match {k} at step {int(self.steps[k])}")
@@ -324,15 +389,34 @@ class WarpVectorMatches:
                         if (chosen := self.reset_seed(k)) is not None:
                             self._rngs[k] = np.random.default_rng(chosen)
                 self._restart(rows)
-                obs = torch.where(done[:, None, None], self._observe(self._state()), obs)
+                obs = torch.where(done[:, None, None], self._add_noise(self._observe(self._state()), rows), obs)
             self._last_obs = obs
         return obs, reward, terminated, truncated, infos
 
+    def restart(self, k: int, seed: int | None = None) -> torch.Tensor:
+        """End slot ``k``'s match now and start its next one (from ``np.random.default_rng(seed)``, or its own
+        stream with ``None``); returns its first observation ``(n_agents, obs_dim)``. As
+        ``VectorMatches.restart``: for a caller whose episode ends before the match does (a trainer whose learning
+        agents are all out under elimination rules)."""
+        if not 0 <= k < self.num_envs:
+            raise IndexError(f"match index must be in [0, {self.num_envs}), got {k}")
+        if not self._rngs:
+            raise RuntimeError("call reset() before restart()")
+        if seed is not None:
+            self._rngs[k] = np.random.default_rng(check_seed(seed))
+        rows = np.array([k])
+        with self._on_stream():
+            self._restart(rows)
+            first = self._add_noise(self._observe(self._state()), rows)[k]
+            self._last_obs[k] = first
+        return first.clone()
+
     def snapshot(self) -> list[dict[str, Any]]:
         """Every match's state, on the host, slot order: ``physics`` (float32, the world's
-        :data:`STATE` from ``mujoco_warp.get_state``, warm start included), ``steps`` and ``rng``
-        (its start-state generator). Arrays and JSON-able values only (no pickle). With the last
-        returned observations, :meth:`restore` continues exactly (as ``VectorMatches.snapshot``)."""
+        :data:`STATE` from ``mujoco_warp.get_state``, warm start included), ``steps``, ``rng``
+        (its start-state generator) and ``alive``, ``places`` and ``outcomes`` (elimination rules: who is in play,
+        and what was decided so far, as ``Match.snapshot``). Arrays and JSON-able values only (no pickle). With the
+        last returned observations, :meth:`restore` continues exactly (as ``VectorMatches.snapshot``)."""
         if not self._rngs:
             raise RuntimeError("call reset() before snapshot()")
         with self._on_stream(), wp.ScopedDevice(self.wp_device):
@@ -340,8 +424,9 @@ class WarpVectorMatches:
             mjw.get_state(self.m, self.d, state, STATE)
             physics = state.numpy()
         steps = self.steps.cpu().tolist()
-        return [{"physics": physics[k], "steps": int(steps[k]), "rng": self._rngs[k].bit_generator.state}
-                for k in range(self.num_envs)]
+        alive, places, outcomes = (t.cpu().tolist() for t in (self._alive, self._places, self._outcomes))
+        return [{"physics": physics[k], "steps": int(steps[k]), "rng": self._rngs[k].bit_generator.state,
+                 "alive": alive[k], "places": places[k], "outcomes": outcomes[k]} for k in range(self.num_envs)]
 
     def restore(self, snapshots: Sequence[dict[str, Any]], obs: Any) -> None:
         """Continue from :meth:`snapshot` and the observations ``(num_envs, n_agents, obs_dim)``
@@ -370,6 +455,10 @@ class WarpVectorMatches:
                 mjw.set_state(self.m, self.d, wp.array(physics, dtype=wp.float32), STATE)
             self._launch("derive")  # contacts and cfrc_ext of the restored state (no warm start is written)
             self.steps.copy_(torch.as_tensor([int(s["steps"]) for s in snapshots], device=self.device))
+            every, none = [True] * self.n_agents, [0] * self.n_agents  # a snapshot of before elimination rules ran
+            for name, default in (("alive", every), ("places", none), ("outcomes", none)):
+                getattr(self, f"_{name}").copy_(torch.as_tensor([s.get(name, default) for s in snapshots],
+                                                                device=self.device))
             self._last_obs = last.clone()
         self._rngs = rngs
 

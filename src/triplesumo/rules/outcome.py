@@ -129,11 +129,20 @@ class Elimination:
     """The worst place it shares (``low`` when it is alone in its place; 0 where nothing was decided)."""
     code: Any
     """Outcome code (:data:`OUTCOME_CODES`) decided on this step: win, loss or draw, else 0 (playing)."""
+    terminated: Any
+    """``(E,)``: the match ended on this step by its rules: at most one team left in play, or a survivor paid a
+    decided win or loss (the evader surviving to the step limit). Only survivors sharing a draw at the step limit
+    end truncated (:attr:`truncated`)."""
 
     @property
     def places(self) -> Any:
         """Place decided on this step, 0 where nothing was decided (``low``)."""
         return self.low
+
+    @property
+    def truncated(self) -> Any:
+        """``(E,)``: the match ended on this step at the step limit with survivors sharing a draw."""
+        return self.over & ~self.terminated
 
 
 def judge_elimination(alive: Any, out: Any, at_limit: Any, rules: BatchedRules, xp: Any) -> Elimination:
@@ -169,7 +178,9 @@ def judge_elimination(alive: Any, out: Any, at_limit: Any, rules: BatchedRules, 
     low = xp.where(won | drawn, 1, xp.where(lost, 2, low))
     high = xp.where(won, 1, xp.where(lost | drawn, n_after, high))
     code = xp.where(low == 0, PLAYING, xp.where(low > 1, LOSS_CODE, xp.where(high > 1, DRAW_CODE, WIN_CODE)))
-    return Elimination(leaving, still, over, low, high, code)
+    # terminal: one team or none left, or a survivor paid a win or loss (decided implies the match is over)
+    terminated = ((n_after <= 1) | decided)[:, 0]
+    return Elimination(leaving, still, over, low, high, code, terminated)
 
 
 def place_values(low: Any, high: Any, rules: BatchedRules, xp: Any) -> Any:
