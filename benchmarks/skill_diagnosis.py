@@ -20,7 +20,8 @@ from triplesumo.train.config import TrainConfig
 
 KEYS = ("mwr", "bug_out", "ant_out", "spider_out", "none_out", "median_exit_step", "bug_self_exit",
         "bug_out_touched_by_spider", "bug_touched_spider", "median_first_touch_spider", "bug_pushed_ant_out",
-        "bug_pushed_spider_out", "mean_dist_spider", "median_end_radius")
+        "bug_pushed_spider_out", "mean_dist_spider", "median_end_radius", "median_touch_steps_spider", "median_path",
+        "flipped")
 
 
 def main(argv: list[str] | None = None) -> int:

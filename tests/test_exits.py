@@ -10,12 +10,18 @@ import pytest
 from triplesumo.agents.zoo import make_policy
 from triplesumo.envs.match import Match
 from triplesumo.evaluation.evaluate import play_test_epochs
-from triplesumo.evaluation.exits import edge_of, exit_rows, geom_owners, summarize_exits, touching
+from triplesumo.evaluation.exits import edge_of, exit_rows, geom_owners, summarize_exits, touching, upright
 from triplesumo.train.config import TrainConfig
 
 
 def test_edge_of_names_the_axis_furthest_out() -> None:
     assert [edge_of(2.1, 0.5), edge_of(-2.3, 1.9), edge_of(0.2, 2.05), edge_of(1.0, -2.4)] == ["+x", "-x", "+y", "-y"]
+
+
+def test_upright_reads_the_torso_axis() -> None:
+    assert upright(np.array([1.0, 0.0, 0.0, 0.0])) == 1.0
+    assert upright(np.array([0.0, 1.0, 0.0, 0.0])) == -1.0  # half a turn about x: upside down
+    assert upright(np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4), 0.0])) == pytest.approx(0.0)  # on its side
 
 
 def test_touching_sees_two_overlapping_agents_and_only_them() -> None:
@@ -60,13 +66,16 @@ def test_rows_agree_with_the_projects_test_epochs_and_classify_each_end() -> Non
         for other in ("ant", "spider"):
             first, steps = r[f"focus_first_touch_{other}"], r[f"focus_touch_steps_{other}"]
             assert (first < 0) == (steps == 0) and steps <= r["steps"] and first <= r["steps"]
+        assert r["focus_path"] >= r["focus_travel"] and -1 <= r["focus_end_upright"] <= 1
+        assert (r["focus_flipped"] < 0) or r["focus_flipped"] <= r["steps"]
 
 
 def test_summary_counts_self_exits_pushes_of_the_partner_and_contacts() -> None:
     def row(outcome: str, out: str, by: str, touch: int, steps: int = 100) -> dict[str, object]:
         return {"outcome": outcome, "steps": steps, "first_out": out, "pushed_by": by,
                 "self_exit": out != "none" and by == "", "focus_first_touch_spider": touch,
-                "focus_mean_dist_spider": 1.0, "focus_end_radius": 0.5}
+                "focus_mean_dist_spider": 1.0, "focus_end_radius": 0.5, "focus_touch_steps_spider": max(touch, 0),
+                "focus_path": 2.0, "focus_flipped": 5 if out == "bug" else -1}
 
     rows = [row("loss", "bug", "", -1, 40),           # Bug walks out alone
             row("loss", "ant", "bug+spider", 10, 80),  # Bug helps push its partner out
@@ -79,6 +88,7 @@ def test_summary_counts_self_exits_pushes_of_the_partner_and_contacts() -> None:
     assert s["bug_pushed_ant_out"] == 0.25 and s["bug_pushed_spider_out"] == 0.25
     assert s["bug_touched_spider"] == 0.75 and s["median_first_touch_spider"] == 20
     assert s["median_exit_step"] == 80
+    assert s["flipped"] == 0.25 and s["median_touch_steps_spider"] == 15
     with pytest.raises(ValueError, match="at least one row"):
         summarize_exits([])
     assert np.isfinite(s["mean_dist_spider"])

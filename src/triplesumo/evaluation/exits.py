@@ -15,9 +15,12 @@ The row's words:
   half-size that is the furthest past it), joined by ``;``.
 - ``pushed_by``: the agents that touched one who left within the last ``recent`` steps before the exit. An exit
   with nobody in ``pushed_by`` is a *self-exit*: that agent walked or fell out on its own.
-- ``focus_*``: the focus agent's first contact with each other agent (step, or -1 for never), steps in contact,
-  mean and final distance between torso centres, and its final distance from the centre (the square ring's
-  ``max(|x|, |y|)``, so 1 is the ring's edge at half-size 2 read as ``r / half_size``).
+- ``focus_*``: the focus agent's start and final distance from the centre (the square ring's ``max(|x|, |y|)``
+  over the ring's half-size: 1 is the edge), the edge it is nearest at the end, how far its torso ended from
+  where it started (``travel``) and the length of its path, the first step its torso was upside down
+  (``flipped``, -1 for never) and how upright it ends (:func:`upright`); then for each other agent its first
+  contact with it (step, -1 for never), steps in contact, and the mean and final distance between their torso
+  centres.
 """
 
 from __future__ import annotations
@@ -41,6 +44,13 @@ RECENT = 20
 def edge_of(x: float, y: float) -> str:
     """The edge a torso at ``(x, y)`` is past (or nearest to): the axis with the larger magnitude and its sign."""
     return ("+x" if x >= 0 else "-x") if abs(x) >= abs(y) else ("+y" if y >= 0 else "-y")
+
+
+def upright(quat: np.ndarray) -> float:
+    """The world-z component of a body's z axis from its quaternion ``(w, x, y, z)``: 1 upright, below 0 upside
+    down."""
+    _, x, y, _ = (float(q) for q in quat)
+    return 1.0 - 2.0 * (x * x + y * y)
 
 
 def geom_owners(match: Match) -> np.ndarray:
@@ -82,6 +92,7 @@ def exit_row(policies: Mapping[str, Policy | None], seed: int, match: Match, foc
     last_touch = np.full((n, n), -1, dtype=np.int64)
     touch_steps = np.zeros((n, n), dtype=np.int64)
     dist_sum = np.zeros(n)
+    path, flipped, prev = 0.0, -1, start[f].copy()
     while True:
         actions = np.zeros((n, match.action_width))
         for i, name in enumerate(agents):
@@ -96,6 +107,10 @@ def exit_row(policies: Mapping[str, Policy | None], seed: int, match: Match, foc
         touch_steps += touch
         pos = match.sim.torso_positions()[:, :2]
         dist_sum += np.linalg.norm(pos - pos[f], axis=1)
+        path += float(np.linalg.norm(pos[f] - prev))
+        prev = pos[f].copy()
+        if flipped < 0 and upright(match.sim.torso_quaternions()[f]) < 0:
+            flipped = step
         if result.terminated or result.truncated:
             break
     infos = result.infos
@@ -111,6 +126,9 @@ def exit_row(policies: Mapping[str, Policy | None], seed: int, match: Match, foc
         "focus_end_radius": round(float(np.abs(pos[f]).max() / match.half_size), 4),
         "focus_edge": edge_of(*pos[f]),
         "focus_travel": round(float(np.linalg.norm(pos[f] - start[f])), 4),
+        "focus_path": round(path, 4),
+        "focus_flipped": flipped,
+        "focus_end_upright": round(upright(match.sim.torso_quaternions()[f]), 4),
     }
     for j, other in enumerate(agents):
         if j == f:
@@ -123,7 +141,7 @@ def exit_row(policies: Mapping[str, Policy | None], seed: int, match: Match, foc
 
 
 COLUMNS = ("seed", "outcome", "steps", "first_out", "edge", "pushed_by", "self_exit", "focus_start_radius",
-           "focus_end_radius", "focus_edge", "focus_travel")
+           "focus_end_radius", "focus_edge", "focus_travel", "focus_path", "focus_flipped", "focus_end_upright")
 """The columns every row has; ``focus_first_touch_A``, ``focus_touch_steps_A``, ``focus_mean_dist_A`` and
 ``focus_end_dist_A`` follow for each other agent ``A`` in roster order."""
 
@@ -146,8 +164,9 @@ def summarize_exits(rows: Sequence[Mapping[str, Any]], agents: Sequence[str] = (
     """Shares over the rows (fractions of all matches unless said): the team's MWR (the focus agent's wins minus
     losses, over all), who left first (an agent counts in every match it left in), the median step of the exits,
     the focus agent's self-exits, contacts with the opponent, the partner pushed out by the focus agent, the
-    opponent pushed out with the focus agent among the pushers, the focus agent's mean distance to the opponent
-    and its final distance from the centre."""
+    opponent pushed out with the focus agent among the pushers, the focus agent's mean distance to the opponent,
+    its final distance from the centre, its steps in contact with the opponent, its path and how often it was
+    upside down."""
     n = len(rows)
     if n == 0:
         raise ValueError("summarize_exits needs at least one row")
@@ -177,6 +196,9 @@ def summarize_exits(rows: Sequence[Mapping[str, Any]], agents: Sequence[str] = (
                                                 for r in rows]),
         f"mean_dist_{opponent}": round(float(np.mean([float(r[f"focus_mean_dist_{opponent}"]) for r in rows])), 4),
         "median_end_radius": float(np.median([float(r["focus_end_radius"]) for r in rows])),
+        f"median_touch_steps_{opponent}": float(np.median([int(r[f"focus_touch_steps_{opponent}"]) for r in rows])),
+        "median_path": float(np.median([float(r["focus_path"]) for r in rows])),
+        "flipped": share([int(r["focus_flipped"]) >= 0 for r in rows]),
     }
 
 
