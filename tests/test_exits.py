@@ -88,6 +88,7 @@ def test_summary_counts_self_exits_pushes_of_the_partner_and_contacts() -> None:
     assert s["bug_pushed_ant_out"] == 0.25 and s["bug_pushed_spider_out"] == 0.25
     assert s["bug_touched_spider"] == 0.75 and s["median_first_touch_spider"] == 20
     assert s["median_exit_step"] == 80
+    assert (s["median_step_bug_out"], s["median_step_ant_out"], s["median_step_spider_out"]) == (40, 80, 120)
     assert s["flipped"] == 0.25 and s["median_touch_steps_spider"] == 15
     with pytest.raises(ValueError, match="at least one row"):
         summarize_exits([])

@@ -162,7 +162,8 @@ def exit_rows(policies: Mapping[str, Policy | None], n: int, seed: int, config: 
 def summarize_exits(rows: Sequence[Mapping[str, Any]], agents: Sequence[str] = ("ant", "bug", "spider"),
                     focus: str = "bug", opponent: str = "spider", partner: str = "ant") -> dict[str, Any]:
     """Shares over the rows (fractions of all matches unless said): the team's MWR (the focus agent's wins minus
-    losses, over all), who left first (an agent counts in every match it left in), the median step of the exits,
+    losses, over all), who left first (an agent counts in every match it left in) and the median step it left
+    at, the median step of the exits,
     the focus agent's self-exits, contacts with the opponent, the partner pushed out by the focus agent, the
     opponent pushed out with the focus agent among the pushers, the focus agent's mean distance to the opponent,
     its final distance from the centre, its steps in contact with the opponent, its path and how often it was
@@ -183,6 +184,7 @@ def summarize_exits(rows: Sequence[Mapping[str, Any]], agents: Sequence[str] = (
         "matches": n,
         "mwr": round((sum(r["outcome"] == "win" for r in rows) - sum(r["outcome"] == "loss" for r in rows)) / n, 4),
         **{f"{a}_out": share([left(r, a) for r in rows]) for a in agents},
+        **{f"median_step_{a}_out": _median([int(r["steps"]) for r in rows if left(r, a)]) for a in agents},
         "none_out": share([r["first_out"] == "none" for r in rows]),
         "median_exit_step": float(np.median(ended)) if ended else None,
         f"{focus}_self_exit": share([left(r, focus) and _true(r["self_exit"]) for r in rows]),
@@ -200,6 +202,11 @@ def summarize_exits(rows: Sequence[Mapping[str, Any]], agents: Sequence[str] = (
         "median_path": float(np.median([float(r["focus_path"]) for r in rows])),
         "flipped": share([int(r["focus_flipped"]) >= 0 for r in rows]),
     }
+
+
+def _median(values: Sequence[float]) -> float | None:
+    """The median, or None for no values."""
+    return float(np.median(values)) if len(values) else None
 
 
 def _true(value: Any) -> bool:
