@@ -85,6 +85,7 @@ def test_summary_counts_self_exits_pushes_of_the_partner_and_contacts() -> None:
     assert s["mwr"] == pytest.approx(-0.25)
     assert (s["bug_out"], s["ant_out"], s["spider_out"], s["none_out"]) == (0.25, 0.25, 0.25, 0.25)
     assert s["bug_self_exit"] == 0.25 and s["bug_out_touched_by_spider"] == 0.0
+    assert s["ant_self_exit"] == 0.0 and s["spider_self_exit"] == 0.0
     assert s["bug_pushed_ant_out"] == 0.25 and s["bug_pushed_spider_out"] == 0.25
     assert s["bug_touched_spider"] == 0.75 and s["median_first_touch_spider"] == 20
     assert s["median_exit_step"] == 80

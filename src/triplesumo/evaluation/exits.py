@@ -164,7 +164,7 @@ def summarize_exits(rows: Sequence[Mapping[str, Any]], agents: Sequence[str] = (
     """Shares over the rows (fractions of all matches unless said): the team's MWR (the focus agent's wins minus
     losses, over all), who left first (an agent counts in every match it left in) and the median step it left
     at, the median step of the exits,
-    the focus agent's self-exits, contacts with the opponent, the partner pushed out by the focus agent, the
+    each agent's self-exits, contacts with the opponent, the partner pushed out by the focus agent, the
     opponent pushed out with the focus agent among the pushers, the focus agent's mean distance to the opponent,
     its final distance from the centre, its steps in contact with the opponent, its path and how often it was
     upside down."""
@@ -187,7 +187,7 @@ def summarize_exits(rows: Sequence[Mapping[str, Any]], agents: Sequence[str] = (
         **{f"median_step_{a}_out": _median([int(r["steps"]) for r in rows if left(r, a)]) for a in agents},
         "none_out": share([r["first_out"] == "none" for r in rows]),
         "median_exit_step": float(np.median(ended)) if ended else None,
-        f"{focus}_self_exit": share([left(r, focus) and _true(r["self_exit"]) for r in rows]),
+        **{f"{a}_self_exit": share([left(r, a) and _true(r["self_exit"]) for r in rows]) for a in agents},
         f"{focus}_out_touched_by_{opponent}": share([left(r, focus) and opponent in str(r["pushed_by"]).split("+")
                                                      for r in rows]),
         f"{focus}_touched_{opponent}": share([int(r[f"focus_first_touch_{opponent}"]) >= 0 for r in rows]),
