@@ -5,7 +5,9 @@ Each match is played to its end with one :class:`~triplesumo.envs.match.Match`, 
 :func:`~triplesumo.evaluation.runner.play_match` plays it (match ``i`` resets with ``seed + i``, the seeds of
 ``triplesumo evaluate`` and of a training's evaluations), and watched step by step: the torso positions, and
 which agents touch which (any contact between two agents' geoms after the step). :func:`exit_rows` gives one row
-per match (:data:`COLUMNS`), :func:`summarize_exits` the shares over them.
+per match (:data:`COLUMNS`), :func:`summarize_exits` the shares over them. It reads a match under the
+``first_out`` rules (the paper's: the match ends at the first exit); under ``elimination`` rules it describes the
+last step only.
 
 The row's words:
 
