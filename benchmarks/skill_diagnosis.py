@@ -1,0 +1,74 @@
+"""Who leaves the ring, from where, after how many steps, for Bug policies in the bench skill match.
+
+``python benchmarks/skill_diagnosis.py --policy LABEL=SPEC ... --out DIR`` plays each Bug policy (a policy file
+stem, ``zoo:NAME`` or ``passive``) on the test matches of ``triplesumo bench skill`` (``--epochs`` 200 starts,
+test match ``i`` reset with ``--seed`` 10000 + i, the match and the other agents' policies of the bench's
+default ``TrainConfig``: ``zoo:ant`` and ``zoo:spider``) and writes ``DIR/LABEL.csv`` (one row per match:
+:func:`triplesumo.evaluation.exits.exit_row`) and ``DIR/summary.json`` (:func:`~triplesumo.evaluation.exits.
+summarize_exits` per label, kept across calls), and prints the summary as a Markdown table."""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import time
+import warnings
+from pathlib import Path
+
+from triplesumo.agents.zoo import make_policy, policies_from_pairs
+from triplesumo.evaluation.exits import exit_rows, summarize_exits, write_rows
+from triplesumo.train.config import TrainConfig
+
+KEYS = ("mwr", "bug_out", "ant_out", "spider_out", "none_out", "median_exit_step", "median_step_bug_out",
+        "bug_self_exit", "bug_out_touched_by_spider", "bug_touched_spider", "median_first_touch_spider",
+        "bug_pushed_ant_out",
+        "bug_pushed_spider_out", "mean_dist_spider", "median_end_radius", "median_touch_steps_spider", "median_path",
+        "flipped")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--policy", nargs="*", default=[], help="LABEL=SPEC Bug policies (SPEC: file stem, "
+                        "zoo:NAME or passive)")
+    parser.add_argument("--summarize", action="store_true", help="rebuild summary.json from every OUT/LABEL.csv "
+                        "(nothing is played)")
+    parser.add_argument("--epochs", type=int, default=200, help="test matches per policy")
+    parser.add_argument("--seed", type=int, default=10_000, help="test match i resets with seed + i")
+    parser.add_argument("--out", required=True, help="folder of LABEL.csv and summary.json")
+    args = parser.parse_args(argv)
+    warnings.simplefilter("ignore")
+    import torch
+
+    torch.set_num_threads(1)
+    cfg = TrainConfig()
+    match_cfg = cfg.match_config()
+    others = policies_from_pairs(cfg.policies, args.seed, cfg.obs_mode)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "summary.json"
+    summary = json.loads(path.read_text()) if path.is_file() else {}
+    if args.summarize:
+        for table in sorted(out.glob("*.csv")):
+            with open(table, newline="") as fh:
+                rows = list(csv.DictReader(fh))
+            kept = {k: summary.get(table.stem, {}).get(k) for k in ("spec", "seconds")}
+            summary[table.stem] = {**kept, **summarize_exits(rows)}
+        path.write_text(json.dumps(summary, indent=2) + "\n")
+    for item in args.policy:
+        label, spec = item.split("=", 1)
+        bug = None if spec == "passive" else make_policy(spec, expect_obs_mode=cfg.obs_mode, frozen=True)
+        t0 = time.perf_counter()
+        rows = exit_rows({**others, "bug": bug}, args.epochs, args.seed, match_cfg)
+        write_rows(out / f"{label}.csv", rows, {"policy": label})
+        summary[label] = {"spec": spec, "seconds": round(time.perf_counter() - t0, 1), **summarize_exits(rows)}
+        path.write_text(json.dumps(summary, indent=2) + "\n")
+        print(f"{label}: {summary[label]['seconds']} s", flush=True)
+    print("| policy | " + " | ".join(KEYS) + " |")
+    print("|" + " --- |" * (len(KEYS) + 1))
+    for label, s in summary.items():
+        print(f"| {label} | " + " | ".join(str(s[k]) for k in KEYS) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
