@@ -64,6 +64,7 @@ from __future__ import annotations
 import argparse
 import functools
 import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -550,6 +551,10 @@ def format_table(result: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if "--profile" in (sys.argv[1:] if argv is None else argv):  # one env step cut into its parts
+        from triplesumo.benchmarks.train_profile import main as profile
+
+        return profile(argv)
     parser = argparse.ArgumentParser(prog="triplesumo bench train", description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=None,
                         help="env steps per variant and round (default: 6000; warp: 2048)")
@@ -573,6 +578,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
+    parser.add_argument("--profile", action="store_true",
+                        help="instead: one env step of the trainer cut into its parts, per learner "
+                             "(triplesumo.benchmarks.train_profile; its own options)")
     args = parser.parse_args(argv)
     learning_starts = 1000
     if args.backend == "warp":
