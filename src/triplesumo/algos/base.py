@@ -76,6 +76,7 @@ class Algorithm:
     """Whether updates draw random numbers (then the generator is part of the checkpoint)."""
 
     actor: Actor
+    acting: Actor
 
     def __init__(self, obs_dim: int, act_dim: int, config: Any, seed: int,
                  device: str | torch.device = "cpu") -> None:
@@ -100,6 +101,12 @@ class Algorithm:
         self.build_optimizers()
         self.policy = ActorPolicy(self.actor, self.obs_norm)
         """Numpy policy following the online actor (deterministic, no noise, normaliser frozen)."""
+        self.acting = self.actor
+        """The actor that collects (exploration acts with it): the online actor itself, or after
+        :meth:`act_apart` a copy of it that :meth:`sync_acting` refreshes."""
+        self.acting_policy = self.policy
+        """:attr:`policy` of :attr:`acting`."""
+        self._acting_pairs: list[tuple[torch.Tensor, torch.Tensor]] = []
         self.num_updates = 0
         """Gradient updates done so far."""
 
@@ -155,6 +162,24 @@ class Algorithm:
             with torch.inference_mode():
                 return self.actor(self.normalize(self.tensor(obs)))
         return self.policy(obs)
+
+    def act_apart(self) -> None:
+        """Collect with a copy of the actor from now on (:attr:`acting`), which takes the actor's weights at each
+        :meth:`sync_acting`: updates may then change the actor while the copy acts (the trainer runs them in a
+        thread beside acting). Same weights, same forward pass: the actions are bit for bit the actor's."""
+        if self.acting is not self.actor:
+            return
+        self.acting = copy.deepcopy(self.actor).requires_grad_(False)
+        self.acting_policy = ActorPolicy(self.acting, self.obs_norm)
+        self._acting_pairs = list(zip([*self.acting.parameters(), *self.acting.buffers()],
+                                      [*self.actor.parameters(), *self.actor.buffers()], strict=True))
+
+    def sync_acting(self) -> None:
+        """:attr:`acting` takes the actor's current weights (a no-op without :meth:`act_apart`). Call it while no
+        update runs."""
+        if self._acting_pairs:
+            with torch.no_grad():
+                torch._foreach_copy_([a for a, _ in self._acting_pairs], [b for _, b in self._acting_pairs])
 
     def export_actor(self) -> Actor:
         """The deterministic policy as a plain :class:`Actor` (a copy), for policy files."""

@@ -115,9 +115,11 @@ def profile_trainer(cfg: TrainConfig, run_dir: Path, steps: int, warm_up: int) -
     parts.wrap(c.env, "step", "env")
     parts.wrap(trainer.seats, "act", "seats")
     for learner in trainer.learners:
+        parts.wrap(learner, "prepare", "act")  # (the normaliser; an off-policy learner's actor copy)
         parts.wrap(learner, "act", "act")
         parts.wrap(learner, "store", "store")
         if hasattr(learner, "run_updates"):  # off-policy: in the update thread (or inline)
+            parts.wrap(learner, "draw", "update")  # (its replay samples)
             parts.wrap(learner, "run_updates", "update", thread="update" if cfg.overlap_learning else "collect")
         else:  # PPO: inline, when its rollout is full
             parts.wrap(learner, "learn", "update_inline")

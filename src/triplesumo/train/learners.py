@@ -140,10 +140,15 @@ class Learner:
     def diverged(self, what: str) -> DivergenceError:
         return DivergenceError(what, learner=self.name)
 
+    def prepare(self, obs: Any) -> None:
+        """Before the step's updates begin: its observations ``(n_rows, obs_dim)`` join the running observation
+        normaliser (a no-op at the paper preset), which those updates read."""
+        self.algo.observe(obs)
+
     def act(self, obs: Any, rng: np.random.Generator) -> Any:
-        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)``, with its
-        exploration (drawn from ``rng``); :class:`DivergenceError` when they are not finite."""
-        self.algo.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
+        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)`` (already
+        :meth:`prepare` d), with its exploration (drawn from ``rng``); :class:`DivergenceError` when they are not
+        finite."""
         action = self._explore(obs, rng)
         if not finite(action):
             raise self.diverged("its actions are not finite")
@@ -248,6 +253,12 @@ class OffPolicyLearner(Learner):
             self.noise = make_noise(c.noise, (self.n_rows, act_dim), c.noise_sigma, c.noise_theta)
         self.sample_rng = np.random.default_rng([cfg.seed, 1 + position])
         """Replay sampling only (used by the update thread; never shared with collection)."""
+        self.algo.act_apart()  # collection acts with a copy of the actor, so the updates may run beside acting
+
+    def prepare(self, obs: Any) -> None:
+        """As :meth:`Learner.prepare`; then the actor that acts takes the weights of the updates so far."""
+        super().prepare(obs)
+        self.algo.sync_acting()
 
     def _explore(self, obs: Any, rng: np.random.Generator) -> Any:
         if self.collected < self.config.learning_starts:  # warm-up
@@ -258,10 +269,15 @@ class OffPolicyLearner(Learner):
         """Updates due at this step: they read the replay as it is before the step."""
         return self.algo.updates_due(self.collected, self.collected + int(self.active.sum()), len(self.replay))
 
-    def run_updates(self, due: int) -> None:
-        """``due`` gradient updates on replay samples; :class:`DivergenceError` says what is not finite."""
-        for _ in range(due):
-            batch = self.replay.sample(self.config.batch_size, self.sample_rng)
+    def draw(self, due: int) -> list[Any]:
+        """The replay samples of ``due`` gradient updates, drawn now (in the order the updates take them): the
+        replay may take new transitions once they are drawn."""
+        return [self.replay.sample(self.config.batch_size, self.sample_rng) for _ in range(due)]
+
+    def run_updates(self, due: int, batches: Sequence[Any] | None = None) -> None:
+        """``due`` gradient updates on replay samples (``batches``: already :meth:`draw` n; the same ones);
+        :class:`DivergenceError` says what is not finite."""
+        for batch in self.draw(due) if batches is None else batches:
             try:
                 stats = self.algo.update(batch)
             except DivergenceError as exc:  # the algorithm's own finite check of its update stats
@@ -357,9 +373,11 @@ def make_learner(spec: LearnerSpec, index: list[int], position: int, cfg: TrainC
 
 class Updates(threading.Thread):
     """The off-policy updates due at one collection step (every learner's, in turn), computed before the step
-    (they read the replay as it was): :meth:`begin` runs them in a thread beside the physics (``overlap``: the
-    GIL is released in MuJoCo's batch and in torch's kernels) or inline; :meth:`finish` waits for them and
-    raises what stopped them. Overlapped or not, the result is bit for bit the same."""
+    (they read the replay as it was): :meth:`begin` runs them in a thread beside acting and the physics
+    (``overlap``: the GIL is released in MuJoCo's batch and in torch's kernels; the learners act with a copy of
+    their actor) or inline; they draw every replay sample first, and :meth:`drawn` waits for that (the replay
+    may then take the step's transitions); :meth:`finish` waits for them and raises what stopped them.
+    Overlapped or not, the result is bit for bit the same."""
 
     def __init__(self, learners: Sequence[Learner]) -> None:
         super().__init__(name="offpolicy-updates", daemon=True)
@@ -367,6 +385,12 @@ class Updates(threading.Thread):
         self.seconds = 0.0
         self.error: BaseException | None = None
         self._launched = False
+        self._drawn = threading.Event()
+
+    @property
+    def overlapped(self) -> bool:
+        """Whether they run in the thread (else they ran inline in :meth:`begin`)."""
+        return self._launched
 
     def begin(self, overlap: bool) -> Updates:
         if self.due and overlap:
@@ -379,11 +403,20 @@ class Updates(threading.Thread):
     def run(self) -> None:
         t = time.perf_counter()
         try:
-            for learner, due in self.due:
-                learner.run_updates(due)
+            drawn = [(learner, due, learner.draw(due)) for learner, due in self.due]
+            self._drawn.set()
+            for learner, due, batches in drawn:
+                learner.run_updates(due, batches)
         except BaseException as exc:  # re-raised in the collecting thread by finish()
             self.error = exc
+        finally:
+            self._drawn.set()
         self.seconds = time.perf_counter() - t
+
+    def drawn(self) -> None:
+        """Wait until the updates have drawn their replay samples."""
+        if self._launched:
+            self._drawn.wait()
 
     def finish(self) -> None:
         if self._launched:
