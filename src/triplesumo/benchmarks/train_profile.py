@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import sys
 import tempfile
 import time
@@ -48,8 +49,9 @@ from triplesumo.train.loop import Trainer
 
 PARTS = ("env", "act", "seats", "store", "bookkeeping", "update")
 """The parts of an env step, in the table's order (their sum is the CPU of an env step, both threads)."""
-LEARNERS = ("ddpg", "td3", "sac", "ppo")
-"""The learners profiled: DDPG at the paper preset, the others on ``bench train``'s algorithm schedule."""
+LEARNERS = ("env", "ddpg", "td3", "sac", "ppo")
+"""The learners profiled: ``env`` the collection alone (``bench train``'s ``env_only``: DDPG that never leaves
+its random warm-up), DDPG at the paper preset, the others on ``bench train``'s algorithm schedule."""
 MODES = ("overlap", "inline")
 
 
@@ -61,6 +63,7 @@ class _Parts:
         self.cpu: dict[str, float] = defaultdict(float)
         self.wall: dict[str, float] = defaultdict(float)
         self.threads: dict[str, dict[str, int]] = {}
+        self.blocked: dict[str, int] = defaultdict(int)
 
     def wrap(self, obj: Any, name: str, part: str, thread: str | None = None) -> None:
         fn: Callable[..., Any] = getattr(obj, name)
@@ -69,14 +72,53 @@ class _Parts:
             if thread is not None and thread not in self.threads:
                 self.threads[thread] = {"intra_op": torch.get_num_threads(),
                                         "inter_op": torch.get_num_interop_threads()}
-            c, w = time.thread_time(), time.perf_counter()
+            c, w, b = time.thread_time(), time.perf_counter(), _blocked()
             try:
                 return fn(*args, **kwargs)
             finally:
                 self.cpu[part] += time.thread_time() - c
                 self.wall[part] += time.perf_counter() - w
+                self.blocked[part] += _blocked() - b
 
         setattr(obj, name, wrapper)
+
+
+def _blocked() -> int:
+    """Times the calling thread has blocked so far (voluntary context switches: waiting for the GIL, a lock or
+    an event; the machine's other load preempts instead, which is not counted)."""
+    return resource.getrusage(resource.RUSAGE_THREAD).ru_nvcsw
+
+
+class _Window:
+    """The collecting thread's CPU seconds (:attr:`cpu`) from the moment a step's updates are handed to their
+    thread (``Updates.begin`` returns) to the moment it waits for them (``Updates.finish``): what it does beside
+    them."""
+
+    def __enter__(self) -> _Window:
+        from triplesumo.train.learners import Updates
+
+        self.cpu, self._start = 0.0, 0.0
+        self._saved = (Updates.begin, Updates.finish)
+        begin, finish = self._saved
+
+        def timed_begin(updates: Any, *args: Any, **kwargs: Any) -> Any:
+            out = begin(updates, *args, **kwargs)
+            self._start = time.thread_time()
+            return out
+
+        def timed_finish(updates: Any, *args: Any, **kwargs: Any) -> Any:
+            self.cpu += time.thread_time() - self._start
+            return finish(updates, *args, **kwargs)
+
+        setattr(Updates, "begin", timed_begin)  # noqa: B010
+        setattr(Updates, "finish", timed_finish)  # noqa: B010
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        from triplesumo.train.learners import Updates
+
+        setattr(Updates, "begin", self._saved[0])  # noqa: B010
+        setattr(Updates, "finish", self._saved[1])  # noqa: B010
 
 
 def learner_configs(n_envs: int, learning_starts: int, ppo_rollout: int | None = None) -> dict[str, dict[str, Any]]:
@@ -89,7 +131,8 @@ def learner_configs(n_envs: int, learning_starts: int, ppo_rollout: int | None =
     from triplesumo.benchmarks.train import PPO_ROLLOUT
 
     rollout = ppo_rollout or PPO_ROLLOUT
-    return {"ddpg": {"ddpg": DDPGConfig(learning_starts=learning_starts)},
+    return {"env": {"ddpg": DDPGConfig(learning_starts=10**12)},
+            "ddpg": {"ddpg": DDPGConfig(learning_starts=learning_starts)},
             "td3": {"learn": ("bug=td3",), "td3": TD3Config(learn_every=n_envs, learning_starts=learning_starts)},
             "sac": {"learn": ("bug=sac",), "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts)},
             "ppo": {"learn": ("bug=ppo",), "ppo": PPOConfig(n_steps=max(rollout // n_envs, 1))}}
@@ -125,13 +168,21 @@ def profile_trainer(cfg: TrainConfig, run_dir: Path, steps: int, warm_up: int) -
             parts.wrap(learner, "learn", "update_inline")
     parts.threads["collect"] = {"intra_op": torch.get_num_threads(), "inter_op": torch.get_num_interop_threads()}
     start_steps, grads0 = c.env_steps, gradient_steps(trainer)
-    main_cpu = main_wall = 0.0
-    while c.env_steps - start_steps < steps:
-        t, w = time.thread_time(), time.perf_counter()
-        trainer.step()
-        main_cpu += time.thread_time() - t
-        main_wall += time.perf_counter() - w
+    main_cpu = main_wall = critical = 0.0
+    main_blocked = _blocked()
+    with _Window() as window:
+        while c.env_steps - start_steps < steps:
+            t, w, u = time.thread_time(), time.perf_counter(), parts.cpu["update"]
+            window.cpu = 0.0
+            trainer.step()
+            step_cpu = time.thread_time() - t
+            main_cpu += step_cpu
+            main_wall += time.perf_counter() - w
+            beside = parts.cpu["update"] - u if cfg.overlap_learning else 0.0
+            critical += step_cpu - window.cpu + max(window.cpu, beside)
     n, grads = c.env_steps - start_steps, gradient_steps(trainer) - grads0
+    main_blocked = _blocked() - main_blocked
+    trainer_steps = n / cfg.n_envs
     trainer.log.close()
     cpu, wall = parts.cpu, parts.wall
     update = cpu["update"] + cpu["update_inline"]
@@ -144,11 +195,15 @@ def profile_trainer(cfg: TrainConfig, run_dir: Path, steps: int, warm_up: int) -
     return {"cpu_us_per_env_step": row,
             "cpu_us_per_env_step_total": sum(row.values()),
             "wall_us_per_env_step": main_wall * us,
+            "critical_path_us_per_env_step": critical * us,
             "update_ms_per_gradient_step": 1e3 * update / grads if grads else None,
             "gradient_steps_per_env_step": grads / n,
             "wall_over_cpu": {"env": wall["env"] / max(cpu["env"], 1e-12),
                               "update": update_wall / update if update else None,
                               "collecting_thread": main_wall / max(main_cpu, 1e-12)},
+            "blocked_per_step": {"collecting_thread": main_blocked / trainer_steps,
+                                 "update_thread": parts.blocked["update"] / trainer_steps
+                                 if cfg.overlap_learning else 0.0},
             "torch_threads": dict(parts.threads), "env_steps": n, "gradient_steps": grads}
 
 
@@ -167,10 +222,10 @@ def run_step_profile(steps: int = 4096, n_envs: int = 16, learners: tuple[str, .
     with tempfile.TemporaryDirectory(prefix="triplesumo-profile-") as tmp:
         for name in learners:
             out[name] = {}
-            for mode in modes:
+            for mode in modes[:1] if name == "env" else modes:  # (nothing to overlap)
                 cfg = TrainConfig(**{**base.__dict__, **configs[name], "overlap_learning": mode == "overlap"})
                 out[name][mode] = profile_trainer(cfg, Path(tmp) / f"{name}-{mode}", steps,
-                                                  0 if name == "ppo" else learning_starts)
+                                                  0 if name in ("ppo", "env") else learning_starts)
     return {"setup": {"steps": steps, "n_envs": n_envs, "n_threads": 1, "policies": list(policies), "seed": seed,
                       "learning_starts": learning_starts, "switch_interval_s": sys.getswitchinterval(),
                       "cpu_count": os.cpu_count(), "load_average_before": list(load_before),
@@ -184,20 +239,30 @@ def format_profile_table(result: dict[str, Any]) -> str:
              f"others {s['policies']}, {s['steps']} env steps per row; load average "
              f"{s['load_average_before'][0]:.1f} before, {s['load_average_after'][0]:.1f} after",
              "", f"{'learner':13s} " + " ".join(f"{p:>8s}" for p in PARTS)
-             + f" {'total':>8s} {'wall':>8s} {'ms/grad':>8s} {'env w/c':>8s} {'upd w/c':>8s} {'torch thr':>10s}"]
+             + f" {'total':>8s} {'critical':>8s} {'vs env':>6s} {'wall':>8s} {'ms/grad':>8s} {'env w/c':>8s} "
+             f"{'upd w/c':>8s} {'blocked':>9s} {'torch thr':>10s}"]
+    env = result["learners"].get("env", {})
+    alone = next(iter(env.values()))["critical_path_us_per_env_step"] if env else float("nan")
     for name, modes in result["learners"].items():
         for mode, r in modes.items():
             cells = " ".join(f"{r['cpu_us_per_env_step'][p]:8.0f}" for p in PARTS)
             ms = r["update_ms_per_gradient_step"]
             wc = r["wall_over_cpu"]
             threads = ",".join(f"{t[0]}{v['intra_op']}/{v['inter_op']}" for t, v in r["torch_threads"].items())
-            lines.append(f"{name + ' ' + mode:13s} {cells} {r['cpu_us_per_env_step_total']:8.0f} "
-                         f"{r['wall_us_per_env_step']:8.0f} {ms if ms is not None else float('nan'):8.2f} "
-                         f"{wc['env']:8.2f} {wc['update'] if wc['update'] else float('nan'):8.2f} {threads:>10s}")
-    lines += ["", "total: CPU of an env step, both threads; wall: of the collecting thread per env step; "
+            crit, blocked = r["critical_path_us_per_env_step"], r["blocked_per_step"]
+            nan = float("nan")
+            lines.append(f"{name + ' ' + mode:13s} {cells} {r['cpu_us_per_env_step_total']:8.0f} {crit:8.0f} "
+                         f"{alone / crit:6.2f} {r['wall_us_per_env_step']:8.0f} {nan if ms is None else ms:8.2f} "
+                         f"{wc['env']:8.2f} {wc['update'] or nan:8.2f} "
+                         f"{blocked['collecting_thread']:4.1f}/{blocked['update_thread']:<4.1f} {threads:>10s}")
+    lines += ["", "total: CPU of an env step, both threads; critical: the CPU on the step's critical path (the "
+              "collecting thread's, where the update thread's is longer beside it: the wall time of an idle machine "
+              "with a core per thread, no contention); vs env: env alone's critical over this one's; "
+              "wall: of the collecting thread per env step (this machine, its load); "
               "ms/grad: CPU of one gradient step (PPO: minibatch); w/c: wall over CPU of the part (above 1: ready "
-              "but not running, the GIL or a busy core); torch thr: intra/inter-op threads of the collecting (c) "
-              "and update (u) threads"]
+              "but not running, the GIL or a busy core); blocked: times per trainer step the collecting / update "
+              "thread blocked (the GIL, or one waiting for the other; preemption by other load is not counted); "
+              "torch thr: intra/inter-op threads of the collecting (c) and update (u) threads"]
     return "\n".join(lines)
 
 
