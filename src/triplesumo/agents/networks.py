@@ -237,6 +237,9 @@ class ActorPolicy:
     def __init__(self, actor: Actor, obs_norm: ObsNormalizer | None = None) -> None:
         self.actor = actor
         self.obs_norm = obs_norm
+        self._weight = next(actor.parameters())
+        """A parameter of the actor, whose device is the actor's (``Module.to`` keeps the parameter objects);
+        looking one up per call walked every submodule."""
 
     @property
     def obs_dim(self) -> int:
@@ -255,7 +258,7 @@ class ActorPolicy:
             raise ValueError(
                 f"obs must have shape ({self.obs_dim},) or (n, {self.obs_dim}), got {obs.shape}"
             )
-        device = next(self.actor.parameters()).device
+        device = self._weight.device
         with torch.inference_mode():
             x = torch.as_tensor(obs, device=device)
             if self.obs_norm is not None:

@@ -107,6 +107,8 @@ class Algorithm:
         self.acting_policy = self.policy
         """:attr:`policy` of :attr:`acting`."""
         self._acting_pairs: list[tuple[torch.Tensor, torch.Tensor]] = []
+        self._acting_at: int | None = None
+        """:attr:`num_updates` when :attr:`acting` last took the actor's weights (None: not since a load)."""
         self.num_updates = 0
         """Gradient updates done so far."""
 
@@ -175,11 +177,12 @@ class Algorithm:
                                       [*self.actor.parameters(), *self.actor.buffers()], strict=True))
 
     def sync_acting(self) -> None:
-        """:attr:`acting` takes the actor's current weights (a no-op without :meth:`act_apart`). Call it while no
-        update runs."""
-        if self._acting_pairs:
+        """:attr:`acting` takes the actor's current weights if an update or a load may have changed them since it
+        last did (a no-op without :meth:`act_apart`). Call it while no update runs."""
+        if self._acting_pairs and self._acting_at != self.num_updates:
             with torch.no_grad():
                 torch._foreach_copy_([a for a, _ in self._acting_pairs], [b for _, b in self._acting_pairs])
+            self._acting_at = self.num_updates
 
     def export_actor(self) -> Actor:
         """The deterministic policy as a plain :class:`Actor` (a copy), for policy files."""
@@ -225,6 +228,7 @@ class Algorithm:
                     f"{label} state key {key!r}: shape {tuple(tensors[key].shape)}, "
                     f"expected {tuple(shape)}"
                 )
+        self._acting_at = None  # (the actor's weights change here)
         for name in self.modules:
             module: nn.Module = getattr(self, name)
             prefix = f"{name}."

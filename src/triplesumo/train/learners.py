@@ -23,9 +23,11 @@ the host generators, which keeps their streams and checkpoints those of the CPU 
 from __future__ import annotations
 
 import math
+import os
+import queue
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -371,21 +373,54 @@ def make_learner(spec: LearnerSpec, index: list[int], position: int, cfg: TrainC
     return cls(spec, index, position, cfg, obs_dim, act_dim, device, elimination)
 
 
-class Updates(threading.Thread):
+class UpdateThread:
+    """The long-lived thread that runs the overlapped off-policy updates of every step, one job after another
+    (:func:`update_thread`: one per process). A thread started per step cost its creation and the wait for it to
+    run at every collection step. Each job runs with the torch thread count of the thread that submitted it."""
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue[tuple[Callable[[], None], int]] = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._loop, name="offpolicy-updates", daemon=True)
+        self.thread.start()
+
+    def _loop(self) -> None:
+        while True:
+            job, threads = self._jobs.get()
+            if torch.get_num_threads() != threads:  # (a thread keeps the count it first ran with)
+                torch.set_num_threads(threads)
+            job()
+
+    def submit(self, job: Callable[[], None]) -> None:
+        """Run ``job`` in the thread, after the jobs before it (``job`` keeps its own errors)."""
+        self._jobs.put((job, torch.get_num_threads()))
+
+
+_UPDATE_THREAD: tuple[int, UpdateThread] | None = None
+
+
+def update_thread() -> UpdateThread:
+    """This process's :class:`UpdateThread`, started on first use (again in a forked child)."""
+    global _UPDATE_THREAD
+    if _UPDATE_THREAD is None or _UPDATE_THREAD[0] != os.getpid() or not _UPDATE_THREAD[1].thread.is_alive():
+        _UPDATE_THREAD = (os.getpid(), UpdateThread())
+    return _UPDATE_THREAD[1]
+
+
+class Updates:
     """The off-policy updates due at one collection step (every learner's, in turn), computed before the step
-    (they read the replay as it was): :meth:`begin` runs them in a thread beside acting and the physics
-    (``overlap``: the GIL is released in MuJoCo's batch and in torch's kernels; the learners act with a copy of
-    their actor) or inline; they draw every replay sample first, and :meth:`drawn` waits for that (the replay
-    may then take the step's transitions); :meth:`finish` waits for them and raises what stopped them.
+    (they read the replay as it was): :meth:`begin` runs them in the :class:`UpdateThread` beside acting and the
+    physics (``overlap``: the GIL is released in MuJoCo's batch and in torch's kernels; the learners act with a
+    copy of their actor) or inline; they draw every replay sample first, and :meth:`drawn` waits for that (the
+    replay may then take the step's transitions); :meth:`finish` waits for them and raises what stopped them.
     Overlapped or not, the result is bit for bit the same."""
 
     def __init__(self, learners: Sequence[Learner]) -> None:
-        super().__init__(name="offpolicy-updates", daemon=True)
         self.due = [(lr, d) for lr in learners if isinstance(lr, OffPolicyLearner) and (d := lr.updates_due())]
         self.seconds = 0.0
         self.error: BaseException | None = None
         self._launched = False
         self._drawn = threading.Event()
+        self._done = threading.Event()
 
     @property
     def overlapped(self) -> bool:
@@ -395,7 +430,7 @@ class Updates(threading.Thread):
     def begin(self, overlap: bool) -> Updates:
         if self.due and overlap:
             self._launched = True
-            self.start()
+            update_thread().submit(self.run)
         elif self.due:
             self.run()
         return self
@@ -410,8 +445,9 @@ class Updates(threading.Thread):
         except BaseException as exc:  # re-raised in the collecting thread by finish()
             self.error = exc
         finally:
+            self.seconds = time.perf_counter() - t
             self._drawn.set()
-        self.seconds = time.perf_counter() - t
+            self._done.set()
 
     def drawn(self) -> None:
         """Wait until the updates have drawn their replay samples."""
@@ -420,6 +456,6 @@ class Updates(threading.Thread):
 
     def finish(self) -> None:
         if self._launched:
-            self.join()
+            self._done.wait()
         if self.error is not None:
             raise self.error
