@@ -166,8 +166,11 @@ class GaussianActor(Actor):
 
     def distribution(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean and log σ of the Gaussian over ``u``, each ``(..., act_dim)``."""
-        features = self.net[:-1](obs)
-        mean = self.net[-1](features)
+        *body, head = self.net  # (slicing the Sequential would build a new one at every call)
+        features = obs
+        for layer in body:
+            features = layer(features)
+        mean = head(features)
         if self.log_std_head is not None:
             squashed = torch.tanh(self.log_std_head(features))
             log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (squashed + 1.0)
