@@ -43,6 +43,9 @@ the physics (which pays off only when a core is free). ``update_profile_ms``
 and SB3's, split into forward passes and the rest, backward, and Adam: where the time of
 an update goes.
 
+``--profile`` cuts one env step of the trainer into its parts instead, per learner, in thread CPU
+(:mod:`~triplesumo.benchmarks.train_profile`).
+
 ``--backend warp --device DEV`` measures the trainer on MuJoCo Warp instead
 (:func:`run_warp_train_benchmark`): ``env_only``, ``train_ddpg`` and ``train_ppo`` on a
 massively parallel schedule (``n_envs`` matches, DDPG ``gradient_steps`` updates of
