@@ -148,9 +148,9 @@ class Learner:
         self.algo.observe(obs)
 
     def act(self, obs: Any, rng: np.random.Generator) -> Any:
-        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)`` (already
-        :meth:`prepare` d), with its exploration (drawn from ``rng``); :class:`DivergenceError` when they are not
-        finite."""
+        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)`` (after
+        :meth:`prepare` with them), with its exploration (drawn from ``rng``); :class:`DivergenceError` when they
+        are not finite."""
         action = self._explore(obs, rng)
         if not finite(action):
             raise self.diverged("its actions are not finite")
