@@ -81,7 +81,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.benchmarks import report, versions
+from triplesumo.benchmarks import PPO_ROLLOUT, report, versions
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer
 
@@ -90,8 +90,6 @@ TARGET_VS_SB3 = 1.6
 PAPER_EPOCHS = 20_000
 
 
-PPO_ROLLOUT = 2048
-"""Transitions per PPO rollout on the algorithm schedule (SB3's n_steps with one env)."""
 
 
 class _TrainerVariant:

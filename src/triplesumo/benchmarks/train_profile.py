@@ -43,7 +43,7 @@ from typing import Any
 
 import torch
 
-from triplesumo.benchmarks import report, versions
+from triplesumo.benchmarks import PPO_ROLLOUT, report, versions
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer
 
@@ -128,7 +128,6 @@ def learner_configs(n_envs: int, learning_starts: int, ppo_rollout: int | None =
     from triplesumo.algos.ppo import PPOConfig
     from triplesumo.algos.sac import SACConfig
     from triplesumo.algos.td3 import TD3Config
-    from triplesumo.benchmarks.train import PPO_ROLLOUT
 
     rollout = ppo_rollout or PPO_ROLLOUT
     return {"env": {"ddpg": DDPGConfig(learning_starts=10**12)},
