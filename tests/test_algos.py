@@ -7,6 +7,7 @@ import dataclasses
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t  # the same random batches
+from test_ddpg import CONFIG as CONFIG_DDPG
 from triplesumo.agents.networks import ActorPolicy, GaussianActor, gaussian_log_prob, tanh_log_det_jacobian
 from triplesumo.agents.normalizer import ObsNormalizer
 from triplesumo.agents.policy_file import load_policy, save_policy
@@ -499,3 +501,38 @@ def test_trainer_feeds_and_saves_the_normaliser(tmp_path: Path) -> None:
     assert manifest["obs_norm"] and policy.obs_norm is not None
     assert float(policy.obs_norm.count) == result.env_steps  # every learner observation, once
     assert float(policy.obs_norm.var.min()) != 1.0  # the statistics moved
+
+
+@pytest.mark.parametrize("algo", ["ddpg", "td3", "sac"])
+def test_a_copy_of_the_actor_acts_with_the_weights_of_its_last_sync(algo: str) -> None:
+    """The trainer's collection acts with a copy of the actor while the updates change the actor (in a thread):
+    the copy keeps the weights of its last ``sync_acting`` and then acts bit for bit as the actor itself."""
+    from triplesumo.algos.noise import make_noise
+
+    cls, config = {"ddpg": (DDPG, CONFIG_DDPG), "td3": (TD3, TD3_CFG), "sac": (SAC, SAC_CFG)}[algo]
+    apart, together = cls(OBS_DIM, ACT_DIM, config, seed=0), cls(OBS_DIM, ACT_DIM, config, seed=0)
+    apart.act_apart()
+    obs = np.random.default_rng(5).standard_normal((3, OBS_DIM)).astype(np.float32)
+
+    def explore(agent: Any) -> np.ndarray:
+        noise = None if algo == "sac" else make_noise("gaussian", (3, ACT_DIM), 0.1, 0.15)
+        return agent.explore(obs, np.random.default_rng(1), noise)
+
+    for agent in (apart, together):
+        agent.observe(obs)  # (the normaliser is shared: the copy reads its statistics as they are)
+    before = explore(apart)
+    np.testing.assert_array_equal(before, explore(together))
+    for agent in (apart, together):
+        for k in range(2):  # (TD3 steps its actor on every second update)
+            agent.update(_batch(k))
+    np.testing.assert_array_equal(explore(apart), before)  # not synced: the weights before the updates
+    assert not np.array_equal(explore(together), before)
+    apart.sync_acting()
+    np.testing.assert_array_equal(explore(apart), explore(together))
+    state = together.state_dict()
+    for k in range(2):
+        together.update(_batch(10 + k))
+    apart.load_state_dict(together.state_dict())  # a load changes the actor too: the next sync copies it
+    apart.sync_acting()
+    np.testing.assert_array_equal(explore(apart), explore(together))
+    assert state.keys() == apart.state_dict().keys()  # the copy is no module of the checkpoint

@@ -149,3 +149,49 @@ def test_the_phase_timer_counts_backward_and_adam_and_puts_everything_back() -> 
             opt.step()
     assert timer.backward > 0 and timer.optimizer > 0
     assert (torch.Tensor.backward, torch.optim.Adam.step) == (backward, step)
+
+
+PROFILE_PARTS = ("env", "act", "seats", "store", "bookkeeping", "update")
+
+
+@pytest.fixture(scope="module")
+def quick_profile(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, dict[str, Any]]:
+    path = tmp_path_factory.mktemp("bench") / "profile.json"
+    rc, printed = run_bench(["--profile", "--quick", "--json", str(path)])
+    return rc, printed, json.loads(path.read_text())
+
+
+@pytest.mark.slow  # 30 s alone on the shared 2-core box
+def test_profile_cuts_an_env_step_into_parts_that_add_up_for_every_learner(quick_profile: tuple) -> None:
+    rc, printed, result = quick_profile
+    assert rc == 0
+    learners = result["learners"]
+    assert set(learners) == {"env", "ddpg", "td3", "sac", "ppo"}
+    for name, modes in learners.items():
+        assert set(modes) == ({"overlap"} if name == "env" else {"overlap", "inline"}), name
+        for mode, r in modes.items():
+            parts = r["cpu_us_per_env_step"]
+            assert tuple(parts) == PROFILE_PARTS
+            assert all(math.isfinite(v) and v >= 0 for v in parts.values()), (name, mode, parts)
+            assert parts["env"] > 0 and parts["act"] > 0 and parts["store"] > 0
+            assert (parts["update"] > 0) == (name != "env")
+            total = r["cpu_us_per_env_step_total"]
+            assert total == pytest.approx(sum(parts.values()))
+            # the critical path holds all the collecting thread does and, of the updates, at most all
+            collecting = total - (parts["update"] if mode == "overlap" else 0.0)
+            assert collecting * (1 - 1e-9) <= r["critical_path_us_per_env_step"] <= total * (1 + 1e-9)
+            if mode == "inline" or name in ("env", "ppo"):  # nothing runs beside the collecting thread
+                assert r["critical_path_us_per_env_step"] == pytest.approx(total)
+                assert r["blocked_per_step"]["update_thread"] == 0
+            # the update's per-gradient-step and per-env-step figures are one measurement read two ways
+            assert name == "env" or r["update_ms_per_gradient_step"] * r["gradient_steps"] == pytest.approx(
+                parts["update"] * r["env_steps"] / 1e3)
+            assert all(t["intra_op"] == 1 for t in r["torch_threads"].values())  # the trainer's torch_threads
+            assert ("update" in r["torch_threads"]) == (mode == "overlap" and name not in ("ppo", "env"))
+            line = next(line for line in printed.splitlines() if line.startswith(f"{name} {mode} "))
+            assert float(line.split()[2]) == pytest.approx(parts["env"], abs=0.5)
+    # the schedules: TD3 and SAC one gradient step per n_envs transitions (2 here), PPO 10 x 32 per 64-step rollout
+    for name in ("td3", "sac"):
+        assert learners[name]["overlap"]["gradient_steps_per_env_step"] == 0.5
+    assert learners["ppo"]["inline"]["gradient_steps_per_env_step"] == 10 * 32 / 64
+    assert result["setup"]["n_envs"] == QUICK_ENVS

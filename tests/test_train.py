@@ -658,6 +658,23 @@ def test_overlapped_learning_gives_the_same_run_as_serial_learning(tmp_path: Pat
                         checkpoint.latest(overlapped) / "weights.safetensors")
 
 
+@pytest.mark.slow  # 12 s alone on the shared 2-core box
+@pytest.mark.parametrize("algo", ["sac", "td3"])
+def test_learners_acting_beside_their_updates_give_the_serial_run(tmp_path: Path, algo: str) -> None:
+    """SAC and TD3 act at every step while their updates (one per step here) change the actor in the update
+    thread: they act with a copy of the actor as the last step's updates left it, so the run is the serial one."""
+    from triplesumo.algos.sac import SACConfig
+    from triplesumo.algos.td3 import TD3Config
+
+    small = {"hidden": (16, 16), "buffer_size": 5000, "learning_starts": 50, "batch_size": 16, "learn_every": 2}
+    fields = {"learn": (f"bug={algo}",), algo: (SACConfig if algo == "sac" else TD3Config)(**small)}
+    serial = train(tiny(tmp_path, "serial", overlap_learning=False, **fields)).run_dir
+    overlapped = train(tiny(tmp_path, "overlap", overlap_learning=True, **fields)).run_dir
+    assert_same_tensors(checkpoint.latest(serial) / "weights.safetensors",
+                        checkpoint.latest(overlapped) / "weights.safetensors")
+    assert without_wall_time(read_rows(serial)[1]) == without_wall_time(read_rows(overlapped)[1])
+
+
 def test_an_error_in_the_update_thread_reaches_the_caller(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     def broken(self: Any, batch: Any) -> dict[str, float]:
         raise RuntimeError("update failed on purpose")

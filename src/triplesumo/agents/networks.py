@@ -166,8 +166,11 @@ class GaussianActor(Actor):
 
     def distribution(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean and log σ of the Gaussian over ``u``, each ``(..., act_dim)``."""
-        features = self.net[:-1](obs)
-        mean = self.net[-1](features)
+        *body, head = self.net  # (slicing the Sequential would build a new one at every call)
+        features = obs
+        for layer in body:
+            features = layer(features)
+        mean = head(features)
         if self.log_std_head is not None:
             squashed = torch.tanh(self.log_std_head(features))
             log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (squashed + 1.0)
@@ -237,6 +240,9 @@ class ActorPolicy:
     def __init__(self, actor: Actor, obs_norm: ObsNormalizer | None = None) -> None:
         self.actor = actor
         self.obs_norm = obs_norm
+        self._weight = next(actor.parameters())
+        """A parameter of the actor, whose device is the actor's (``Module.to`` keeps the parameter objects);
+        looking one up per call walked every submodule."""
 
     @property
     def obs_dim(self) -> int:
@@ -255,7 +261,7 @@ class ActorPolicy:
             raise ValueError(
                 f"obs must have shape ({self.obs_dim},) or (n, {self.obs_dim}), got {obs.shape}"
             )
-        device = next(self.actor.parameters()).device
+        device = self._weight.device
         with torch.inference_mode():
             x = torch.as_tensor(obs, device=device)
             if self.obs_norm is not None:

@@ -76,6 +76,7 @@ class Algorithm:
     """Whether updates draw random numbers (then the generator is part of the checkpoint)."""
 
     actor: Actor
+    acting: Actor
 
     def __init__(self, obs_dim: int, act_dim: int, config: Any, seed: int,
                  device: str | torch.device = "cpu") -> None:
@@ -100,6 +101,14 @@ class Algorithm:
         self.build_optimizers()
         self.policy = ActorPolicy(self.actor, self.obs_norm)
         """Numpy policy following the online actor (deterministic, no noise, normaliser frozen)."""
+        self.acting = self.actor
+        """The actor that collects (exploration acts with it): the online actor itself, or after
+        :meth:`act_apart` a copy of it that :meth:`sync_acting` refreshes."""
+        self.acting_policy = self.policy
+        """:attr:`policy` of :attr:`acting`."""
+        self._acting_pairs: list[tuple[torch.Tensor, torch.Tensor]] = []
+        self._acting_at: int | None = None
+        """:attr:`num_updates` when :attr:`acting` last took the actor's weights (None: not since a load)."""
         self.num_updates = 0
         """Gradient updates done so far."""
 
@@ -156,6 +165,25 @@ class Algorithm:
                 return self.actor(self.normalize(self.tensor(obs)))
         return self.policy(obs)
 
+    def act_apart(self) -> None:
+        """Collect with a copy of the actor from now on (:attr:`acting`), which takes the actor's weights at each
+        :meth:`sync_acting`: updates may then change the actor while the copy acts (the trainer runs them in a
+        thread beside acting). Same weights, same forward pass: the actions are bit for bit the actor's."""
+        if self.acting is not self.actor:
+            return
+        self.acting = copy.deepcopy(self.actor).requires_grad_(False)
+        self.acting_policy = ActorPolicy(self.acting, self.obs_norm)
+        self._acting_pairs = list(zip([*self.acting.parameters(), *self.acting.buffers()],
+                                      [*self.actor.parameters(), *self.actor.buffers()], strict=True))
+
+    def sync_acting(self) -> None:
+        """:attr:`acting` takes the actor's current weights if an update or a load may have changed them since it
+        last did (a no-op without :meth:`act_apart`). Call it while no update runs."""
+        if self._acting_pairs and self._acting_at != self.num_updates:
+            with torch.no_grad():
+                torch._foreach_copy_([a for a, _ in self._acting_pairs], [b for _, b in self._acting_pairs])
+            self._acting_at = self.num_updates
+
     def export_actor(self) -> Actor:
         """The deterministic policy as a plain :class:`Actor` (a copy), for policy files."""
         if isinstance(self.actor, GaussianActor):
@@ -200,6 +228,7 @@ class Algorithm:
                     f"{label} state key {key!r}: shape {tuple(tensors[key].shape)}, "
                     f"expected {tuple(shape)}"
                 )
+        self._acting_at = None  # (the actor's weights change here)
         for name in self.modules:
             module: nn.Module = getattr(self, name)
             prefix = f"{name}."
@@ -295,12 +324,13 @@ def not_finite(named: Sequence[tuple[str, torch.Tensor]]) -> list[str]:
     """Names of the tensors in ``named`` holding a NaN or an infinity (empty when all are finite).
 
     One reduction per tensor and one check for the common all-finite case (a NaN or an
-    infinity anywhere makes a tensor's ``max |x|`` non-finite: NaN propagates through ``amax``),
-    several times cheaper than an ``isfinite`` mask per tensor; the tensors are looked at
-    element by element only to name the bad ones.
+    infinity anywhere makes a tensor's sum non-finite), several times cheaper than an
+    ``isfinite`` mask per tensor (and than ``max |x|``, which copies each tensor for ``abs``);
+    the tensors are looked at element by element only to name the bad ones (and when a sum
+    of finite values overflows, which then names none).
     """
     floats = [t.detach() for _, t in named if t.is_floating_point()]  # integers are always finite
-    if not floats or bool(torch.isfinite(torch.stack([t.abs().amax() for t in floats])).all()):
+    if not floats or bool(torch.isfinite(torch.stack([t.sum() for t in floats])).all()):
         return []
     return [name for name, t in named if t.is_floating_point() and not bool(torch.isfinite(t).all())]
 

@@ -139,8 +139,13 @@ class OffPolicyAlgorithm(Algorithm):
 
     def explore(self, obs: Any, rng: np.random.Generator, noise: ActionNoise | None = None) -> Any:
         """Training action: ``clip(μ(s) + noise, -1, 1)`` (no noise: the deterministic action); the noise is
-        drawn on the host from ``rng``. Observations on the device (a tensor) give a tensor there."""
-        action = self.act(obs)
+        drawn on the host from ``rng``. Observations on the device (a tensor) give a tensor there. The actor that
+        acts is :attr:`acting` (the online actor, or its copy)."""
+        if isinstance(obs, torch.Tensor):
+            with torch.inference_mode():
+                action = self.acting(self.normalize(self.tensor(obs)))
+        else:
+            action = self.acting_policy(obs)
         if noise is None:
             return action
         if isinstance(action, torch.Tensor):

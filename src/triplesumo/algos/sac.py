@@ -120,6 +120,7 @@ class SAC(OffPolicyAlgorithm):
 
     config: SACConfig
     actor: GaussianActor
+    acting: GaussianActor
     modules = ("actor", "critic", "critic2", "critic_target", "critic2_target", "temperature")
     target_pairs = (("critic", "critic_target"), ("critic2", "critic2_target"))
     uses_generator = True
@@ -202,7 +203,7 @@ class SAC(OffPolicyAlgorithm):
 
     def explore(self, obs: Any, rng: np.random.Generator,
                 noise: ActionNoise | None = None) -> Any:
-        """Training action sampled from the policy, ``tanh(μ(s) + σ(s) ε)``, ε from ``rng``.
+        """Training action sampled from the policy (:attr:`acting`), ``tanh(μ(s) + σ(s) ε)``, ε from ``rng``.
 
         SAC explores by its own stochasticity: passing a noise process is an error.
         """
@@ -211,7 +212,7 @@ class SAC(OffPolicyAlgorithm):
         on_device = isinstance(obs, torch.Tensor)  # a device-resident collection: stay a tensor
         obs = obs if on_device else np.asarray(obs, dtype=np.float32)
         with torch.inference_mode():
-            mean, log_std = self.actor.distribution(self.normalize(self.tensor(obs)))
+            mean, log_std = self.acting.distribution(self.normalize(self.tensor(obs)))
             eps = self.tensor(rng.standard_normal(mean.shape))
             action = torch.tanh(mean + log_std.exp() * eps)
         return action if on_device else action.cpu().numpy().astype(np.float32, copy=False)

@@ -8,6 +8,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+PPO_ROLLOUT = 2048
+"""Transitions per PPO rollout on ``bench train``'s algorithm schedule (SB3's n_steps with one env); its
+``--profile`` uses it too."""
+
 
 def report(table: str, result: dict[str, Any], json_path: str | None) -> None:
     """Print a benchmark's table and, when asked, write its results as JSON."""

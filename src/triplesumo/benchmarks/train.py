@@ -43,6 +43,9 @@ the physics (which pays off only when a core is free). ``update_profile_ms``
 and SB3's, split into forward passes and the rest, backward, and Adam: where the time of
 an update goes.
 
+``--profile`` cuts one env step of the trainer into its parts instead, per learner, in thread CPU
+(:mod:`~triplesumo.benchmarks.train_profile`).
+
 ``--backend warp --device DEV`` measures the trainer on MuJoCo Warp instead
 (:func:`run_warp_train_benchmark`): ``env_only``, ``train_ddpg`` and ``train_ppo`` on a
 massively parallel schedule (``n_envs`` matches, DDPG ``gradient_steps`` updates of
@@ -64,6 +67,7 @@ from __future__ import annotations
 import argparse
 import functools
 import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -77,7 +81,7 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.benchmarks import report, versions
+from triplesumo.benchmarks import PPO_ROLLOUT, report, versions
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer
 
@@ -86,8 +90,6 @@ TARGET_VS_SB3 = 1.6
 PAPER_EPOCHS = 20_000
 
 
-PPO_ROLLOUT = 2048
-"""Transitions per PPO rollout on the algorithm schedule (SB3's n_steps with one env)."""
 
 
 class _TrainerVariant:
@@ -550,6 +552,10 @@ def format_table(result: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if "--profile" in (sys.argv[1:] if argv is None else argv):  # one env step cut into its parts
+        from triplesumo.benchmarks.train_profile import main as profile
+
+        return profile(argv)
     parser = argparse.ArgumentParser(prog="triplesumo bench train", description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=None,
                         help="env steps per variant and round (default: 6000; warp: 2048)")
@@ -573,6 +579,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="seed (default: 0)")
     parser.add_argument("--json", metavar="PATH", default=None, help="also write the results as JSON to PATH")
     parser.add_argument("--quick", action="store_true", help="tiny sizes (a smoke test, not a measurement)")
+    parser.add_argument("--profile", action="store_true",
+                        help="instead: one env step of the trainer cut into its parts, per learner "
+                             "(triplesumo.benchmarks.train_profile; its own options)")
     args = parser.parse_args(argv)
     learning_starts = 1000
     if args.backend == "warp":

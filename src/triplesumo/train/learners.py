@@ -23,9 +23,11 @@ the host generators, which keeps their streams and checkpoints those of the CPU 
 from __future__ import annotations
 
 import math
+import os
+import queue
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -140,10 +142,15 @@ class Learner:
     def diverged(self, what: str) -> DivergenceError:
         return DivergenceError(what, learner=self.name)
 
+    def prepare(self, obs: Any) -> None:
+        """Before the step's updates begin: its observations ``(n_rows, obs_dim)`` join the running observation
+        normaliser (a no-op at the paper preset), which those updates read."""
+        self.algo.observe(obs)
+
     def act(self, obs: Any, rng: np.random.Generator) -> Any:
-        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)``, with its
-        exploration (drawn from ``rng``); :class:`DivergenceError` when they are not finite."""
-        self.algo.observe(obs)  # the running observation normaliser (a no-op at the paper preset)
+        """Training actions ``(n_rows, act_dim)`` in [-1, 1] for observations ``(n_rows, obs_dim)`` (after
+        :meth:`prepare` with them), with its exploration (drawn from ``rng``); :class:`DivergenceError` when they
+        are not finite."""
         action = self._explore(obs, rng)
         if not finite(action):
             raise self.diverged("its actions are not finite")
@@ -248,6 +255,12 @@ class OffPolicyLearner(Learner):
             self.noise = make_noise(c.noise, (self.n_rows, act_dim), c.noise_sigma, c.noise_theta)
         self.sample_rng = np.random.default_rng([cfg.seed, 1 + position])
         """Replay sampling only (used by the update thread; never shared with collection)."""
+        self.algo.act_apart()  # collection acts with a copy of the actor, so the updates may run beside acting
+
+    def prepare(self, obs: Any) -> None:
+        """As :meth:`Learner.prepare`; then the actor that acts takes the weights of the updates so far."""
+        super().prepare(obs)
+        self.algo.sync_acting()
 
     def _explore(self, obs: Any, rng: np.random.Generator) -> Any:
         if self.collected < self.config.learning_starts:  # warm-up
@@ -258,10 +271,15 @@ class OffPolicyLearner(Learner):
         """Updates due at this step: they read the replay as it is before the step."""
         return self.algo.updates_due(self.collected, self.collected + int(self.active.sum()), len(self.replay))
 
-    def run_updates(self, due: int) -> None:
-        """``due`` gradient updates on replay samples; :class:`DivergenceError` says what is not finite."""
-        for _ in range(due):
-            batch = self.replay.sample(self.config.batch_size, self.sample_rng)
+    def draw(self, due: int) -> list[Any]:
+        """The replay samples of ``due`` gradient updates, drawn now (in the order the updates take them): the
+        replay may take new transitions once they are drawn."""
+        return [self.replay.sample(self.config.batch_size, self.sample_rng) for _ in range(due)]
+
+    def run_updates(self, due: int, batches: Sequence[Any] | None = None) -> None:
+        """``due`` gradient updates on replay samples (``batches``: already :meth:`draw` n; the same ones);
+        :class:`DivergenceError` says what is not finite."""
+        for batch in self.draw(due) if batches is None else batches:
             try:
                 stats = self.algo.update(batch)
             except DivergenceError as exc:  # the algorithm's own finite check of its update stats
@@ -355,23 +373,64 @@ def make_learner(spec: LearnerSpec, index: list[int], position: int, cfg: TrainC
     return cls(spec, index, position, cfg, obs_dim, act_dim, device, elimination)
 
 
-class Updates(threading.Thread):
+class UpdateThread:
+    """The long-lived thread that runs the overlapped off-policy updates of every step, one job after another
+    (:func:`update_thread`: one per process). A thread started per step cost its creation and the wait for it to
+    run at every collection step. Each job runs with the torch thread count of the thread that submitted it."""
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue[tuple[Callable[[], None], int]] = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._loop, name="offpolicy-updates", daemon=True)
+        self.thread.start()
+
+    def _loop(self) -> None:
+        while True:
+            job, threads = self._jobs.get()
+            if torch.get_num_threads() != threads:  # (a thread keeps the count it first ran with)
+                torch.set_num_threads(threads)
+            job()
+
+    def submit(self, job: Callable[[], None]) -> None:
+        """Run ``job`` in the thread, after the jobs before it (``job`` keeps its own errors)."""
+        self._jobs.put((job, torch.get_num_threads()))
+
+
+_UPDATE_THREAD: tuple[int, UpdateThread] | None = None
+
+
+def update_thread() -> UpdateThread:
+    """This process's :class:`UpdateThread`, started on first use (again in a forked child)."""
+    global _UPDATE_THREAD
+    if _UPDATE_THREAD is None or _UPDATE_THREAD[0] != os.getpid() or not _UPDATE_THREAD[1].thread.is_alive():
+        _UPDATE_THREAD = (os.getpid(), UpdateThread())
+    return _UPDATE_THREAD[1]
+
+
+class Updates:
     """The off-policy updates due at one collection step (every learner's, in turn), computed before the step
-    (they read the replay as it was): :meth:`begin` runs them in a thread beside the physics (``overlap``: the
-    GIL is released in MuJoCo's batch and in torch's kernels) or inline; :meth:`finish` waits for them and
-    raises what stopped them. Overlapped or not, the result is bit for bit the same."""
+    (they read the replay as it was): :meth:`begin` runs them in the :class:`UpdateThread` beside acting and the
+    physics (``overlap``: the GIL is released in MuJoCo's batch and in torch's kernels; the learners act with a
+    copy of their actor) or inline; they draw every replay sample first, and :meth:`drawn` waits for that (the
+    replay may then take the step's transitions); :meth:`finish` waits for them and raises what stopped them.
+    Overlapped or not, the result is bit for bit the same."""
 
     def __init__(self, learners: Sequence[Learner]) -> None:
-        super().__init__(name="offpolicy-updates", daemon=True)
         self.due = [(lr, d) for lr in learners if isinstance(lr, OffPolicyLearner) and (d := lr.updates_due())]
         self.seconds = 0.0
         self.error: BaseException | None = None
         self._launched = False
+        self._drawn = threading.Event()
+        self._done = threading.Event()
+
+    @property
+    def overlapped(self) -> bool:
+        """Whether they run in the thread (else they ran inline in :meth:`begin`)."""
+        return self._launched
 
     def begin(self, overlap: bool) -> Updates:
         if self.due and overlap:
             self._launched = True
-            self.start()
+            update_thread().submit(self.run)
         elif self.due:
             self.run()
         return self
@@ -379,14 +438,24 @@ class Updates(threading.Thread):
     def run(self) -> None:
         t = time.perf_counter()
         try:
-            for learner, due in self.due:
-                learner.run_updates(due)
+            drawn = [(learner, due, learner.draw(due)) for learner, due in self.due]
+            self._drawn.set()
+            for learner, due, batches in drawn:
+                learner.run_updates(due, batches)
         except BaseException as exc:  # re-raised in the collecting thread by finish()
             self.error = exc
-        self.seconds = time.perf_counter() - t
+        finally:
+            self.seconds = time.perf_counter() - t
+            self._drawn.set()
+            self._done.set()
+
+    def drawn(self) -> None:
+        """Wait until the updates have drawn their replay samples."""
+        if self._launched:
+            self._drawn.wait()
 
     def finish(self) -> None:
         if self._launched:
-            self.join()
+            self._done.wait()
         if self.error is not None:
             raise self.error

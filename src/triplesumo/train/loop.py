@@ -141,7 +141,7 @@ class Trainer:
                          for position, spec in enumerate(self.specs)]
         self.timers = {"env": 0.0, "act": 0.0, "learn": 0.0, "wait": 0.0}
         """Seconds collecting (physics and rules), acting, learning (off-policy updates run in a thread: they
-        overlap "env" when overlap_learning is on; PPO's run inline) and waiting for learning."""
+        overlap "act" and "env" when overlap_learning is on; PPO's run inline) and waiting for learning."""
         self.train_seconds = 0.0
         """Wall time of training so far, over every leg of the run: collection, learning and checkpoints,
         the evaluations excluded (as of the last evaluation or checkpoint)."""
@@ -224,26 +224,32 @@ class Trainer:
     def step(self) -> int:
         """Step every match once; returns the number of epochs that finished.
 
-        Each learner acts on its rows with exploration, the seats it does not take act too; the off-policy
-        updates due now (they read the replay as it was before this step) run beside the physics while the
-        matches step; each learner stores its transitions; each finished epoch is written, rated by the league
-        and its match's next epoch seated; PPO learns when its rollout is full."""
+        The off-policy updates due now (they read the replay as it was before this step, and the normaliser
+        with this step's observations) run beside the rest of the step: each learner acts on its rows with
+        exploration (with a copy of its actor as the last updates left it), the seats it does not take act too,
+        the matches step, each learner stores its transitions; then each finished epoch is written, rated by the
+        league and its match's next epoch seated; PPO learns when its rollout is full."""
         c, learners, timers = self.collector, self.learners, self.timers
         where = c.epochs_done, c.env_steps
         try:
             t0 = time.perf_counter()
             seen = [c.rows(learner) for learner in learners]
-            acted = [learner.act(obs, self.rng) for learner, obs in zip(learners, seen, strict=True)]
-            actions = c.actions(learners, acted)
-            self.seats.act(actions, c.obs)
-            t1 = time.perf_counter()
+            for learner, obs in zip(learners, seen, strict=True):
+                learner.prepare(obs)  # the normaliser the updates read, the actor copy that acts
             updates = Updates(learners).begin(self.cfg.overlap_learning)
-            step = c.step(actions)
-            t2 = time.perf_counter()
-            updates.finish()
+            try:
+                acted = [learner.act(obs, self.rng) for learner, obs in zip(learners, seen, strict=True)]
+                actions = c.actions(learners, acted)
+                self.seats.act(actions, c.obs)
+                t1 = time.perf_counter()
+                step = c.step(actions)
+                updates.drawn()  # (long since, as a rule)
+                for learner, obs, act in zip(learners, seen, acted, strict=True):
+                    learner.store(obs, act, step)
+            finally:
+                t2 = time.perf_counter()
+                updates.finish()  # (before the epochs' rows: they read the learners' update counts and losses)
             t3 = time.perf_counter()
-            for learner, obs, act in zip(learners, seen, acted, strict=True):
-                learner.store(obs, act, step)
             for end in step.ended:
                 self.end_match(end)
             t4 = time.perf_counter()
@@ -251,9 +257,10 @@ class Trainer:
                 learner.learn(c.rows(learner))
         except DivergenceError as exc:
             raise self.diverged(exc, *where) from None
-        timers["act"] += t1 - t0
+        inline = 0.0 if updates.overlapped else updates.seconds
+        timers["act"] += t1 - t0 - inline
         timers["env"] += (t2 - t1) + (t4 - t3)
-        timers["learn"] += updates.seconds + time.perf_counter() - t4  # the thread's part overlaps "env"
+        timers["learn"] += updates.seconds + time.perf_counter() - t4  # the thread's part overlaps "act" and "env"
         timers["wait"] += t3 - t2
         return len(step.ended)
 
