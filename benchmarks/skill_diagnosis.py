@@ -3,7 +3,7 @@
 ``python benchmarks/skill_diagnosis.py --policy LABEL=SPEC ... --out DIR`` plays each Bug policy (a policy file
 stem, ``zoo:NAME`` or ``passive``) on the test matches of ``triplesumo bench skill`` (``--epochs`` 200 starts,
 test match ``i`` reset with ``--seed`` 10000 + i, the match and the other agents' policies of the bench's
-default ``TrainConfig``: ``zoo:ant`` and ``zoo:spider``) and writes ``DIR/LABEL.csv`` (one row per match:
+default ``TrainConfig``: ``zoo:ant`` and ``zoo:spider``, or another pair's with ``--pair``) and writes ``DIR/LABEL.csv`` (one row per match:
 :func:`triplesumo.evaluation.exits.exit_row`) and ``DIR/summary.json`` (:func:`~triplesumo.evaluation.exits.
 summarize_exits` per label, kept across calls), and prints the summary as a Markdown table."""
 from __future__ import annotations
@@ -35,6 +35,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--epochs", type=int, default=200, help="test matches per policy")
     parser.add_argument("--seed", type=int, default=10_000, help="test match i resets with seed + i")
     parser.add_argument("--out", required=True, help="folder of LABEL.csv and summary.json")
+    parser.add_argument("--pair", nargs="*", default=None, metavar="AGENT=SPEC",
+                        help="the other agents' policies (default: the bench's, zoo:ant and zoo:spider), e.g. "
+                        "ant=docs/runs/scratch-v2/seed-1/ant/screens/policy-4000 to diagnose another pair")
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore")
     import torch
@@ -42,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(1)
     cfg = TrainConfig()
     match_cfg = cfg.match_config()
-    others = policies_from_pairs(cfg.policies, args.seed, cfg.obs_mode)
+    others = policies_from_pairs(tuple(args.pair) if args.pair else cfg.policies, args.seed, cfg.obs_mode)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     path = out / "summary.json"
