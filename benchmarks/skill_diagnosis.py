@@ -3,9 +3,10 @@
 ``python benchmarks/skill_diagnosis.py --policy LABEL=SPEC ... --out DIR`` plays each Bug policy (a policy file
 stem, ``zoo:NAME`` or ``passive``) on the test matches of ``triplesumo bench skill`` (``--epochs`` 200 starts,
 test match ``i`` reset with ``--seed`` 10000 + i, the match and the other agents' policies of the bench's
-default ``TrainConfig``: ``zoo:ant`` and ``zoo:spider``, or another pair's with ``--pair``) and writes ``DIR/LABEL.csv`` (one row per match:
-:func:`triplesumo.evaluation.exits.exit_row`) and ``DIR/summary.json`` (:func:`~triplesumo.evaluation.exits.
-summarize_exits` per label, kept across calls), and prints the summary as a Markdown table."""
+default ``TrainConfig``: ``zoo:ant`` and ``zoo:spider``, or another pair's with ``--pair``) and writes
+``DIR/LABEL.csv`` (one row per match: :func:`triplesumo.evaluation.exits.exit_row`) and ``DIR/summary.json``
+(:func:`~triplesumo.evaluation.exits.summarize_exits` per label, kept across calls), and prints the summary as a
+Markdown table."""
 from __future__ import annotations
 
 import argparse
