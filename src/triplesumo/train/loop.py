@@ -1,25 +1,21 @@
 """The trainer: learners of any algorithm in several matches at once, resumable, wired from parts.
 
-:meth:`Trainer.run` and :meth:`Trainer.step` are the algorithm: each learner acts for its agents with
-exploration, the fixed policies and league members for theirs; the off-policy updates due (``gradient_steps``
-every ``learn_every`` transitions) run in a thread beside the physics while the matches step; each learner stores
-its transitions; every finished match is one *epoch*: its rows are written, the league rates it, its next match
-seats the players drawn; PPO learns when its rollout is full. ``--learn bug=ddpg`` (the default) is the paper's.
+:meth:`Trainer.run` and :meth:`Trainer.step` are the algorithm: the off-policy updates due (``gradient_steps``
+every ``learn_every`` transitions) run in a thread beside the rest of the step; each learner acts for its agents
+with exploration, the fixed policies and league members for theirs; the matches step; each learner stores its
+transitions; every finished match is one *epoch*: its rows are written, the league rates it, its next match seats
+the players drawn; PPO learns when its rollout is full. ``--learn bug=ddpg`` (the default) is the paper's.
 
-The parts, each usable without the others and each keeping its own state (``state_dict``):
+The parts, each keeping its own state (``state_dict``): :mod:`~triplesumo.train.preflight` (checks before anything
+is made: memory, schedule, sizes), :mod:`~triplesumo.train.collect` (the batched matches, stepped into transitions
+and finished-match records), :mod:`~triplesumo.train.learners` (act, store, learn), :mod:`~triplesumo.train.seats`
+(fixed policies, self-play league members), :mod:`~triplesumo.train.evaluations` (evaluation beside the loop), and
+:mod:`~triplesumo.train.checkpoint` with :mod:`~triplesumo.train.run_folder` (the run folder and its checkpoints;
+every match's exact state too, so a resume continues the matches in progress).
 
-- :mod:`~triplesumo.train.preflight`: what is checked before anything is made (memory, schedule, sizes);
-- :mod:`~triplesumo.train.collect`: the batched matches, stepped into transitions and finished-match records;
-- :mod:`~triplesumo.train.learners`: the learners (one per network): act, store, learn;
-- :mod:`~triplesumo.train.seats`: who sits in which seat (fixed policies, self-play league members);
-- :mod:`~triplesumo.train.evaluations`: evaluation while training, beside the loop;
-- :mod:`~triplesumo.train.checkpoint`, :mod:`~triplesumo.train.run_folder`: the run folder and its checkpoints,
-  the parts' states side by side (every match's exact state too: a resume continues the matches in progress).
-
-Nothing is lost: a folder that already holds a run is never trained into again without ``resume`` (continue it)
-or ``start_over`` (move it aside first); the memory the replay buffer needs is checked before anything is made;
-a learner whose losses, parameters or actions stop being finite stops the run with a :class:`DivergenceError`
-naming the learner, the update and the last good checkpoint.
+Nothing is lost: a folder that already holds a run is never trained into again without ``resume`` or
+``start_over`` (move it aside first); a learner whose losses, parameters or actions stop being finite stops the
+run with a :class:`DivergenceError` naming the learner, the update and the last good checkpoint.
 """
 
 from __future__ import annotations
@@ -222,13 +218,11 @@ class Trainer:
                            time.perf_counter() - start, dict(self.timers), {a: c.mwr(a) for a in self.agents})
 
     def step(self) -> int:
-        """Step every match once; returns the number of epochs that finished.
-
-        The off-policy updates due now (they read the replay as it was before this step, and the normaliser
-        with this step's observations) run beside the rest of the step: each learner acts on its rows with
-        exploration (with a copy of its actor as the last updates left it), the seats it does not take act too,
-        the matches step, each learner stores its transitions; then each finished epoch is written, rated by the
-        league and its match's next epoch seated; PPO learns when its rollout is full."""
+        """Step every match once; returns the number of epochs that finished. The off-policy updates due now
+        (on the replay as it was before this step, the normaliser with this step's observations) run beside the
+        rest: each learner acts on its rows with exploration (a copy of its actor as the last updates left it),
+        the seats it does not take act too, the matches step, each learner stores its transitions; then each
+        finished epoch is written, rated and its match's next epoch seated; PPO learns when its rollout is full."""
         c, learners, timers = self.collector, self.learners, self.timers
         where = c.epochs_done, c.env_steps
         try:
