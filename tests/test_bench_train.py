@@ -30,18 +30,21 @@ def run_bench(argv: list[str]) -> tuple[int, str]:
     return rc, buf.getvalue()
 
 
+def run_bench_json(path: Path, argv: list[str]) -> tuple[int, str, dict[str, Any]]:
+    """``bench train ARGV --json PATH``: its exit code, what it printed and the JSON it wrote."""
+    rc, printed = run_bench([*argv, "--json", str(path)])
+    return rc, printed, json.loads(path.read_text())
+
+
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, dict[str, Any], Path]:
     path = tmp_path_factory.mktemp("bench") / "sub" / "b.json"
-    rc, printed = run_bench(["--quick", "--json", str(path)])
-    return rc, printed, json.loads(path.read_text()), path
+    return *run_bench_json(path, ["--quick"]), path
 
 
 @pytest.fixture(scope="module")
 def quick_no_sb3(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, dict[str, Any]]:
-    path = tmp_path_factory.mktemp("bench") / "n.json"
-    rc, printed = run_bench(["--quick", "--no-sb3", "--json", str(path)])
-    return rc, printed, json.loads(path.read_text())
+    return run_bench_json(tmp_path_factory.mktemp("bench") / "n.json", ["--quick", "--no-sb3"])
 
 
 @pytest.mark.slow  # 45 s alone on the shared 2-core box
@@ -156,9 +159,7 @@ PROFILE_PARTS = ("env", "act", "seats", "store", "bookkeeping", "update")
 
 @pytest.fixture(scope="module")
 def quick_profile(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, str, dict[str, Any]]:
-    path = tmp_path_factory.mktemp("bench") / "profile.json"
-    rc, printed = run_bench(["--profile", "--quick", "--json", str(path)])
-    return rc, printed, json.loads(path.read_text())
+    return run_bench_json(tmp_path_factory.mktemp("bench") / "profile.json", ["--profile", "--quick"])
 
 
 @pytest.mark.slow  # 30 s alone on the shared 2-core box

@@ -13,6 +13,22 @@ PPO_ROLLOUT = 2048
 ``--profile`` uses it too."""
 
 
+def learner_configs(n_envs: int, learning_starts: int, ppo_rollout: int | None = None) -> dict[str, dict[str, Any]]:
+    """``TrainConfig`` fields of each learner as ``bench train`` measures it (DDPG: the paper preset; PPO's
+    rollout ``ppo_rollout`` transitions, by default ``bench train``'s)."""
+    from triplesumo.algos.ddpg import DDPGConfig  # (here: the env benches import this package without torch)
+    from triplesumo.algos.ppo import PPOConfig
+    from triplesumo.algos.sac import SACConfig
+    from triplesumo.algos.td3 import TD3Config
+
+    rollout = ppo_rollout or PPO_ROLLOUT
+    return {"env": {"ddpg": DDPGConfig(learning_starts=10**12)},
+            "ddpg": {"ddpg": DDPGConfig(learning_starts=learning_starts)},
+            "td3": {"learn": ("bug=td3",), "td3": TD3Config(learn_every=n_envs, learning_starts=learning_starts)},
+            "sac": {"learn": ("bug=sac",), "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts)},
+            "ppo": {"learn": ("bug=ppo",), "ppo": PPOConfig(n_steps=max(rollout // n_envs, 1))}}
+
+
 def report(table: str, result: dict[str, Any], json_path: str | None) -> None:
     """Print a benchmark's table and, when asked, write its results as JSON."""
     print(table)

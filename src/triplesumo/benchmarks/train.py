@@ -81,15 +81,13 @@ from triplesumo.algos.ddpg import DDPGConfig
 from triplesumo.algos.ppo import PPOConfig
 from triplesumo.algos.sac import SACConfig
 from triplesumo.algos.td3 import TD3Config
-from triplesumo.benchmarks import PPO_ROLLOUT, report, versions
+from triplesumo.benchmarks import PPO_ROLLOUT, learner_configs, report, versions
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer
 
 TARGET_VS_ENV = 0.7
 TARGET_VS_SB3 = 1.6
 PAPER_EPOCHS = 20_000
-
-
 
 
 class _TrainerVariant:
@@ -292,13 +290,11 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
                        steps_per_epoch=steps_per_epoch)
     tmp = tempfile.TemporaryDirectory(prefix="triplesumo-bench-")
     root = Path(tmp.name)
+    configs = learner_configs(n_envs, learning_starts)
     variants: dict[str, Any] = {
-        "env_only": _TrainerVariant(
-            TrainConfig(**{**base.__dict__, "ddpg": DDPGConfig(learning_starts=10**12)}), root / "env",
-            learning_starts),
-        "train_paper": _TrainerVariant(
-            TrainConfig(**{**base.__dict__, "ddpg": DDPGConfig(learning_starts=learning_starts)}), root / "train",
-            learning_starts),
+        "env_only": _TrainerVariant(TrainConfig(**{**base.__dict__, **configs["env"]}), root / "env", learning_starts),
+        "train_paper": _TrainerVariant(TrainConfig(**{**base.__dict__, **configs["ddpg"]}), root / "train",
+                                       learning_starts),
     }
     variants["train_every_step"] = _TrainerVariant(
         TrainConfig(**{**base.__dict__, "ddpg": DDPGConfig(learning_starts=learning_starts, learn_every=1)}),
@@ -315,9 +311,7 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     else:
         sb3_status = "skipped"
     if algo_steps is not None:
-        algo_base = {**base.__dict__, "td3": TD3Config(learn_every=n_envs, learning_starts=learning_starts),
-                     "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts),
-                     "ppo": PPOConfig(n_steps=max(PPO_ROLLOUT // n_envs, 1))}
+        algo_base = {**base.__dict__, **{algo: configs[algo][algo] for algo in ("td3", "sac", "ppo")}}
         for algo in ("td3", "sac", "ppo"):
             variants[f"train_{algo}"] = _TrainerVariant(TrainConfig(**{**algo_base, "learn": (f"bug={algo}",)}),
                                                         root / algo, 0 if algo == "ppo" else learning_starts)

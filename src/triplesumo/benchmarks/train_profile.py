@@ -43,7 +43,7 @@ from typing import Any
 
 import torch
 
-from triplesumo.benchmarks import PPO_ROLLOUT, report, versions
+from triplesumo.benchmarks import learner_configs, report, versions
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import Trainer
 
@@ -119,22 +119,6 @@ class _Window:
 
         setattr(Updates, "begin", self._saved[0])  # noqa: B010
         setattr(Updates, "finish", self._saved[1])  # noqa: B010
-
-
-def learner_configs(n_envs: int, learning_starts: int, ppo_rollout: int | None = None) -> dict[str, dict[str, Any]]:
-    """``TrainConfig`` fields of each learner as ``bench train`` measures it (DDPG: the paper preset; PPO's
-    rollout ``ppo_rollout`` transitions, by default ``bench train``'s)."""
-    from triplesumo.algos.ddpg import DDPGConfig
-    from triplesumo.algos.ppo import PPOConfig
-    from triplesumo.algos.sac import SACConfig
-    from triplesumo.algos.td3 import TD3Config
-
-    rollout = ppo_rollout or PPO_ROLLOUT
-    return {"env": {"ddpg": DDPGConfig(learning_starts=10**12)},
-            "ddpg": {"ddpg": DDPGConfig(learning_starts=learning_starts)},
-            "td3": {"learn": ("bug=td3",), "td3": TD3Config(learn_every=n_envs, learning_starts=learning_starts)},
-            "sac": {"learn": ("bug=sac",), "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts)},
-            "ppo": {"learn": ("bug=ppo",), "ppo": PPOConfig(n_steps=max(rollout // n_envs, 1))}}
 
 
 def gradient_steps(trainer: Trainer) -> int:
