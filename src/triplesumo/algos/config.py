@@ -114,6 +114,11 @@ class OffPolicyConfig:
     """L2 weight decay of the critics' Adam (Lillicrap et al. used 1e-2; the paper none)."""
     normalize_obs: bool = False
     """Normalise observations by their running mean and variance (off in the paper)."""
+    n_step: int = 1
+    """n of n-step returns: each stored transition carries its agent's next n rewards, discounted, and bootstraps
+    from the observation n steps on with γ^n (fewer where its match ends first:
+    :mod:`triplesumo.algos.nstep`). 1: one-step TD (the paper, SB3, CleanRL). It makes the replay's contents, so
+    a fork keeps it."""
 
     TUNABLE: ClassVar[tuple[str, ...]] = ("actor_lr", "critic_lr", "gamma", "tau", "batch_size", "learn_every",
                                           "gradient_steps", "weight_decay")
@@ -128,7 +133,7 @@ class OffPolicyConfig:
             learning_rate(self, name)
         for name in ("gamma", "tau"):
             fraction(self, name)
-        for name in ("batch_size", "buffer_size", "learn_every", "gradient_steps"):
+        for name in ("batch_size", "buffer_size", "learn_every", "gradient_steps", "n_step"):
             at_least(self, name, 1)
         at_least(self, "learning_starts", 0)
         non_negative(self, "weight_decay")

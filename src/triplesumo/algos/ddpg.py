@@ -100,7 +100,8 @@ class DDPG(OffPolicyAlgorithm):
     # ------------------------------------------------------------------------ learning
 
     def td_target(self, batch: Batch) -> torch.Tensor:
-        """Critic regression target ``y = r + γ (1 - done) Q'(s', μ'(s'))``, shape ``(B,)``.
+        """Critic regression target ``y = r + γ (1 - done) Q'(s', μ'(s'))``, shape ``(B,)`` (γ^m with n-step
+        returns: :meth:`~triplesumo.algos.offpolicy.OffPolicyAlgorithm.bootstrap`).
 
         Uses the TARGET actor μ' and the TARGET critic Q' (Lillicrap et al., 2015), without
         gradients. ``done = 1`` (a real win/loss terminal) removes the bootstrap term.
@@ -110,7 +111,7 @@ class DDPG(OffPolicyAlgorithm):
         with torch.no_grad():
             next_action = self.target_action(b["next_obs"])  # μ'(s'): TARGET actor
             next_q = min_q(self.critic_targets, b["next_obs"], next_action)  # Q'(s', μ'(s')): TARGET critic
-            return b["rew"] + self.config.gamma * (1.0 - b["done"]) * next_q
+            return b["rew"] + self.bootstrap(b) * next_q
 
     def update_critic(self, batch: Batch) -> dict[str, float]:
         """One Adam critic step on ``mean (Q(s, a) - y)²``, with ``y`` from :meth:`td_target`.

@@ -34,7 +34,8 @@ from triplesumo.algos.base import Algorithm, adam, descend
 from triplesumo.algos.noise import ActionNoise
 
 Batch = Mapping[str, np.ndarray | torch.Tensor]
-"""A replay sample: ``obs``, ``act``, ``rew``, ``next_obs``, ``done`` (see ``ReplayBuffer.sample``)."""
+"""A replay sample: ``obs``, ``act``, ``rew``, ``next_obs``, ``done`` and, with n-step returns, ``discount`` (see
+``ReplayBuffer.sample``)."""
 
 
 def min_q(critics: Sequence[Critic], obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
@@ -62,8 +63,8 @@ class OffPolicyAlgorithm(Algorithm):
     # ------------------------------------------------------------------------- batches
 
     def batch(self, batch: Batch) -> dict[str, torch.Tensor]:
-        """Batch as float32 tensors on the device; ``rew`` and ``done`` flattened to ``(B,)``;
-        ``obs`` and ``next_obs`` normalised (when the learner normalises observations).
+        """Batch as float32 tensors on the device; ``rew``, ``done`` (and ``discount``, where the batch has it)
+        flattened to ``(B,)``; ``obs`` and ``next_obs`` normalised (when the learner normalises observations).
 
         Already-prepared batches (as returned here) pass through unchanged.
         """
@@ -74,8 +75,10 @@ class OffPolicyAlgorithm(Algorithm):
             if key not in batch:
                 raise KeyError(f"batch is missing {key!r}")
             out[key] = self.tensor(batch[key])
+        if "discount" in batch:
+            out["discount"] = self.tensor(batch["discount"])
         n = out["obs"].shape[0]
-        for key in ("rew", "done"):
+        for key in [k for k in ("rew", "done", "discount") if k in out]:
             out[key] = out[key].reshape(-1)
             if out[key].shape != (n,):
                 raise ValueError(f"batch[{key!r}] must have {n} entries, got {out[key].shape}")
@@ -96,6 +99,12 @@ class OffPolicyAlgorithm(Algorithm):
     def train_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
         """The algorithm's update on a prepared batch (``self.num_updates`` is its index)."""
         raise NotImplementedError
+
+    def bootstrap(self, b: Mapping[str, torch.Tensor]) -> torch.Tensor:
+        """The factor of each transition's bootstrap value in its TD target, ``(B,)``: ``γ (1 - done)``, or
+        ``γ^m (1 - done)`` with the batch's ``discount`` γ^m (n-step returns: m is the steps the transition
+        spans)."""
+        return b.get("discount", self.config.gamma) * (1.0 - b["done"])
 
     def updates_due(self, before: int, after: int, stored: int) -> int:
         """Gradient updates due when the collected transitions go from ``before`` to ``after``.

@@ -9,6 +9,9 @@ What goes in (the caller's contract):
   terminal.
 - A transition that ends in a physics error (simulation instability) is dropped by the
   caller and never stored; its next observation is meaningless.
+- With n-step returns (:class:`~triplesumo.algos.nstep.NStepReturns`) a buffer made with
+  ``discount=True`` also keeps each transition's bootstrap factor γ^m (m: the steps it spans),
+  since transitions cut short by a match's end span fewer than n.
 
 The buffer is circular: once full, each new transition overwrites the oldest one. Its
 :meth:`ReplayBuffer.state_dict` is a dict of plain numpy arrays, so a run can be saved with
@@ -25,6 +28,8 @@ import torch
 
 FIELDS = ("obs", "act", "rew", "next_obs", "done")
 """Names of the stored arrays, as used in sampled batches and in the state dict."""
+DISCOUNT = "discount"
+"""The extra field of a buffer made with ``discount=True``: each transition's bootstrap factor γ^m."""
 
 
 def _positive_int(name: str, value: int) -> int:
@@ -43,17 +48,17 @@ class ReplayBuffer:
         capacity: Maximum number of transitions kept (paper: 1,000,000).
         obs_dim: Size of one (flat) observation.
         act_dim: Size of one action.
+        discount: Also keep each transition's bootstrap factor (:data:`DISCOUNT`; n-step returns).
     """
 
-    def __init__(self, capacity: int, obs_dim: int, act_dim: int) -> None:
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int, discount: bool = False) -> None:
         self._capacity = _positive_int("capacity", capacity)
         self.obs_dim = _positive_int("obs_dim", obs_dim)
         self.act_dim = _positive_int("act_dim", act_dim)
-        self.obs = np.zeros((self._capacity, self.obs_dim), dtype=np.float32)
-        self.act = np.zeros((self._capacity, self.act_dim), dtype=np.float32)
-        self.rew = np.zeros(self._capacity, dtype=np.float32)
-        self.next_obs = np.zeros((self._capacity, self.obs_dim), dtype=np.float32)
-        self.done = np.zeros(self._capacity, dtype=np.float32)
+        self.fields: tuple[str, ...] = (*FIELDS, DISCOUNT) if discount else FIELDS
+        """The stored arrays: :data:`FIELDS`, and :data:`DISCOUNT` when made with ``discount``."""
+        for name, shape in self._row_shapes().items():
+            setattr(self, name, np.zeros((self._capacity, *shape), dtype=np.float32))
         self._pos = 0  # index the next transition is written to
         self._size = 0  # number of filled slots (saturates at capacity)
 
@@ -71,13 +76,16 @@ class ReplayBuffer:
         return self._size
 
     def _row_shapes(self) -> dict[str, tuple[int, ...]]:
-        return {
-            "obs": (self.obs_dim,),
-            "act": (self.act_dim,),
-            "rew": (),
-            "next_obs": (self.obs_dim,),
-            "done": (),
-        }
+        shapes: dict[str, tuple[int, ...]] = {"obs": (self.obs_dim,), "act": (self.act_dim,), "rew": (),
+                                              "next_obs": (self.obs_dim,), "done": (), DISCOUNT: ()}
+        return {name: shapes[name] for name in self.fields}
+
+    def _arrays(self, obs: Any, act: Any, rew: Any, next_obs: Any, done: Any, discount: Any) -> dict[str, Any]:
+        """The fields of one ``add_batch`` call by name; ``discount`` given exactly when the buffer keeps it."""
+        if (discount is not None) != (DISCOUNT in self.fields):
+            raise ValueError("discount must be given exactly when the buffer keeps it (made with discount=True)")
+        arrays = {"obs": obs, "act": act, "rew": rew, "next_obs": next_obs, "done": done}
+        return arrays if discount is None else {**arrays, DISCOUNT: discount}
 
     def add(
         self,
@@ -103,13 +111,15 @@ class ReplayBuffer:
         rew: np.ndarray,
         next_obs: np.ndarray,
         done: np.ndarray,
+        discount: np.ndarray | None = None,
     ) -> None:
         """Store ``n`` transitions at once (leading axis ``n``), in order, wrapping around.
 
         Equivalent to ``n`` calls of :meth:`add`; if ``n > capacity`` only the last
-        ``capacity`` transitions survive, exactly as with sequential adds.
+        ``capacity`` transitions survive, exactly as with sequential adds. ``discount``: their
+        bootstrap factors, given exactly when the buffer keeps them.
         """
-        arrays = {"obs": obs, "act": act, "rew": rew, "next_obs": next_obs, "done": done}
+        arrays = self._arrays(obs, act, rew, next_obs, done, discount)
         n = int(np.shape(obs)[0]) if np.ndim(obs) > 0 else 0
         checked: dict[str, np.ndarray] = {}
         for name, row_shape in self._row_shapes().items():
@@ -131,14 +141,14 @@ class ReplayBuffer:
     def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
         """Draw ``batch_size`` transitions uniformly (with replacement) from the filled part.
 
-        Returns fresh arrays keyed by :data:`FIELDS`: ``obs (B, obs_dim)``, ``act (B, act_dim)``,
-        ``rew (B,)``, ``next_obs (B, obs_dim)``, ``done (B,)``.
+        Returns fresh arrays keyed by :attr:`fields`: ``obs (B, obs_dim)``, ``act (B, act_dim)``,
+        ``rew (B,)``, ``next_obs (B, obs_dim)``, ``done (B,)`` (and ``discount (B,)``).
         """
         batch_size = _positive_int("batch_size", batch_size)
         if self._size == 0:
             raise ValueError("cannot sample from an empty ReplayBuffer")
         idx = rng.integers(0, self._size, size=batch_size)
-        return {name: getattr(self, name)[idx] for name in FIELDS}
+        return {name: getattr(self, name)[idx] for name in self.fields}
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """Filled part of every array plus ``pos``, ``size``, ``capacity`` as 0-d int64 arrays.
@@ -146,7 +156,7 @@ class ReplayBuffer:
         All values are numpy arrays, so ``np.savez(path, **buffer.state_dict())`` works
         without pickle.
         """
-        state = {name: getattr(self, name)[: self._size].copy() for name in FIELDS}
+        state = {name: getattr(self, name)[: self._size].copy() for name in self.fields}
         state["pos"] = np.asarray(self._pos, dtype=np.int64)
         state["size"] = np.asarray(self._size, dtype=np.int64)
         state["capacity"] = np.asarray(self._capacity, dtype=np.int64)
@@ -177,7 +187,7 @@ class ReplayBuffer:
 
     def _checked_extent(self, state: Mapping[str, np.ndarray]) -> tuple[int, int]:
         """``(size, pos)`` of a saved state, once its keys, capacity, size and position fit this buffer."""
-        for key in (*FIELDS, "pos", "size", "capacity"):
+        for key in (*self.fields, "pos", "size", "capacity"):
             if key not in state:
                 raise KeyError(f"replay state is missing {key!r}")
         capacity, size, pos = (int(np.asarray(state[k])) for k in ("capacity", "size", "pos"))
@@ -211,21 +221,24 @@ class TorchReplayBuffer(ReplayBuffer):
     The whole capacity is allocated on the device up front.
     """
 
-    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: str | torch.device = "cpu") -> None:
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int, device: str | torch.device = "cpu",
+                 discount: bool = False) -> None:
         self._capacity = _positive_int("capacity", capacity)
         self.obs_dim = _positive_int("obs_dim", obs_dim)
         self.act_dim = _positive_int("act_dim", act_dim)
+        self.fields = (*FIELDS, DISCOUNT) if discount else FIELDS
         self.device = torch.device(device)
         shapes = self._row_shapes()
-        for name in FIELDS:
+        for name in self.fields:
             setattr(self, name, torch.zeros((self._capacity, *shapes[name]), dtype=torch.float32, device=self.device))
         self._pos = 0
         self._size = 0
 
-    def add_batch(self, obs: Any, act: Any, rew: Any, next_obs: Any, done: Any) -> None:
+    def add_batch(self, obs: Any, act: Any, rew: Any, next_obs: Any, done: Any, discount: Any = None) -> None:
         """Store ``n`` transitions (tensors, or anything ``torch.as_tensor`` takes), in order, wrapping."""
-        arrays = {"obs": obs, "act": act, "rew": rew, "next_obs": next_obs, "done": done}
-        checked = {name: torch.as_tensor(arrays[name], dtype=torch.float32, device=self.device) for name in FIELDS}
+        arrays = self._arrays(obs, act, rew, next_obs, done, discount)
+        checked = {name: torch.as_tensor(arrays[name], dtype=torch.float32, device=self.device)
+                   for name in self.fields}
         n = int(checked["obs"].shape[0]) if checked["obs"].ndim > 0 else 0
         for name, row_shape in self._row_shapes().items():
             if tuple(checked[name].shape) != (n, *row_shape):
@@ -245,11 +258,11 @@ class TorchReplayBuffer(ReplayBuffer):
         if self._size == 0:
             raise ValueError("cannot sample from an empty ReplayBuffer")
         idx = torch.as_tensor(rng.integers(0, self._size, size=batch_size), device=self.device)
-        return {name: getattr(self, name)[idx] for name in FIELDS}
+        return {name: getattr(self, name)[idx] for name in self.fields}
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """As :meth:`ReplayBuffer.state_dict`: numpy arrays of the filled part (copied to the host)."""
-        state = {name: getattr(self, name)[: self._size].cpu().numpy() for name in FIELDS}
+        state = {name: getattr(self, name)[: self._size].cpu().numpy() for name in self.fields}
         state["pos"] = np.asarray(self._pos, dtype=np.int64)
         state["size"] = np.asarray(self._size, dtype=np.int64)
         state["capacity"] = np.asarray(self._capacity, dtype=np.int64)

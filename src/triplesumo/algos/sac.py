@@ -156,13 +156,14 @@ class SAC(OffPolicyAlgorithm):
     # ------------------------------------------------------------------------ learning
 
     def td_target(self, batch: Batch) -> torch.Tensor:
-        """``y = r + γ (1 - done) (min_i Q'_i(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')``, ``(B,)``."""
+        """``y = r + γ (1 - done) (min_i Q'_i(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')``, ``(B,)`` (γ^m with
+        n-step returns: :meth:`~triplesumo.algos.offpolicy.OffPolicyAlgorithm.bootstrap`)."""
         b = self.batch(batch)
         with torch.no_grad():
             next_action, next_log_prob = self.actor.sample(b["next_obs"], self.generator)
             next_q = min_q(self.critic_targets, b["next_obs"], next_action)  # TARGET critics
             soft_value = next_q - self.temperature() * next_log_prob
-            return b["rew"] + self.config.gamma * (1.0 - b["done"]) * soft_value
+            return b["rew"] + self.bootstrap(b) * soft_value
 
     def update_actor(self, batch: Batch) -> tuple[dict[str, float], torch.Tensor]:
         """One Adam step on ``mean (α log π(a|s) - min_i Q_i(s, a))`` (critics and α held fixed).

@@ -37,9 +37,10 @@ import torch
 from triplesumo.algos.base import Algorithm, DivergenceError, not_finite
 from triplesumo.algos.ddpg import DDPG
 from triplesumo.algos.noise import ActionNoise, make_noise
+from triplesumo.algos.nstep import NStepReturns
 from triplesumo.algos.offpolicy import OffPolicyAlgorithm
 from triplesumo.algos.ppo import PPO
-from triplesumo.algos.replay import FIELDS, ReplayBuffer, TorchReplayBuffer
+from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
 from triplesumo.algos.sac import SAC
 from triplesumo.algos.td3 import TD3
 from triplesumo.rules.config import check_shared_network
@@ -247,8 +248,15 @@ class OffPolicyLearner(Learner):
                  obs_dim: int, act_dim: int, device: torch.device | None = None, elimination: bool = False) -> None:
         super().__init__(spec, index, position, cfg, obs_dim, act_dim, device, elimination)
         c = self.config
-        self.replay = (ReplayBuffer(c.buffer_size, obs_dim, act_dim) if device is None
-                       else TorchReplayBuffer(c.buffer_size, obs_dim, act_dim, device))
+        self.nstep: NStepReturns | None = None
+        """The rows' pending n-step windows (``n_step`` > 1); None: one-step transitions go straight to replay."""
+        if c.n_step > 1:
+            if device is not None:
+                raise ValueError(f"{self.name}: n_step {c.n_step} needs transitions collected on the host; a "
+                                 f"device-resident collection (--device {device}) stores one-step ones only")
+            self.nstep = NStepReturns(c.n_step, c.gamma, self.n_rows, obs_dim, act_dim)
+        self.replay = (ReplayBuffer(c.buffer_size, obs_dim, act_dim, discount=self.nstep is not None)
+                       if device is None else TorchReplayBuffer(c.buffer_size, obs_dim, act_dim, device))
         self.noise: ActionNoise | None = None
         """The exploration noise process (DDPG, TD3); SAC samples its own policy."""
         if hasattr(c, "noise"):
@@ -294,7 +302,11 @@ class OffPolicyLearner(Learner):
     def _record(self, obs: Any, action: Any, reward: Any, next_obs: Any, terminated: Any, truncated: Any,
                 valid: Any, played: np.ndarray) -> None:
         """Store the rows that played this step and are real steps: done = terminated (a draw by time limit
-        bootstraps)."""
+        bootstraps); with n-step returns, the n-step transitions the step completes."""
+        if self.nstep is not None:
+            self.replay.add_batch(**self.nstep.push(obs, action, reward, next_obs, terminated, truncated, valid,
+                                                    played))
+            return
         del truncated
         keep = valid & self.xp.put(played)  # (on the device the rows kept are gathered there)
         self.replay.add_batch(obs[keep], action[keep], reward[keep], next_obs[keep], terminated[keep])
@@ -308,6 +320,8 @@ class OffPolicyLearner(Learner):
         state = super().state_dict()
         state.json["sample_rng"] = self.sample_rng.bit_generator.state
         state.arrays |= {f"noise.{k}": v for k, v in noise.items()}
+        if self.nstep is not None:
+            state.arrays |= {f"nstep.{k}": v for k, v in self.nstep.state_dict().items()}
         state.replay = self.replay.state_dict() if replay else None
         return state
 
@@ -317,8 +331,11 @@ class OffPolicyLearner(Learner):
         if self.noise is not None:
             self.noise.load_state_dict({k.removeprefix("noise."): v for k, v in state.arrays.items()
                                         if k.startswith("noise.")})
+        if self.nstep is not None:
+            self.nstep.load_state_dict({k.removeprefix("nstep."): v for k, v in state.arrays.items()
+                                        if k.startswith("nstep.")})
         if state.replay is not None:
-            keys = (*FIELDS, "pos", "size", "capacity")
+            keys = (*self.replay.fields, "pos", "size", "capacity")
             absent = [k for k in keys if k not in state.replay]
             if absent:
                 raise KeyError(f"replay arrays {[f'{self.name}.{k}' for k in absent]}")
