@@ -46,6 +46,10 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
         for rel in record["stages"][name]["outputs"]:
             assert (out / rel).exists(), rel
         assert record["stages"][name]["commands"] and record["stages"][name]["seconds"] > 0  # each stage's wall time
+        if name != "spider":  # (made alongside the Ant: its record is the Ant's)
+            [leg] = record["stages"][name]["legs"]  # one invocation made it, and finished it
+            assert leg["finished"] and leg["seconds"] == record["stages"][name]["seconds"]
+    assert "| bug |" in (out / "REPRODUCTION.md").read_text()  # the wall time per stage table
     # the machine and its speed, as bench skill records them; the Spider trained beside the Ant
     machine = record["runs"][-1]["machine"]
     assert machine["cores"] and machine["reference"]["ms_per_env_step"] > 0
@@ -486,7 +490,9 @@ def test_the_bug_stage_refuses_a_pair_that_is_no_contest(tmp_path: Path) -> None
     assert not (contest_dir / "spider-pushes").exists() and not (contest_dir / "match").exists()
     assert not (tmp_path / "rep" / "bug").exists()
     record = _record(tmp_path / "rep")
-    assert record["stages"].keys() == {"contest"}
+    assert record["stages"].keys() == {"contest", "bug"}
+    [refused] = record["stages"]["bug"]["legs"]  # the Bug stage's one leg: it began, refused, and made nothing
+    assert not refused["finished"] and "done" not in record["stages"]["bug"]
     [command] = record["stages"]["contest"]["commands"]  # the Ant's check, to the start that decided it
     assert "--learner ant " in command and f"{command} ".count("--epochs 6 ") == 1
     played = metrics.stat().st_mtime_ns
@@ -624,3 +630,37 @@ def test_a_reproduction_grows_by_more_bug_runs_keeping_those_made_and_refuses_to
     assert main([*base, "--algos", "sac", "--seeds", "0", "1"]) == 2  # drops the DDPG run
     err = capsys.readouterr().err
     assert "other options" in err and "algos: ['ddpg', 'sac'] there, ['sac'] given" in err
+
+
+def test_a_stage_leg_keeps_its_time_when_it_fails_is_killed_or_resumed(tmp_path: Path) -> None:
+    """Each invocation's work on a stage is a leg in reproduce.json: written at its start, every heartbeat while it
+    runs, and at its end, finished or not (SIGTERM ends it as an interrupt does); the stage's time sums its legs."""
+    import os
+    import signal
+    import time
+
+    from triplesumo.reproduce.reporting import _stage_times, stage_seconds
+    from triplesumo.reproduce.run import Record, stage_leg
+
+    path = tmp_path / "reproduce.json"
+    book = Record(path, {"stages": {}})
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(RuntimeError, match="a stage that fails"), stage_leg(book, "bug", "git abc", every=0.05):
+        assert json.loads(path.read_text())["stages"]["bug"]["legs"][0]["seconds"] == 0.0  # written at its start
+        time.sleep(0.3)
+        assert json.loads(path.read_text())["stages"]["bug"]["legs"][0]["seconds"] > 0.1  # the heartbeat
+        raise RuntimeError("a stage that fails")
+    with pytest.raises(KeyboardInterrupt), stage_leg(book, "bug", "git def", every=10.0):
+        time.sleep(0.1)
+        os.kill(os.getpid(), signal.SIGTERM)  # pkill, or a scheduler's stop
+        time.sleep(5)  # (not reached: the signal interrupts it)
+    assert signal.getsignal(signal.SIGTERM) is before  # the handler is the leg's only while it runs
+    with stage_leg(book, "bug", "git def", every=10.0):
+        time.sleep(0.05)
+    legs = json.loads(path.read_text())["stages"]["bug"]["legs"]
+    assert [(leg["version"], leg["finished"]) for leg in legs] == [("git abc", False), ("git def", False),
+                                                                   ("git def", True)]
+    assert legs[0]["seconds"] >= 0.3 and 0.1 <= legs[1]["seconds"] < 4 and legs[2]["seconds"] >= 0.05
+    assert stage_seconds(book.data["stages"]["bug"]) == pytest.approx(sum(leg["seconds"] for leg in legs))
+    assert "| bug | 0.0 min | 3 | not finished |" in "\n".join(_stage_times(book.data))
+    assert stage_seconds({"seconds": 12.5, "done": "x"}) == 12.5  # a record from before legs

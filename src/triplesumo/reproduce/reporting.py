@@ -111,6 +111,32 @@ def _machines(record: dict[str, Any]) -> list[str]:
     return [*lines, ""]
 
 
+def stage_seconds(stage: dict[str, Any]) -> float:
+    """A stage's wall time in the record: the sum over its legs (a record written before legs: the time of the
+    invocation that finished it, which leaves out the legs before)."""
+    return float(sum(leg["seconds"] for leg in stage["legs"])) if "legs" in stage else float(stage["seconds"])
+
+
+def _stage_times(record: dict[str, Any]) -> list[str]:
+    """Each stage's wall time, summed over the invocations that worked on it (its legs, across sessions)."""
+    stages = record.get("stages", {})
+    if not stages:
+        return []
+    lines = ["Wall time per stage: the sum of its legs (each invocation of `reproduce` that worked on it, whichever "
+             "session ran it; a leg's time is written every minute while it runs).", "",
+             "| stage | wall time | legs | state |", "| --- | ---: | ---: | --- |"]
+    for name, stage in stages.items():
+        if "with" in stage:
+            lines.append(f"| {name} | - | - | made alongside {stage['with']} |")
+            continue
+        legs = stage.get("legs")
+        count = str(len(legs)) if legs is not None else "-"
+        state = ("not finished" if "done" not in stage else "done" if legs is not None
+                 else "done (recorded before legs: the time of the invocation that finished it)")
+        lines.append(f"| {name} | {_duration(stage_seconds(stage))} | {count} | {state} |")
+    return [*lines, ""]
+
+
 def _stage_one_section(protocol: Protocol) -> list[str]:
     """Each side's screens (the checkpoint rule) and every pair played (the pair rule), from their records."""
     lines = [f"Screens: every {protocol.screen_every:,} epochs each side's policy, frozen, against still opponents on "
@@ -196,7 +222,7 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
              f"`{out.name}/`." + (" **Tiny budgets (a smoke run): the numbers mean nothing.**"
                                                     if cfg.tiny else ""), "",
              f"Ring: {ring}; every stage trained and was evaluated on it.", "",
-             *_machines(record),
+             *_machines(record), *_stage_times(record),
              "## Stage 1: the pair (each side learns to push still opponents)", "",
              *([f"Skipped: the pair was given (`--pair {' '.join(cfg.pair)}`).", ""] if cfg.pair else [
                  f"Pre-training reward: the paper's terms with still = {cfg.pretrain.still:g} (losing costs more than "
@@ -261,7 +287,9 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
     lines += ["## Commands", "", "The whole protocol: `triplesumo reproduce "
               + " ".join(shlex.quote(a) for a in _argv(cfg)) + "`. Stage by stage:", "", "```bash"]
     for name, stage in record["stages"].items():
-        lines.append(f"# {name} ({stage['seconds']:.0f} s, {stage['version']}, done {stage['done']})")
+        if "done" not in stage:  # a stage still under way: its legs so far, no command yet
+            continue
+        lines.append(f"# {name} ({stage_seconds(stage):.0f} s, {stage['version']}, done {stage['done']})")
         lines += stage["commands"]
     lines += ["```", ""]
     return "\n".join(lines)

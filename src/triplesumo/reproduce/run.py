@@ -5,7 +5,11 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
+import signal
+import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +18,7 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig, bug_runs
 from triplesumo.reproduce.protocol import Protocol
-from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status
+from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status, stage_seconds
 from triplesumo.train import legs
 from triplesumo.version import ENV_VERSION, __version__
 
@@ -49,6 +53,60 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
                          + "); re-running resumes it and needs the same options: choose another --out")
 
 
+HEARTBEAT_SECONDS = 60.0
+"""How often the running stage's leg writes its wall time so far into ``reproduce.json``: a process killed without
+warning (a session's end) loses at most this much of it."""
+
+
+class Record:
+    """``reproduce.json``, written whole and atomically on every change, from the main thread or the heartbeat."""
+
+    def __init__(self, path: Path, data: dict[str, Any]) -> None:
+        self.path, self.data = path, data
+        self.lock = threading.Lock()
+
+    def write(self) -> None:
+        with self.lock:
+            atomic_write_bytes(self.path, (json.dumps(self.data, indent=2) + "\n").encode())
+
+
+@contextmanager
+def stage_leg(record: Record, name: str, version: str, every: float = HEARTBEAT_SECONDS) -> Iterator[dict[str, Any]]:
+    """One invocation's work on stage ``name`` (a *leg*): appended to the stage's ``legs`` in the record at once,
+    its ``seconds`` rewritten every ``every`` seconds while it runs and at its end (``finished``: it completed
+    the stage's work without an exception). A stage's wall time is the sum over its legs, whichever sessions ran
+    them. SIGTERM (``pkill``, a scheduler) ends the leg as an interrupt does, so its time is written."""
+    entry = record.data["stages"].setdefault(name, {})
+    leg: dict[str, Any] = {"started": _now(), "seconds": 0.0, "version": version, "finished": False}
+    entry.setdefault("legs", []).append(leg)
+    start = time.perf_counter()
+    stop = threading.Event()
+
+    def beat() -> None:
+        while not stop.wait(every):
+            leg["seconds"] = round(time.perf_counter() - start, 3)
+            record.write()
+
+    def terminate(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    previous = (signal.signal(signal.SIGTERM, terminate)
+                if threading.current_thread() is threading.main_thread() else None)
+    heart = threading.Thread(target=beat, name=f"reproduce-{name}-clock", daemon=True)
+    record.write()
+    heart.start()
+    try:
+        yield leg
+        leg["finished"] = True
+    finally:
+        stop.set()
+        heart.join()
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+        leg["seconds"] = round(time.perf_counter() - start, 3)
+        record.write()
+
+
 def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     """Run (or finish) every stage in order, skipping complete ones; write reproduce.json and the report."""
     protocol = Protocol(cfg)
@@ -75,6 +133,7 @@ def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[
         return record
     record["runs"].append(run_now)
     run_now["machine"] = _machine(protocol)
+    book = Record(path, record)
     n = len(protocol.stages)
     made_before = {stage.name for stage in protocol.stages if stage.complete()}
     made_with: dict[str, str] = {}  # a stage made alongside an earlier one of this run (the Spider beside the Ant)
@@ -85,25 +144,25 @@ def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[
             record["stages"][stage.name] = {**record["stages"][by], "with": by, "commands": stage.commands()}
             made_with[stage.name] = by
             run_now["ran"].append(stage.name)
-            atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+            book.write()
             continue
         if stage.complete():
             print(f"[{k}/{n}] {stage.name}: complete, skipped ({stage.title})")
             run_now["skipped"].append(stage.name)
             continue
         print(f"[{k}/{n}] {stage.name}: {stage.title}")
-        start = time.perf_counter()
-        commands = stage.run()
+        with stage_leg(book, stage.name, run_now["version"]):
+            commands = stage.run()
         if not stage.complete():
             raise RuntimeError(f"stage {stage.name} ran but its outputs are not complete: {stage.outputs}")
-        record["stages"][stage.name] = {"done": _now(), "seconds": round(time.perf_counter() - start, 3),
-                                        "version": run_now["version"], "commands": commands,
-                                        "outputs": [str(p.relative_to(out)) for p in stage.outputs]}
+        entry = record["stages"][stage.name]
+        entry.update({"done": _now(), "seconds": round(stage_seconds(entry), 3), "version": run_now["version"],
+                      "commands": commands, "outputs": [str(p.relative_to(out)) for p in stage.outputs]})
         run_now["ran"].append(stage.name)
-        atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+        book.write()
     if cfg.publish:
         record["published"] = _publish(protocol, run_now["version"])
-    atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
+    book.write()
     _write_report(protocol, record)
     print(f"report: {out / REPORT_FILE}; record: {path}")
     return record
