@@ -118,12 +118,12 @@ def stage_seconds(stage: dict[str, Any]) -> float:
 
 
 def _stage_times(record: dict[str, Any]) -> list[str]:
-    """Each stage's wall time, summed over the invocations that worked on it (its legs, across sessions)."""
+    """Each stage's wall time, summed over the invocations that worked on it (its legs, whenever they ran)."""
     stages = record.get("stages", {})
     if not stages:
         return []
-    lines = ["Wall time per stage: the sum of its legs (each invocation of `reproduce` that worked on it, whichever "
-             "session ran it; a leg's time is written every minute while it runs).", "",
+    lines = ["Wall time per stage: the sum of its legs (each invocation of `reproduce` that worked on it, whenever "
+             "it ran; a leg's time is written every minute while it runs).", "",
              "| stage | wall time | legs | state |", "| --- | ---: | ---: | --- |"]
     for name, stage in stages.items():
         if "with" in stage:

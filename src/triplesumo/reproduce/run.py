@@ -55,7 +55,7 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
 
 HEARTBEAT_SECONDS = 60.0
 """How often the running stage's leg writes its wall time so far into ``reproduce.json``: a process killed without
-warning (a session's end) loses at most this much of it."""
+warning (SIGKILL, a machine going down) loses at most this much of it."""
 
 
 class Record:
@@ -74,7 +74,7 @@ class Record:
 def stage_leg(record: Record, name: str, version: str, every: float = HEARTBEAT_SECONDS) -> Iterator[dict[str, Any]]:
     """One invocation's work on stage ``name`` (a *leg*): appended to the stage's ``legs`` in the record at once,
     its ``seconds`` rewritten every ``every`` seconds while it runs and at its end (``finished``: it completed
-    the stage's work without an exception). A stage's wall time is the sum over its legs, whichever sessions ran
+    the stage's work without an exception). A stage's wall time is the sum over its legs, whenever they ran
     them. SIGTERM (``pkill``, a scheduler) ends the leg as an interrupt does, so its time is written."""
     entry = record.data["stages"].setdefault(name, {})
     leg: dict[str, Any] = {"started": _now(), "seconds": 0.0, "version": version, "finished": False}
