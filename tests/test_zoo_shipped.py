@@ -403,3 +403,53 @@ def test_an_alias_of_an_alias_or_with_weights_of_its_own_is_refused(
     (tiny / "moth.safetensors").write_bytes((tiny / "spider.safetensors").read_bytes())
     with pytest.raises(zoo.PolicyFileError, match=r"an alias \(of zoo:spider\) ships no weights"):
         zoo.load("moth")
+
+
+SCRATCH = ROOT / "docs" / "runs" / "scratch-v2"
+
+
+@pytest.mark.parametrize("pair_seed", [1])
+def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_matches(pair_seed: int) -> None:
+    """A from-scratch pair's 2,000-start test: every Bug's and baseline's MWR from its per-match rows, the IQM and
+    the rliable interval of the SAC runs from those, and the table on docs/reproduce.md and the README's figures."""
+    from rliable import library as rly
+    from rliable import metrics as rly_metrics
+    from scipy.stats import trim_mean
+
+    from triplesumo.evaluation.metrics import summarize
+
+    folder = SCRATCH / f"seed-{pair_seed}"
+    with open(folder / "evaluation" / "per_seed.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    score: dict[str, list[float]] = {}
+    for row in sorted(rows, key=lambda r: (r["algo"] or r["group"], int(r["train_seed"] or 0))):
+        with open_table(folder / "evaluation" / row["candidate"] / "metrics.csv") as fh:
+            matches = list(csv.DictReader(fh))
+        assert len(matches) == 2000 and row["eval_seed"] == "10000"
+        mwr = float(summarize([m["outcome"] for m in matches], [float(m["steps"]) for m in matches])["mean_lwr"])
+        assert mwr == pytest.approx(float(row["test_mwr"]), abs=1e-12)
+        score.setdefault(row["algo"] or row["group"], []).append(mwr)
+    assert [len(score[k]) for k in ("sac", "ddpg", "passive", "random")] == [5, 3, 1, 1]
+    sac = np.asarray(score["sac"])
+    iqm = trim_mean(sac, 0.25)
+    compare = json.loads((folder / "compare" / "compare.json").read_text())
+    group = next(g for g in compare["groups"] if g["group"] == "sac")
+    assert group["iqm"] == pytest.approx(iqm, abs=1e-12)
+    estimates, intervals = rly.get_interval_estimates({"sac": sac[:, None]}, lambda x: np.array(
+        [rly_metrics.aggregate_iqm(x)]), reps=2000, confidence_interval_size=0.95)
+    assert estimates["sac"][0] == pytest.approx(iqm)
+    assert abs(intervals["sac"][0, 0] - group["lo"]) < 0.05 and abs(intervals["sac"][1, 0] - group["hi"]) < 0.05
+
+    def signed(values: list[float]) -> str:
+        return ", ".join(f"{v:+.3f}" for v in values)
+
+    page = (ROOT / "docs" / "reproduce.md").read_text()
+    sac_line = next(x for x in page.splitlines() if x.strip().startswith("| SAC, seeds 0-4 |"))
+    assert signed(score["sac"]) in sac_line and f"IQM {iqm:+.3f} [{group['lo']:+.3f}, {group['hi']:+.3f}]" in sac_line
+    ddpg_line = next(x for x in page.splitlines() if x.strip().startswith("| DDPG (paper preset), seeds 0-2 |"))
+    assert signed(score["ddpg"]) in ddpg_line and f"mean {np.mean(score['ddpg']):+.3f}" in ddpg_line
+    for baseline in ("passive", "random"):
+        assert f"| {baseline} | {score[baseline][0]:+.3f} |" in page
+    readme = (ROOT / "README.md").read_text()
+    assert f"IQM {iqm:+.3f} [{group['lo']:+.3f}, {group['hi']:+.3f}]" in readme
+    assert f"against {score['passive'][0]:+.3f} for a passive Bug" in readme
