@@ -39,7 +39,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     argv = ["reproduce", "--tiny", "--out", str(out), "--algos", "ddpg", "ppo", "--seeds", "0", "--no-progress",
             "--ablations", "noise=gaussian", "still=-1", "--publish"]
     assert main(argv) == 0
-    stages = ["ant", "spider", "pair", "contest", "bug", "ablations", "evaluation", "compare"]
+    stages = ["ant", "spider", "pair", "contest", "engagement", "bug", "ablations", "evaluation", "compare"]
     record = _record(out)
     assert record["runs"][-1]["ran"] == stages and record["runs"][-1]["version"]
     for name in stages:
@@ -50,6 +50,16 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
             [leg] = record["stages"][name]["legs"]  # one invocation made it, and finished it
             assert leg["finished"] and leg["seconds"] == record["stages"][name]["seconds"]
     assert "| bug |" in (out / "REPRODUCTION.md").read_text()  # the wall time per stage table
+    # the pair with Bug passive, watched match by match on the contest's first starts: reported, not a gate
+    engagement = json.loads((out / "contest" / "engagement.json").read_text())
+    assert engagement["matches"] == 4 and engagement["bug"] == "passive" and engagement["seed"] == 20000
+    assert engagement["ant"] == "ant/screens/policy-1" and engagement["spider"] == "spider/screens/policy-1"
+    with open(out / "contest" / "engagement.csv", newline="") as fh:
+        watched = list(csv.DictReader(fh))
+    assert len(watched) == 4 and all(row["seed"] == str(20000 + i) for i, row in enumerate(watched))
+    out_shares = [engagement[f"{a}_out"] for a in ("ant", "bug", "spider")] + [engagement["none_out"]]
+    assert sum(out_shares) >= 1.0 - 1e-9  # every match ends with someone out (two may leave at once) or a draw
+    assert f"| {engagement['mwr']:+.3f} | {engagement['bug_out']:.1%} |" in (out / "REPRODUCTION.md").read_text()
     # the machine and its speed, as bench skill records them; the Spider trained beside the Ant
     machine = record["runs"][-1]["machine"]
     assert machine["cores"] and machine["reference"]["ms_per_env_step"] > 0
@@ -170,7 +180,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     shutil.rmtree(out / "contest")
     shutil.rmtree(out / "compare")
     assert main(argv) == 0
-    assert _record(out)["runs"][-1]["ran"] == ["contest", "compare"]
+    assert _record(out)["runs"][-1]["ran"] == ["contest", "engagement", "compare"]
     assert json.loads((out / "contest" / "contest.json").read_text()) == contest
     assert (out / "bug" / "learn=bug=ddpg,seed=0" / "policy.safetensors").stat().st_mtime_ns == policy
 
@@ -490,7 +500,7 @@ def test_the_bug_stage_refuses_a_pair_that_is_no_contest(tmp_path: Path) -> None
     assert not (contest_dir / "spider-pushes").exists() and not (contest_dir / "match").exists()
     assert not (tmp_path / "rep" / "bug").exists()
     record = _record(tmp_path / "rep")
-    assert record["stages"].keys() == {"contest", "bug"}
+    assert record["stages"].keys() == {"contest", "engagement", "bug"}
     [refused] = record["stages"]["bug"]["legs"]  # the Bug stage's one leg: it began, refused, and made nothing
     assert not refused["finished"] and "done" not in record["stages"]["bug"]
     [command] = record["stages"]["contest"]["commands"]  # the Ant's check, to the start that decided it

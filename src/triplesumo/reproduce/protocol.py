@@ -56,6 +56,10 @@ CONTEST_CHECKS = ("ant-pushes", "spider-pushes", "match")
 """Stage 2's checks, in the order they are played: the Ant against a passive Spider, the Spider against a passive
 Ant and Bug, and the match with Bug passive (from the Spider's seat)."""
 NOT_PLAYED = "not played: the contest failed on an earlier check"
+ENGAGEMENT_FILE = "engagement.json"
+"""The pair with Bug passive watched match by match (``contest/engagement.json``, rows in ``engagement.csv``)."""
+ENGAGEMENT_MATCHES = 200
+"""Starts of the engagement report: the first of the contest's held-out starts."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -234,6 +238,9 @@ class Protocol:
                       self._pair_stage),)),
             Stage("contest", "is the pair a contest? (each side pushes; the team loses without Bug, not hopelessly)",
                   (self.out / "contest" / "contest.json",), self._contest_complete, self._contest),
+            Stage("engagement", "who leaves the ring with Bug passive, match by match (reported beside the Bugs, "
+                  "not a gate)", (self.out / "contest" / ENGAGEMENT_FILE,), self._engagement_complete,
+                  self._engagement),
             Stage("bug", "Bug per algorithm x seed in the pair's match (Ant and Spider frozen)", (self.out / "bug",),
                   lambda: all(finished(t) for t in self.bug_trials()), self._bug_stage),
             *([Stage("ablations", "paper-preset DDPG Bug with one change each, per seed", (self.out / "ablations",),
@@ -486,6 +493,38 @@ class Protocol:
         print(format_contest(facts))
         atomic_write_bytes(self.out / "contest" / "contest.json", (json.dumps(facts, indent=2) + "\n").encode())
         return [command for check in counts for command in commands[check]]
+
+    def engagement_matches(self) -> int:
+        return min(4 if self.cfg.tiny else ENGAGEMENT_MATCHES, self.epochs["contest"])
+
+    def _engagement_complete(self) -> bool:
+        path = self.out / "contest" / ENGAGEMENT_FILE
+        return path.exists() and json.loads(path.read_text()).get("matches") == self.engagement_matches()
+
+    def _engagement(self) -> list[str]:
+        """The pair with Bug passive on the contest's first starts, watched match by match
+        (:mod:`triplesumo.evaluation.exits`): who leaves first, who touched them, and whether the Spider meets the
+        Bug at all. A Spider that hunts only the Ant passes the contest yet leaves a Bug nothing to learn from
+        (docs/reproduce.md); this is reported beside the pair's Bugs and decides nothing."""
+        from triplesumo.agents.zoo import make_policy
+        from triplesumo.evaluation.exits import exit_rows, summarize_exits, write_rows
+
+        base = self._base(name="engagement")
+        policies = {"ant": make_policy(self.ant_policy, expect_obs_mode=base.obs_mode, frozen=True),
+                    "spider": make_policy(self.spider_policy, expect_obs_mode=base.obs_mode, frozen=True),
+                    "bug": None}
+        n, seed = self.engagement_matches(), self.cfg.contest_seed
+        rows = exit_rows(policies, n, seed, base.match_config())
+        folder = self.out / "contest"
+        folder.mkdir(parents=True, exist_ok=True)
+        write_rows(folder / "engagement.csv", rows)
+        facts = {"ant": self._in_out(self.ant_policy), "spider": self._in_out(self.spider_policy), "bug": "passive",
+                 "seed": seed, **summarize_exits(rows)}
+        atomic_write_bytes(folder / ENGAGEMENT_FILE, (json.dumps(facts, indent=2) + "\n").encode())
+        print(f"  with Bug passive on {n} starts: Bug out {facts['bug_out']:.1%}, Ant out {facts['ant_out']:.1%}, "
+              f"Spider out {facts['spider_out']:.1%}; the Bug touches the Spider in {facts['bug_touched_spider']:.1%}")
+        return [f"python benchmarks/skill_diagnosis.py --pair ant={self.ant_policy} spider={self.spider_policy} "
+                f"--policy passive=passive --epochs {n} --seed {seed} --out {folder / 'engagement'}"]
 
     def _in_out(self, policy: str) -> str:
         """A policy path relative to the folder when it lies in it (records that stay true when it moves)."""

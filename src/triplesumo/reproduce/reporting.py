@@ -15,7 +15,7 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.compare import trial_group
 from triplesumo.evaluation.metrics_csv import table_exists
 from triplesumo.reproduce.config import PUSH_MIN, REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
-from triplesumo.reproduce.protocol import NOT_PLAYED, Protocol, _read_csv, contest_can_pass
+from triplesumo.reproduce.protocol import ENGAGEMENT_FILE, NOT_PLAYED, Protocol, _read_csv, contest_can_pass
 from triplesumo.train.logger import policy_seconds
 from triplesumo.train.sweep import Trial, finished, run_facts
 
@@ -196,6 +196,22 @@ def _contest_section(c: dict[str, Any], seed: int) -> list[str]:
             "| check | value | bound | |", "| --- | ---: | ---: | --- |", *rows, "", f"Verdict: {verdict}.", ""]
 
 
+def _engagement_section(e: dict[str, Any]) -> list[str]:
+    """Who leaves the ring with Bug passive (``contest/engagement.json``): reported, not a gate."""
+    def pct(key: str) -> str:
+        return f"{e[key]:.1%}"
+
+    return ["With Bug passive, watched match by match on the contest's first "
+            f"{e['matches']} starts (seed {e['seed']}; reported beside the Bugs, not a gate): who left the ring first, "
+            "and whether the Spider meets the Bug at all (a Spider that hunts only the Ant leaves a Bug nothing to "
+            "learn from).", "",
+            "| team MWR | Bug out | Ant out | Spider out | nobody out | Bug touches Spider | "
+            "Bug out, Spider touching |",
+            "| ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+            f"| {e['mwr']:+.3f} | {pct('bug_out')} | {pct('ant_out')} | {pct('spider_out')} | {pct('none_out')} | "
+            f"{pct('bug_touched_spider')} | {pct('bug_out_touched_by_spider')} |", ""]
+
+
 def _trial_group(trial: Trial) -> str:
     """The compare group of a trial's policy (``ddpg``, ``ddpg,ddpg.noise=gaussian``)."""
     return trial_group({"group": "trained", "algo": "", "policy": str(Path(trial.config.out) / trial.name / "policy")})
@@ -234,6 +250,9 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
     lines += ["## Stage 2: is it a contest?", ""]
     if contest_path.exists():
         lines += _contest_section(json.loads(contest_path.read_text()), cfg.contest_seed)
+    engagement_path = out / "contest" / ENGAGEMENT_FILE
+    if engagement_path.exists():
+        lines += _engagement_section(json.loads(engagement_path.read_text()))
     budget = "" if cfg.tiny else f" (budget {cfg.bug_env_steps:,} env steps per run)"
     schedule = [] if cfg.tiny else [
         "DDPG: the paper preset (one gradient step per 30 transitions); TD3 and SAC: one gradient step per "
