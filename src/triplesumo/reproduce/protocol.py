@@ -510,8 +510,8 @@ class Protocol:
         from triplesumo.evaluation.exits import exit_rows, summarize_exits, write_rows
 
         base = self._base(name="engagement")
-        policies = {"ant": make_policy(self.ant_policy, expect_obs_mode=base.obs_mode, frozen=True),
-                    "spider": make_policy(self.spider_policy, expect_obs_mode=base.obs_mode, frozen=True),
+        policies = {"ant": make_policy(self.ant_policy, expect_obs_mode=base.obs_mode),  # (the torch actors, as the
+                    "spider": make_policy(self.spider_policy, expect_obs_mode=base.obs_mode),  # contest plays them)
                     "bug": None}
         n, seed = self.engagement_matches(), self.cfg.contest_seed
         rows = exit_rows(policies, n, seed, base.match_config())
