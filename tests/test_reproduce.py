@@ -594,6 +594,39 @@ def test_stage_one_trains_each_side_to_its_first_passing_screen_then_the_pair_ru
     assert len(trained) == 5 and len(played) == 2
 
 
+def test_a_pair_rule_that_needs_a_stronger_side_past_its_budget_stops_stage_one_saying_why(tmp_path: Path) -> None:
+    """Pair seed 2's case: both sides pass, but with Bug passive the team wins (above the band) with every Spider
+    the budget gives; stage 1 stops naming the last pair, the band and the spent budget, and pair.json keeps it."""
+    from triplesumo.reproduce import PairError
+    from triplesumo.reproduce.pretrain import PAIR_FILE, play_pair_rule
+    from triplesumo.reproduce.reporting import _stage_one_section
+
+    trained: list[tuple[str, int]] = []
+    sides = {"ant": _scripted_side(tmp_path, "ant", {1000: 72}, trained),
+             "spider": _scripted_side(tmp_path, "spider", {1000: 52, 2000: 70}, trained, budget=2000)}
+
+    def play(ant: dict[str, Any], spider: dict[str, Any]) -> dict[str, int]:
+        return {"n": 100, "n_win": 38, "n_loss": 57, "n_draw": 5}  # team MWR +0.19
+
+    path = tmp_path / "pair" / PAIR_FILE
+    with pytest.raises(PairError, match=r"the pair rule found no pair: with Ant 1,000 / Spider 2,000 and Bug passive "
+                                        r"the team's MWR is \+0\.190, above the band \[-0\.50, -0\.10\], so the Spider "
+                                        r"must get stronger, but stage 1: the Spider .* after epoch 2,000: its budget "
+                                        r"of 2,000 epochs is spent"):
+        play_pair_rule(sides, path, play)
+    record = json.loads(path.read_text())
+    assert [(p["spider_epoch"], p["move"]) for p in record["pairs"]] == [(1000, "spider"), (2000, "spider")]
+    assert record["failed"].startswith("the pair rule found no pair") and "pick" not in record
+    assert trained == [("ant", 1000), ("spider", 1000), ("spider", 2000)]  # nothing past the budget
+
+    from types import SimpleNamespace
+
+    protocol = SimpleNamespace(screen_every=1000, screen_epochs=100, cfg=SimpleNamespace(screen_seed=30000),
+                               side=sides.__getitem__, pair_record=lambda: json.loads(path.read_text()))
+    text = "\n".join(_stage_one_section(protocol))  # (what the report reads of the protocol)
+    assert "**Stage 1 stopped: the pair rule found no pair" in text and "No contest was played" in text
+
+
 def test_a_side_that_never_passes_within_its_budget_stops_stage_one_naming_its_screens(tmp_path: Path) -> None:
     from triplesumo.reproduce import PairError
 

@@ -121,9 +121,11 @@ class Side:
             epoch = done + self.every
             if epoch > self.budget:
                 rates = ", ".join(f"{s['n_win']}/{s['n']} at {s['epoch']:,}" for s in record["screens"])
+                left = (f"at every checkpoint after epoch {after:,} up to its budget of {self.budget:,} epochs"
+                        if after < self.budget else f"after epoch {after:,}: its budget of {self.budget:,} epochs "
+                                                    "is spent")
                 raise PairError(f"stage 1: the {self.role.capitalize()} pushed still opponents out in fewer than "
-                                f"{self.push_min:.0%} of its screen's starts at every checkpoint after epoch "
-                                f"{after:,} up to its budget of {self.budget:,} epochs ({rates}; {self.path}). Raise "
+                                f"{self.push_min:.0%} of its screen's starts {left} ({rates}; {self.path}). Raise "
                                 f"the budget (--{self.role}-epochs) and re-run: the run resumes")
             start = time.perf_counter()
             env_steps = self._train(epoch)
@@ -176,4 +178,13 @@ def play_pair_rule(sides: dict[str, Side], path: Path,
             write_record(path, record)
             return record
         role = entry["move"]
-        current[role] = sides[role].until_pass(current[role]["epoch"])
+        try:
+            current[role] = sides[role].until_pass(current[role]["epoch"])
+        except PairError as exc:  # the rule wants a stronger side that its budget cannot give: say so, and keep it
+            lo, hi = band
+            where = "above" if entry["team_mwr"] > hi else "below"
+            record["failed"] = (f"the pair rule found no pair: with Ant {key[0]:,} / Spider {key[1]:,} and Bug passive "
+                                f"the team's MWR is {entry['team_mwr']:+.3f}, {where} the band [{lo:+.2f}, {hi:+.2f}], "
+                                f"so the {role.capitalize()} must get stronger, but {exc}")
+            write_record(path, record)
+            raise PairError(record["failed"]) from None

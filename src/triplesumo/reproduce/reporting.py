@@ -161,6 +161,8 @@ def _stage_one_section(protocol: Protocol) -> list[str]:
             nxt = "**the pair**" if p["move"] == "pair" else f"a stronger {p['move'].capitalize()}"
             lines.append(f"| {p['ant_epoch']:,} | {p['spider_epoch']:,} | {c['n_win']} / {c['n_loss']} / "
                          f"{c['n_draw']} | {p['team_mwr']:+.3f} | {nxt} |")
+        if pair.get("failed"):
+            lines += ["", f"**Stage 1 stopped: {pair['failed']}.** No contest was played and no Bug trained."]
     return [*lines, ""]
 
 
