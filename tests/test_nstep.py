@@ -10,15 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from safetensors.torch import load_file
 
 from test_ddpg import ACT_DIM, OBS_DIM, _batch
+from test_sac_options import resumed_equals_uninterrupted
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.algos.nstep import NStepReturns
 from triplesumo.algos.replay import ReplayBuffer
 from triplesumo.algos.sac import SACConfig
 from triplesumo.train.config import TrainConfig
-from triplesumo.train.loop import train
 
 torch.set_num_threads(1)
 G = 0.9
@@ -176,26 +175,13 @@ def test_the_td_target_bootstraps_with_the_batchs_discount() -> None:
     torch.testing.assert_close(y[~live], rew[~live])  # no bootstrap after a win or a loss
 
 
-E = 2
 TINY = SACConfig(hidden=(16, 16), buffer_size=2000, learning_starts=40, batch_size=16, learn_every=2, n_step=3)
 
 
-def _tiny(out: Path, name: str, epochs: int) -> TrainConfig:
-    return TrainConfig(name=name, out=str(out), learn=("bug=sac",), policies=("ant=zero", "spider=random"),
-                       epochs=epochs, steps_per_epoch=30, n_envs=2, checkpoint_every=E, seed=3, sac=TINY,
-                       progress=False, tensorboard=False)
-
-
 def test_an_n_step_training_run_resumed_equals_the_uninterrupted_one(tmp_path: Path) -> None:
-    whole = train(_tiny(tmp_path, "whole", 2 * E))
-    killed = train(_tiny(tmp_path, "killed", E))
-    resumed = train(TrainConfig(), resume_dir=killed.run_dir, overrides={"epochs": 2 * E})
-    assert (resumed.epochs, resumed.env_steps, resumed.updates) == (whole.epochs, whole.env_steps, whole.updates)
-    assert whole.updates > 0
-    a, b = load_file(str(whole.run_dir / "policy.safetensors")), load_file(str(killed.run_dir / "policy.safetensors"))
-    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
-    assert json.loads((killed.run_dir / "config.json").read_text())["sac"]["n_step"] == 3
-    checkpoint = sorted((killed.run_dir / "checkpoints").glob("epoch-*"))[0]
+    run_dir = resumed_equals_uninterrupted(tmp_path, TINY)
+    assert json.loads((run_dir / "config.json").read_text())["sac"]["n_step"] == 3
+    checkpoint = sorted((run_dir / "checkpoints").glob("epoch-*"))[0]
     with np.load(checkpoint / "replay.npz") as replay, np.load(checkpoint / "arrays.npz") as arrays:
         spans = np.round(np.log(replay["bug.discount"].astype(np.float64)) / np.log(0.99)).astype(int)
         assert np.allclose(replay["bug.discount"], 0.99 ** spans)  # γ^m, m steps spanned

@@ -111,21 +111,28 @@ TINY = SACConfig(hidden=(16, 16), buffer_size=2000, learning_starts=40, batch_si
                  critic_norm="layer")
 
 
-def _tiny(out: Path, name: str, epochs: int) -> TrainConfig:
-    return TrainConfig(name=name, out=str(out), learn=("bug=sac",), policies=("ant=zero", "spider=random"),
-                       epochs=epochs, steps_per_epoch=30, n_envs=2, checkpoint_every=E, seed=3, sac=TINY,
-                       progress=False, tensorboard=False)
+def resumed_equals_uninterrupted(out: Path, sac: SACConfig) -> Path:
+    """A tiny run of a SAC Bug with ``sac`` trained whole for 2E epochs, and for E epochs then resumed to 2E: the
+    same epochs, env steps and updates (some), and the same policy bit for bit. Returns the interrupted run's
+    folder."""
+    def tiny(name: str, epochs: int) -> TrainConfig:
+        return TrainConfig(name=name, out=str(out), learn=("bug=sac",), policies=("ant=zero", "spider=random"),
+                           epochs=epochs, steps_per_epoch=30, n_envs=2, checkpoint_every=E, seed=3, sac=sac,
+                           progress=False, tensorboard=False)
 
-
-def test_a_layer_norm_training_run_resumed_equals_the_uninterrupted_one(tmp_path: Path) -> None:
-    whole = train(_tiny(tmp_path, "whole", 2 * E))
-    killed = train(_tiny(tmp_path, "killed", E))
+    whole = train(tiny("whole", 2 * E))
+    killed = train(tiny("killed", E))
     resumed = train(TrainConfig(), resume_dir=killed.run_dir, overrides={"epochs": 2 * E})
     assert (resumed.epochs, resumed.env_steps, resumed.updates) == (whole.epochs, whole.env_steps, whole.updates)
     assert whole.updates > 0
     a, b = load_file(str(whole.run_dir / "policy.safetensors")), load_file(str(killed.run_dir / "policy.safetensors"))
     assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
-    saved = json.loads((killed.run_dir / "config.json").read_text())
+    return killed.run_dir
+
+
+def test_a_layer_norm_training_run_resumed_equals_the_uninterrupted_one(tmp_path: Path) -> None:
+    run_dir = resumed_equals_uninterrupted(tmp_path, TINY)
+    saved = json.loads((run_dir / "config.json").read_text())
     assert saved["sac"]["critic_norm"] == "layer"
 
 

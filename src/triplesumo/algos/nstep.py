@@ -44,7 +44,7 @@ class NStepReturns:
     def __init__(self, n: int, gamma: float, rows: int, obs_dim: int, act_dim: int) -> None:
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
             raise ValueError(f"n-step returns need n >= 1, got {n!r}")
-        self.n, self.gamma, self.rows = n, float(gamma), rows
+        self.n, self.gamma = n, float(gamma)
         self.obs = np.zeros((n, rows, obs_dim), dtype=np.float32)
         """``(n, rows, obs_dim)`` s_t of each pending transition, oldest first."""
         self.act = np.zeros((n, rows, act_dim), dtype=np.float32)
@@ -68,14 +68,15 @@ class NStepReturns:
         played = np.asarray(played, dtype=bool)
         valid = np.asarray(valid, dtype=bool)
         terminated = np.asarray(terminated, dtype=bool)
+        rew = np.asarray(rew)
         kept = played & valid
         broken = played & ~valid  # the pending ones bootstrap from s_t, the failed step's observation
         rows = np.flatnonzero(kept)
         c = self.count[rows]
         pending = np.arange(self.n)[:, None] < c[None, :]  # (n, kept rows)
         age = c[None, :] - np.arange(self.n)[:, None]  # steps since each pending transition began
-        self.ret[:, rows] += np.where(pending, self.powers[np.clip(age, 0, self.n)], 0.0) * np.asarray(rew)[rows]
-        self.obs[c, rows], self.act[c, rows], self.ret[c, rows] = obs[rows], act[rows], np.asarray(rew)[rows]
+        self.ret[:, rows] += np.where(pending, self.powers[np.clip(age, 0, self.n)], 0.0) * rew[rows]
+        self.obs[c, rows], self.act[c, rows], self.ret[c, rows] = obs[rows], act[rows], rew[rows]
         self.count[rows] += 1
         ended = kept & (terminated | np.asarray(truncated, dtype=bool))
         full = kept & ~ended & (self.count == self.n)
