@@ -611,8 +611,9 @@ def test_a_pair_rule_that_needs_a_stronger_side_past_its_budget_stops_stage_one_
     path = tmp_path / "pair" / PAIR_FILE
     with pytest.raises(PairError, match=r"the pair rule found no pair: with Ant 1,000 / Spider 2,000 and Bug passive "
                                         r"the team's MWR is \+0\.190, above the band \[-0\.50, -0\.10\], so the Spider "
-                                        r"must get stronger, but stage 1: the Spider .* after epoch 2,000: its budget "
-                                        r"of 2,000 epochs is spent"):
+                                        r"must get stronger, but stage 1: the Spider has no checkpoint after epoch "
+                                        r"2,000: its budget of 2,000 epochs is spent \(52/100 at 1,000, 70/100 at "
+                                        r"2,000; "):
         play_pair_rule(sides, path, play)
     record = json.loads(path.read_text())
     assert [(p["spider_epoch"], p["move"]) for p in record["pairs"]] == [(1000, "spider"), (2000, "spider")]

@@ -121,11 +121,11 @@ class Side:
             epoch = done + self.every
             if epoch > self.budget:
                 rates = ", ".join(f"{s['n_win']}/{s['n']} at {s['epoch']:,}" for s in record["screens"])
-                left = (f"at every checkpoint after epoch {after:,} up to its budget of {self.budget:,} epochs"
-                        if after < self.budget else f"after epoch {after:,}: its budget of {self.budget:,} epochs "
-                                                    "is spent")
-                raise PairError(f"stage 1: the {self.role.capitalize()} pushed still opponents out in fewer than "
-                                f"{self.push_min:.0%} of its screen's starts {left} ({rates}; {self.path}). Raise "
+                what = (f"pushed still opponents out in fewer than {self.push_min:.0%} of its screen's starts at "
+                        f"every checkpoint after epoch {after:,} up to its budget of {self.budget:,} epochs"
+                        if after < self.budget else
+                        f"has no checkpoint after epoch {after:,}: its budget of {self.budget:,} epochs is spent")
+                raise PairError(f"stage 1: the {self.role.capitalize()} {what} ({rates}; {self.path}). Raise "
                                 f"the budget (--{self.role}-epochs) and re-run: the run resumes")
             start = time.perf_counter()
             env_steps = self._train(epoch)

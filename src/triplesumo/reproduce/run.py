@@ -74,8 +74,8 @@ class Record:
 def stage_leg(record: Record, name: str, version: str, every: float = HEARTBEAT_SECONDS) -> Iterator[dict[str, Any]]:
     """One invocation's work on stage ``name`` (a *leg*): appended to the stage's ``legs`` in the record at once,
     its ``seconds`` rewritten every ``every`` seconds while it runs and at its end (``finished``: it completed
-    the stage's work without an exception). A stage's wall time is the sum over its legs, whenever they ran
-    them. SIGTERM (``pkill``, a scheduler) ends the leg as an interrupt does, so its time is written."""
+    the stage's work without an exception). A stage's wall time is the sum over its legs, whenever they ran.
+    SIGTERM (``pkill``, a scheduler) ends the leg as an interrupt does, so its time is written."""
     entry = record.data["stages"].setdefault(name, {})
     leg: dict[str, Any] = {"started": _now(), "seconds": 0.0, "version": version, "finished": False}
     entry.setdefault("legs", []).append(leg)
