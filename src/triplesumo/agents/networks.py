@@ -38,13 +38,26 @@ def _check_sizes(obs_dim: int, act_dim: int, hidden: tuple[int, ...]) -> None:
         raise ValueError(f"hidden must be a non-empty tuple of ints >= 1, got {hidden!r}")
 
 
+class FloatHead(nn.Linear):
+    """An output layer that stays in float32 under ``torch.autocast``: the hidden layers' matrix products may run
+    in bfloat16 (an off-policy learner's ``update_dtype``), but a Q-value, a mean or a log σ read from a
+    bfloat16 product would keep 8 bits of mantissa (a Q of 300 in steps of 2). Outside autocast it is exactly
+    ``nn.Linear`` (same tensors, same state-dict keys, same results)."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if torch.is_autocast_enabled(x.device.type):
+            with torch.autocast(x.device.type, enabled=False):
+                return F.linear(x.float(), self.weight, self.bias)
+        return F.linear(x, self.weight, self.bias)
+
+
 def _mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int) -> nn.Sequential:
-    """Linear/LeakyReLU stack ending in a linear layer with a small uniform init."""
+    """Linear/LeakyReLU stack ending in a linear layer (:class:`FloatHead`) with a small uniform init."""
     layers: list[nn.Module] = []
     for width in hidden:
         layers += [nn.Linear(in_dim, width), nn.LeakyReLU()]
         in_dim = width
-    last = nn.Linear(in_dim, out_dim)
+    last = FloatHead(in_dim, out_dim)
     nn.init.uniform_(last.weight, -FINAL_INIT, FINAL_INIT)
     nn.init.uniform_(last.bias, -FINAL_INIT, FINAL_INIT)
     layers.append(last)
@@ -160,7 +173,7 @@ class GaussianActor(Actor):
         self.log_std_head: nn.Linear | None = None
         self.log_std: nn.Parameter | None = None
         if state_dependent_std:
-            self.log_std_head = nn.Linear(self.hidden[-1], act_dim)
+            self.log_std_head = FloatHead(self.hidden[-1], act_dim)
         else:
             self.log_std = nn.Parameter(torch.full((act_dim,), float(log_std_init)))
 

@@ -15,11 +15,13 @@ It owns what the three have in common and nothing else:
   finite checks and policy export.
 
 Each algorithm states what differs in :meth:`OffPolicyAlgorithm.train_step`: its TD target,
-its actor loss and when the targets move.
+its actor loss and when the targets move. :meth:`OffPolicyAlgorithm.update` runs it in float32, or under
+``torch.autocast`` with the config's ``update_dtype`` bfloat16.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -94,7 +96,18 @@ class OffPolicyAlgorithm(Algorithm):
         Raises:
             DivergenceError: A loss or statistic is not finite (names the update index).
         """
-        return self.finish_update(self.train_step(self.batch(batch)))
+        prepared = self.batch(batch)
+        with self.update_precision():
+            stats = self.train_step(prepared)
+        return self.finish_update(stats)
+
+    def update_precision(self) -> contextlib.AbstractContextManager[Any]:
+        """The context an update runs in: nothing for float32; for bfloat16, ``torch.autocast`` without its cache
+        of cast weights (a cached cast would hand a later step of the same update the weights from before an
+        earlier step: SAC's actor step reads the critics its critic step has just moved)."""
+        if self.config.update_dtype == "float32":
+            return contextlib.nullcontext()
+        return torch.autocast(self.device.type, dtype=getattr(torch, self.config.update_dtype), cache_enabled=False)
 
     def train_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
         """The algorithm's update on a prepared batch (``self.num_updates`` is its index)."""

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from triplesumo.agents.networks import FINAL_INIT, Critic, GaussianActor
+from triplesumo.agents.networks import FINAL_INIT, Critic, FloatHead, GaussianActor
 from triplesumo.algos.base import adam, descend, frozen
 from triplesumo.algos.config import OffPolicyConfig, flag, learning_rate, real, require
 from triplesumo.algos.noise import ActionNoise
@@ -94,7 +94,7 @@ class LayerNormCritic(Critic):
         for width in self.hidden:
             layers += [nn.Linear(width_in, width), nn.LayerNorm(width), nn.LeakyReLU()]
             width_in = width
-        last = nn.Linear(width_in, 1)
+        last = FloatHead(width_in, 1)
         nn.init.uniform_(last.weight, -FINAL_INIT, FINAL_INIT)
         nn.init.uniform_(last.bias, -FINAL_INIT, FINAL_INIT)
         self.net = nn.Sequential(*layers, last)
