@@ -80,7 +80,8 @@ def test_quick_json_rates_ratios_split_and_projection_follow_from_each_other(qui
     assert setup["sb3"] == "measured"
 
 
-ALGO_ROWS = ("train_td3", "train_sac", "train_ppo", "train_3_learners", "sb3_td3", "sb3_sac", "sb3_ppo")
+ALGO_ROWS = ("train_td3", "train_sac", "train_ppo", "train_3_learners", "sb3_td3", "sb3_sac", "sb3_ppo",
+             "train_td3_bf16", "train_sac_bf16")
 
 
 @pytest.mark.slow  # uses the module's quick fixture, 63 s to build
@@ -93,6 +94,13 @@ def test_quick_measures_each_algorithm_three_learners_and_sb3s_same_algorithm(qu
     for algo in ("td3", "sac", "ppo"):
         assert ratios[f"{algo}_vs_sb3"] == pytest.approx(rates[f"train_{algo}"] / rates[f"sb3_{algo}"])
         assert f"train {algo.upper()} / SB3 {algo.upper()}:" in printed
+    for algo in ("td3", "sac"):  # bfloat16 updates, against SB3's (float32) same algorithm and the env alone
+        assert ratios[f"{algo}_bf16_vs_sb3"] == pytest.approx(rates[f"train_{algo}_bf16"] / rates[f"sb3_{algo}"])
+        assert ratios[f"{algo}_bf16_vs_env"] == pytest.approx(rates[f"train_{algo}_bf16"] / rates["env_only"])
+        assert f"train {algo.upper()} (bfloat16 updates) / SB3 {algo.upper()}: " in printed
+        verdict = "met" if ratios[f"{algo}_bf16_vs_env"] >= 0.8 else "NOT met"
+        assert f"train {algo.upper()} (bfloat16 updates) / env alone: {ratios[f'{algo}_bf16_vs_env']:.2f} " \
+               f"(target >= 0.8: {verdict})" in printed
     assert result["setup"]["algo_schedule"]["three_learners"] == ["ant=sac", "bug=td3", "spider=ppo"]
     line = next(line for line in printed.splitlines() if line.startswith("training 3 learners"))
     assert float(line.split()[-1]) == pytest.approx(updates["train_3_learners"], abs=0.05)
@@ -126,9 +134,14 @@ def test_quick_cpu_rates_and_the_update_profile_follow_from_each_other(quick: tu
     assert set(cpu) == set(result["rates"]) and all(math.isfinite(r) and r > 0 for r in cpu.values())
     for algo, ours in (("ddpg", "train_paper"), ("td3", "train_td3"), ("sac", "train_sac"), ("ppo", "train_ppo")):
         assert result["cpu_ratios"][f"{algo}_vs_sb3"] == pytest.approx(cpu[ours] / cpu[f"sb3_{algo}"])
+    for algo in ("td3", "sac"):
+        assert result["cpu_ratios"][f"{algo}_bf16_vs_sb3"] == pytest.approx(cpu[f"train_{algo}_bf16"]
+                                                                            / cpu[f"sb3_{algo}"])
     assert "per CPU-second of the process" in printed
     profile = result["update_profile_ms"]
-    assert set(profile) == {"ddpg", "td3", "sac", "ppo"}
+    assert set(profile) == {"ddpg", "td3", "sac", "ppo", "td3_bf16", "sac_bf16"}
+    for algo in ("td3_bf16", "sac_bf16"):  # ours only: SB3 has no bfloat16 updates
+        assert set(profile.pop(algo)) == {"ours"}
     for algo, row in profile.items():
         assert set(row) == {"ours", "sb3"}, algo
         for side in row.values():
@@ -167,7 +180,7 @@ def test_profile_cuts_an_env_step_into_parts_that_add_up_for_every_learner(quick
     rc, printed, result = quick_profile
     assert rc == 0
     learners = result["learners"]
-    assert set(learners) == {"env", "ddpg", "td3", "sac", "ppo"}
+    assert set(learners) == {"env", "ddpg", "td3", "sac", "ppo", "td3_bf16", "sac_bf16"}
     for name, modes in learners.items():
         assert set(modes) == ({"overlap"} if name == "env" else {"overlap", "inline"}), name
         for mode, r in modes.items():
@@ -192,7 +205,7 @@ def test_profile_cuts_an_env_step_into_parts_that_add_up_for_every_learner(quick
             line = next(line for line in printed.splitlines() if line.startswith(f"{name} {mode} "))
             assert float(line.split()[2]) == pytest.approx(parts["env"], abs=0.5)
     # the schedules: TD3 and SAC one gradient step per n_envs transitions (2 here), PPO 10 x 32 per 64-step rollout
-    for name in ("td3", "sac"):
+    for name in ("td3", "sac", "td3_bf16", "sac_bf16"):
         assert learners[name]["overlap"]["gradient_steps_per_env_step"] == 0.5
     assert learners["ppo"]["inline"]["gradient_steps_per_env_step"] == 10 * 32 / 64
     assert result["setup"]["n_envs"] == QUICK_ENVS

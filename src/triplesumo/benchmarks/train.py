@@ -26,6 +26,9 @@ other agents following ``policies``):
     sizes, on one shared *algorithm schedule*: one gradient step per ``n_envs`` collected
     transitions for the off-policy ones (``learn_every = n_envs``), and for PPO rollouts of
     2,048 transitions (``n_steps = 2048 / n_envs``), 10 epochs of 32 minibatches.
+``train_td3_bf16``, ``train_sac_bf16``
+    TD3 and SAC on that schedule with their updates' matrix products in bfloat16
+    (``update_dtype="bfloat16"``); their ratios against SB3 are against its float32 TD3 and SAC.
 ``train_3_learners``
     Ant (SAC), Bug (TD3) and Spider (PPO) learning at once on that schedule.
 ``sb3_td3``, ``sb3_sac``, ``sb3_ppo``
@@ -88,6 +91,12 @@ from triplesumo.train.loop import Trainer
 TARGET_VS_ENV = 0.7
 TARGET_VS_SB3 = 1.6
 PAPER_EPOCHS = 20_000
+TARGET_ALGO_VS_ENV = 0.8
+"""The off-policy learners on the algorithm schedule against the env alone (issue 53's target for SAC)."""
+BF16_ROWS = ("td3_bf16", "sac_bf16")
+"""The algorithm rows with bfloat16 updates (keys of :func:`~triplesumo.benchmarks.learner_configs`)."""
+ALGO_ROWS = ("td3", "sac", "ppo", *BF16_ROWS)
+"""Every algorithm row, in the table's order."""
 
 
 class _TrainerVariant:
@@ -255,7 +264,8 @@ def update_profile(variants: dict[str, Any], seed: int) -> dict[str, dict[str, d
     step). Ours: the trainer's learner (replay sample, update, finite checks); SB3: ``model.train``
     on its own replay or rollout; CPU time, so the machine's load barely moves it."""
     out: dict[str, dict[str, dict[str, float]]] = {}
-    for algo, ours_name in (("ddpg", "train_paper"), ("td3", "train_td3"), ("sac", "train_sac"), ("ppo", "train_ppo")):
+    for algo, ours_name in (("ddpg", "train_paper"), ("td3", "train_td3"), ("sac", "train_sac"), ("ppo", "train_ppo"),
+                            ("td3_bf16", "train_td3_bf16"), ("sac_bf16", "train_sac_bf16")):
         if ours_name not in variants:
             continue
         learner = variants[ours_name].trainer.learners[0]
@@ -267,7 +277,7 @@ def update_profile(variants: dict[str, Any], seed: int) -> dict[str, dict[str, d
                 row["sb3"] = _phases(_timed(model.train, model.n_epochs * (PPO_ROLLOUT // model.batch_size)))
         else:
             row["ours"] = _phases(_timed(functools.partial(learner.run_updates, PROFILE_STEPS), PROFILE_STEPS))
-            if f"sb3_{algo}" in variants:
+            if f"sb3_{algo}" in variants:  # (not for the bfloat16 rows: SB3's are in their float32 rows)
                 model = variants[f"sb3_{algo}"].model
                 sb3_train = functools.partial(model.train, gradient_steps=PROFILE_STEPS, batch_size=model.batch_size)
                 row["sb3"] = _phases(_timed(sb3_train, PROFILE_STEPS))
@@ -316,6 +326,10 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
             variants[f"train_{algo}"] = _TrainerVariant(TrainConfig(**{**algo_base, "learn": (f"bug={algo}",)}),
                                                         root / algo, 0 if algo == "ppo" else learning_starts)
             budget[f"train_{algo}"] = algo_steps
+        for name in BF16_ROWS:
+            variants[f"train_{name}"] = _TrainerVariant(TrainConfig(**{**base.__dict__, **configs[name]}),
+                                                        root / name, learning_starts)
+            budget[f"train_{name}"] = algo_steps
         others = tuple(p for p in policies if p.split("=")[0] not in ("ant", "bug", "spider"))
         variants["train_3_learners"] = _TrainerVariant(
             TrainConfig(**{**algo_base, "learn": ("ant=sac", "bug=td3", "spider=ppo"), "policies": others}),
@@ -363,16 +377,18 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     ratios = {"train_vs_env": rates["train_paper"] / rates["env_only"]}
     if "sb3_ddpg" in rates:
         ratios["train_vs_sb3"] = rates["train_paper"] / rates["sb3_ddpg"]
-    for algo in ("td3", "sac", "ppo"):
-        if f"sb3_{algo}" in rates:
-            ratios[f"{algo}_vs_sb3"] = rates[f"train_{algo}"] / rates[f"sb3_{algo}"]
+    for algo in ALGO_ROWS:
+        sb3_name = f"sb3_{algo.removesuffix('_bf16')}"
+        if f"train_{algo}" in rates and sb3_name in rates:
+            ratios[f"{algo}_vs_sb3"] = rates[f"train_{algo}"] / rates[sb3_name]
         if f"train_{algo}" in rates:
             ratios[f"{algo}_vs_env"] = rates[f"train_{algo}"] / rates["env_only"]
     if "train_3_learners" in rates:
         ratios["3_learners_vs_env"] = rates["train_3_learners"] / rates["env_only"]
     cpu_ratios = {f"{ours.removeprefix('train_').replace('paper', 'ddpg')}_vs_sb3": cpu_rates[ours] / cpu_rates[theirs]
                   for ours, theirs in (("train_paper", "sb3_ddpg"), ("train_td3", "sb3_td3"),
-                                       ("train_sac", "sb3_sac"), ("train_ppo", "sb3_ppo"))
+                                       ("train_sac", "sb3_sac"), ("train_ppo", "sb3_ppo"),
+                                       ("train_td3_bf16", "sb3_td3"), ("train_sac_bf16", "sb3_sac"))
                   if ours in cpu_rates and theirs in cpu_rates}
     result = {
         "setup": {"steps": steps, "rounds": rounds, "chunk": chunk, "n_envs": n_envs, "n_threads": n_threads,
@@ -504,7 +520,8 @@ def format_table(result: dict[str, Any]) -> str:
               "train_ppo": "training PPO, algorithm schedule",
               "train_3_learners": "training 3 learners (SAC, TD3, PPO)",
               "sb3_td3": "Stable-Baselines3 TD3, same schedule", "sb3_sac": "Stable-Baselines3 SAC, same schedule",
-              "sb3_ppo": "Stable-Baselines3 PPO, same schedule"}
+              "sb3_ppo": "Stable-Baselines3 PPO, same schedule",
+              "train_td3_bf16": "training TD3, bfloat16 updates", "train_sac_bf16": "training SAC, bfloat16 updates"}
     updates = result.get("updates_per_s", {})
     for name, rate in rates.items():
         lines.append(f"{labels[name]:38s} {rate:11.0f} {rate / rates['env_only']:11.2f} "
@@ -517,10 +534,16 @@ def format_table(result: dict[str, Any]) -> str:
     if "train_vs_sb3" in ratios:
         lines.append(f"train / SB3 DDPG: {ratios['train_vs_sb3']:.2f} (target >= {TARGET_VS_SB3}: "
                      f"{'met' if ratios['train_vs_sb3'] >= TARGET_VS_SB3 else 'NOT met'})")
-    for algo in ("td3", "sac", "ppo"):
+    for algo in ALGO_ROWS:
         if f"{algo}_vs_sb3" in ratios:
-            lines.append(f"train {algo.upper()} / SB3 {algo.upper()}: {ratios[f'{algo}_vs_sb3']:.2f} "
+            ours, theirs = algo.upper().replace("_BF16", " (bfloat16 updates)"), algo.removesuffix("_bf16").upper()
+            lines.append(f"train {ours} / SB3 {theirs}: {ratios[f'{algo}_vs_sb3']:.2f} "
                          f"(target >= 2: {'met' if ratios[f'{algo}_vs_sb3'] >= 2 else 'NOT met'})")
+    for algo in ALGO_ROWS:
+        if algo != "ppo" and f"{algo}_vs_env" in ratios:
+            ours = algo.upper().replace("_BF16", " (bfloat16 updates)")
+            lines.append(f"train {ours} / env alone: {ratios[f'{algo}_vs_env']:.2f} (target >= {TARGET_ALGO_VS_ENV}: "
+                         f"{'met' if ratios[f'{algo}_vs_env'] >= TARGET_ALGO_VS_ENV else 'NOT met'})")
     cpu_rates, cpu_ratios = result.get("cpu_rates", {}), result.get("cpu_ratios", {})
     if cpu_ratios:
         lines.append("per CPU-second of the process (all its threads; barely moved by other load on the machine): "

@@ -49,9 +49,10 @@ from triplesumo.train.loop import Trainer
 
 PARTS = ("env", "act", "seats", "store", "bookkeeping", "update")
 """The parts of an env step, in the table's order (their sum is the CPU of an env step, both threads)."""
-LEARNERS = ("env", "ddpg", "td3", "sac", "ppo")
+LEARNERS = ("env", "ddpg", "td3", "sac", "ppo", "td3_bf16", "sac_bf16")
 """The learners profiled: ``env`` the collection alone (``bench train``'s ``env_only``: DDPG that never leaves
-its random warm-up), DDPG at the paper preset, the others on ``bench train``'s algorithm schedule."""
+its random warm-up), DDPG at the paper preset, the others on ``bench train``'s algorithm schedule (``*_bf16``:
+with bfloat16 updates)."""
 MODES = ("overlap", "inline")
 
 
