@@ -158,3 +158,18 @@ def test_a_bfloat16_training_run_resumed_equals_the_uninterrupted_one(tmp_path: 
     weights = load_file(str(run_dir / "policy.safetensors"))
     layers = {k: t.dtype for k, t in weights.items() if not k.startswith("obs_norm.")}
     assert layers and set(layers.values()) == {torch.float32}  # the policy file is float32 whatever trained it
+
+
+def test_a_config_json_written_before_update_dtype_reads_back_as_float32() -> None:
+    """Run folders from before ``update_dtype`` trained in float32 and resume so; an unknown key is still refused."""
+    from triplesumo.train.config import TrainConfig
+    from triplesumo.train.run_folder import config_from_json
+
+    data = json.loads(json.dumps(dataclasses.asdict(TrainConfig(learn=("bug=sac",)))))
+    for algo in ("ddpg", "td3", "sac"):
+        del data[algo]["update_dtype"]
+    cfg = config_from_json(data)
+    assert (cfg.ddpg.update_dtype, cfg.td3.update_dtype, cfg.sac.update_dtype) == ("float32",) * 3
+    data["sac"]["update_dtpye"] = "bfloat16"
+    with pytest.raises(ValueError, match="update_dtpye"):
+        config_from_json(data, "old/config.json")

@@ -125,9 +125,10 @@ LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_thres
                       "zoo_share")
 """LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
 
-ALGO_ADDED_LATER = {"sac": ("critic_norm", "n_step"), "ddpg": ("n_step",), "td3": ("n_step",)}
+ALGO_ADDED_LATER = {"sac": ("critic_norm", "n_step", "update_dtype"), "ddpg": ("n_step", "update_dtype"),
+                    "td3": ("n_step", "update_dtype")}
 """Learner config fields newer than the first run folders of their algorithm, whose defaults are what every earlier
-run trained with (no LayerNorm in SAC's critics, one-step TD targets), likewise."""
+run trained with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates), likewise."""
 REWARD_ADDED_LATER = ("axis_dead_zone", "opponents")
 """RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs; how several
 opponents' terms combine), whose defaults are what every earlier run was paid by, likewise."""
