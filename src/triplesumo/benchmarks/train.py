@@ -100,6 +100,16 @@ ALGO_ROWS = ("td3", "sac", "ppo", *BF16_ROWS)
 """Every algorithm row, in the table's order."""
 
 
+def _sb3_twin(algo: str) -> str:
+    """The SB3 variant an algorithm row is compared with: its own algorithm's (SB3 has no bfloat16 updates)."""
+    return f"sb3_{algo.removesuffix('_bf16')}"
+
+
+def _label(algo: str) -> str:
+    """An algorithm row's name in the table's verdict lines: ``SAC``, ``SAC (bfloat16 updates)``."""
+    return algo.upper().replace("_BF16", " (bfloat16 updates)")
+
+
 class _TrainerVariant:
     def __init__(self, cfg: TrainConfig, run_dir: Path, warm_up_steps: int) -> None:
         self.trainer = Trainer(cfg, run_dir=run_dir)
@@ -265,8 +275,7 @@ def update_profile(variants: dict[str, Any], seed: int) -> dict[str, dict[str, d
     step). Ours: the trainer's learner (replay sample, update, finite checks); SB3: ``model.train``
     on its own replay or rollout; CPU time, so the machine's load barely moves it."""
     out: dict[str, dict[str, dict[str, float]]] = {}
-    for algo, ours_name in (("ddpg", "train_paper"), ("td3", "train_td3"), ("sac", "train_sac"), ("ppo", "train_ppo"),
-                            ("td3_bf16", "train_td3_bf16"), ("sac_bf16", "train_sac_bf16")):
+    for algo, ours_name in (("ddpg", "train_paper"), *((a, f"train_{a}") for a in ALGO_ROWS)):
         if ours_name not in variants:
             continue
         learner = variants[ours_name].trainer.learners[0]
@@ -379,17 +388,14 @@ def run_train_benchmark(steps: int = 6000, n_envs: int = 16, n_threads: int = 1,
     if "sb3_ddpg" in rates:
         ratios["train_vs_sb3"] = rates["train_paper"] / rates["sb3_ddpg"]
     for algo in ALGO_ROWS:
-        sb3_name = f"sb3_{algo.removesuffix('_bf16')}"
-        if f"train_{algo}" in rates and sb3_name in rates:
-            ratios[f"{algo}_vs_sb3"] = rates[f"train_{algo}"] / rates[sb3_name]
+        if f"train_{algo}" in rates and _sb3_twin(algo) in rates:
+            ratios[f"{algo}_vs_sb3"] = rates[f"train_{algo}"] / rates[_sb3_twin(algo)]
         if f"train_{algo}" in rates:
             ratios[f"{algo}_vs_env"] = rates[f"train_{algo}"] / rates["env_only"]
     if "train_3_learners" in rates:
         ratios["3_learners_vs_env"] = rates["train_3_learners"] / rates["env_only"]
     cpu_ratios = {f"{ours.removeprefix('train_').replace('paper', 'ddpg')}_vs_sb3": cpu_rates[ours] / cpu_rates[theirs]
-                  for ours, theirs in (("train_paper", "sb3_ddpg"), ("train_td3", "sb3_td3"),
-                                       ("train_sac", "sb3_sac"), ("train_ppo", "sb3_ppo"),
-                                       ("train_td3_bf16", "sb3_td3"), ("train_sac_bf16", "sb3_sac"))
+                  for ours, theirs in (("train_paper", "sb3_ddpg"), *((f"train_{a}", _sb3_twin(a)) for a in ALGO_ROWS))
                   if ours in cpu_rates and theirs in cpu_rates}
     result = {
         "setup": {"steps": steps, "rounds": rounds, "chunk": chunk, "n_envs": n_envs, "n_threads": n_threads,
@@ -537,14 +543,14 @@ def format_table(result: dict[str, Any]) -> str:
                      f"{'met' if ratios['train_vs_sb3'] >= TARGET_VS_SB3 else 'NOT met'})")
     for algo in ALGO_ROWS:
         if f"{algo}_vs_sb3" in ratios:
-            ours, theirs = algo.upper().replace("_BF16", " (bfloat16 updates)"), algo.removesuffix("_bf16").upper()
-            lines.append(f"train {ours} / SB3 {theirs}: {ratios[f'{algo}_vs_sb3']:.2f} "
+            theirs = _sb3_twin(algo).removeprefix("sb3_").upper()
+            lines.append(f"train {_label(algo)} / SB3 {theirs}: {ratios[f'{algo}_vs_sb3']:.2f} "
                          f"(target >= 2: {'met' if ratios[f'{algo}_vs_sb3'] >= 2 else 'NOT met'})")
     for algo in ALGO_ROWS:
         if algo != "ppo" and f"{algo}_vs_env" in ratios:
-            ours = algo.upper().replace("_BF16", " (bfloat16 updates)")
-            lines.append(f"train {ours} / env alone: {ratios[f'{algo}_vs_env']:.2f} (target >= {TARGET_ALGO_VS_ENV}: "
-                         f"{'met' if ratios[f'{algo}_vs_env'] >= TARGET_ALGO_VS_ENV else 'NOT met'})")
+            ratio = ratios[f"{algo}_vs_env"]
+            lines.append(f"train {_label(algo)} / env alone: {ratio:.2f} (target >= {TARGET_ALGO_VS_ENV}: "
+                         f"{'met' if ratio >= TARGET_ALGO_VS_ENV else 'NOT met'})")
     cpu_rates, cpu_ratios = result.get("cpu_rates", {}), result.get("cpu_ratios", {})
     if cpu_ratios:
         lines.append("per CPU-second of the process (all its threads; barely moved by other load on the machine): "
