@@ -260,3 +260,65 @@ def test_three_runs_report_their_values_and_mean_and_ten_runs_rliables_interval(
     five = compare(CompareConfig(folders=(str(_per_seed_folder(tmp_path / "ev5", {"a": ten[:5], "b": ten[5:]})),),
                                  by="algo", reps=500, out=str(tmp_path / "cmp5")))
     assert {(p["x"], p["y"]) for p in five["improvement"]} == {("a", "b"), ("b", "a")}
+
+
+def _with_opponents(folder: Path, others: dict[str, str]) -> Path:
+    """Give a per_seed.csv folder the opponents' record ``evaluate`` writes beside it."""
+    (folder / "evaluation.json").write_text(json.dumps({"rows_depend_on": {}, "others": others, "candidates": {}}))
+    return folder
+
+
+def test_the_same_policy_against_other_opponents_is_another_run_and_against_the_same_ones_is_not(
+        tmp_path: Path) -> None:
+    """A passive Bug in two from-scratch pairs is two evaluations; one evaluation copied to two folders is one."""
+    pair_a = {"ant=a/policy": "a" * 64, "spider=s/policy": "s" * 64}
+    pair_b = {"ant=b/policy": "b" * 64, "spider=t/policy": "t" * 64}
+    one = _with_opponents(_per_seed_folder(tmp_path / "one", {"passive": [-0.3]}), pair_a)
+    other = _with_opponents(_per_seed_folder(tmp_path / "other", {"passive": [-0.4]}), pair_b)
+    copy = _with_opponents(_per_seed_folder(tmp_path / "copy", {"passive": [-0.3]}), pair_a)
+    table = compare(CompareConfig(folders=(str(one), str(other), str(copy)), by="algo", reps=200,
+                                  out=str(tmp_path / "cmp")))
+    assert [g["scores"] for g in table["groups"]] == [[-0.3, -0.4]]
+    (copy / "evaluation.json").write_text("{not json")
+    with pytest.raises(ValueError, match=r"copy/evaluation\.json: not an evaluation record"):
+        compare(CompareConfig(folders=(str(copy),), out=str(tmp_path / "bad")))
+
+
+def test_tasks_folder_draws_runs_within_each_folder_and_leaves_an_unbalanced_group_without_an_interval(
+        tmp_path: Path) -> None:
+    """The headline over two pairs: SAC's 5 + 5 runs as a (5, 2) task matrix, its IQM and interval rliable's;
+    DDPG, run on one pair only, and a baseline of one run per pair get their values and mean."""
+    from rliable import library as rly_library
+
+    pair_1, pair_3 = [0.15, 0.21, 0.06, 0.02, -0.03], [0.62, 0.48, 0.55, 0.41, 0.70]
+    one = _with_opponents(_per_seed_folder(tmp_path / "p1", {"sac": pair_1, "ddpg": [-0.5, -0.3, -0.2],
+                                                             "passive": [-0.30]}), {"ant=a": "a" * 64})
+    three = _with_opponents(_per_seed_folder(tmp_path / "p3", {"sac": pair_3, "passive": [-0.43]}),
+                            {"ant=b": "b" * 64})
+    table = compare(CompareConfig(folders=(str(one), str(three)), by="algo", tasks="folder", reps=4000,
+                                  out=str(tmp_path / "cmp")))
+    groups = {g["group"]: g for g in table["groups"]}
+    sac = groups["sac"]
+    matrix = np.array([pair_1, pair_3]).T
+    assert sac["n_seeds"] == 10 and sac["iqm"] == pytest.approx(rly_metrics.aggregate_iqm(matrix))
+    np.random.seed(0)  # noqa: NPY002 (rliable's bootstrap draws from numpy's global generator)
+    _, ci = rly_library.get_interval_estimates({"sac": matrix}, lambda x: np.array([rly_metrics.aggregate_iqm(x)]),
+                                               reps=4000)
+    assert sac["lo"] == pytest.approx(ci["sac"][0, 0], abs=0.02)
+    assert sac["hi"] == pytest.approx(ci["sac"][1, 0], abs=0.02)
+    # drawing within each pair keeps each pair's five runs: narrower than drawing 10 runs from one pool
+    pooled = compare(CompareConfig(folders=(str(one), str(three)), by="algo", reps=4000, out=str(tmp_path / "pool")))
+    wide = next(g for g in pooled["groups"] if g["group"] == "sac")
+    assert wide["iqm"] == pytest.approx(sac["iqm"]) and wide["hi"] - wide["lo"] > sac["hi"] - sac["lo"]
+    assert groups["ddpg"]["lo"] is None and groups["ddpg"]["no_interval"].startswith("runs per folder differ (3, 0)")
+    assert groups["passive"]["lo"] is None and groups["passive"]["no_interval"] == "fewer than 5 runs"
+    assert groups["passive"]["scores"] == [-0.30, -0.43]
+    assert table["improvement"] == []  # only SAC may have one, and it has no partner
+    printed = format_compare(table)
+    assert "(runs per folder differ (3, 0): no task matrix, no interval and no P(X > Y)" in printed
+    assert "(fewer than 5 runs, no interval" in printed and "mean -0.365" in printed
+
+
+def test_tasks_must_be_one_or_folder() -> None:
+    with pytest.raises(ValueError, match=r"CompareConfig\.tasks must be one of \('one', 'folder'\), got 'pair'"):
+        CompareConfig(tasks="pair")

@@ -13,15 +13,22 @@ Mann-Whitney U statistic over ``n_x n_y``; ties count one half) with its bootstr
 interval (Agarwal et al., 2021, "Deep RL at the Edge of the Statistical Precipice").
 
 The bootstrap follows ``rliable.library.StratifiedBootstrap``: scores are a
-``(runs, tasks)`` matrix (here one task, the test match) and each resample draws runs
+``(runs, tasks)`` matrix (one task, the test match, unless ``tasks="folder"``) and each resample draws runs
 with replacement within each task. It is computed here with numpy, vectorised over
 resamples and seeded from ``seed`` (rliable's ``get_interval_estimates`` draws from
 numpy's global generator, so its intervals are not reproducible from a seed); the point
 estimates are rliable's own functions, and a test holds the intervals to
 ``rliable.library.get_interval_estimates`` on the same scores.
 
-An evaluation repeated in several folders (same policy files by sha256, same test seed
-and epochs) is counted once: identical evaluations are not independent seeds.
+An evaluation repeated in several folders (same policy files by sha256, same opponents by the sha256 its
+``evaluation.json`` records, same test seed and epochs) is counted once: identical evaluations are not independent
+seeds. The same policy against other opponents (a passive Bug in two from-scratch pairs) is another evaluation.
+
+``tasks="folder"`` makes each evaluation folder a task of the stratified bootstrap: runs are drawn within each
+folder, so every resample keeps each folder's share of the runs (the headline over several from-scratch pairs:
+5 SAC seeds in each pair's folder are a ``(5, pairs)`` matrix, as rliable holds Atari games). A group needs the
+same number of runs in every folder for that; one that lacks it gets its values and mean, no interval, and the
+table names why.
 
 A group of fewer than :data:`MIN_RUNS` runs gets no interval and takes part in no probability of improvement:
 over three runs a bootstrap's 95 % interval is their minimum and maximum, and P(X > Y) of two groups that never
@@ -44,11 +51,12 @@ from numpy.typing import NDArray
 
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.envs.seeding import check_seed
-from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, PER_SEED_FILE
+from triplesumo.evaluation.evaluate import PER_SEED_COLUMNS, PER_SEED_FILE, RECORD_FILE
 from triplesumo.evaluation.metrics_csv import open_table, table_exists, write_table
 from triplesumo.evaluation.video import check_writable
 
 BY = ("group", "algo", "folder", "trial")
+TASKS = ("one", "folder")
 MIN_RUNS = 5
 """Fewest runs (seeds) of a group for a bootstrap interval or a probability of improvement."""
 
@@ -63,6 +71,9 @@ class CompareConfig:
     """Group the seeds by: group (trained, passive, random, ...), algo (from the policy manifest), folder, or trial
     (the sweep trial of the policy's run folder without its seed: learn=bug=ddpg,ddpg.noise=gaussian,seed=0 ->
     ddpg,ddpg.noise=gaussian)."""
+    tasks: str = "one"
+    """What the stratified bootstrap draws runs within: one (all runs of a group are one task) or folder (each
+    evaluation folder is a task, e.g. one per from-scratch pair; a group needs as many runs in every folder)."""
     reps: int = 10_000
     """Bootstrap resamples."""
     confidence: float = 0.95
@@ -76,6 +87,8 @@ class CompareConfig:
         check_seed(self.seed, "CompareConfig.seed")
         if self.by not in BY:
             raise ValueError(f"CompareConfig.by must be one of {BY}, got {self.by!r}")
+        if self.tasks not in TASKS:
+            raise ValueError(f"CompareConfig.tasks must be one of {TASKS}, got {self.tasks!r}")
         if isinstance(self.reps, bool) or not isinstance(self.reps, int) or self.reps < 100:
             raise ValueError(f"CompareConfig.reps must be an int >= 100, got {self.reps!r}")
         if not 0.0 < self.confidence < 1.0:
@@ -122,9 +135,10 @@ def _poi_rows(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.floa
 
 
 def interval_estimates(scores: dict[str, NDArray[np.float64]], reps: int = 10_000, confidence: float = 0.95,
-                       seed: int = 0) -> dict[str, Any]:
+                       seed: int = 0, compared: tuple[str, ...] | None = None) -> dict[str, Any]:
     """IQM with stratified-bootstrap percentile intervals per group, and the probability of improvement
-    (with its interval) of every ordered pair of groups."""
+    (with its interval) of every ordered pair of the ``compared`` groups (all when None; their score matrices
+    have the same tasks)."""
     rng = np.random.default_rng(seed)
     alpha = 100.0 * (1.0 - confidence) / 2.0
     samples = {g: stratified_resamples(np.asarray(s, dtype=np.float64), reps, rng) for g, s in scores.items()}
@@ -133,7 +147,7 @@ def interval_estimates(scores: dict[str, NDArray[np.float64]], reps: int = 10_00
         lo, hi = np.percentile(_iqm_rows(samples[g]), [alpha, 100.0 - alpha])
         groups[g] = {"iqm": iqm(s), "lo": float(lo), "hi": float(hi)}
     pairs = {}
-    for gx, gy in itertools.permutations(scores, 2):
+    for gx, gy in itertools.permutations(scores if compared is None else compared, 2):
         lo, hi = np.percentile(_poi_rows(samples[gx], samples[gy]), [alpha, 100.0 - alpha])
         pairs[(gx, gy)] = {"poi": probability_of_improvement(scores[gx], scores[gy]), "lo": float(lo),
                            "hi": float(hi)}
@@ -155,6 +169,22 @@ def trial_group(row: dict[str, str]) -> str:
     return ",".join(kept) or row["algo"]
 
 
+def _opponents(folder: Path) -> tuple[str, ...]:
+    """The sha256 of the opponents an evaluation folder's rows played (its ``evaluation.json``), sorted; none
+    recorded (a ``per_seed.csv`` alone) reads as no opponents."""
+    path = folder / RECORD_FILE
+    if not path.exists():
+        return ()
+    try:
+        others = json.loads(path.read_text())["others"]
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not an evaluation record of triplesumo evaluate (no readable 'others': "
+                         f"{exc!r})") from exc
+    if not isinstance(others, dict):
+        raise ValueError(f"{path}: 'others' must map each opponent to its sha256, got {type(others).__name__}")
+    return tuple(sorted(f"{k}:{v}" for k, v in others.items()))
+
+
 def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str, str]]]:
     """The per-seed rows of evaluation folders, grouped; repeated evaluations counted once."""
     if not folders:
@@ -171,8 +201,9 @@ def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str,
             if tuple(reader.fieldnames or ()) != PER_SEED_COLUMNS:
                 raise ValueError(f"{path}: expected the columns {list(PER_SEED_COLUMNS)}, got {reader.fieldnames}")
             rows = list(reader)
+        opponents = _opponents(Path(folder))
         for row in rows:
-            key = (row["sha256"], row["learner"], row["eval_seed"], row["epochs"])
+            key = (row["sha256"], row["learner"], row["eval_seed"], row["epochs"], *opponents)
             if key in seen:
                 continue
             seen.add(key)
@@ -182,6 +213,19 @@ def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str,
     return grouped
 
 
+def task_matrix(rows: list[dict[str, str]], folders: tuple[str, ...]) -> tuple[NDArray[np.float64], str]:
+    """A group's test MWR as the ``(runs, tasks)`` matrix of the stratified bootstrap, and why it gets no interval
+    ("" when it may have one). No ``folders``: one task. ``folders``: one task (column) per folder, in their
+    order; a group without the same number of runs in every folder is one column, with the reason."""
+    column = np.array([[float(r["test_mwr"])] for r in rows])
+    if not folders:
+        return column, ""
+    counts = [sum(r["folder"] == str(f) for r in rows) for f in folders]
+    if len(set(counts)) > 1:
+        return column, "runs per folder differ (" + ", ".join(str(c) for c in counts) + "): no task matrix"
+    return np.array([[float(r["test_mwr"]) for r in rows if r["folder"] == str(f)] for f in folders]).T, ""
+
+
 def compare(cfg: CompareConfig) -> dict[str, Any]:
     """Group the per-seed rows, estimate, write ``compare.csv``, ``improvement.csv``, ``compare.json``
     and ``compare.png``; returns the table."""
@@ -189,18 +233,21 @@ def compare(cfg: CompareConfig) -> dict[str, Any]:
 
     out = check_writable(Path(cfg.out), folder=True)
     grouped = read_per_seed(cfg.folders, cfg.by)
-    scores = {g: np.array([[float(r["test_mwr"])] for r in rows]) for g, rows in grouped.items()}
-    est = interval_estimates(scores, cfg.reps, cfg.confidence, cfg.seed)
-    table: dict[str, Any] = {"config": asdict(cfg), "by": cfg.by, "confidence": cfg.confidence,
+    scores, why = {}, {}
+    for g, rows in grouped.items():
+        scores[g], reason = task_matrix(rows, cfg.folders if cfg.tasks == "folder" else ())
+        if reason or len(rows) < MIN_RUNS:
+            why[g] = reason or f"fewer than {MIN_RUNS} runs"
+    compared = tuple(g for g in scores if g not in why)
+    est = interval_estimates(scores, cfg.reps, cfg.confidence, cfg.seed, compared=compared)
+    table: dict[str, Any] = {"config": asdict(cfg), "by": cfg.by, "tasks": cfg.tasks, "confidence": cfg.confidence,
                              "min_runs": MIN_RUNS, "groups": [], "improvement": []}
     for g, rows in sorted(grouped.items(), key=lambda kv: -est["groups"][kv[0]]["iqm"]):
-        interval = {"lo": None, "hi": None} if len(rows) < MIN_RUNS else {}  # per-run values and mean only
+        interval = {"lo": None, "hi": None, "no_interval": why[g]} if g in why else {}  # values and mean only
         table["groups"].append({"group": g, "n_seeds": len(rows), "scores": [float(r["test_mwr"]) for r in rows],
                                 "policies": [r["policy"] for r in rows], "mean": float(np.mean(scores[g])),
                                 **est["groups"][g], **interval})
-    for (gx, gy), p in est["pairs"].items():
-        if min(len(grouped[gx]), len(grouped[gy])) >= MIN_RUNS:
-            table["improvement"].append({"x": gx, "y": gy, **p})
+    table["improvement"] = [{"x": gx, "y": gy, **p} for (gx, gy), p in est["pairs"].items()]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(["group", "n_seeds", "iqm", "lo", "hi", "mean", "seed_scores"])
@@ -227,10 +274,13 @@ def format_compare(table: dict[str, Any]) -> str:
     for g in table["groups"]:
         ci = f"{g['iqm']:+.3f} [{g['lo']:+.3f}, {g['hi']:+.3f}]" if g["lo"] is not None else f"mean {g['mean']:+.3f}"
         lines.append(f"{g['group']:{w}s} {g['n_seeds']:5d} {ci:>26s}  " + " ".join(f"{s:+.3f}" for s in g["scores"]))
-    few = [g["group"] for g in table["groups"] if g["lo"] is None]
-    if few:
-        lines.append(f"(fewer than {table.get('min_runs', MIN_RUNS)} runs, no interval and no P(X > Y): the per-run "
-                     f"values and their mean: {', '.join(few)})")
+    few: dict[str, list[str]] = {}
+    for g in table["groups"]:
+        if g["lo"] is None:
+            reason = g.get("no_interval", f"fewer than {table.get('min_runs', MIN_RUNS)} runs")
+            few.setdefault(reason, []).append(g["group"])
+    for reason, names in few.items():
+        lines.append(f"({reason}, no interval and no P(X > Y): the per-run values and their mean: {', '.join(names)})")
     if table["improvement"]:
         lines.append("")
         lines.append(f"{'P(X > Y)':{2 * w + 3}s} {f'[{pct}% CI]':>18s}")
