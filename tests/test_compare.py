@@ -322,3 +322,13 @@ def test_tasks_folder_draws_runs_within_each_folder_and_leaves_an_unbalanced_gro
 def test_tasks_must_be_one_or_folder() -> None:
     with pytest.raises(ValueError, match=r"CompareConfig\.tasks must be one of \('one', 'folder'\), got 'pair'"):
         CompareConfig(tasks="pair")
+
+
+def test_by_folder_tells_apart_folders_of_the_same_name(tmp_path: Path) -> None:
+    one = _per_seed_folder(tmp_path / "seed-1" / "evaluation", {"sac": [0.1, 0.2]})
+    three = _per_seed_folder(tmp_path / "seed-3" / "evaluation", {"td3": [0.5]})
+    table = compare(CompareConfig(folders=(str(one), str(three)), by="folder", reps=200, out=str(tmp_path / "c")))
+    assert {g["group"]: g["scores"] for g in table["groups"]} == {"seed-1/evaluation/trained": [0.1, 0.2],
+                                                                  "seed-3/evaluation/trained": [0.5]}
+    alone = compare(CompareConfig(folders=(str(one),), by="folder", reps=200, out=str(tmp_path / "d")))
+    assert [g["group"] for g in alone["groups"]] == ["evaluation/trained"]

@@ -169,6 +169,19 @@ def trial_group(row: dict[str, str]) -> str:
     return ",".join(kept) or row["algo"]
 
 
+def folder_labels(folders: tuple[str, ...]) -> dict[str, str]:
+    """Each folder's label for ``by="folder"``: its name, or as many trailing parts of its path as tell it from the
+    others (``seed-1/evaluation`` and ``seed-3/evaluation``, not two groups called ``evaluation``)."""
+    parts = {f: Path(f).resolve().parts for f in folders}
+    labels = {}
+    for f in folders:
+        k = 1
+        while k < len(parts[f]) and any(g != f and parts[g][-k:] == parts[f][-k:] for g in folders):
+            k += 1
+        labels[f] = "/".join(parts[f][-k:])
+    return labels
+
+
 def _opponents(folder: Path) -> tuple[str, ...]:
     """The sha256 of the opponents an evaluation folder's rows played (its ``evaluation.json``), sorted; none
     recorded (a ``per_seed.csv`` alone) reads as no opponents."""
@@ -189,6 +202,7 @@ def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str,
     """The per-seed rows of evaluation folders, grouped; repeated evaluations counted once."""
     if not folders:
         raise ValueError("compare needs at least one evaluation folder")
+    labels = folder_labels(folders)
     grouped: dict[str, list[dict[str, str]]] = {}
     seen: set[tuple[str, ...]] = set()
     for folder in folders:
@@ -207,7 +221,7 @@ def read_per_seed(folders: tuple[str, ...], by: str) -> dict[str, list[dict[str,
             if key in seen:
                 continue
             seen.add(key)
-            name = {"group": row["group"], "algo": row["algo"], "folder": f"{Path(folder).name}/{row['group']}",
+            name = {"group": row["group"], "algo": row["algo"], "folder": f"{labels[folder]}/{row['group']}",
                     "trial": trial_group(row) if by == "trial" else ""}[by]
             grouped.setdefault(name, []).append({**row, "folder": str(folder)})
     return grouped
