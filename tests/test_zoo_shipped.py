@@ -406,16 +406,13 @@ def test_an_alias_of_an_alias_or_with_weights_of_its_own_is_refused(
 
 
 SCRATCH = ROOT / "docs" / "runs" / "scratch-v2"
+SCRATCH_PAIRS = {1: {"sac": 5, "ddpg": 3, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}}
+"""The from-scratch pair seeds that made a contest, and the runs of each algorithm and baseline on their test."""
 
 
-@pytest.mark.parametrize("pair_seed", [1])
-def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_matches(pair_seed: int) -> None:
-    """A from-scratch pair's 2,000-start test: every Bug's and baseline's MWR from its per-match rows, the IQM and
-    the rliable interval of the SAC runs from those, and the table on docs/reproduce.md and the README's figures."""
-    from rliable import library as rly
-    from rliable import metrics as rly_metrics
-    from scipy.stats import trim_mean
-
+def _scratch_scores(pair_seed: int) -> dict[str, list[float]]:
+    """Each Bug's and baseline's test MWR on a from-scratch pair, recomputed from its 2,000 per-match rows (and
+    held to its per_seed.csv row), by algorithm (SAC, DDPG) or baseline, in training-seed order."""
     from triplesumo.evaluation.metrics import summarize
 
     folder = SCRATCH / f"seed-{pair_seed}"
@@ -429,10 +426,33 @@ def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_mat
         mwr = float(summarize([m["outcome"] for m in matches], [float(m["steps"]) for m in matches])["mean_lwr"])
         assert mwr == pytest.approx(float(row["test_mwr"]), abs=1e-12)
         score.setdefault(row["algo"] or row["group"], []).append(mwr)
-    assert [len(score[k]) for k in ("sac", "ddpg", "passive", "random")] == [5, 3, 1, 1]
+    assert {k: len(v) for k, v in score.items()} == SCRATCH_PAIRS[pair_seed]
+    return score
+
+
+def _pair_section(page: str, pair_seed: int) -> str:
+    """docs/reproduce.md's section on one from-scratch pair seed: from its bold "Pair seed N" paragraph to the next."""
+    start = page.index(f"**Pair seed {pair_seed}:")
+    ends = [i for i in (page.find("**Pair seed", start + 1), page.find("**Runs in progress", start)) if i > 0]
+    return page[start:min(ends)]
+
+
+def _signed(values: list[float]) -> str:
+    return ", ".join(f"{v:+.3f}" for v in values)
+
+
+@pytest.mark.parametrize("pair_seed", sorted(SCRATCH_PAIRS))
+def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_matches(pair_seed: int) -> None:
+    """A from-scratch pair's 2,000-start test: every Bug's and baseline's MWR from its per-match rows, the IQM and
+    the rliable interval of the SAC runs from those, and the pair's table on docs/reproduce.md."""
+    from rliable import library as rly
+    from rliable import metrics as rly_metrics
+    from scipy.stats import trim_mean
+
+    score = _scratch_scores(pair_seed)
     sac = np.asarray(score["sac"])
     iqm = trim_mean(sac, 0.25)
-    compare = json.loads((folder / "compare" / "compare.json").read_text())
+    compare = json.loads((SCRATCH / f"seed-{pair_seed}" / "compare" / "compare.json").read_text())
     group = next(g for g in compare["groups"] if g["group"] == "sac")
     assert group["iqm"] == pytest.approx(iqm, abs=1e-12)
     estimates, intervals = rly.get_interval_estimates({"sac": sac[:, None]}, lambda x: np.array(
@@ -440,16 +460,45 @@ def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_mat
     assert estimates["sac"][0] == pytest.approx(iqm)
     assert abs(intervals["sac"][0, 0] - group["lo"]) < 0.05 and abs(intervals["sac"][1, 0] - group["hi"]) < 0.05
 
-    def signed(values: list[float]) -> str:
-        return ", ".join(f"{v:+.3f}" for v in values)
-
-    page = (ROOT / "docs" / "reproduce.md").read_text()
-    sac_line = next(x for x in page.splitlines() if x.strip().startswith("| SAC, seeds 0-4 |"))
-    assert signed(score["sac"]) in sac_line and f"IQM {iqm:+.3f} [{group['lo']:+.3f}, {group['hi']:+.3f}]" in sac_line
-    ddpg_line = next(x for x in page.splitlines() if x.strip().startswith("| DDPG (paper preset), seeds 0-2 |"))
-    assert signed(score["ddpg"]) in ddpg_line and f"mean {np.mean(score['ddpg']):+.3f}" in ddpg_line
+    section = _pair_section((ROOT / "docs" / "reproduce.md").read_text(), pair_seed)
+    sac_line = next(x for x in section.splitlines() if x.strip().startswith("| SAC, seeds 0-4 |"))
+    assert _signed(score["sac"]) in sac_line
+    assert f"IQM {iqm:+.3f} [{group['lo']:+.3f}, {group['hi']:+.3f}]" in sac_line
+    if "ddpg" in score:
+        ddpg_line = next(x for x in section.splitlines() if x.strip().startswith("| DDPG (paper preset), seeds 0-2 |"))
+        assert _signed(score["ddpg"]) in ddpg_line and f"mean {np.mean(score['ddpg']):+.3f}" in ddpg_line
     for baseline in ("passive", "random"):
-        assert f"| {baseline} | {score[baseline][0]:+.3f} |" in page
-    readme = (ROOT / "README.md").read_text()
-    assert f"IQM {iqm:+.3f} [{group['lo']:+.3f}, {group['hi']:+.3f}]" in readme
-    assert f"against {score['passive'][0]:+.3f} for a passive Bug" in readme
+        assert f"| {baseline} | {score[baseline][0]:+.3f} |" in section
+
+
+def test_the_from_scratch_headline_is_recomputed_from_every_pairs_committed_matches() -> None:
+    """The headline over the (pair, seed) runs of every pair that made a contest: SAC's IQM over the runs as a
+    (seeds, pairs) matrix, its stratified-bootstrap interval (rliable's, drawing seeds within each pair), the
+    share of runs at +0.15 or more, each pair's passive baseline, and the figures on docs/reproduce.md and the
+    README."""
+    from rliable import library as rly
+    from rliable import metrics as rly_metrics
+
+    scores = {seed: _scratch_scores(seed) for seed in sorted(SCRATCH_PAIRS)}
+    matrix = np.array([scores[seed]["sac"] for seed in sorted(SCRATCH_PAIRS)]).T
+    assert matrix.shape == (5, len(SCRATCH_PAIRS)) and matrix.size >= 10
+    iqm = float(rly_metrics.aggregate_iqm(matrix))
+    headline = json.loads((SCRATCH / "headline" / "compare.json").read_text())
+    assert headline["tasks"] == "folder" and headline["by"] == "algo"
+    assert [Path(f).parent.name for f in headline["config"]["folders"]] == [f"seed-{s}" for s in sorted(SCRATCH_PAIRS)]
+    sac = next(g for g in headline["groups"] if g["group"] == "sac")
+    assert sac["iqm"] == pytest.approx(iqm, abs=1e-12) and sac["n_seeds"] == matrix.size
+    np.random.seed(0)  # noqa: NPY002 (rliable's bootstrap draws from numpy's global generator)
+    _, ci = rly.get_interval_estimates({"sac": matrix}, lambda x: np.array([rly_metrics.aggregate_iqm(x)]),
+                                       reps=5000)
+    assert abs(ci["sac"][0, 0] - sac["lo"]) < 0.03 and abs(ci["sac"][1, 0] - sac["hi"]) < 0.03
+    passive = next(g for g in headline["groups"] if g["group"] == "passive")
+    assert passive["scores"] == pytest.approx([scores[s]["passive"][0] for s in sorted(SCRATCH_PAIRS)])
+    share = float(np.mean(matrix >= 0.15))
+    figures = f"IQM {iqm:+.3f} [{sac['lo']:+.3f}, {sac['hi']:+.3f}]"
+    for page in (ROOT / "docs" / "reproduce.md", ROOT / "README.md"):
+        text = " ".join(page.read_text().split())
+        assert f"{figures} over the {matrix.size} (pair, seed) runs" in text, page
+        assert f"{round(100 * share)}% of runs at +0.15 or more" in text, page
+        for seed in sorted(SCRATCH_PAIRS):
+            assert f"pair {seed}: passive Bug {scores[seed]['passive'][0]:+.3f}" in text, page
