@@ -62,8 +62,9 @@ def test_a_killed_worker_is_retried_and_its_epochs_replay_exactly(ray_tasks: Any
             killed = pids[0]
             os.kill(killed, signal.SIGKILL)
         time.sleep(0.05)
-    thread.join(timeout=120)
+    thread.join(timeout=240)
     assert killed is not None, "no chunk worker was seen running"
+    assert not thread.is_alive() and "rows" in result, "the killed chunk's retry did not finish within 240 s"
     local = play_test_epochs(make_policy("random"), {a: make_policy(s) for a, s in OTHERS.items()},
                              "bug", 8, 7, cfg, n_envs=4, n_threads=1)
     assert result["rows"] == local
