@@ -758,3 +758,24 @@ def test_a_config_written_before_the_axis_dead_zone_reads_with_the_paper_sign() 
     del data["reward"]["still"]
     with pytest.raises(ValueError, match=r"missing key\(s\) \['reward.still'\]"):
         config_from_json(data)
+
+
+def test_fields_added_later_read_with_what_earlier_runs_used_not_todays_defaults() -> None:
+    """A run folder written before SAC's ``n_step``, ``critic_norm`` and ``update_dtype`` (and the others' ``n_step``
+    and ``update_dtype``) existed resumes with one-step targets, plain critics and float32 updates, what it trained
+    with, whatever the learners' defaults are now: the filled values are written out, not read from the defaults."""
+
+    from triplesumo.algos.sac import SACConfig
+    from triplesumo.train.run_folder import config_from_json, config_to_json
+
+    data = config_to_json(TrainConfig(sac=SACConfig(n_step=5, critic_norm="layer", update_dtype="bfloat16")))
+    for algo in ("sac", "ddpg", "td3"):
+        for name in ("n_step", "update_dtype"):
+            del data[algo][name]
+    del data["sac"]["critic_norm"]
+    read = config_from_json(data)
+    assert (read.sac.n_step, read.sac.critic_norm, read.sac.update_dtype) == (1, "none", "float32")
+    assert all((getattr(read, a).n_step, getattr(read, a).update_dtype) == (1, "float32") for a in ("ddpg", "td3"))
+    del data["sac"]["alpha"]
+    with pytest.raises(ValueError, match=r"missing key\(s\) \['sac.alpha'\]"):
+        config_from_json(data)

@@ -121,26 +121,30 @@ budget, evaluations while training): a config.json without them gets their defau
 missing key is an error."""
 
 
-LEAGUE_ADDED_LATER = ("live_share", "draw_score", "side_draw_score", "side_threshold", "keep_zoo",
-                      "zoo_share")
-"""LeagueConfig fields newer than the first self-play runs (both sides learning), likewise."""
+LEAGUE_ADDED_LATER: dict[str, Any] = {"live_share": 0.35, "draw_score": 0.0, "side_draw_score": [],
+                                       "side_threshold": [], "keep_zoo": False, "zoo_share": 0.0}
+"""LeagueConfig fields newer than the first self-play runs (both sides learning), each with the value every earlier
+run used: a saved league section without one gets it. The values are written out, not read from today's defaults,
+so that a default changed later cannot change how an old run resumes."""
 
-ALGO_ADDED_LATER = {"sac": ("critic_norm", "n_step", "update_dtype"), "ddpg": ("n_step", "update_dtype"),
-                    "td3": ("n_step", "update_dtype")}
-"""Learner config fields newer than the first run folders of their algorithm, whose defaults are what every earlier
-run trained with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates), likewise."""
-REWARD_ADDED_LATER = ("axis_dead_zone", "opponents")
+ALGO_ADDED_LATER: dict[str, dict[str, Any]] = {
+    "sac": {"critic_norm": "none", "n_step": 1, "update_dtype": "float32"},
+    "ddpg": {"n_step": 1, "update_dtype": "float32"},
+    "td3": {"n_step": 1, "update_dtype": "float32"},
+}
+"""Learner config fields newer than the first run folders of their algorithm, with what every earlier run trained
+with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates), likewise written out."""
+REWARD_ADDED_LATER: dict[str, Any] = {"axis_dead_zone": 0.0, "opponents": "mean"}
 """RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs; how several
-opponents' terms combine), whose defaults are what every earlier run was paid by, likewise."""
+opponents' terms combine), with what every earlier run was paid by, likewise."""
 
 
-def _with_added_later(data: Any, cls: type, added_later: tuple[str, ...]) -> Any:
-    """``data`` (a saved config section) with the defaults of the ``cls`` fields in ``added_later`` that it lacks;
-    anything but a dict as it is, for :func:`_check_keys` to name."""
+def _with_added_later(data: Any, added_later: Mapping[str, Any]) -> Any:
+    """``data`` (a saved config section) with the values in ``added_later`` of the fields it lacks; anything but a
+    dict as it is, for :func:`_check_keys` to name."""
     if not isinstance(data, dict):
         return data
-    defaults = dataclasses.asdict(cls())
-    return {**{k: defaults[k] for k in added_later}, **data}
+    return {**added_later, **data}
 
 
 def config_from_json(data: dict[str, Any], source: str = "config.json") -> TrainConfig:
@@ -152,7 +156,7 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         defaults = config_to_json(TrainConfig(physics=V0_PHYSICS))  # (physics came in env v0)
         data = {**{k: defaults[k] for k in ADDED_LATER if k not in data}, **data}
     data = _check_keys(data, TrainConfig, "", source)
-    data["reward"] = _with_added_later(data["reward"], RewardConfig, REWARD_ADDED_LATER)
+    data["reward"] = _with_added_later(data["reward"], REWARD_ADDED_LATER)
     data["reward"] = RewardConfig(**_check_keys(data["reward"], RewardConfig, "reward.", source))
     try:
         data["physics"] = PhysicsConfig(**_check_keys(physics_record(data["physics"]), PhysicsConfig, "physics.",
@@ -161,13 +165,13 @@ def config_from_json(data: dict[str, Any], source: str = "config.json") -> Train
         raise ValueError(f"{source}: {exc}") from exc
     for name, cls in (("ddpg", DDPGConfig), ("td3", TD3Config), ("sac", SACConfig), ("ppo", PPOConfig)):
         try:
-            section = _with_added_later(data[name], cls, ALGO_ADDED_LATER.get(name, ()))
+            section = _with_added_later(data[name], ALGO_ADDED_LATER.get(name, {}))
             data[name] = cls(**_check_keys(section, cls, f"{name}.", source))
         except (TypeError, ValueError) as exc:
             raise ValueError(f"{source}: {exc}") from exc
     data["policies"] = tuple(data["policies"])
     data["learn"] = tuple(data["learn"])
-    data["league"] = _with_added_later(data["league"], LeagueConfig, LEAGUE_ADDED_LATER)
+    data["league"] = _with_added_later(data["league"], LEAGUE_ADDED_LATER)
     try:
         league: dict[str, Any] = _check_keys(data["league"], LeagueConfig, "league.", source)
         data["league"] = LeagueConfig(**league)
