@@ -206,12 +206,50 @@ def test_a_config_json_written_before_n_step_reads_back_with_one_step_targets() 
     assert (cfg.sac.n_step, cfg.ddpg.n_step, cfg.td3.n_step) == (1, 1, 1)
 
 
-def test_a_device_resident_collection_refuses_n_step_by_name() -> None:
+@pytest.mark.parametrize("n", [2, 5])
+def test_the_device_windows_give_the_host_windows_transitions_and_checkpoint(n: int) -> None:
+    """:class:`TorchNStepReturns` (a device-resident collection's windows; torch's CPU device here) stores the same
+    transitions in the same order as the numpy windows over random matches with every kind of end, and its
+    checkpoint arrays are the numpy windows', loadable either way."""
+    from triplesumo.algos.nstep import TorchNStepReturns
+
+    rng = np.random.default_rng(10 + n)
+    rows = 6
+    host, device = NStepReturns(n, G, rows, 2, 2), TorchNStepReturns(n, G, rows, 2, 2, "cpu")
+    stored = 0
+    for t in range(80):
+        kind = rng.choice(["plain", "terminated", "truncated", "broken", "out"], size=rows, p=[.7, .1, .08, .04, .08])
+        s = _step(rows, t, list(rng.normal(size=rows)), tuple(np.flatnonzero(kind == "terminated")),
+                  tuple(np.flatnonzero(kind == "truncated")), tuple(np.flatnonzero(kind == "broken")),
+                  tuple(np.flatnonzero(kind == "out")))
+        want = host.push(**s)
+        got = device.push(**{k: torch.as_tensor(v) for k, v in s.items()})
+        assert set(got) == set(want) and all(isinstance(v, torch.Tensor) and v.dtype == torch.float32
+                                             for v in got.values())
+        for name in want:
+            np.testing.assert_allclose(got[name].numpy(), want[name], rtol=0, atol=1e-6, err_msg=f"{name} at {t}")
+        stored += len(want["rew"])
+        assert len(device) == len(host)
+        if t == 40:  # a checkpoint each way: the arrays are the same, and each loads the other's
+            a, b = host.state_dict(), device.state_dict()
+            assert all(np.array_equal(a[k], b[k]) and a[k].dtype == b[k].dtype for k in a)
+            host.load_state_dict(b)
+            device.load_state_dict(a)
+    assert stored > 150
+    with pytest.raises(ValueError, match="n-step state 'obs' has shape"):
+        device.load_state_dict({**host.state_dict(), "obs": np.zeros((n + 1, rows, 2), np.float32)})
+
+
+def test_a_device_resident_collection_keeps_its_windows_and_discounts_on_the_device() -> None:
+    from triplesumo.algos.nstep import TorchNStepReturns
+    from triplesumo.algos.replay import TorchReplayBuffer
     from triplesumo.train.learners import learner_specs, make_learner
 
     cfg = TrainConfig(learn=("bug=sac",), policies=("ant=zero", "spider=random"), sac=TINY, n_envs=2)
     spec = learner_specs(cfg, ("ant", "bug", "spider"), {"ant": "team", "bug": "team", "spider": "spider"})[0]
-    with pytest.raises(ValueError, match="bug: n_step 3 needs transitions collected on the host"):
-        make_learner(spec, [1], 0, cfg, 8, 2, device=torch.device("cpu"))
-    learner = make_learner(spec, [1], 0, cfg, 8, 2)  # on the host it keeps a window per row
-    assert learner.nstep is not None and learner.nstep.obs.shape == (3, 2, 8) and "discount" in learner.replay.fields
+    learner = make_learner(spec, [1], 0, cfg, 8, 2, device=torch.device("cpu"))
+    assert isinstance(learner.nstep, TorchNStepReturns) and isinstance(learner.replay, TorchReplayBuffer)
+    assert learner.nstep.obs.shape == (3, 2, 8) and "discount" in learner.replay.fields
+    learner = make_learner(spec, [1], 0, cfg, 8, 2)  # on the host the numpy windows
+    assert type(learner.nstep) is NStepReturns and learner.nstep.obs.shape == (3, 2, 8)
+    assert "discount" in learner.replay.fields

@@ -20,14 +20,18 @@ policy having changed since the transition was collected (no importance weights)
 SAC of D4PG, Rainbow-style agents and FastTD3. SAC's entropy bonus counts at the bootstrap state only.
 
 The pending window of every row is part of a checkpoint (:meth:`NStepReturns.state_dict`), so a resumed run
-stores what an uninterrupted one would. n = 1 is plain one-step TD.
+stores what an uninterrupted one would. n = 1 is plain one-step TD. :class:`TorchNStepReturns` keeps the windows
+as tensors on a device for a device-resident collection (``train --backend warp --device cuda``): the same
+transitions, and the same checkpoint arrays, without the steps visiting the host.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
+import torch
 
 
 class NStepReturns:
@@ -116,3 +120,69 @@ class NStepReturns:
         for name in ("obs", "act", "ret"):
             getattr(self, name)[...] = state[name]
         self.count[...] = count
+
+
+class TorchNStepReturns(NStepReturns):
+    """:class:`NStepReturns` whose windows are tensors on ``device``: :meth:`push` takes the step as tensors there
+    (or anything ``torch.as_tensor`` takes) and returns the completed transitions as float32 tensors there, the
+    same ones in the same order as the numpy windows; :meth:`state_dict` gives (and :meth:`load_state_dict` takes)
+    the numpy windows' arrays, so a checkpoint is the same on either."""
+
+    def __init__(self, n: int, gamma: float, rows: int, obs_dim: int, act_dim: int,
+                 device: str | torch.device = "cpu") -> None:
+        super().__init__(n, gamma, rows, obs_dim, act_dim)
+        self.device = torch.device(device)
+        for name in ("obs", "act", "ret", "count", "powers"):
+            setattr(self, name, torch.as_tensor(getattr(self, name), device=self.device))
+        self.slots = torch.arange(self.n, device=self.device)[:, None]
+
+    def __len__(self) -> int:
+        return int(self.count.sum())
+
+    def _put(self, x: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=dtype, device=self.device)
+
+    def push(self, obs: Any, act: Any, rew: Any, next_obs: Any, terminated: Any,  # type: ignore[override]
+             truncated: Any, valid: Any, played: Any) -> dict[str, torch.Tensor]:
+        """As :meth:`NStepReturns.push`, on the device."""
+        obs, act, next_obs = self._put(obs), self._put(act), self._put(next_obs)
+        rew = self._put(rew, torch.float64)
+        played, valid = self._put(played, torch.bool), self._put(valid, torch.bool)
+        terminated, truncated = self._put(terminated, torch.bool), self._put(truncated, torch.bool)
+        kept = played & valid
+        broken = played & ~valid
+        rows = torch.nonzero(kept).flatten()
+        c = self.count[rows]
+        pending = self.slots < c[None, :]
+        age = c[None, :] - self.slots
+        self.ret[:, rows] += torch.where(pending, self.powers[age.clamp(0, self.n)], 0.0) * rew[rows]
+        self.obs[c, rows], self.act[c, rows], self.ret[c, rows] = obs[rows], act[rows], rew[rows]
+        self.count[rows] += 1
+        ended = kept & (terminated | truncated)
+        full = kept & ~ended & (self.count == self.n)
+        flush = ended | broken
+        leave = self.slots < torch.where(flush, torch.as_tensor(self.count), 0)[None, :]
+        leave[0] |= full
+        row, slot = torch.nonzero(leave.T, as_tuple=True)  # row-major: row by row, oldest first
+        out = {"obs": self.obs[slot, row], "act": self.act[slot, row], "rew": self.ret[slot, row].float(),
+               "next_obs": torch.where(broken[row, None], obs[row], next_obs[row]).float(),
+               "done": (terminated[row] & ended[row]).float(),
+               "discount": self.powers[self.count[row] - slot].float()}
+        self.count[flush] = 0
+        if bool(full.any()):
+            for name in ("obs", "act", "ret"):
+                window = getattr(self, name)
+                window[:-1, full] = window[1:, full].clone()
+            self.count[full] = self.n - 1
+        return out
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """As :meth:`NStepReturns.state_dict`: numpy arrays (copied to the host)."""
+        return {name: getattr(self, name).cpu().numpy().copy() for name in ("obs", "act", "ret", "count")}
+
+    def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
+        """As :meth:`NStepReturns.load_state_dict`, onto the device."""
+        host = NStepReturns(self.n, self.gamma, self.count.shape[0], self.obs.shape[2], self.act.shape[2])
+        host.load_state_dict(state)  # (its checks)
+        for name in ("obs", "act", "ret", "count"):
+            getattr(self, name).copy_(torch.as_tensor(getattr(host, name)))

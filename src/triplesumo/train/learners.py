@@ -37,7 +37,7 @@ import torch
 from triplesumo.algos.base import Algorithm, DivergenceError, not_finite
 from triplesumo.algos.ddpg import DDPG
 from triplesumo.algos.noise import ActionNoise, make_noise
-from triplesumo.algos.nstep import NStepReturns
+from triplesumo.algos.nstep import NStepReturns, TorchNStepReturns
 from triplesumo.algos.offpolicy import OffPolicyAlgorithm
 from triplesumo.algos.ppo import PPO
 from triplesumo.algos.replay import ReplayBuffer, TorchReplayBuffer
@@ -251,12 +251,11 @@ class OffPolicyLearner(Learner):
         self.nstep: NStepReturns | None = None
         """The rows' pending n-step windows (``n_step`` > 1); None: one-step transitions go straight to replay."""
         if c.n_step > 1:
-            if device is not None:
-                raise ValueError(f"{self.name}: n_step {c.n_step} needs transitions collected on the host; a "
-                                 f"device-resident collection (--device {device}) stores one-step ones only")
-            self.nstep = NStepReturns(c.n_step, c.gamma, self.n_rows, obs_dim, act_dim)
+            self.nstep = (NStepReturns(c.n_step, c.gamma, self.n_rows, obs_dim, act_dim) if device is None
+                          else TorchNStepReturns(c.n_step, c.gamma, self.n_rows, obs_dim, act_dim, device))
         self.replay = (ReplayBuffer(c.buffer_size, obs_dim, act_dim, discount=self.nstep is not None)
-                       if device is None else TorchReplayBuffer(c.buffer_size, obs_dim, act_dim, device))
+                       if device is None else TorchReplayBuffer(c.buffer_size, obs_dim, act_dim, device,
+                                                                discount=self.nstep is not None))
         self.noise: ActionNoise | None = None
         """The exploration noise process (DDPG, TD3); SAC samples its own policy."""
         if hasattr(c, "noise"):
