@@ -23,6 +23,7 @@ import triplesumo.agents.zoo
 from conftest import TinyZoo
 from triplesumo.agents.policy_file import load_fixed_policy, load_json, load_policy, save_policy
 from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.algos.sac import SACConfig
 from triplesumo.cli import main
 from triplesumo.demo import match_to_record
 from triplesumo.evaluation.evaluate import EvaluateConfig
@@ -51,7 +52,7 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
                                                       monkeypatch: pytest.MonkeyPatch,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo"
-    rc = main(["demo", "--out", str(out), "--train-epochs", "2", "--eval-epochs", "4", "--n-envs", "2",
+    rc = main(["demo", "--out", str(out), "--train-env-steps", "80", "--eval-epochs", "4", "--n-envs", "2",
                "--learning-starts", "20", "--max-minutes", "0", "--no-progress",
                "--steps-per-epoch", str(DEMO_STEPS), "--video-size", "64"])
     printed = capsys.readouterr().out
@@ -60,16 +61,22 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
     shipped = load_json(zoo.zoo_dir / "bug.json")  # the output says what the shipped Bug is, from its manifest
     assert f"(zoo:bug: {shipped['algo'].upper()}, {shipped['env_steps']:,} env steps)" in printed
 
-    # 1. training: Bug in the (tiny) shipped ongoing match, default networks
+    # 1. training: Bug with SAC's defaults in the (tiny) shipped ongoing match, up to the first match end past
+    # its env-step budget
+    assert "[1/3] training Bug with SAC (TripleSumo's recipe) for 80 env steps" in printed
     with (out / "bug" / "metrics.csv").open(newline="") as fh:
         reader = csv.DictReader(fh)
         assert tuple(reader.fieldnames or ()) == COLUMNS
-        assert [int(r["epoch"]) for r in reader] == [1, 2]
+        rows = list(reader)
+    assert [int(r["epoch"]) for r in rows] == list(range(1, len(rows) + 1))
     assert sorted(p.name for p in (out / "bug" / "plots").glob("*.png")) == PLOTS
     manifest = load_json(out / "bug" / "policy.json")
-    assert manifest["agent"] == "bug" and manifest["epochs"] == 2
+    assert manifest["agent"] == "bug" and manifest["algo"] == "sac" and manifest["epochs"] == len(rows)
+    assert 80 <= manifest["env_steps"] < 80 + 2 * DEMO_STEPS
     assert manifest["trained_against"] == ["ant=zoo:ant", "spider=zoo:spider"]
-    assert manifest["hidden"] == list(DDPGConfig().hidden)
+    assert manifest["hidden"] == list(SACConfig().hidden)
+    config = json.loads((out / "bug" / "config.json").read_text())
+    assert (config["sac"]["learn_every"], config["sac"]["n_step"], config["sac"]["learning_starts"]) == (8, 5, 20)
     # 2. evaluation against both baselines, on the policy it just trained
     summary = json.loads((out / "evaluation" / "summary.json").read_text())
     assert list(summary["candidates"]) == ["trained", "zoo-bug", "passive", "random"]
@@ -95,6 +102,19 @@ def test_demo_trains_evaluates_records_and_says_where(zoo: TinyZoo, tmp_path: Pa
         assert str(path) in where, path
     for label in ("trained", "zoo-bug", "passive", "random"):
         assert re.search(rf"^{label}\s", printed, re.M), label
+
+
+def test_the_demo_trains_the_learner_asked_for_with_its_own_hyper_parameters(tmp_path: Path) -> None:
+    """``--algo ddpg`` trains the paper's preset (its warm-up too unless ``--learning-starts`` is given); a learner
+    the demo does not offer is refused by name."""
+    from triplesumo.demo import DemoConfig, _train_config
+
+    cfg = _train_config(DemoConfig(algo="ddpg"), "bug", tmp_path, learn=("bug=ddpg",))
+    assert cfg.learn == ("bug=ddpg",) and cfg.ddpg == DDPGConfig() and cfg.max_env_steps == 150_000
+    cfg = _train_config(DemoConfig(learning_starts=7), "bug", tmp_path, learn=("bug=sac",))
+    assert cfg.sac.learning_starts == 7 and cfg.sac.n_step == SACConfig().n_step and cfg.ddpg == DDPGConfig()
+    with pytest.raises(ValueError, match="DemoConfig.algo must be one of sac, ddpg, got 'td3'"):
+        DemoConfig(algo="td3")
 
 
 # ------------------------------------------------------------------------------ zoo

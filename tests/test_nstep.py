@@ -189,8 +189,13 @@ def test_an_n_step_training_run_resumed_equals_the_uninterrupted_one(tmp_path: P
         assert {"bug.nstep.obs", "bug.nstep.count"} <= set(arrays.files)
 
 
-def test_n_step_is_validated_and_off_by_default() -> None:
-    assert SACConfig().n_step == DDPGConfig().n_step == 1
+def test_n_step_is_validated_and_on_by_default_in_sac_only() -> None:
+    """SAC's default schedule is the measured recipe (5-step returns, one update per 8 transitions); DDPG's paper
+    preset and TD3 keep one-step targets."""
+    from triplesumo.algos.td3 import TD3Config
+
+    assert (SACConfig().n_step, SACConfig().learn_every) == (5, 8)
+    assert DDPGConfig().n_step == TD3Config().n_step == 1
     with pytest.raises(ValueError, match="SACConfig.n_step must be >= 1"):
         SACConfig(n_step=0)
     assert dataclasses.replace(TINY, n_step=2).n_step == 2

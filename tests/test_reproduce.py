@@ -211,6 +211,7 @@ def test_tiny_reproduction_runs_every_stage_then_skips_them_and_redoes_a_removed
     ({"seeds": (0, 0)}, "without repeats"),
     ({"bug_epochs": 0}, "ReproduceConfig.bug_epochs must be an int >= 1"),
     ({"bug_learn_every": -1}, "ReproduceConfig.bug_learn_every must be an int >= 0"),
+    ({"bug_n_step": -1}, "ReproduceConfig.bug_n_step must be an int >= 0"),
     ({"ablations": ("noise=brownian",)}, r"ReproduceConfig.ablations: 'noise=brownian': .*DDPGConfig.noise"),
     ({"ablations": ("still=2",)}, "RewardConfig.still is a punishment"),
     ({"ablations": ("seed=3",)}, "seed is set by the protocol"),
@@ -262,14 +263,32 @@ def test_bug_trials_give_td3_and_sac_the_shared_schedule_and_keep_ddpg_at_the_pa
     by_algo = {t.config.learn[0].split("=")[1]: t.config
                for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,), algos=ALGOS)).bug_trials()}
     assert sorted(by_algo) == ["ddpg", "ppo", "sac", "td3"]
-    assert by_algo["td3"].td3.learn_every == 16 and by_algo["sac"].sac.learn_every == 16
-    assert by_algo["ddpg"].ddpg.learn_every == 30  # the paper preset, untouched
+    assert (by_algo["td3"].td3.learn_every, by_algo["td3"].td3.n_step) == (8, 5)
+    assert (by_algo["sac"].sac.learn_every, by_algo["sac"].sac.n_step) == (8, 5)
+    assert (by_algo["ddpg"].ddpg.learn_every, by_algo["ddpg"].ddpg.n_step) == (30, 1)  # the paper preset, untouched
     assert by_algo["td3"].max_env_steps == 1_000_000
-    assert "--td3.learn-every 16" in command_for(by_algo["td3"])  # the recorded command says so
+    assert "--td3.learn-every 8 --td3.n-step 5" in command_for(by_algo["td3"])  # the recorded command says so
+    shipped = {t.config.learn[0].split("=")[1]: t.config  # the recipe the shipped pair's Bugs trained with
+               for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,), algos=ALGOS, bug_learn_every=16,
+                                                 bug_n_step=1)).bug_trials()}
+    assert (shipped["sac"].sac.learn_every, shipped["sac"].sac.n_step) == (16, 1)
     default = {t.config.learn[0].split("=")[1]: t.config
                for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,), algos=ALGOS,
-                                                 bug_learn_every=0)).bug_trials()}
-    assert default["td3"].td3.learn_every == 1 and default["sac"].sac.learn_every == 1
+                                                 bug_learn_every=0, bug_n_step=0)).bug_trials()}
+    assert (default["td3"].td3.learn_every, default["td3"].td3.n_step) == (1, 1)
+    assert (default["sac"].sac.learn_every, default["sac"].sac.n_step) == (8, 5)  # SAC's own default is the recipe
+
+
+def test_a_record_written_before_bug_n_step_resumes_only_with_one_step_returns(tmp_path: Path) -> None:
+    """A reproduction recorded before ``bug_n_step`` existed trained its TD3 and SAC Bugs with one-step returns:
+    resuming it with today's default (5) is refused, naming the option; with ``--bug-n-step 1`` it resumes."""
+    from triplesumo.reproduce.run import check_same_options
+
+    recorded = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig(out=str(tmp_path), bug_learn_every=16))))
+    del recorded["bug_n_step"]
+    with pytest.raises(ValueError, match=r"bug_n_step: 1 there, 5 given"):
+        check_same_options(tmp_path, recorded, ReproduceConfig(out=str(tmp_path), bug_learn_every=16))
+    check_same_options(tmp_path, recorded, ReproduceConfig(out=str(tmp_path), bug_learn_every=16, bug_n_step=1))
 
 
 @pytest.mark.slow  # 109 s alone on the shared 2-core box

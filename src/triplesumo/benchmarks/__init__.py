@@ -16,7 +16,8 @@ PPO_ROLLOUT = 2048
 def learner_configs(n_envs: int, learning_starts: int, ppo_rollout: int | None = None) -> dict[str, dict[str, Any]]:
     """``TrainConfig`` fields of each learner as ``bench train`` measures it (DDPG: the paper preset; PPO's
     rollout ``ppo_rollout`` transitions, by default ``bench train``'s; ``td3_bf16`` and ``sac_bf16``: TD3 and SAC
-    with ``update_dtype="bfloat16"``)."""
+    with ``update_dtype="bfloat16"``). Every off-policy learner has one-step targets here, as SB3's, which ``bench
+    train`` sets beside them on the same schedule (SAC's default is 5-step returns)."""
     from triplesumo.algos.ddpg import DDPGConfig  # (here: the env benches import this package without torch)
     from triplesumo.algos.ppo import PPOConfig
     from triplesumo.algos.sac import SACConfig
@@ -26,11 +27,12 @@ def learner_configs(n_envs: int, learning_starts: int, ppo_rollout: int | None =
     return {"env": {"ddpg": DDPGConfig(learning_starts=10**12)},
             "ddpg": {"ddpg": DDPGConfig(learning_starts=learning_starts)},
             "td3": {"learn": ("bug=td3",), "td3": TD3Config(learn_every=n_envs, learning_starts=learning_starts)},
-            "sac": {"learn": ("bug=sac",), "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts)},
+            "sac": {"learn": ("bug=sac",), "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts,
+                                                            n_step=1)},
             "td3_bf16": {"learn": ("bug=td3",), "td3": TD3Config(learn_every=n_envs, learning_starts=learning_starts,
                                                                  update_dtype="bfloat16")},
             "sac_bf16": {"learn": ("bug=sac",), "sac": SACConfig(learn_every=n_envs, learning_starts=learning_starts,
-                                                                 update_dtype="bfloat16")},
+                                                                 n_step=1, update_dtype="bfloat16")},
             "ppo": {"learn": ("bug=ppo",), "ppo": PPOConfig(n_steps=max(rollout // n_envs, 1))}}
 
 

@@ -125,11 +125,14 @@ class ReproduceConfig:
     bug_env_steps: int = 1_000_000
     """Stage 3: the env-step budget of every Bug run, the same for every algorithm whatever its matches
     last (``train --max-env-steps``); a run stops at the first epoch end past it. 0: epochs only."""
-    bug_learn_every: int = 16
-    """Stage 3 (and the ablations): collected transitions per gradient step of the TD3 and SAC Bugs, one per step
-    of the 16 matches, the algorithm schedule of ``bench train``. Their library default, 1 (the papers' one update
-    per transition), makes every run several times slower (``docs/bench/index.md``).
-    0 keeps the algorithm's default. DDPG keeps the paper preset (30) and PPO its rollouts."""
+    bug_learn_every: int = 8
+    """Stage 3 (and the ablations): collected transitions per gradient step of the TD3 and SAC Bugs: 8, SAC's
+    default and the recipe measured fastest to skill (``docs/bench/skill.md``; the shipped pair's Bugs trained with
+    16). 0 keeps the algorithm's default (TD3: 1, the paper's one update per transition, several times slower).
+    DDPG keeps the paper preset (30) and PPO its rollouts."""
+    bug_n_step: int = 5
+    """Stage 3 (and the ablations): n of the TD3 and SAC Bugs' n-step returns: 5, the same recipe's (the shipped
+    pair's Bugs trained with 1). 0 keeps the algorithm's default. DDPG keeps the paper preset (1)."""
     bug_eval_every: int = 100_000
     """Stage 3 (and the ablations): every this many env steps each Bug run evaluates its current policy on the
     first bug_eval_epochs test matches of stage 4 (``train --eval-every``): the test-MWR curves and time to skill.
@@ -204,7 +207,7 @@ class ReproduceConfig:
         bad = [a for a in self.algos if a not in ALGOS]
         if bad:
             raise ValueError(f"ReproduceConfig.algos must be among {ALGOS}, got {bad}")
-        for name in ("bug_env_steps", "bug_learn_every", "bug_eval_every", "ddpg_runs"):
+        for name in ("bug_env_steps", "bug_learn_every", "bug_n_step", "bug_eval_every", "ddpg_runs"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 0, got {value!r}")

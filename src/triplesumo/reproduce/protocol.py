@@ -386,11 +386,12 @@ class Protocol:
             base = dataclasses.replace(base, eval_every=20 if self.cfg.tiny else self.cfg.bug_eval_every,
                                        eval_epochs=2 if self.cfg.tiny else self.cfg.bug_eval_epochs,
                                        eval_seed=self.cfg.eval_seed)
-        k = self.cfg.bug_learn_every
-        if self.cfg.tiny or not k:
+        schedule = {name: value for name, value in (("learn_every", self.cfg.bug_learn_every),
+                                                    ("n_step", self.cfg.bug_n_step)) if value}
+        if self.cfg.tiny or not schedule:
             return base
-        return dataclasses.replace(base, td3=dataclasses.replace(base.td3, learn_every=k),
-                                   sac=dataclasses.replace(base.sac, learn_every=k))
+        return dataclasses.replace(base, td3=dataclasses.replace(base.td3, **schedule),
+                                   sac=dataclasses.replace(base.sac, **schedule))
 
     def bug_trials(self) -> list[Trial]:
         return [t for sweep in self.sweeps() for t in trials(sweep, self.bug_base())]

@@ -257,9 +257,12 @@ def report(protocol: Protocol, record: dict[str, Any]) -> str:
         lines += _engagement_section(json.loads(engagement_path.read_text()))
     budget = "" if cfg.tiny else f" (budget {cfg.bug_env_steps:,} env steps per run)"
     schedule = [] if cfg.tiny else [
-        "DDPG: the paper preset (one gradient step per 30 transitions); TD3 and SAC: one gradient step per "
-        + (f"{cfg.bug_learn_every} transitions (`--bug-learn-every`)" if cfg.bug_learn_every
-           else "transition (their default)") + "; PPO: its rollouts. The exact commands are at the end.", ""]
+        "DDPG: the paper preset (one gradient step per 30 transitions, one-step targets); TD3 and SAC: one "
+        "gradient step per " + (f"{cfg.bug_learn_every} transitions (`--bug-learn-every`)" if cfg.bug_learn_every
+                                else "transition or their default (`--bug-learn-every 0`)")
+        + ", " + (f"{cfg.bug_n_step}-step returns (`--bug-n-step`)" if cfg.bug_n_step
+                  else "their default returns (`--bug-n-step 0`)")
+        + "; PPO: its rollouts. The exact commands are at the end.", ""]
     lines += [f"## Stage 3: Bug per algorithm and seed (training){budget}", "", *schedule,
               "| run | epochs | env steps | final training MWR (last 200 epochs) |", "| --- | ---: | ---: | ---: |"]
     lines += [_run_row(protocol, f"bug/{t.name}") for t in protocol.bug_trials()]

@@ -32,12 +32,18 @@ def code_version() -> str:
     return f"triplesumo {__version__}"
 
 
+OPTIONS_ADDED_LATER: dict[str, Any] = {"bug_n_step": 1}
+"""Options added to :class:`ReproduceConfig` with a default other than what the reproductions recorded before them
+did (one-step returns for the TD3 and SAC Bugs), written out: a record without one counts as this value."""
+
+
 def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:
     """``ValueError`` unless the reproduction recorded in ``out`` was made with ``cfg``'s options (:data:`RUN_OPTIONS`
     aside, and the Bug runs' algorithms and seeds where ``cfg`` keeps every run the record names);
-    an option added since the record was written counts as its default, what that run used."""
+    an option added since the record was written counts as what that run used: its value in
+    :data:`OPTIONS_ADDED_LATER`, else its default."""
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
-    defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig())))
+    defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig()))) | OPTIONS_ADDED_LATER
     recorded = {**{k: v for k, v in defaults.items() if k not in recorded}, **recorded}
     # the folder by its place, however it was written; --status only reads, so a moved folder may be read
     config["out"], recorded["out"] = str(Path(config["out"]).resolve()), str(Path(recorded["out"]).resolve())
