@@ -29,7 +29,7 @@ from triplesumo.algos.td3 import TD3, TD3Config
 torch.set_num_threads(1)
 
 TD3_CFG = TD3Config(hidden=(32, 16), batch_size=BATCH, buffer_size=100)
-SAC_CFG = SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100)
+SAC_CFG = SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100, n_step=1)  # one-step batches here
 PPO_CFG = PPOConfig(hidden=(32, 16), n_steps=8, n_minibatches=4, n_epochs=2)
 
 
@@ -459,7 +459,7 @@ def _bandit_error(agent: Algorithm) -> float:
 def test_off_policy_learners_solve_a_bandit(name: str) -> None:
     common = {"hidden": (32, 32), "batch_size": 64, "learning_starts": 0, "buffer_size": 4096}
     config = {"ddpg": DDPGConfig(actor_lr=1e-3, **common), "td3": TD3Config(actor_lr=1e-3, critic_lr=1e-3, **common),
-              "sac": SACConfig(actor_lr=1e-3, target_entropy=-4.0, **common)}[name]
+              "sac": SACConfig(actor_lr=1e-3, target_entropy=-4.0, n_step=1, **common)}[name]  # one-step bandit
     agent = {"ddpg": DDPG, "td3": TD3, "sac": SAC}[name](1, 1, config, seed=0)  # type: ignore[abstract]
     assert isinstance(agent, (DDPG, SAC))
     rng = np.random.default_rng(0)

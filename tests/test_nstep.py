@@ -258,3 +258,20 @@ def test_a_device_resident_collection_keeps_its_windows_and_discounts_on_the_dev
     learner = make_learner(spec, [1], 0, cfg, 8, 2)  # on the host the numpy windows
     assert type(learner.nstep) is NStepReturns and learner.nstep.obs.shape == (3, 2, 8)
     assert "discount" in learner.replay.fields
+
+
+def test_an_n_step_learner_refuses_one_step_batches_by_name() -> None:
+    """A learner made with ``n_step`` above 1 (SAC's default) fed a batch without ``discount`` (one-step transitions
+    from a loop of one's own) says so instead of learning from them as if they were n-step ones; with n_step 1, or
+    with the discounts, it updates."""
+    from triplesumo.algos.sac import SAC
+
+    batch = _batch(0)
+    sac = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(SACConfig(), hidden=(16, 16), batch_size=len(batch["rew"])), 0)
+    with pytest.raises(ValueError, match=r"SACConfig.n_step is 5 but the batch has no 'discount'.*\(n_step=1\)"):
+        sac.update(batch)
+    assert sac.num_updates == 0
+    sac.update({**batch, "discount": np.full(len(batch["rew"]), G**5, np.float32)})
+    one_step = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(SACConfig(), hidden=(16, 16), n_step=1), 0)
+    one_step.update(batch)
+    assert sac.num_updates == one_step.num_updates == 1

@@ -22,7 +22,7 @@ from triplesumo.train.loop import train
 
 torch.set_num_threads(1)
 
-CFG = SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100, critic_norm="layer")
+CFG = SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100, critic_norm="layer", n_step=1)
 
 
 def _layer_norms(module: nn.Module) -> list[nn.LayerNorm]:

@@ -28,7 +28,7 @@ torch.set_num_threads(1)
 LEARNERS = {
     "ddpg": (DDPG, DDPGConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100)),
     "td3": (TD3, TD3Config(hidden=(32, 16), batch_size=BATCH, buffer_size=100, policy_delay=1)),
-    "sac": (SAC, SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100)),
+    "sac": (SAC, SACConfig(hidden=(32, 16), batch_size=BATCH, buffer_size=100, n_step=1)),
 }
 
 

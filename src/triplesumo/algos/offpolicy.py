@@ -95,7 +95,15 @@ class OffPolicyAlgorithm(Algorithm):
 
         Raises:
             DivergenceError: A loss or statistic is not finite (names the update index).
+            ValueError: ``n_step`` is above 1 and the batch has no ``discount``: one-step transitions would be
+                learned from as if they were n-step ones' (the trainer makes n-step ones; a loop of one's own needs
+                :class:`~triplesumo.algos.nstep.NStepReturns`, or ``n_step=1``).
         """
+        if self.config.n_step > 1 and "discount" not in batch:
+            name = type(self.config).__name__
+            raise ValueError(f"{name}.n_step is {self.config.n_step} but the batch has no 'discount': feed n-step "
+                             "transitions (triplesumo.algos.nstep.NStepReturns into ReplayBuffer(..., discount=True)) "
+                             f"or make the learner with {name}(n_step=1) for one-step ones")
         prepared = self.batch(batch)
         with self.update_precision():
             stats = self.train_step(prepared)
