@@ -280,3 +280,47 @@ def test_quick_writes_the_table_the_json_and_the_plot_over_three_seeds(
     assert f"{'sac':6s} {2:4d} {'yes':>11s} {runs[2]['env_steps']:11,d}" in table
     assert "sac: median (min - max) over 3 seeds, 3 reached:" in table
     assert f"reference collection after the bench: {measured['after']['ms_per_env_step']:.3f} ms" in table
+
+
+HOLD = Path(__file__).parents[1] / "docs" / "runs" / "hold-n5u8"
+"""The final-skill check of SAC's default recipe (n = 5 at UTD 1/8), in docs/runs, cited by docs/bench/skill.md."""
+
+
+def test_the_default_recipes_final_skill_is_recomputed_from_its_committed_matches() -> None:
+    """Each of the three runs trained the recipe that is SAC's default now for 1 M env steps in the shipped match;
+    its final policy's test MWR on the 2,000 test starts, recomputed from the per-match rows, is the page's, and
+    the rule written before the test (mean at least +0.40, no seed under +0.30) holds on them."""
+    import numpy as np
+
+    from triplesumo.agents.policy_file import load_policy
+    from triplesumo.algos.sac import SACConfig
+    from triplesumo.evaluation.metrics import summarize
+    from triplesumo.evaluation.metrics_csv import open_table
+
+    with open(HOLD / "test-2000" / "per_seed.csv", newline="") as fh:
+        rows = {r["candidate"]: r for r in csv.DictReader(fh)}
+    scores = []
+    for seed in (0, 1, 2):
+        run = HOLD / f"learn=bug=sac,seed={seed}"
+        config = json.loads((run / "config.json").read_text())
+        defaults = SACConfig()
+        assert (config["sac"]["learn_every"], config["sac"]["n_step"]) == (defaults.learn_every, defaults.n_step)
+        assert config["seed"] == seed and config["max_env_steps"] == 1_000_000
+        assert config["policies"] == ["ant=zoo:ant", "spider=zoo:spider"]
+        assert json.loads((run / "policy.json").read_text())["env_steps"] >= 1_000_000  # the final policy
+        candidate = next(c for c in rows if c.endswith(f"sac-seed-{seed}-policy"))
+        with open_table(HOLD / "test-2000" / candidate / "metrics.csv") as fh:
+            matches = list(csv.DictReader(fh))
+        assert len(matches) == 2000 and rows[candidate]["eval_seed"] == "10000"
+        mwr = float(summarize([m["outcome"] for m in matches], [float(m["steps"]) for m in matches])["mean_lwr"])
+        assert mwr == pytest.approx(float(rows[candidate]["test_mwr"]), abs=1e-12)
+        scores.append(mwr)
+        policy, _ = load_policy(run / "policy")  # safetensors and JSON: loads without pickle, acts
+        assert np.all(np.abs(policy(np.zeros((2, policy.obs_dim), np.float32))) <= 1.0)
+    assert np.mean(scores) >= 0.40 and min(scores) >= 0.30
+    page = " ".join((Path(__file__).parents[1] / "docs" / "bench" / "skill.md").read_text().split())
+    row = " | ".join(f"**{v:+.3f}**" for v in scores)
+    assert f"| **n = 5 at UTD 1/8** (`learn_every 8`, `n_step 5`) | {row.split(' | ')[0]}" in page
+    for value in scores:
+        assert f"{value:+.3f}" in page
+    assert f"(mean {np.mean(scores):+.3f})" in page

@@ -431,9 +431,10 @@ def _scratch_scores(pair_seed: int) -> dict[str, list[float]]:
 
 
 def _pair_section(page: str, pair_seed: int) -> str:
-    """docs/reproduce.md's section on one from-scratch pair seed: from its bold "Pair seed N" paragraph to the next."""
+    """docs/reproduce.md's section on one from-scratch pair seed: from its bold "Pair seed N" paragraph to the next
+    (or to the next heading)."""
     start = page.index(f"**Pair seed {pair_seed}:")
-    ends = [i for i in (page.find("**Pair seed", start + 1), page.find("**Runs in progress", start)) if i > 0]
+    ends = [i for i in (page.find("**Pair seed", start + 1), page.find("\n### ", start)) if i > 0]
     return page[start:min(ends)]
 
 
