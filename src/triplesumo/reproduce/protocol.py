@@ -386,8 +386,8 @@ class Protocol:
             base = dataclasses.replace(base, eval_every=20 if self.cfg.tiny else self.cfg.bug_eval_every,
                                        eval_epochs=2 if self.cfg.tiny else self.cfg.bug_eval_epochs,
                                        eval_seed=self.cfg.eval_seed)
-        schedule = {name: value for name, value in (("learn_every", self.cfg.bug_learn_every),
-                                                    ("n_step", self.cfg.bug_n_step)) if value}
+        schedule: dict[str, Any] = {name: value for name, value in (("learn_every", self.cfg.bug_learn_every),
+                                                                    ("n_step", self.cfg.bug_n_step)) if value}
         if self.cfg.tiny or not schedule:
             return base
         return dataclasses.replace(base, td3=dataclasses.replace(base.td3, **schedule),
