@@ -192,7 +192,8 @@ def test_share_team_trains_one_network_for_both_team_mates(tmp_path: Path) -> No
 
 def test_a_learner_out_of_an_elimination_match_stops_collecting_until_the_match_ends(tmp_path: Path) -> None:
     cfg = tiny(tmp_path, "ffa", scenario="ffa", learn=("ant=sac", "bug=ppo"), policies=("*=random",), epochs=5,
-               steps_per_epoch=50, sac=SACConfig(hidden=(8, 8), buffer_size=200, learning_starts=1000))
+               steps_per_epoch=50, sac=SACConfig(hidden=(8, 8), buffer_size=200, learning_starts=1000,
+                                                 n_step=1))  # one-step: each step's transitions reach the replay
     trainer = Trainer(cfg)
     ant, bug = trainer.learners
     assert isinstance(ant, OffPolicyLearner) and isinstance(bug, PPOLearner)
