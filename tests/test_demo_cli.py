@@ -109,9 +109,9 @@ def test_the_demo_trains_the_learner_asked_for_with_its_own_hyper_parameters(tmp
     the demo does not offer is refused by name."""
     from triplesumo.demo import DemoConfig, _train_config
 
-    cfg = _train_config(DemoConfig(algo="ddpg"), "bug", tmp_path, learn=("bug=ddpg",))
+    cfg = _train_config(DemoConfig(algo="ddpg"), "bug", tmp_path)
     assert cfg.learn == ("bug=ddpg",) and cfg.ddpg == DDPGConfig() and cfg.max_env_steps == 150_000
-    cfg = _train_config(DemoConfig(learning_starts=7), "bug", tmp_path, learn=("bug=sac",))
+    cfg = _train_config(DemoConfig(learning_starts=7), "bug", tmp_path)
     assert cfg.sac.learning_starts == 7 and cfg.sac.n_step == SACConfig().n_step and cfg.ddpg == DDPGConfig()
     with pytest.raises(ValueError, match="DemoConfig.algo must be one of sac, ddpg, got 'td3'"):
         DemoConfig(algo="td3")

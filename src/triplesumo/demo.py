@@ -122,11 +122,12 @@ class DemoConfig:
 
 
 def _train_config(cfg: DemoConfig, name: str, out: Path, **fields: Any) -> TrainConfig:
-    """The demo's training run: ``cfg``'s budget, matches and seed, the learner's own hyper-parameters but for
-    ``learning_starts`` when given."""
-    base = TrainConfig(name=name, out=str(out), epochs=10**9, max_env_steps=cfg.train_env_steps,
-                       max_minutes=cfg.max_minutes, steps_per_epoch=cfg.steps_per_epoch, seed=cfg.seed,
-                       n_envs=cfg.n_envs, progress=cfg.progress, checkpoint_every=250, **fields)
+    """The demo's training run of agent ``name`` with ``cfg.algo``: ``cfg``'s budget, matches and seed, the
+    learner's own hyper-parameters but for ``learning_starts`` when given."""
+    base = TrainConfig(name=name, out=str(out), learn=(f"{name}={cfg.algo}",), epochs=10**9,
+                       max_env_steps=cfg.train_env_steps, max_minutes=cfg.max_minutes,
+                       steps_per_epoch=cfg.steps_per_epoch, seed=cfg.seed, n_envs=cfg.n_envs,
+                       progress=cfg.progress, checkpoint_every=250, **fields)
     if cfg.learning_starts is None:
         return base
     learner = getattr(base, cfg.algo)
@@ -147,7 +148,7 @@ def run_demo(cfg: DemoConfig) -> dict[str, Path]:
               "(docs/CONTEST.md)")
     print(f"[1/3] training Bug with {DEMO_ALGOS[cfg.algo]} for {cfg.train_env_steps:,} env steps in the shipped "
           f"ongoing match -> {out / 'bug'}")
-    result = train(_train_config(cfg, "bug", out, learn=(f"bug={cfg.algo}",)))
+    result = train(_train_config(cfg, "bug", out))
     print(f"      {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates in "
           f"{result.seconds:.0f} s; training MWR {result.mwr:+.3f}")
     policy = str(result.run_dir / "policy")
@@ -183,8 +184,7 @@ def _run_scenario_demo(cfg: DemoConfig) -> dict[str, Path]:
     out = check_writable(Path(cfg.out), folder=True)
     print(f"[1/3] training {learner} with {DEMO_ALGOS[cfg.algo]} for {cfg.train_env_steps:,} env steps in "
           f"scenario {cfg.scenario!r} against random others -> {out / learner}")
-    result = train(_train_config(cfg, learner, out, learn=(f"{learner}={cfg.algo}",), policies=("*=random",),
-                                 scenario=cfg.scenario))
+    result = train(_train_config(cfg, learner, out, policies=("*=random",), scenario=cfg.scenario))
     print(f"      {result.epochs} epochs, {result.env_steps} env steps, {result.updates} updates in "
           f"{result.seconds:.0f} s; training MWR {result.mwr:+.3f}")
     policy = str(result.run_dir / "policy")

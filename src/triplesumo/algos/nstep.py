@@ -136,9 +136,6 @@ class TorchNStepReturns(NStepReturns):
             setattr(self, name, torch.as_tensor(getattr(self, name), device=self.device))
         self.slots = torch.arange(self.n, device=self.device)[:, None]
 
-    def __len__(self) -> int:
-        return int(self.count.sum())
-
     def _put(self, x: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
         return torch.as_tensor(x, dtype=dtype, device=self.device)
 
