@@ -37,6 +37,10 @@ import torch
 class NStepReturns:
     """The pending window of each of ``rows`` rows (at most n one-step transitions, oldest first) and what leaves it.
 
+    The windows are numpy arrays; :class:`TorchNStepReturns` runs the same :meth:`push` on tensors. The arithmetic is
+    written once against ``xp`` (``numpy`` or ``torch``, whose ``where``, indexing and comparisons it uses alike);
+    a subclass names its ``xp`` and how a step's inputs, float32 outputs and checkpoint arrays convert.
+
     Args:
         n: Steps per return, >= 1.
         gamma: The discount γ.
@@ -44,6 +48,9 @@ class NStepReturns:
         obs_dim: Size of one observation.
         act_dim: Size of one action.
     """
+
+    xp: Any = np
+    """The array module the windows live in."""
 
     def __init__(self, n: int, gamma: float, rows: int, obs_dim: int, act_dim: int) -> None:
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
@@ -59,42 +66,56 @@ class NStepReturns:
         """``(rows,)`` pending transitions per row."""
         self.powers = self.gamma ** np.arange(n + 1, dtype=np.float64)
         """γ^0 ... γ^n."""
+        self.slots = np.arange(n)[:, None]
+        """``(n, 1)`` the window's slot numbers."""
 
     def __len__(self) -> int:
         """Transitions pending, over all rows."""
         return int(self.count.sum())
 
-    def push(self, obs: np.ndarray, act: np.ndarray, rew: np.ndarray, next_obs: np.ndarray, terminated: np.ndarray,
-             truncated: np.ndarray, valid: np.ndarray, played: np.ndarray) -> dict[str, np.ndarray]:
+    def _take(self, x: Any, dtype: str | None = None) -> Any:
+        """One of :meth:`push`'s inputs as an array of ``xp`` (of the dtype named, if one is)."""
+        return np.asarray(x, dtype=dtype)
+
+    def _f32(self, x: Any) -> Any:
+        """An output field as float32."""
+        return x.astype(np.float32, copy=False)
+
+    def _host(self, x: Any) -> np.ndarray:
+        """A window as a numpy array of its own (for a checkpoint)."""
+        return np.array(x, copy=True)
+
+    def push(self, obs: Any, act: Any, rew: Any, next_obs: Any, terminated: Any, truncated: Any, valid: Any,
+             played: Any) -> dict[str, Any]:
         """Take one step of every row (``(rows, ...)`` arrays; ``played``: the row was in its match, ``valid``: its
         step is real, not a physics error) and return the transitions it completes, as replay fields (``obs``,
-        ``act``, ``rew``, ``next_obs``, ``done``, ``discount``; float32), row by row and oldest first in a row."""
-        played = np.asarray(played, dtype=bool)
-        valid = np.asarray(valid, dtype=bool)
-        terminated = np.asarray(terminated, dtype=bool)
-        rew = np.asarray(rew)
+        ``act``, ``rew``, ``next_obs``, ``done``, ``discount``; float32 arrays of ``xp``), row by row and oldest
+        first in a row."""
+        xp = self.xp
+        obs, act, next_obs, rew = self._take(obs), self._take(act), self._take(next_obs), self._take(rew, "float64")
+        played, valid = self._take(played, "bool"), self._take(valid, "bool")
+        terminated, truncated = self._take(terminated, "bool"), self._take(truncated, "bool")
         kept = played & valid
         broken = played & ~valid  # the pending ones bootstrap from s_t, the failed step's observation
-        rows = np.flatnonzero(kept)
+        rows = xp.where(kept)[0]
         c = self.count[rows]
-        pending = np.arange(self.n)[:, None] < c[None, :]  # (n, kept rows)
-        age = c[None, :] - np.arange(self.n)[:, None]  # steps since each pending transition began
-        self.ret[:, rows] += np.where(pending, self.powers[np.clip(age, 0, self.n)], 0.0) * rew[rows]
+        pending = self.slots < c[None, :]  # (n, kept rows)
+        age = c[None, :] - self.slots  # steps since each pending transition began
+        self.ret[:, rows] += xp.where(pending, self.powers[age.clip(0, self.n)], 0.0) * rew[rows]
         self.obs[c, rows], self.act[c, rows], self.ret[c, rows] = obs[rows], act[rows], rew[rows]
         self.count[rows] += 1
-        ended = kept & (terminated | np.asarray(truncated, dtype=bool))
+        ended = kept & (terminated | truncated)
         full = kept & ~ended & (self.count == self.n)
         flush = ended | broken  # every pending transition leaves
-        leave = (np.arange(self.n)[:, None] < np.where(flush, self.count, 0)[None, :])
+        leave = self.slots < xp.where(flush, self.count, 0)[None, :]
         leave[0] |= full  # a full window's oldest leaves
-        row, slot = np.nonzero(leave.T)  # row by row, oldest first
-        out = {"obs": self.obs[slot, row], "act": self.act[slot, row],
-               "rew": self.ret[slot, row].astype(np.float32),
-               "next_obs": np.where(broken[row, None], obs[row], next_obs[row]).astype(np.float32, copy=False),
-               "done": (terminated[row] & ended[row]).astype(np.float32),
-               "discount": self.powers[self.count[row] - slot].astype(np.float32)}
+        row, slot = xp.where(leave.T)  # row by row, oldest first
+        out = {"obs": self.obs[slot, row], "act": self.act[slot, row], "rew": self._f32(self.ret[slot, row]),
+               "next_obs": self._f32(xp.where(broken[row, None], obs[row], next_obs[row])),
+               "done": self._f32(terminated[row] & ended[row]),
+               "discount": self._f32(self.powers[self.count[row] - slot])}
         self.count[flush] = 0
-        if full.any():  # the window moves on by one
+        if bool(full.any()):  # the window moves on by one (the right side's mask index copies)
             for name in ("obs", "act", "ret"):
                 window = getattr(self, name)
                 window[:-1, full] = window[1:, full]
@@ -103,23 +124,22 @@ class NStepReturns:
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """The pending windows (numpy arrays, for a checkpoint's ``arrays.npz``)."""
-        return {"obs": self.obs.copy(), "act": self.act.copy(), "ret": self.ret.copy(), "count": self.count.copy()}
+        return {name: self._host(getattr(self, name)) for name in ("obs", "act", "ret", "count")}
 
     def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
         """Restore :meth:`state_dict`; ``ValueError`` naming the array whose shape does not fit."""
         for name in ("obs", "act", "ret", "count"):
             if name not in state:
                 raise KeyError(f"n-step state is missing {name!r}")
-            want = getattr(self, name).shape
+            want = tuple(getattr(self, name).shape)
             got = np.shape(state[name])
             if got != want:
                 raise ValueError(f"n-step state {name!r} has shape {got}, this learner's is {want} (n = {self.n})")
         count = np.asarray(state["count"], dtype=np.int64)
         if count.min(initial=0) < 0 or count.max(initial=0) >= self.n:
             raise ValueError(f"n-step state 'count' must lie in [0, {self.n - 1}], got {count.min()}..{count.max()}")
-        for name in ("obs", "act", "ret"):
-            getattr(self, name)[...] = state[name]
-        self.count[...] = count
+        for name, dtype in (("obs", "float32"), ("act", "float32"), ("ret", "float64"), ("count", "int64")):
+            getattr(self, name)[...] = self._take(state[name], dtype)
 
 
 class TorchNStepReturns(NStepReturns):
@@ -128,58 +148,20 @@ class TorchNStepReturns(NStepReturns):
     same ones in the same order as the numpy windows; :meth:`state_dict` gives (and :meth:`load_state_dict` takes)
     the numpy windows' arrays, so a checkpoint is the same on either."""
 
+    xp = torch
+
     def __init__(self, n: int, gamma: float, rows: int, obs_dim: int, act_dim: int,
                  device: str | torch.device = "cpu") -> None:
         super().__init__(n, gamma, rows, obs_dim, act_dim)
         self.device = torch.device(device)
-        for name in ("obs", "act", "ret", "count", "powers"):
+        for name in ("obs", "act", "ret", "count", "powers", "slots"):
             setattr(self, name, torch.as_tensor(getattr(self, name), device=self.device))
-        self.slots = torch.arange(self.n, device=self.device)[:, None]
 
-    def _put(self, x: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
-        return torch.as_tensor(x, dtype=dtype, device=self.device)
+    def _take(self, x: Any, dtype: str | None = None) -> torch.Tensor:
+        return torch.as_tensor(x, dtype=None if dtype is None else getattr(torch, dtype), device=self.device)
 
-    def push(self, obs: Any, act: Any, rew: Any, next_obs: Any, terminated: Any,  # type: ignore[override]
-             truncated: Any, valid: Any, played: Any) -> dict[str, torch.Tensor]:
-        """As :meth:`NStepReturns.push`, on the device."""
-        obs, act, next_obs = self._put(obs), self._put(act), self._put(next_obs)
-        rew = self._put(rew, torch.float64)
-        played, valid = self._put(played, torch.bool), self._put(valid, torch.bool)
-        terminated, truncated = self._put(terminated, torch.bool), self._put(truncated, torch.bool)
-        kept = played & valid
-        broken = played & ~valid
-        rows = torch.nonzero(kept).flatten()
-        c = self.count[rows]
-        pending = self.slots < c[None, :]
-        age = c[None, :] - self.slots
-        self.ret[:, rows] += torch.where(pending, self.powers[age.clamp(0, self.n)], 0.0) * rew[rows]
-        self.obs[c, rows], self.act[c, rows], self.ret[c, rows] = obs[rows], act[rows], rew[rows]
-        self.count[rows] += 1
-        ended = kept & (terminated | truncated)
-        full = kept & ~ended & (self.count == self.n)
-        flush = ended | broken
-        leave = self.slots < torch.where(flush, torch.as_tensor(self.count), 0)[None, :]
-        leave[0] |= full
-        row, slot = torch.nonzero(leave.T, as_tuple=True)  # row-major: row by row, oldest first
-        out = {"obs": self.obs[slot, row], "act": self.act[slot, row], "rew": self.ret[slot, row].float(),
-               "next_obs": torch.where(broken[row, None], obs[row], next_obs[row]).float(),
-               "done": (terminated[row] & ended[row]).float(),
-               "discount": self.powers[self.count[row] - slot].float()}
-        self.count[flush] = 0
-        if bool(full.any()):
-            for name in ("obs", "act", "ret"):
-                window = getattr(self, name)
-                window[:-1, full] = window[1:, full].clone()
-            self.count[full] = self.n - 1
-        return out
+    def _f32(self, x: torch.Tensor) -> torch.Tensor:
+        return x.float()
 
-    def state_dict(self) -> dict[str, np.ndarray]:
-        """As :meth:`NStepReturns.state_dict`: numpy arrays (copied to the host)."""
-        return {name: getattr(self, name).cpu().numpy().copy() for name in ("obs", "act", "ret", "count")}
-
-    def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
-        """As :meth:`NStepReturns.load_state_dict`, onto the device."""
-        host = NStepReturns(self.n, self.gamma, self.count.shape[0], self.obs.shape[2], self.act.shape[2])
-        host.load_state_dict(state)  # (its checks)
-        for name in ("obs", "act", "ret", "count"):
-            getattr(self, name).copy_(torch.as_tensor(getattr(host, name)))
+    def _host(self, x: torch.Tensor) -> np.ndarray:
+        return x.cpu().numpy().copy()
