@@ -150,6 +150,7 @@ def test_a_reached_target_stops_training_at_the_first_evaluation_past_it(
 
 def test_the_stop_rule_on_a_curve() -> None:
     cfg = SkillConfig(target=0.2, eval_every=10, max_env_steps=30)
+    assert cfg.algos == ("sac",) and cfg.seeds == (0, 1, 2)  # the default learner, 3 seeds
 
     def curve(*mwrs: float) -> list[dict[str, Any]]:
         return [{"env_steps": 10 * k + 3, "budget": 10 * k, "test_mwr": m, "policy_train_seconds": float(k),

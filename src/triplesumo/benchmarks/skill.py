@@ -98,8 +98,9 @@ def _quick_train(t: TrainConfig) -> TrainConfig:
 class SkillConfig:
     """Time to skill: train Bug per algorithm and seed, evaluate every eval_every env steps, stop at the target."""
 
-    algos: tuple[str, ...] = ALGOS
-    """Algorithms Bug learns with (ddpg td3 sac ppo, or one comma-separated item: ddpg,td3)."""
+    algos: tuple[str, ...] = ("sac",)
+    """Algorithms Bug learns with (any of ddpg td3 sac ppo, or one comma-separated item: ddpg,td3); the default is
+    ``--learn bug=sac``'s learner, the one the demo and reproduce train."""
     seeds: tuple[int, ...] = (0, 1, 2)
     """Training seeds: each its own run of each algorithm (OUT/ALGO/seedS, train --seed S); the report gives the
     median and the spread (min-max) over them."""
