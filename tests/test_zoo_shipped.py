@@ -405,17 +405,22 @@ def test_an_alias_of_an_alias_or_with_weights_of_its_own_is_refused(
         zoo.load("moth")
 
 
-SCRATCH = ROOT / "docs" / "runs" / "scratch-v2"
-SCRATCH_PAIRS = {1: {"sac": 5, "ddpg": 3, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}}
-"""The from-scratch pair seeds that made a contest, and the runs of each algorithm and baseline on their test."""
+SCRATCH: dict[str, dict[int, dict[str, int]]] = {
+    "scratch-v2": {1: {"sac": 5, "ddpg": 3, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}},
+    "scratch-v3": {}}
+"""Per protocol version (its folder under docs/runs): the from-scratch pair seeds that made a contest, and the runs
+of each algorithm and baseline on their test. ``scratch-v3`` reruns the Bugs under protocol change 1."""
+SECTION = {"scratch-v2": "**Pair seed {}:", "scratch-v3": "**Protocol change 1, pair seed {}:"}
+"""How docs/reproduce.md opens a version's section on one pair seed."""
+SCRATCH_PAIRS = [(version, seed) for version, pairs in SCRATCH.items() for seed in sorted(pairs)]
 
 
-def _scratch_scores(pair_seed: int) -> dict[str, list[float]]:
+def _scratch_scores(pair_seed: int, version: str = "scratch-v2") -> dict[str, list[float]]:
     """Each Bug's and baseline's test MWR on a from-scratch pair, recomputed from its 2,000 per-match rows (and
     held to its per_seed.csv row), by algorithm (SAC, DDPG) or baseline, in training-seed order."""
     from triplesumo.evaluation.metrics import summarize
 
-    folder = SCRATCH / f"seed-{pair_seed}"
+    folder = ROOT / "docs" / "runs" / version / f"seed-{pair_seed}"
     with open(folder / "evaluation" / "per_seed.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     score: dict[str, list[float]] = {}
@@ -426,15 +431,16 @@ def _scratch_scores(pair_seed: int) -> dict[str, list[float]]:
         mwr = float(summarize([m["outcome"] for m in matches], [float(m["steps"]) for m in matches])["mean_lwr"])
         assert mwr == pytest.approx(float(row["test_mwr"]), abs=1e-12)
         score.setdefault(row["algo"] or row["group"], []).append(mwr)
-    assert {k: len(v) for k, v in score.items()} == SCRATCH_PAIRS[pair_seed]
+    assert {k: len(v) for k, v in score.items()} == SCRATCH[version][pair_seed]
     return score
 
 
-def _pair_section(page: str, pair_seed: int) -> str:
-    """docs/reproduce.md's section on one from-scratch pair seed: from its bold "Pair seed N" paragraph to the next
-    (or to the next heading)."""
-    start = page.index(f"**Pair seed {pair_seed}:")
-    ends = [i for i in (page.find("**Pair seed", start + 1), page.find("\n### ", start)) if i > 0]
+def _pair_section(page: str, pair_seed: int, version: str = "scratch-v2") -> str:
+    """docs/reproduce.md's section on one from-scratch pair seed of one protocol version: from its bold paragraph
+    to the next of that version (or to the next heading)."""
+    opening = SECTION[version]
+    start = page.index(opening.format(pair_seed))
+    ends = [i for i in (page.find(opening.split("{}")[0], start + 1), page.find("\n### ", start)) if i > 0]
     return page[start:min(ends)]
 
 
@@ -442,18 +448,20 @@ def _signed(values: list[float]) -> str:
     return ", ".join(f"{v:+.3f}" for v in values)
 
 
-@pytest.mark.parametrize("pair_seed", sorted(SCRATCH_PAIRS))
-def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_matches(pair_seed: int) -> None:
+@pytest.mark.parametrize(("version", "pair_seed"), SCRATCH_PAIRS)
+def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_matches(version: str,
+                                                                                      pair_seed: int) -> None:
     """A from-scratch pair's 2,000-start test: every Bug's and baseline's MWR from its per-match rows, the IQM and
     the rliable interval of the SAC runs from those, and the pair's table on docs/reproduce.md."""
     from rliable import library as rly
     from rliable import metrics as rly_metrics
     from scipy.stats import trim_mean
 
-    score = _scratch_scores(pair_seed)
+    score = _scratch_scores(pair_seed, version)
     sac = np.asarray(score["sac"])
     iqm = trim_mean(sac, 0.25)
-    compare = json.loads((SCRATCH / f"seed-{pair_seed}" / "compare" / "compare.json").read_text())
+    compare = json.loads((ROOT / "docs" / "runs" / version / f"seed-{pair_seed}" / "compare" / "compare.json")
+                         .read_text())
     group = next(g for g in compare["groups"] if g["group"] == "sac")
     assert group["iqm"] == pytest.approx(iqm, abs=1e-12)
     estimates, intervals = rly.get_interval_estimates({"sac": sac[:, None]}, lambda x: np.array(
@@ -461,7 +469,7 @@ def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_mat
     assert estimates["sac"][0] == pytest.approx(iqm)
     assert abs(intervals["sac"][0, 0] - group["lo"]) < 0.05 and abs(intervals["sac"][1, 0] - group["hi"]) < 0.05
 
-    section = _pair_section((ROOT / "docs" / "reproduce.md").read_text(), pair_seed)
+    section = _pair_section((ROOT / "docs" / "reproduce.md").read_text(), pair_seed, version)
     sac_line = next(x for x in section.splitlines() if x.strip().startswith("| SAC, seeds 0-4 |"))
     assert _signed(score["sac"]) in sac_line
     assert f"IQM {iqm:+.3f} [{group['lo']:+.3f}, {group['hi']:+.3f}]" in sac_line
@@ -480,13 +488,14 @@ def test_the_from_scratch_headline_is_recomputed_from_every_pairs_committed_matc
     from rliable import library as rly
     from rliable import metrics as rly_metrics
 
-    scores = {seed: _scratch_scores(seed) for seed in sorted(SCRATCH_PAIRS)}
-    matrix = np.array([scores[seed]["sac"] for seed in sorted(SCRATCH_PAIRS)]).T
-    assert matrix.shape == (5, len(SCRATCH_PAIRS)) and matrix.size >= 10
+    pairs = sorted(SCRATCH["scratch-v2"])
+    scores = {seed: _scratch_scores(seed) for seed in pairs}
+    matrix = np.array([scores[seed]["sac"] for seed in pairs]).T
+    assert matrix.shape == (5, len(pairs)) and matrix.size >= 10
     iqm = float(rly_metrics.aggregate_iqm(matrix))
-    headline = json.loads((SCRATCH / "headline" / "compare.json").read_text())
+    headline = json.loads((ROOT / "docs" / "runs" / "scratch-v2" / "headline" / "compare.json").read_text())
     assert headline["tasks"] == "folder" and headline["by"] == "algo"
-    assert [Path(f).parent.name for f in headline["config"]["folders"]] == [f"seed-{s}" for s in sorted(SCRATCH_PAIRS)]
+    assert [Path(f).parent.name for f in headline["config"]["folders"]] == [f"seed-{s}" for s in pairs]
     sac = next(g for g in headline["groups"] if g["group"] == "sac")
     assert sac["iqm"] == pytest.approx(iqm, abs=1e-12) and sac["n_seeds"] == matrix.size
     np.random.seed(0)  # noqa: NPY002 (rliable's bootstrap draws from numpy's global generator)
@@ -494,12 +503,12 @@ def test_the_from_scratch_headline_is_recomputed_from_every_pairs_committed_matc
                                        reps=5000)
     assert abs(ci["sac"][0, 0] - sac["lo"]) < 0.03 and abs(ci["sac"][1, 0] - sac["hi"]) < 0.03
     passive = next(g for g in headline["groups"] if g["group"] == "passive")
-    assert passive["scores"] == pytest.approx([scores[s]["passive"][0] for s in sorted(SCRATCH_PAIRS)])
+    assert passive["scores"] == pytest.approx([scores[s]["passive"][0] for s in pairs])
     share = float(np.mean(matrix >= 0.15))
     figures = f"IQM {iqm:+.3f} [{sac['lo']:+.3f}, {sac['hi']:+.3f}]"
     for page in (ROOT / "docs" / "reproduce.md", ROOT / "README.md"):
         text = " ".join(page.read_text().split())
         assert f"{figures} over the {matrix.size} (pair, seed) runs" in text, page
         assert f"{round(100 * share)}% of runs at +0.15 or more" in text, page
-        for seed in sorted(SCRATCH_PAIRS):
+        for seed in pairs:
             assert f"pair {seed}: passive Bug {scores[seed]['passive'][0]:+.3f}" in text, page
