@@ -407,7 +407,7 @@ def test_an_alias_of_an_alias_or_with_weights_of_its_own_is_refused(
 
 SCRATCH: dict[str, dict[int, dict[str, int]]] = {
     "scratch-v2": {1: {"sac": 5, "ddpg": 3, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}},
-    "scratch-v3": {}}
+    "scratch-v3": {3: {"sac": 5, "passive": 1, "random": 1}}}
 """Per protocol version (its folder under docs/runs): the from-scratch pair seeds that made a contest, and the runs
 of each algorithm and baseline on their test. ``scratch-v3`` reruns the Bugs under protocol change 1."""
 SECTION = {"scratch-v2": "**Pair seed {}:", "scratch-v3": "**Protocol change 1, pair seed {}:"}
