@@ -405,6 +405,7 @@ def test_an_alias_of_an_alias_or_with_weights_of_its_own_is_refused(
         zoo.load("moth")
 
 
+RUNS = ROOT / "docs" / "runs"
 SCRATCH: dict[str, dict[int, dict[str, int]]] = {
     "scratch-v2": {1: {"sac": 5, "ddpg": 3, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}},
     "scratch-v3": {3: {"sac": 5, "passive": 1, "random": 1}}}
@@ -415,12 +416,12 @@ SECTION = {"scratch-v2": "**Pair seed {}:", "scratch-v3": "**Protocol change 1, 
 SCRATCH_PAIRS = [(version, seed) for version, pairs in SCRATCH.items() for seed in sorted(pairs)]
 
 
-def _scratch_scores(pair_seed: int, version: str = "scratch-v2") -> dict[str, list[float]]:
+def _scratch_scores(pair_seed: int, version: str) -> dict[str, list[float]]:
     """Each Bug's and baseline's test MWR on a from-scratch pair, recomputed from its 2,000 per-match rows (and
     held to its per_seed.csv row), by algorithm (SAC, DDPG) or baseline, in training-seed order."""
     from triplesumo.evaluation.metrics import summarize
 
-    folder = ROOT / "docs" / "runs" / version / f"seed-{pair_seed}"
+    folder = RUNS / version / f"seed-{pair_seed}"
     with open(folder / "evaluation" / "per_seed.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     score: dict[str, list[float]] = {}
@@ -435,7 +436,7 @@ def _scratch_scores(pair_seed: int, version: str = "scratch-v2") -> dict[str, li
     return score
 
 
-def _pair_section(page: str, pair_seed: int, version: str = "scratch-v2") -> str:
+def _pair_section(page: str, pair_seed: int, version: str) -> str:
     """docs/reproduce.md's section on one from-scratch pair seed of one protocol version: from its bold paragraph
     to the next of that version (or to the next heading)."""
     opening = SECTION[version]
@@ -460,8 +461,7 @@ def test_a_from_scratch_reproductions_table_is_recomputed_from_its_committed_mat
     score = _scratch_scores(pair_seed, version)
     sac = np.asarray(score["sac"])
     iqm = trim_mean(sac, 0.25)
-    compare = json.loads((ROOT / "docs" / "runs" / version / f"seed-{pair_seed}" / "compare" / "compare.json")
-                         .read_text())
+    compare = json.loads((RUNS / version / f"seed-{pair_seed}" / "compare" / "compare.json").read_text())
     group = next(g for g in compare["groups"] if g["group"] == "sac")
     assert group["iqm"] == pytest.approx(iqm, abs=1e-12)
     estimates, intervals = rly.get_interval_estimates({"sac": sac[:, None]}, lambda x: np.array(
@@ -489,11 +489,11 @@ def test_the_from_scratch_headline_is_recomputed_from_every_pairs_committed_matc
     from rliable import metrics as rly_metrics
 
     pairs = sorted(SCRATCH["scratch-v2"])
-    scores = {seed: _scratch_scores(seed) for seed in pairs}
+    scores = {seed: _scratch_scores(seed, "scratch-v2") for seed in pairs}
     matrix = np.array([scores[seed]["sac"] for seed in pairs]).T
     assert matrix.shape == (5, len(pairs)) and matrix.size >= 10
     iqm = float(rly_metrics.aggregate_iqm(matrix))
-    headline = json.loads((ROOT / "docs" / "runs" / "scratch-v2" / "headline" / "compare.json").read_text())
+    headline = json.loads((RUNS / "scratch-v2" / "headline" / "compare.json").read_text())
     assert headline["tasks"] == "folder" and headline["by"] == "algo"
     assert [Path(f).parent.name for f in headline["config"]["folders"]] == [f"seed-{s}" for s in pairs]
     sac = next(g for g in headline["groups"] if g["group"] == "sac")

@@ -138,8 +138,8 @@ class NStepReturns:
         count = np.asarray(state["count"], dtype=np.int64)
         if count.min(initial=0) < 0 or count.max(initial=0) >= self.n:
             raise ValueError(f"n-step state 'count' must lie in [0, {self.n - 1}], got {count.min()}..{count.max()}")
-        for name, dtype in (("obs", "float32"), ("act", "float32"), ("ret", "float64"), ("count", "int64")):
-            getattr(self, name)[...] = self._take(state[name], dtype)
+        for name in ("obs", "act", "ret", "count"):
+            getattr(self, name)[...] = self._take(state[name])  # (cast to the window's own dtype)
 
 
 class TorchNStepReturns(NStepReturns):
