@@ -1,6 +1,8 @@
 """SAC's learner options for time to skill (issue 53): each one's update, and resume equals uninterrupted.
 
 ``critic_norm="layer"``: both critics and their targets put a LayerNorm after each hidden linear layer.
+``critic_norm="batch"``: CrossQ's critics, batch norm before each linear layer and no targets; the TD target is read
+from one training-mode pass of ``[(s, a); (s', a')]``.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 
 from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t  # the same random batches
-from triplesumo.algos.sac import SAC, LayerNormCritic, SACConfig
+from triplesumo.algos.sac import BATCH_NORM_MOMENTUM, SAC, BatchNormCritic, LayerNormCritic, SACConfig
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import train
 
@@ -71,16 +73,73 @@ def test_a_layer_norm_update_steps_the_norms_and_their_targets_follow() -> None:
     assert {"critic.net.1.weight", "critic.net.1.bias", "critic2_target.net.4.weight"} <= set(state)
 
 
+def _batch_norms(module: nn.Module) -> list[nn.BatchNorm1d]:
+    return [m for m in module.modules() if isinstance(m, nn.BatchNorm1d)]
+
+
+BN = dataclasses.replace(CFG, critic_norm="batch")
+
+
+def test_batch_norm_critics_normalise_before_each_linear_layer_and_have_no_targets() -> None:
+    agent = SAC(OBS_DIM, ACT_DIM, BN, seed=0)
+    for critic in agent.critics:
+        assert isinstance(critic, BatchNormCritic) and not critic.training  # evaluation mode outside the critic step
+        assert [bn.num_features for bn in _batch_norms(critic)] == [OBS_DIM + ACT_DIM, 32, 16]
+    assert not hasattr(agent, "critic_target") and agent.critic_targets == [] and agent.target_pairs == ()
+    assert not any(key.startswith("critic_target") for key in agent.state_dict())
+    assert {"critic.net.0.running_mean", "critic2.net.6.running_var"} <= set(agent.state_dict())
+    assert not _batch_norms(agent.actor)
+    plain = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm="none"), seed=0)
+    assert torch.equal(plain.actor.net[0].weight, agent.actor.net[0].weight)  # the same actor from the same seed
+    assert plain.target_pairs  # the class's targets are untouched
+
+
+def test_a_batch_norm_critic_step_regresses_both_halves_of_one_joint_pass() -> None:
+    """The critic loss of an update is the one computed by hand from a joint training-mode pass of
+    ``[(s, a); (s', a')]`` with the pre-update weights and generator; the input layer's running mean moves toward
+    the mean of both halves (not of ``(s, a)`` alone); the critics end in evaluation mode."""
+    agent = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(BN, normalize_obs=False), seed=0)
+    _perturb(agent.critic, 1)
+    _perturb(agent.critic2, 2)
+    twin = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(BN, normalize_obs=False), seed=5)
+    twin.load_state_dict(agent.state_dict())
+    assert twin.generator is not None and agent.generator is not None
+    twin.generator.set_state(agent.generator.get_state())
+    batch = _batch(3)
+    b = {k: _t(v) for k, v in batch.items()}
+    with torch.no_grad():
+        next_action, next_log_prob = twin.actor.sample(b["next_obs"], twin.generator)
+        obs, act = torch.cat([b["obs"], b["next_obs"]]), torch.cat([b["act"], next_action])
+        joint = []
+        for critic in twin.critics:
+            critic.train()
+            joint.append(critic(obs, act))
+        q = [j[:BATCH] for j in joint]
+        y = b["rew"] + 0.99 * (1 - b["done"]) * (torch.minimum(joint[0][BATCH:], joint[1][BATCH:])
+                                                  - 0.2 * next_log_prob)
+        expected = sum(torch.mean((qi - y) ** 2) for qi in q)
+        apart = twin.critic.train()(b["obs"], b["act"])  # (s, a) alone: other batch statistics, other Q
+    assert not torch.allclose(apart, q[0], atol=1e-4)
+    stats = agent.update(batch)
+    assert stats["critic_loss"] == pytest.approx(float(expected), rel=1e-5)
+    assert stats["q_mean"] == pytest.approx(float(q[0].mean()), rel=1e-5, abs=1e-7)
+    first = _batch_norms(agent.critic)[0]
+    torch.testing.assert_close(first.running_mean[:OBS_DIM], BATCH_NORM_MOMENTUM * obs[:, :OBS_DIM].mean(0))
+    assert int(first.num_batches_tracked) == 1
+    assert not agent.critic.training and not agent.critic2.training
+
+
 def test_critic_norm_is_validated() -> None:
-    with pytest.raises(ValueError, match="SACConfig.critic_norm must be one of none, layer"):
-        SACConfig(critic_norm="batch")
+    with pytest.raises(ValueError, match="SACConfig.critic_norm must be one of none, layer, batch"):
+        SACConfig(critic_norm="group")
     assert SACConfig().critic_norm == "none"  # the default is unchanged
     assert SACConfig(**json.loads(json.dumps(dataclasses.asdict(CFG)))) == CFG
 
 
-def test_a_layer_norm_learner_resumes_bit_for_bit(tmp_path: Path) -> None:
+@pytest.mark.parametrize("norm", ["layer", "batch"])
+def test_a_normalised_critic_learner_resumes_bit_for_bit(tmp_path: Path, norm: str) -> None:
     def make(seed: int = 0) -> SAC:
-        return SAC(OBS_DIM, ACT_DIM, CFG, seed=seed)
+        return SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm=norm), seed=seed)
 
     def steps(agent: SAC, rounds: range) -> list[dict[str, float]]:
         out = []
@@ -101,9 +160,13 @@ def test_a_layer_norm_learner_resumes_bit_for_bit(tmp_path: Path) -> None:
     assert steps(uninterrupted, range(3, 6)) == steps(resumed, range(3, 6))
     for key, value in uninterrupted.state_dict().items():
         assert torch.equal(resumed.state_dict()[key], value), key
-    # a plain critic's checkpoint lacks the norms
-    with pytest.raises(KeyError, match=r"missing key 'critic\.net\.1\.bias' \(8 missing\)"):
-        make().load_state_dict({k: v for k, v in uninterrupted.state_dict().items() if ".net.1." not in k})
+    if norm == "layer":  # a plain critic's checkpoint lacks the norms
+        with pytest.raises(KeyError, match=r"missing key 'critic\.net\.1\.bias' \(8 missing\)"):
+            make().load_state_dict({k: v for k, v in uninterrupted.state_dict().items() if ".net.1." not in k})
+    else:  # the running statistics are checkpointed and moved (they are part of what resumes)
+        assert int(uninterrupted.state_dict()["critic.net.0.num_batches_tracked"]) == 6
+        with pytest.raises(KeyError, match=r"missing key 'critic\.net\.0\.running_var'"):
+            make().load_state_dict({k: v for k, v in uninterrupted.state_dict().items() if "running_var" not in k})
 
 
 E = 2
@@ -130,10 +193,11 @@ def resumed_equals_uninterrupted(out: Path, sac: SACConfig) -> Path:
     return killed.run_dir
 
 
-def test_a_layer_norm_training_run_resumed_equals_the_uninterrupted_one(tmp_path: Path) -> None:
-    run_dir = resumed_equals_uninterrupted(tmp_path, TINY)
+@pytest.mark.parametrize("norm", ["layer", "batch"])
+def test_a_normalised_critic_training_run_resumed_equals_the_uninterrupted_one(tmp_path: Path, norm: str) -> None:
+    run_dir = resumed_equals_uninterrupted(tmp_path, dataclasses.replace(TINY, critic_norm=norm))
     saved = json.loads((run_dir / "config.json").read_text())
-    assert saved["sac"]["critic_norm"] == "layer"
+    assert saved["sac"]["critic_norm"] == norm
 
 
 def test_a_config_json_written_before_critic_norm_reads_back_with_the_norm_it_trained_with() -> None:

@@ -7,6 +7,11 @@ states its own three pieces::
     actor        L_π = mean (α log π(a|s) - min_i Q_i(s, a)),  a = tanh(μ + σ ε) (reparameterised)
     temperature  L_α = -mean log α · (log π(a|s) + H̄),   H̄ = -act_dim by default
 
+With ``critic_norm="batch"`` the critics are CrossQ's (Bhatt et al., ICLR 2024): batch norm and no target networks.
+The target's ``Q'`` is then the online critics' own, read from one forward pass of the stacked batch
+``[(s, a); (s', a')]`` in training mode (so the batch statistics are those of both halves' mixture), its ``(s', a')``
+half held fixed (no gradient).
+
 The policy is a squashed Gaussian (:class:`~triplesumo.agents.networks.GaussianActor`,
 state-dependent log σ), with the tanh change of variables in ``log π``. There is no target
 actor. The temperature falls when the policy's entropy is above the target and rises when it
@@ -17,12 +22,14 @@ schedule: one update per 8 transitions with 5-step returns, the recipe measured 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from triplesumo.agents.networks import FINAL_INIT, Critic, FloatHead, GaussianActor
@@ -31,7 +38,7 @@ from triplesumo.algos.config import OffPolicyConfig, flag, learning_rate, real, 
 from triplesumo.algos.noise import ActionNoise
 from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
 
-CRITIC_NORMS = ("none", "layer")
+CRITIC_NORMS = ("none", "layer", "batch")
 """The values of :attr:`SACConfig.critic_norm`."""
 
 
@@ -71,9 +78,11 @@ class SACConfig(OffPolicyConfig):
     """Target entropy H̄ of the learned temperature; None means -act_dim (SAC v2)."""
 
     critic_norm: str = "none"
-    """Normalisation inside both critics and their targets: none, or layer (LayerNorm after each hidden linear
-    layer, before its activation, as RLPD (Ball et al., 2023) and BRO (Nauman et al., 2024) do to keep Q bounded
-    at high update-to-data ratios). It makes the critics' tensors, so a fork keeps it."""
+    """Normalisation inside both critics: none; layer (LayerNorm after each hidden linear layer, before its
+    activation, in the critics and their targets, as RLPD (Ball et al., 2023) and BRO (Nauman et al., 2024) do to
+    keep Q bounded at high update-to-data ratios); or batch (CrossQ's critics: batch norm before each linear layer,
+    and no target networks, so ``tau`` is unused: :class:`BatchNormCritic`). It makes the critics' tensors, so a
+    fork keeps it."""
 
     TUNABLE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.TUNABLE, "alpha_lr", "target_entropy")
 
@@ -107,6 +116,40 @@ class LayerNormCritic(Critic):
         self.net = nn.Sequential(*layers, last)
 
 
+BATCH_NORM_MOMENTUM = 0.01
+"""Weight of a batch's statistics in a batch-norm critic's running ones (CrossQ's decay 0.99)."""
+BATCH_NORM_EPS = 1e-3
+"""ε of a batch-norm critic's variance (CrossQ's)."""
+
+
+class BatchNormCritic(Critic):
+    """:class:`Critic` with CrossQ's batch norm before each linear layer: ``BatchNorm -> Linear -> LeakyReLU`` per
+    hidden layer, then ``BatchNorm ->`` the small-init linear output (sb3-contrib's CrossQ layout, with torch's
+    ``BatchNorm1d`` where CrossQ uses batch renormalisation).
+
+    In training mode (the critic step's joint pass) each layer normalises by the batch's own statistics and moves
+    its running ones; in evaluation mode (the actor step, the default outside the critic step) by the running ones.
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256)) -> None:
+        nn.Module.__init__(self)
+        self.obs_dim, self.act_dim, self.hidden = obs_dim, act_dim, tuple(hidden)
+        layers: list[nn.Module] = []
+        width_in = obs_dim + act_dim
+        for width in self.hidden:
+            layers += [self._norm(width_in), nn.Linear(width_in, width), nn.LeakyReLU()]
+            width_in = width
+        last = FloatHead(width_in, 1)
+        nn.init.uniform_(last.weight, -FINAL_INIT, FINAL_INIT)
+        nn.init.uniform_(last.bias, -FINAL_INIT, FINAL_INIT)
+        self.net = nn.Sequential(*layers, self._norm(width_in), last)
+        self.eval()
+
+    @staticmethod
+    def _norm(width: int) -> nn.BatchNorm1d:
+        return nn.BatchNorm1d(width, eps=BATCH_NORM_EPS, momentum=BATCH_NORM_MOMENTUM)
+
+
 class Temperature(nn.Module):
     """The entropy temperature α, learned as ``log α`` (so α stays positive)."""
 
@@ -128,21 +171,27 @@ class SAC(OffPolicyAlgorithm):
     config: SACConfig
     actor: GaussianActor
     acting: GaussianActor
-    modules = ("actor", "critic", "critic2", "critic_target", "critic2_target", "temperature")
-    target_pairs = (("critic", "critic_target"), ("critic2", "critic2_target"))
+    modules: tuple[str, ...] = ("actor", "critic", "critic2", "critic_target", "critic2_target", "temperature")
+    target_pairs: tuple[tuple[str, str], ...] = (("critic", "critic_target"), ("critic2", "critic2_target"))
     uses_generator = True
 
     def build(self) -> None:
-        """Squashed Gaussian actor, twin critics with targets (no target actor), temperature."""
+        """Squashed Gaussian actor, twin critics with targets (no target actor; with batch-norm critics no targets
+        at all), temperature."""
         hidden = self.config.hidden
         self.actor = GaussianActor(self.obs_dim, self.act_dim, hidden, state_dependent_std=True)
-        critic = LayerNormCritic if self.config.critic_norm == "layer" else Critic
+        critic = {"none": Critic, "layer": LayerNormCritic, "batch": BatchNormCritic}[self.config.critic_norm]
         self.critic = critic(self.obs_dim, self.act_dim, hidden)
         self.critic2 = critic(self.obs_dim, self.act_dim, hidden)
-        self.critic_target = self.target_copy(self.critic)
-        self.critic2_target = self.target_copy(self.critic2)
         self.critics = [self.critic, self.critic2]
-        self.critic_targets = [self.critic_target, self.critic2_target]
+        if self.config.critic_norm == "batch":
+            self.modules = ("actor", "critic", "critic2", "temperature")
+            self.target_pairs = ()
+            self.critic_targets = []
+        else:
+            self.critic_target = self.target_copy(self.critic)
+            self.critic2_target = self.target_copy(self.critic2)
+            self.critic_targets = [self.critic_target, self.critic2_target]
         self.temperature = Temperature(self.config.alpha)
         self.target_entropy = (float(-self.act_dim) if self.config.target_entropy is None
                                else float(self.config.target_entropy))
@@ -172,6 +221,31 @@ class SAC(OffPolicyAlgorithm):
             soft_value = next_q - self.temperature() * next_log_prob
             return b["rew"] + self.bootstrap(b) * soft_value
 
+    def regress_critics_jointly(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
+        """CrossQ's critic step (batch-norm critics, no targets): one Adam step on ``Σ_i mean (Q_i(s, a) - y)²`` with
+        ``y = r + γ (1 - done) (min_i Q_i(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')``, where each critic reads
+        ``[(s, a); (s', a')]`` in one pass in training mode and its ``(s', a')`` half enters ``y`` detached. Returns
+        ``critic_loss`` and ``q_mean`` (mean Q_1(s, a)), both before the step; the critics are back in evaluation
+        mode after it."""
+        with torch.no_grad():
+            next_action, next_log_prob = self.actor.sample(b["next_obs"], self.generator)
+        obs, act = torch.cat([b["obs"], b["next_obs"]]), torch.cat([b["act"], next_action])
+        n = b["obs"].shape[0]
+        for critic in self.critics:
+            critic.train()
+        try:
+            qs, next_qs = zip(*(critic(obs, act).split(n) for critic in self.critics), strict=True)
+        finally:
+            for critic in self.critics:
+                critic.eval()
+        with torch.no_grad():
+            next_q = functools.reduce(torch.minimum, next_qs)
+            y = b["rew"] + self.bootstrap(b) * (next_q - self.temperature() * next_log_prob)
+        losses = [F.mse_loss(q, y) for q in qs]
+        loss = sum(losses[1:], losses[0])
+        descend(self.critic_optimizer, loss)
+        return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
+
     def update_actor(self, batch: Batch) -> tuple[dict[str, float], torch.Tensor]:
         """One Adam step on ``mean (α log π(a|s) - min_i Q_i(s, a))`` (critics and α held fixed).
 
@@ -194,17 +268,21 @@ class SAC(OffPolicyAlgorithm):
         return {"alpha_loss": loss.item()}
 
     def train_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
-        """Critic step, actor step, temperature step (if learned), soft update of the critics.
+        """Critic step, actor step, temperature step (if learned), soft update of the critics (with targets).
 
         Returns ``critic_loss``, ``q_mean``, ``actor_loss``, ``entropy``, ``alpha`` (after
         the step) and, when α is learned, ``alpha_loss``.
         """
-        stats = self.regress_critics(self.critics, self.critic_optimizer, b, self.td_target(b))
+        if self.target_pairs:
+            stats = self.regress_critics(self.critics, self.critic_optimizer, b, self.td_target(b))
+        else:
+            stats = self.regress_critics_jointly(b)
         actor_stats, log_prob = self.update_actor(b)
         stats |= actor_stats
         if self.config.learn_alpha:
             stats |= self.update_temperature(log_prob)
-        self.soft_update_targets()
+        if self.target_pairs:
+            self.soft_update_targets()
         return stats | {"alpha": self.alpha}
 
     # ------------------------------------------------------------------------- acting
