@@ -3,8 +3,9 @@
 ``tests/data/train_regression.json`` holds what two tiny seeded runs wrote when it was recorded: every metrics
 row (outcome, steps, env steps, reward sums and terms), every learning row (update counts and mean losses),
 the league's log and the run's totals. A change to the trainer that alters collection order, a generator's
-draws, the seating of league members or the learners' schedules changes them. Floats are compared to a relative
-1e-6 (``nan`` equals ``nan``), everything else exactly; ``wall_time`` is not recorded.
+draws, the seating of league members or the learners' schedules changes them. Everything but a float is compared
+exactly; floats to a relative 1e-3 (``nan`` equals ``nan``), because the machine that replays the fixture may
+round differently from the one that recorded it (see :data:`RUNS`); ``wall_time`` is not recorded.
 
 Regenerate (only for an intended change of behaviour, saying why in the commit):
 ``TRIPLESUMO_RECORD=1 pytest tests/test_train_regression.py``.
@@ -44,9 +45,17 @@ Both learn with DDPG: its float32 arithmetic came out bit-identical on every CPU
 squashing, log-probabilities) did not. A SAC self-play run recorded on one x86-64 box parted on another (AMD EPYC with
 AVX-512, 2026-11-28) by 1e-9 in a reward sum at the fifth match and by up to 94 % by the seventh, every outcome, step
 count and league row still equal; neither ``ATEN_CPU_CAPABILITY``, ``MKL_CBWR``, ``ONEDNN_MAX_CPU_ISA`` nor
-``NPY_DISABLE_CPU_FEATURES`` removed the difference. A stored fixture must not depend on the machine that replays it."""
+``NPY_DISABLE_CPU_FEATURES`` removed the difference. A stored fixture must not depend on the machine that replays it.
+
+DDPG is not bit-identical everywhere either. The fixture, recorded on an AMD EPYC, replayed on an Intel Xeon (family 6
+model 207, AVX-512 and AMX; 2026-11-30) with every total, league row, learning row, outcome and step count equal,
+and 2 of the self-play run's 8 metrics rows apart in their reward sums by at most 8.1e-5 relative (``OPENBLAS_CORETYPE``,
+``ATEN_CPU_CAPABILITY`` and ``ONEDNN_MAX_CPU_ISA`` did not remove it). Hence the floats' tolerance: 1e-3 is a dozen
+times that machine's difference, and far below what a change of the trainer's logic makes."""
 
 TABLES = ("metrics*.csv", "learning*.csv", "league/league.csv")
+FLOAT_TOLERANCE = 1e-3
+"""Relative tolerance of a float in the tables: the rounding of the machine that replays (:data:`RUNS`)."""
 
 
 def outcomes(run: Path) -> dict[str, list[dict[str, str]]]:
@@ -69,7 +78,7 @@ def same_value(recorded: str, now: str) -> bool:
         return False
     if math.isnan(a) or math.isnan(b):
         return math.isnan(a) and math.isnan(b)
-    return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-12)
+    return math.isclose(a, b, rel_tol=FLOAT_TOLERANCE, abs_tol=1e-9)
 
 
 def run_once(tmp_path: Path, name: str) -> dict[str, Any]:
