@@ -47,11 +47,12 @@ AVX-512, 2026-11-28) by 1e-9 in a reward sum at the fifth match and by up to 94 
 count and league row still equal; neither ``ATEN_CPU_CAPABILITY``, ``MKL_CBWR``, ``ONEDNN_MAX_CPU_ISA`` nor
 ``NPY_DISABLE_CPU_FEATURES`` removed the difference. A stored fixture must not depend on the machine that replays it.
 
-DDPG is not bit-identical everywhere either. The fixture, recorded on an AMD EPYC, replayed on an Intel Xeon (family 6
-model 207, AVX-512 and AMX; 2026-11-30) with every total, league row, learning row, outcome and step count equal,
-and 2 of the self-play run's 8 metrics rows apart in their reward sums by at most 8.1e-5 relative (``OPENBLAS_CORETYPE``,
-``ATEN_CPU_CAPABILITY`` and ``ONEDNN_MAX_CPU_ISA`` did not remove it). Hence the floats' tolerance: 1e-3 is a dozen
-times that machine's difference, and far below what a change of the trainer's logic makes."""
+DDPG is not bit-identical everywhere either. The fixture, recorded on an AMD EPYC, replayed on an Intel Xeon
+(family 6 model 207, AVX-512 and AMX; 2026-11-30) with every total, league row, learning row, outcome and step count
+equal, and 2 of the self-play run's 8 metrics rows apart in their reward sums by at most 8.1e-5 relative
+(``OPENBLAS_CORETYPE``, ``ATEN_CPU_CAPABILITY`` and ``ONEDNN_MAX_CPU_ISA`` did not remove it). Hence the floats'
+tolerance: 1e-3 is a dozen times that machine's difference, and far below what a change of the trainer's logic
+makes."""
 
 TABLES = ("metrics*.csv", "learning*.csv", "league/league.csv")
 FLOAT_TOLERANCE = 1e-3
