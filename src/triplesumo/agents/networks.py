@@ -15,7 +15,7 @@ plain :class:`Actor` (:meth:`GaussianActor.to_actor`) that every policy-file rea
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 import torch
@@ -51,17 +51,24 @@ class FloatHead(nn.Linear):
         return F.linear(x, self.weight, self.bias)
 
 
-def _mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int) -> nn.Sequential:
-    """Linear/LeakyReLU stack ending in a linear layer (:class:`FloatHead`) with a small uniform init."""
+def plain_block(width_in: int, width: int) -> list[nn.Module]:
+    """One hidden layer of :func:`mlp`: ``Linear -> LeakyReLU``."""
+    return [nn.Linear(width_in, width), nn.LeakyReLU()]
+
+
+def mlp(in_dim: int, hidden: tuple[int, ...], out_dim: int,
+        block: Callable[[int, int], list[nn.Module]] = plain_block,
+        before_head: Callable[[int], list[nn.Module]] = lambda width: []) -> nn.Sequential:
+    """A stack of ``block(width_in, width)`` per hidden layer (:func:`plain_block` by default; a normalised critic
+    states its own), then ``before_head(width)`` and a linear layer (:class:`FloatHead`) with a small uniform init."""
     layers: list[nn.Module] = []
     for width in hidden:
-        layers += [nn.Linear(in_dim, width), nn.LeakyReLU()]
+        layers += block(in_dim, width)
         in_dim = width
     last = FloatHead(in_dim, out_dim)
     nn.init.uniform_(last.weight, -FINAL_INIT, FINAL_INIT)
     nn.init.uniform_(last.bias, -FINAL_INIT, FINAL_INIT)
-    layers.append(last)
-    return nn.Sequential(*layers)
+    return nn.Sequential(*layers, *before_head(in_dim), last)
 
 
 class Actor(nn.Module):
@@ -80,7 +87,7 @@ class Actor(nn.Module):
         self.obs_dim = obs_dim
         self.act_dim = act_dim
         self.hidden = hidden
-        self.net = _mlp(obs_dim, hidden, act_dim)
+        self.net = mlp(obs_dim, hidden, act_dim)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         """Map ``(..., obs_dim)`` observations to ``(..., act_dim)`` actions in [-1, 1]."""
@@ -129,7 +136,7 @@ class Critic(nn.Module):
         self.obs_dim = obs_dim
         self.act_dim = act_dim
         self.hidden = hidden
-        self.net = _mlp(obs_dim + act_dim, hidden, 1)
+        self.net = mlp(obs_dim + act_dim, hidden, 1)
 
     def forward(self, obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
         """Q-values ``(...,)`` for ``(..., obs_dim)`` obs and ``(..., act_dim)`` actions."""
@@ -229,7 +236,7 @@ class ValueFunction(nn.Module):
         hidden = tuple(hidden)
         _check_sizes(obs_dim, 1, hidden)
         self.obs_dim = obs_dim
-        self.net = _mlp(obs_dim, hidden, 1)
+        self.net = mlp(obs_dim, hidden, 1)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         """Values ``(...,)`` of ``(..., obs_dim)`` observations."""

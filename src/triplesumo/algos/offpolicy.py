@@ -143,7 +143,12 @@ class OffPolicyAlgorithm(Algorithm):
                         b: Mapping[str, torch.Tensor], y: torch.Tensor) -> dict[str, float]:
         """One Adam step on ``Σ_i mean (Q_i(s, a) - y)²``; returns ``critic_loss`` and ``q_mean``
         (mean Q_1(s, a)), both before the step."""
-        qs = [critic(b["obs"], b["act"]) for critic in critics]
+        return self.step_critics([critic(b["obs"], b["act"]) for critic in critics], y, optimizer)
+
+    def step_critics(self, qs: Sequence[torch.Tensor], y: torch.Tensor,
+                     optimizer: torch.optim.Optimizer) -> dict[str, float]:
+        """One Adam step on ``Σ_i mean (q_i - y)²`` for critics' Q-values ``qs`` already computed (with their graph);
+        returns ``critic_loss`` and ``q_mean`` (mean ``qs[0]``), both before the step."""
         losses = [F.mse_loss(q, y) for q in qs]
         loss = sum(losses[1:], losses[0])
         descend(optimizer, loss)

@@ -29,10 +29,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import nn
 
-from triplesumo.agents.networks import FINAL_INIT, Critic, FloatHead, GaussianActor
+from triplesumo.agents.networks import Critic, GaussianActor, mlp, plain_block
 from triplesumo.algos.base import adam, descend, frozen
 from triplesumo.algos.config import OffPolicyConfig, flag, learning_rate, real, require
 from triplesumo.algos.noise import ActionNoise
@@ -105,15 +104,8 @@ class LayerNormCritic(Critic):
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256)) -> None:
         nn.Module.__init__(self)
         self.obs_dim, self.act_dim, self.hidden = obs_dim, act_dim, tuple(hidden)
-        layers: list[nn.Module] = []
-        width_in = obs_dim + act_dim
-        for width in self.hidden:
-            layers += [nn.Linear(width_in, width), nn.LayerNorm(width), nn.LeakyReLU()]
-            width_in = width
-        last = FloatHead(width_in, 1)
-        nn.init.uniform_(last.weight, -FINAL_INIT, FINAL_INIT)
-        nn.init.uniform_(last.bias, -FINAL_INIT, FINAL_INIT)
-        self.net = nn.Sequential(*layers, last)
+        self.net = mlp(obs_dim + act_dim, self.hidden, 1,
+                       block=lambda width_in, width: [nn.Linear(width_in, width), nn.LayerNorm(width), nn.LeakyReLU()])
 
 
 BATCH_NORM_MOMENTUM = 0.01
@@ -134,15 +126,9 @@ class BatchNormCritic(Critic):
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256)) -> None:
         nn.Module.__init__(self)
         self.obs_dim, self.act_dim, self.hidden = obs_dim, act_dim, tuple(hidden)
-        layers: list[nn.Module] = []
-        width_in = obs_dim + act_dim
-        for width in self.hidden:
-            layers += [self._norm(width_in), nn.Linear(width_in, width), nn.LeakyReLU()]
-            width_in = width
-        last = FloatHead(width_in, 1)
-        nn.init.uniform_(last.weight, -FINAL_INIT, FINAL_INIT)
-        nn.init.uniform_(last.bias, -FINAL_INIT, FINAL_INIT)
-        self.net = nn.Sequential(*layers, self._norm(width_in), last)
+        self.net = mlp(obs_dim + act_dim, self.hidden, 1,
+                       block=lambda width_in, width: [self._norm(width_in), *plain_block(width_in, width)],
+                       before_head=lambda width: [self._norm(width)])
         self.eval()
 
     @staticmethod
@@ -241,10 +227,7 @@ class SAC(OffPolicyAlgorithm):
         with torch.no_grad():
             next_q = functools.reduce(torch.minimum, next_qs)
             y = b["rew"] + self.bootstrap(b) * (next_q - self.temperature() * next_log_prob)
-        losses = [F.mse_loss(q, y) for q in qs]
-        loss = sum(losses[1:], losses[0])
-        descend(self.critic_optimizer, loss)
-        return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
+        return self.step_critics(list(qs), y, self.critic_optimizer)
 
     def update_actor(self, batch: Batch) -> tuple[dict[str, float], torch.Tensor]:
         """One Adam step on ``mean (α log π(a|s) - min_i Q_i(s, a))`` (critics and α held fixed).
