@@ -10,12 +10,17 @@ import pytest
 from matplotlib.image import imread
 
 from triplesumo.evaluation import local_winning_rate
+from triplesumo.evaluation.metrics import PAPER_TEST_MWR
 from triplesumo.evaluation.plots import (
+    EVALUATION_COLUMNS,
     REQUIRED_COLUMNS,
     plot_comparison,
+    plot_evaluations,
     plot_run,
+    read_evaluations_csv,
     read_metrics_csv,
 )
+from triplesumo.train.logger import EVAL_COLUMNS
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 TERMS = (
@@ -196,3 +201,49 @@ def test_plot_comparison_validation(tmp_path: Path, run: dict[str, np.ndarray]) 
     broken = {k: v for k, v in run.items() if k != "total_reward"}
     with pytest.raises(ValueError, match=r"run 'random'.*total_reward"):
         plot_comparison({"trained": run, "random": broken}, tmp_path)
+
+
+def _write_evaluations(path: Path, mwrs: list[float], drop: str | None = None) -> None:
+    """An ``eval.csv`` as a training run writes it (an evaluation every 100,000 env steps on 200 matches)."""
+    columns = [c for c in EVAL_COLUMNS if c != drop]
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.DictWriter(fh, columns, extrasaction="ignore")
+        writer.writeheader()
+        for k, mwr in enumerate(mwrs, 1):
+            writer.writerow({"evaluation": k, "env_steps": 100_000 * k, "epochs": 600 * k, "policy_train_seconds": "",
+                             "train_seconds": 300.0 * k, "eval_seconds": 60.0, "test_matches": 200, "test_mwr": mwr,
+                             "test_mwr_lo": mwr - 0.12, "test_mwr_hi": mwr + 0.12, "n_win": 0, "n_loss": 0,
+                             "n_draw": 0})
+
+
+def test_evaluations_are_read_as_a_run_writes_them_and_drawn_against_the_band(tmp_path: Path) -> None:
+    assert set(EVALUATION_COLUMNS) <= set(EVAL_COLUMNS)
+    _write_evaluations(tmp_path / "eval.csv", [-0.3, -0.1, 0.2, 0.35])
+    columns = read_evaluations_csv(tmp_path / "eval.csv")
+    assert columns["env_steps"].tolist() == [100_000, 200_000, 300_000, 400_000]
+    assert columns["test_mwr"].tolist() == [-0.3, -0.1, 0.2, 0.35]
+    assert np.isnan(columns["policy_train_seconds"]).all()  # an empty cell (a row from before the column)
+    _write_evaluations(tmp_path / "other.csv", [-0.5, 0.0])
+    runs = {"seed 0": columns, "seed 1": read_evaluations_csv(tmp_path / "other.csv")}
+    with_band = plot_evaluations(runs, tmp_path / "new" / "test_mwr.png", title="pair 1")
+    without = plot_evaluations(runs, tmp_path / "bare.png", band=None)
+    for path in (with_band, without):
+        _assert_real_png(path)
+    assert with_band == tmp_path / "new" / "test_mwr.png"
+    assert not np.array_equal(imread(with_band), imread(without))  # the paper's band is drawn
+    assert PAPER_TEST_MWR == (0.15, 0.47)
+
+
+def test_bad_evaluations_are_named(tmp_path: Path) -> None:
+    _write_evaluations(tmp_path / "eval.csv", [0.1], drop="test_mwr_hi")
+    with pytest.raises(ValueError, match=r"eval\.csv: missing column\(s\) \['test_mwr_hi'\]"):
+        read_evaluations_csv(tmp_path / "eval.csv")
+    empty = {name: np.zeros(0) for name in EVALUATION_COLUMNS}
+    with pytest.raises(ValueError, match="evaluations of seed 3: no evaluation"):
+        plot_evaluations({"seed 3": empty}, tmp_path / "x.png")
+    nan = {name: np.array([1.0, np.nan]) if name == "test_mwr" else np.ones(2) for name in EVALUATION_COLUMNS}
+    with pytest.raises(ValueError, match=r"evaluations of s: column\(s\) \['test_mwr'\] hold non-finite"):
+        plot_evaluations({"s": nan}, tmp_path / "x.png")
+    with pytest.raises(ValueError, match="no run"):
+        plot_evaluations({}, tmp_path / "x.png")
+    assert not (tmp_path / "x.png").exists()

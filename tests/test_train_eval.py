@@ -62,6 +62,10 @@ def test_evaluations_leave_the_training_unchanged(tmp_path: Path) -> None:
     assert seconds == sorted(seconds) and seconds[0] > 0
     # inline, the policy is frozen, played and written at one moment of the training's clock
     assert [float(r["policy_train_seconds"]) for r in rows] == seconds
+    # its figure against the paper's band, beside the training's; a run without evaluations has none
+    assert (with_eval.run_dir / "plots" / "test_mwr.png").is_file()
+    assert (without.run_dir / "plots" / "mwr.png").is_file()
+    assert not (without.run_dir / "plots" / "test_mwr.png").exists()
 
 
 def test_an_evaluation_plays_the_policy_file_on_the_evaluate_matches(tmp_path: Path) -> None:
@@ -110,6 +114,7 @@ def test_each_of_several_learners_is_evaluated_against_the_others(tmp_path: Path
         # Ant and Bug are one team on the same matches: the same outcomes
         assert (a["n_win"], a["n_loss"], a["n_draw"]) == (b["n_win"], b["n_loss"], b["n_draw"])
         assert np.isclose(float(a["test_mwr"]), float(b["test_mwr"]))
+    assert all((result.run_dir / "plots" / name / "test_mwr.png").is_file() for name in ("ant", "bug"))
 
 
 def test_a_run_stops_at_the_first_evaluation_at_its_target(tmp_path: Path) -> None:

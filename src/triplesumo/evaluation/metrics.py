@@ -41,6 +41,7 @@ __all__ = [
     "LOCAL_WINNING_RATE",
     "OUTCOMES",
     "Outcome",
+    "PAPER_TEST_MWR",
     "Summary",
     "full_window_mask",
     "local_winning_rate",
@@ -63,6 +64,9 @@ LOCAL_WINNING_RATE: Final[dict[str, float]] = {
     "error": 0.0,
 }
 """Local winning rate of each outcome; an ``"error"`` epoch counts as a draw (0)."""
+
+PAPER_TEST_MWR: Final[tuple[float, float]] = (0.15, 0.47)
+"""The paper's band for its DDPG Bug's MWR in testing: it stays between these (Wang, Das & Millard, 2022)."""
 
 
 def _check_window(window: int) -> int:

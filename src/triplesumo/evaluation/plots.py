@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from triplesumo.evaluation.metrics import (
     OUTCOMES,
+    PAPER_TEST_MWR,
     moving_winning_rate,
     rolling_mean,
     rolling_steps_to_win,
@@ -38,10 +39,13 @@ from triplesumo.evaluation.metrics import (
 from triplesumo.evaluation.metrics_csv import open_table
 
 __all__ = [
+    "EVALUATION_COLUMNS",
     "REQUIRED_COLUMNS",
     "TERM_PREFIX",
     "plot_comparison",
+    "plot_evaluations",
     "plot_run",
+    "read_evaluations_csv",
     "read_metrics_csv",
 ]
 
@@ -55,6 +59,9 @@ REQUIRED_COLUMNS: Final[tuple[str, ...]] = (
     "sparse_reward",
 )
 """Columns every metrics CSV must have."""
+
+EVALUATION_COLUMNS: Final[tuple[str, ...]] = ("env_steps", "test_mwr", "test_mwr_lo", "test_mwr_hi")
+"""Columns an evaluations CSV (a training run's ``eval.csv``) must have for :func:`plot_evaluations`."""
 
 TERM_PREFIX: Final[str] = "reward_"
 """Prefix of the per-term reward columns (one column per named reward term)."""
@@ -88,24 +95,31 @@ def read_metrics_csv(path: str | os.PathLike[str]) -> dict[str, NDArray[np.gener
             wrong number of fields, a non-numeric cell in a numeric column, or an
             unknown outcome (the message names the file and line).
     """
-    source = Path(path)
+    return _read_columns(Path(path), REQUIRED_COLUMNS, f"plus optional '{TERM_PREFIX}*' terms")
+
+
+def read_evaluations_csv(path: str | os.PathLike[str]) -> dict[str, NDArray[np.generic]]:
+    """Read a run's evaluations while training (``eval.csv``, one row per evaluation) into one float64 array per
+    column; it needs the columns of :data:`EVALUATION_COLUMNS`. Errors as :func:`read_metrics_csv`'s."""
+    return _read_columns(Path(path), EVALUATION_COLUMNS, "one row per evaluation")
+
+
+def _read_columns(source: Path, required: tuple[str, ...], rest: str) -> dict[str, NDArray[np.generic]]:
+    """A CSV with the columns ``required`` (numbers) and any others, as :func:`read_metrics_csv` describes."""
     with open_table(source) as fh:  # plain or packed (metrics.csv.gz)
         reader = csv.reader(fh)
         header = next(reader, None)
         if header is None:
             raise ValueError(
-                f"{source}: empty file; expected a header with columns {list(REQUIRED_COLUMNS)}"
+                f"{source}: empty file; expected a header with columns {list(required)}"
             )
         names = [h.strip() for h in header]
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
             raise ValueError(f"{source}: duplicate column(s) {duplicates}")
-        missing = [c for c in REQUIRED_COLUMNS if c not in names]
+        missing = [c for c in required if c not in names]
         if missing:
-            raise ValueError(
-                f"{source}: missing column(s) {missing}; "
-                f"required: {list(REQUIRED_COLUMNS)} plus optional '{TERM_PREFIX}*' terms"
-            )
+            raise ValueError(f"{source}: missing column(s) {missing}; required: {list(required)} {rest}")
         cells: dict[str, list[str]] = {n: [] for n in names}
         lines: list[int] = []
         for row in reader:
@@ -131,7 +145,7 @@ def read_metrics_csv(path: str | os.PathLike[str]) -> dict[str, NDArray[np.gener
                         f"expected one of {list(OUTCOMES)}"
                     )
             out[name] = np.asarray(column, dtype=np.str_)
-        elif name in REQUIRED_COLUMNS or name.startswith(TERM_PREFIX):
+        elif name in required or name.startswith(TERM_PREFIX):
             out[name] = _parse_floats(column, name, lines, source)
         else:
             try:
@@ -409,6 +423,64 @@ def plot_run(
     ax.legend(loc="best")
     written.append(_save(fig, folder / "steps_to_win.png"))
     return written
+
+
+def plot_evaluations(
+    evaluations: Mapping[str, Mapping[str, NDArray[np.generic]]],
+    path: str | os.PathLike[str],
+    *,
+    title: str = "",
+    band: tuple[float, float] | None = PAPER_TEST_MWR,
+) -> Path:
+    """Draw test MWR against env steps for the evaluations a run played while training (``eval.csv``).
+
+    One line per run, each evaluation a point with its 95 % interval shaded, the zero line dashed, and ``band``
+    shaded: by default the paper's band for its Bug in testing
+    (:data:`~triplesumo.evaluation.metrics.PAPER_TEST_MWR`), the figure's reference.
+
+    Args:
+        evaluations: Run label -> columns, as returned by :func:`read_evaluations_csv` (needs
+            :data:`EVALUATION_COLUMNS`).
+        path: The PNG to write; its folder is created if missing.
+        title: The run's title, shown before the figure's own.
+        band: ``(lo, hi)`` MWRs to shade, or ``None`` for none.
+
+    Returns:
+        ``path``.
+
+    Raises:
+        ValueError: If there is no run, a run has no evaluation, lacks a column (named), its columns differ in
+            length, or a value is not finite (the run named).
+        OSError: If the file cannot be written (named).
+    """
+    if not evaluations:
+        raise ValueError("plot_evaluations: no run to draw")
+    runs: dict[str, dict[str, NDArray[np.float64]]] = {}
+    for label, columns in evaluations.items():
+        what = f"evaluations of {label}"
+        n = _column(columns, "env_steps", what).size
+        if n == 0:
+            raise ValueError(f"{what}: no evaluation to draw")
+        runs[label] = {name: np.asarray(_column(columns, name, what, n), np.float64) for name in EVALUATION_COLUMNS}
+        bad = [name for name, values in runs[label].items() if not np.all(np.isfinite(values))]
+        if bad:
+            raise ValueError(f"{what}: column(s) {bad} hold non-finite values")
+    target = Path(path)
+    _prepare_dir(target.parent)
+    fig, ax = _new_axes(_title(title, "test MWR while training (seeded test matches, 95 % interval)"),
+                        "env steps", "test MWR")
+    if band is not None:
+        ax.axhspan(band[0], band[1], color="tab:green", alpha=0.12,
+                   label=f"the paper's Bug in testing ({band[0]:.2f} to {band[1]:.2f})")
+    for i, (label, run) in enumerate(runs.items()):
+        order = np.argsort(run["env_steps"], kind="stable")
+        x = run["env_steps"][order]
+        ax.fill_between(x, run["test_mwr_lo"][order], run["test_mwr_hi"][order], color=f"C{i}", alpha=0.15, lw=0)
+        ax.plot(x, run["test_mwr"][order], marker="o", ms=3, lw=1.2, color=f"C{i}", label=label)
+    ax.axhline(0.0, color="k", lw=0.8, ls="--", label="0: as many wins as losses")
+    ax.set_ylim(-1.05, 1.05)
+    ax.legend(loc="best", fontsize=8)
+    return _save(fig, target)
 
 
 # --------------------------------------------------------------------------- several runs

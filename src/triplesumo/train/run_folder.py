@@ -255,8 +255,10 @@ def prepare_run_dir(run_dir: Path) -> Path:
 
 def plot_metrics(run_dir: Path, window: int) -> list[Path]:
     """The paper's figures of every learning agent of a run: ``metrics.csv`` -> ``plots/``,
-    ``metrics-<agent>.csv`` -> ``plots/<agent>/`` (agents without a finished epoch are skipped)."""
-    from triplesumo.evaluation.plots import plot_run, read_metrics_csv
+    ``metrics-<agent>.csv`` -> ``plots/<agent>/`` (agents without a finished epoch are skipped); and the test MWR
+    of its evaluations while training against the paper's band, ``eval.csv`` -> ``plots/test_mwr.png``,
+    ``eval-<agent>.csv`` -> ``plots/<agent>/test_mwr.png`` (where it has any)."""
+    from triplesumo.evaluation.plots import plot_evaluations, plot_run, read_evaluations_csv, read_metrics_csv
 
     run_dir = Path(run_dir)
     learner = "bug"
@@ -271,6 +273,14 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
             out = run_dir / "plots" if path.name == "metrics.csv" else run_dir / "plots" / agent
             paths += plot_run(metrics, out, window=window, title=f"{agent} training ({run_dir.name})",
                               label=agent.capitalize())
+    evaluations = tables_in(run_dir, "eval-*.csv") or [p for p in [run_dir / "eval.csv"] if table_exists(p)]
+    for path in evaluations:
+        agent = path.stem.removeprefix("eval-") if path.name != "eval.csv" else learner
+        columns = read_evaluations_csv(path)
+        if len(columns["env_steps"]):
+            out = run_dir / "plots" if path.name == "eval.csv" else run_dir / "plots" / agent
+            paths.append(plot_evaluations({agent.capitalize(): columns}, out / "test_mwr.png",
+                                          title=f"{agent} ({run_dir.name})"))
     if table_exists(run_dir / "league" / "league.csv"):  # a self-play run: rating curves and pool members
         paths.append(plot_league(run_dir))
     return paths
