@@ -234,6 +234,25 @@ def test_evaluations_are_read_as_a_run_writes_them_and_drawn_against_the_band(tm
     assert PAPER_TEST_MWR == (0.15, 0.47)
 
 
+def test_evaluations_of_one_group_share_a_colour_and_a_legend_entry(tmp_path: Path) -> None:
+    for k, mwrs in enumerate(([-0.3, 0.1, 0.4], [-0.2, 0.0, 0.3], [-0.6, -0.5, -0.4])):
+        _write_evaluations(tmp_path / f"{k}.csv", mwrs)
+    runs = {f"seed {k}": read_evaluations_csv(tmp_path / f"{k}.csv") for k in range(3)}
+    grouped = plot_evaluations(runs, tmp_path / "grouped.png", band=None,
+                               groups={"seed 0": "sac", "seed 1": "sac", "seed 2": "ddpg"})
+    own = plot_evaluations(runs, tmp_path / "own.png", band=None)
+    skill = plot_evaluations(runs, tmp_path / "skill.png", band=None, reference=0.2,
+                             groups={"seed 0": "sac", "seed 1": "sac", "seed 2": "ddpg"})
+    for path in (grouped, own, skill):
+        _assert_real_png(path)
+    # seed 1 takes seed 0's colour (not a colour of its own), and the +0.2 line is drawn
+    assert not np.array_equal(imread(grouped), imread(own))
+    assert not np.array_equal(imread(grouped), imread(skill))
+    with pytest.raises(ValueError, match=r"no group for run\(s\) \['seed 2'\]"):
+        plot_evaluations(runs, tmp_path / "x.png", groups={"seed 0": "sac", "seed 1": "sac"})
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_bad_evaluations_are_named(tmp_path: Path) -> None:
     _write_evaluations(tmp_path / "eval.csv", [0.1], drop="test_mwr_hi")
     with pytest.raises(ValueError, match=r"eval\.csv: missing column\(s\) \['test_mwr_hi'\]"):

@@ -431,8 +431,10 @@ def plot_evaluations(
     *,
     title: str = "",
     band: tuple[float, float] | None = PAPER_TEST_MWR,
+    groups: Mapping[str, str] | None = None,
+    reference: float | None = None,
 ) -> Path:
-    """Draw test MWR against env steps for the evaluations a run played while training (``eval.csv``).
+    """Draw test MWR against env steps for the evaluations runs played while training (``eval.csv``).
 
     One line per run, each evaluation a point with its 95 % interval shaded, the zero line dashed, and ``band``
     shaded: by default the paper's band for its Bug in testing
@@ -444,13 +446,16 @@ def plot_evaluations(
         path: The PNG to write; its folder is created if missing.
         title: The run's title, shown before the figure's own.
         band: ``(lo, hi)`` MWRs to shade, or ``None`` for none.
+        groups: Run label -> its group (e.g. its algorithm, for one line per seed): the runs of a group share a
+            colour and one legend entry. ``None``: every run its own colour and entry.
+        reference: An MWR drawn as a dotted line (e.g. the +0.2 of time to skill), or ``None`` for none.
 
     Returns:
         ``path``.
 
     Raises:
         ValueError: If there is no run, a run has no evaluation, lacks a column (named), its columns differ in
-            length, or a value is not finite (the run named).
+            length, or a value is not finite (the run named), or ``groups`` misses a run (named).
         OSError: If the file cannot be written (named).
     """
     if not evaluations:
@@ -465,6 +470,11 @@ def plot_evaluations(
         bad = [name for name, values in runs[label].items() if not np.all(np.isfinite(values))]
         if bad:
             raise ValueError(f"{what}: column(s) {bad} hold non-finite values")
+    group = dict(groups) if groups is not None else {label: label for label in runs}
+    ungrouped = [label for label in runs if label not in group]
+    if ungrouped:
+        raise ValueError(f"plot_evaluations: groups names no group for run(s) {ungrouped}")
+    colours = {g: f"C{i}" for i, g in enumerate(dict.fromkeys(group[label] for label in runs))}
     target = Path(path)
     _prepare_dir(target.parent)
     fig, ax = _new_axes(_title(title, "test MWR while training (seeded test matches, 95 % interval)"),
@@ -472,12 +482,18 @@ def plot_evaluations(
     if band is not None:
         ax.axhspan(band[0], band[1], color="tab:green", alpha=0.12,
                    label=f"the paper's Bug in testing ({band[0]:.2f} to {band[1]:.2f})")
-    for i, (label, run) in enumerate(runs.items()):
+    shade = 0.15 if len(runs) <= 3 else 0.06
+    entered: set[str] = set()
+    for label, run in runs.items():
         order = np.argsort(run["env_steps"], kind="stable")
-        x = run["env_steps"][order]
-        ax.fill_between(x, run["test_mwr_lo"][order], run["test_mwr_hi"][order], color=f"C{i}", alpha=0.15, lw=0)
-        ax.plot(x, run["test_mwr"][order], marker="o", ms=3, lw=1.2, color=f"C{i}", label=label)
+        x, colour = run["env_steps"][order], colours[group[label]]
+        ax.fill_between(x, run["test_mwr_lo"][order], run["test_mwr_hi"][order], color=colour, alpha=shade, lw=0)
+        ax.plot(x, run["test_mwr"][order], marker="o", ms=3, lw=1.2, color=colour,
+                label=None if group[label] in entered else group[label])
+        entered.add(group[label])
     ax.axhline(0.0, color="k", lw=0.8, ls="--", label="0: as many wins as losses")
+    if reference is not None:
+        ax.axhline(reference, color="grey", lw=1.0, ls=":", label=f"{reference:+.2f}")
     ax.set_ylim(-1.05, 1.05)
     ax.legend(loc="best", fontsize=8)
     return _save(fig, target)

@@ -388,31 +388,16 @@ def _duration(seconds: float) -> str:
 
 
 def _plot_curves(runs: list[tuple[Trial, Path]], path: Path) -> Path:
-    """Test MWR against env steps of every stage-4 run, one colour per algorithm, the +0.2 line dashed."""
-    from matplotlib.figure import Figure
+    """Test MWR against env steps of every stage-4 run with evaluations, one line per seed and one colour per
+    algorithm, against the paper's band and the +0.2 of time to skill."""
+    from triplesumo.evaluation.plots import plot_evaluations, read_evaluations_csv
 
-    fig = Figure(figsize=(7.5, 4.2))
-    ax = fig.subplots()
-    colours: dict[str, Any] = {}
+    evaluations, groups = {}, {}
     for trial, run in runs:
-        rows = _evals(run)
-        if not rows:
-            continue
-        algo = trial.config.learners()["bug"]
-        first = algo not in colours
-        colours.setdefault(algo, f"C{len(colours)}")
-        ax.plot([int(r["env_steps"]) for r in rows], [float(r["test_mwr"]) for r in rows], marker=".",
-                color=colours[algo], alpha=0.8, label=algo if first else None)
-    ax.axhline(SKILL, linestyle="--", color="grey", label=f"{SKILL:+.1f}")
-    ax.set_xlabel("env steps")
-    ax.set_ylabel("test MWR (seeded test matches)")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title("Bug's test MWR while training, one line per seed")
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    return path
+        if _evals(run):
+            evaluations[trial.name] = read_evaluations_csv(run / "eval.csv")
+            groups[trial.name] = trial.config.learners()["bug"]
+    return plot_evaluations(evaluations, path, title="Bug, one line per seed", groups=groups, reference=SKILL)
 
 
 def _argv(cfg: ReproduceConfig) -> list[str]:

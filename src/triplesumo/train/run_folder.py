@@ -253,6 +253,18 @@ def prepare_run_dir(run_dir: Path) -> Path:
     return run_dir
 
 
+def _per_agent_tables(run_dir: Path, stem: str, learner: str, required: bool) -> list[tuple[str, Path, Path]]:
+    """(agent, table, plots folder) for a run's ``<stem>-<agent>.csv`` tables (several learners: plots go to
+    ``plots/<agent>/``), or its one ``<stem>.csv`` (the run's one ``learner``: ``plots/``), plain or packed; where
+    the run has neither, none, or (``required``) the missing ``<stem>.csv``, for its reader to name."""
+    tables = tables_in(run_dir, f"{stem}-*.csv")
+    if tables:
+        return [(t.stem.removeprefix(f"{stem}-"), t, run_dir / "plots" / t.stem.removeprefix(f"{stem}-"))
+                for t in tables]
+    one = run_dir / f"{stem}.csv"
+    return [(learner, one, run_dir / "plots")] if required or table_exists(one) else []
+
+
 def plot_metrics(run_dir: Path, window: int) -> list[Path]:
     """The paper's figures of every learning agent of a run: ``metrics.csv`` -> ``plots/``,
     ``metrics-<agent>.csv`` -> ``plots/<agent>/`` (agents without a finished epoch are skipped); and the test MWR
@@ -265,20 +277,14 @@ def plot_metrics(run_dir: Path, window: int) -> list[Path]:
     if (run_dir / "config.json").is_file():  # (its one learner names metrics.csv's plots)
         learner = str(saved_learn(load_json(run_dir / "config.json"), learner)[0]).split("=")[0]
     paths: list[Path] = []
-    files = tables_in(run_dir, "metrics-*.csv") or [run_dir / "metrics.csv"]  # plain or packed
-    for path in files:
-        agent = path.stem.removeprefix("metrics-") if path.name != "metrics.csv" else learner
+    for agent, path, out in _per_agent_tables(run_dir, "metrics", learner, required=True):
         metrics = read_metrics_csv(path)
         if len(metrics["epoch"]):
-            out = run_dir / "plots" if path.name == "metrics.csv" else run_dir / "plots" / agent
             paths += plot_run(metrics, out, window=window, title=f"{agent} training ({run_dir.name})",
                               label=agent.capitalize())
-    evaluations = tables_in(run_dir, "eval-*.csv") or [p for p in [run_dir / "eval.csv"] if table_exists(p)]
-    for path in evaluations:
-        agent = path.stem.removeprefix("eval-") if path.name != "eval.csv" else learner
+    for agent, path, out in _per_agent_tables(run_dir, "eval", learner, required=False):
         columns = read_evaluations_csv(path)
         if len(columns["env_steps"]):
-            out = run_dir / "plots" if path.name == "eval.csv" else run_dir / "plots" / agent
             paths.append(plot_evaluations({agent.capitalize(): columns}, out / "test_mwr.png",
                                           title=f"{agent} ({run_dir.name})"))
     if table_exists(run_dir / "league" / "league.csv"):  # a self-play run: rating curves and pool members
