@@ -29,8 +29,8 @@ KEYS = ("mwr", "bug_out", "ant_out", "spider_out", "none_out", "median_exit_step
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--policy", nargs="*", default=[], help="LABEL=SPEC Bug policies (SPEC: file stem, "
-                        "zoo:NAME or passive)")
+    parser.add_argument("--policy", nargs="*", action="extend", default=[], help="LABEL=SPEC Bug policies (SPEC: "
+                        "file stem, zoo:NAME or passive); --policy may be given more than once")
     parser.add_argument("--summarize", action="store_true", help="rebuild summary.json from every OUT/LABEL.csv "
                         "(nothing is played)")
     parser.add_argument("--epochs", type=int, default=200, help="test matches per policy")

@@ -97,7 +97,8 @@ def test_summary_counts_self_exits_pushes_of_the_partner_and_contacts() -> None:
 
 
 def test_skill_diagnosis_plays_the_pair_it_is_given(tmp_path) -> None:
-    """``--pair`` replaces the bench's zoo pair: with every agent still, nobody leaves and every match is a draw."""
+    """``--pair`` replaces the bench's zoo pair: with every agent still, nobody leaves and every match is a draw;
+    ``--policy`` given twice plays both (the second does not replace the first)."""
     import json
     import runpy
     from pathlib import Path
@@ -105,6 +106,8 @@ def test_skill_diagnosis_plays_the_pair_it_is_given(tmp_path) -> None:
     script = Path(__file__).resolve().parents[1] / "benchmarks" / "skill_diagnosis.py"
     main = runpy.run_path(str(script))["main"]
     assert main(["--policy", "still=passive", "--epochs", "2", "--pair", "ant=passive", "spider=passive",
-                 "--out", str(tmp_path)]) == 0
-    s = json.loads((tmp_path / "summary.json").read_text())["still"]
+                 "--policy", "again=passive", "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert sorted(summary) == ["again", "still"]
+    s = summary["still"]
     assert (s["matches"], s["mwr"], s["none_out"], s["ant_out"], s["spider_out"]) == (2, 0.0, 1.0, 0.0, 0.0)
