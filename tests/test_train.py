@@ -231,6 +231,19 @@ def test_a_resume_on_more_physics_threads_trains_what_the_run_would_have(uninter
     assert_same_run(uninterrupted.run, killed)
 
 
+def test_a_run_stopped_at_its_env_step_budget_goes_on_to_a_larger_one(uninterrupted: Trained,
+                                                                       tmp_path: Path) -> None:
+    """``--resume RUN --max-env-steps N`` (0: none): a run that stopped at its env-step budget trains on, bit for
+    bit, as the run that never had that budget did; the budget a resume gives is in its leg."""
+    budget = int(read_rows(uninterrupted.run)[1][E - 1]["env_steps"])  # env steps at the end of epoch E
+    stopped = train(tiny(tmp_path, name="B", max_env_steps=budget))
+    assert stopped.epochs == E and stopped.env_steps == budget < uninterrupted.result.env_steps
+    assert main(["train", "--resume", str(stopped.run_dir), "--max-env-steps", "0", "--no-progress"]) == 0
+    assert_same_run(uninterrupted.run, stopped.run_dir)
+    legs = json.loads((stopped.run_dir / "legs.json").read_text())["legs"]
+    assert [leg["budget"]["max_env_steps"] for leg in legs] == [budget, 0]
+
+
 @pytest.mark.slow  # 5 s alone on the shared 2-core box
 def test_cli_resume_takes_n_threads_and_names_what_it_refuses(uninterrupted: Trained, tmp_path: Path,
                                                               capsys: pytest.CaptureFixture[str]) -> None:

@@ -73,7 +73,7 @@ from triplesumo.train.run_folder import (
 )
 
 FORK_FORMAT = "triplesumo-fork/1"
-FORK_FIELDS = ("name", "out", "checkpoint_every", "tensorboard", "max_env_steps", *RESUME_OVERRIDES, "league",
+FORK_FIELDS = ("name", "out", "checkpoint_every", "tensorboard", *RESUME_OVERRIDES, "league",
                "reward")
 """The TrainConfig fields a fork may change (``league`` but its ``rating_model``, and its ``zoo`` only by
 appending entries; ``reward``: the networks fine-tune under the new weights from the fork's epoch)."""

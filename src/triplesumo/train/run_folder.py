@@ -64,9 +64,11 @@ FORK_FILE = "fork.json"
 """In a run folder made by ``train --fork`` (:mod:`triplesumo.train.fork`): where it came from."""
 
 
-RESUME_OVERRIDES = ("epochs", "max_minutes", "progress", "save_replay", "n_threads", "eval_background",
-                    "allow_other_ring")
-"""The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``): budgets, output,
+RESUME_OVERRIDES = ("epochs", "max_env_steps", "max_minutes", "progress", "save_replay", "n_threads",
+                    "eval_background", "allow_other_ring")
+"""The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``): budgets (a run that
+stopped at its epochs or env steps goes on to larger ones, e.g. ``--max-env-steps 2000000``, and trains what it
+would have had it never stopped), output,
 and ``n_threads``, the threads stepping the CPU physics, which advance every match alone and bit for bit
 whatever their number (``tests/test_batch.py``), so that a run started on a laptop goes on with the cores of a
 larger machine and trains exactly what it would have; and ``eval_background``, where the evaluations play
