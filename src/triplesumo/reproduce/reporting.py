@@ -394,8 +394,9 @@ def _plot_curves(runs: list[tuple[Trial, Path]], path: Path) -> Path:
 
     evaluations, groups = {}, {}
     for trial, run in runs:
-        if _evals(run):
-            evaluations[trial.name] = read_evaluations_csv(run / "eval.csv")
+        columns = read_evaluations_csv(run / "eval.csv") if table_exists(run / "eval.csv") else None
+        if columns is not None and len(columns["env_steps"]):
+            evaluations[trial.name] = columns
             groups[trial.name] = trial.config.learners()["bug"]
     return plot_evaluations(evaluations, path, title="Bug, one line per seed", groups=groups, reference=SKILL)
 

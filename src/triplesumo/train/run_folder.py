@@ -259,10 +259,9 @@ def _per_agent_tables(run_dir: Path, stem: str, learner: str, required: bool) ->
     """(agent, table, plots folder) for a run's ``<stem>-<agent>.csv`` tables (several learners: plots go to
     ``plots/<agent>/``), or its one ``<stem>.csv`` (the run's one ``learner``: ``plots/``), plain or packed; where
     the run has neither, none, or (``required``) the missing ``<stem>.csv``, for its reader to name."""
-    tables = tables_in(run_dir, f"{stem}-*.csv")
-    if tables:
-        return [(t.stem.removeprefix(f"{stem}-"), t, run_dir / "plots" / t.stem.removeprefix(f"{stem}-"))
-                for t in tables]
+    agents = {t.stem.removeprefix(f"{stem}-"): t for t in tables_in(run_dir, f"{stem}-*.csv")}
+    if agents:
+        return [(agent, table, run_dir / "plots" / agent) for agent, table in agents.items()]
     one = run_dir / f"{stem}.csv"
     return [(learner, one, run_dir / "plots")] if required or table_exists(one) else []
 
