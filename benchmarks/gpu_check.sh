@@ -11,11 +11,13 @@
 #     machine.txt          nvidia-smi, python, package versions
 #     skill_gpu.json/.txt  triplesumo bench skill-gpu (seconds and env steps to +0.2 and +0.4, the curve)
 #     skill_gpu.png        test MWR against env steps and against training seconds
-#     eval.csv             only when bench skill-gpu was stopped before writing its record: the evaluations so far
+#     evals.csv            every seed's evaluations (test MWR, env steps, both clocks), also when bench skill-gpu was
+#                          stopped before writing its record
 #     env_warp.json/.txt   triplesumo bench env --backend warp (env and raw mujoco_warp steps/s per size)
 #
 # Knobs (environment): DEVICE (cuda; cpu runs the same steps on Warp's CPU device, a check of this script),
-# QUICK=1 (bench skill-gpu --quick, tiny sizes everywhere), SKILL_SECONDS (150: training budget of the seed),
+# QUICK=1 (bench skill-gpu --quick, tiny sizes everywhere), SEEDS ("0": training seeds, one after another; each waits
+# for its evaluations, about 2 minutes a seed on the H200), SKILL_SECONDS (150: training budget of each seed),
 # TOTAL_SECONDS (480: the env benchmark gets what is left), N_ENVS (4096), ENV_SIZES (1024,4096,16384),
 # PYTHON (python3), SKIP_INSTALL=1 (packages already importable). Give the call about 560 s.
 set -uo pipefail
@@ -24,6 +26,7 @@ OUT=${OUT:-/tmp/gpu_check_out}
 STAGE=/tmp/triplesumo-wheels
 PYTHON=${PYTHON:-python3}
 DEVICE=${DEVICE:-cuda}
+SEEDS=${SEEDS:-0}
 SKILL_SECONDS=${SKILL_SECONDS:-150}
 TOTAL_SECONDS=${TOTAL_SECONDS:-480}
 N_ENVS=${N_ENVS:-4096}
@@ -52,6 +55,8 @@ else
     export PYTHONPATH=${PWD}/src${PYTHONPATH:+:$PYTHONPATH}
 fi
 export PYTHONUNBUFFERED=1
+# nothing here renders; an image that sets MUJOCO_GL=egl without libEGL makes `import mujoco` fail (seen on the H200)
+export MUJOCO_GL=disable
 TS=("$PYTHON" -m triplesumo.cli)
 {
     nvidia-smi -L 2>/dev/null || echo "no nvidia-smi"
@@ -76,16 +81,22 @@ echo "[$(elapsed) s] installed"
 if [ "${QUICK:-0}" = "1" ]; then
     SKILL_ARGS=(--quick --device "$DEVICE")
 else
-    SKILL_ARGS=(--device "$DEVICE" --n-envs "$N_ENVS" --max-seconds "$SKILL_SECONDS"
+    # shellcheck disable=SC2206
+    SKILL_ARGS=(--device "$DEVICE" --n-envs "$N_ENVS" --max-seconds "$SKILL_SECONDS" --seeds $SEEDS
                 --eval-threads "$(( $(nproc) > 10 ? 8 : 1 ))")
 fi
-timeout $((SKILL_SECONDS + 120)) "${TS[@]}" bench skill-gpu "${SKILL_ARGS[@]}" --out /tmp/skill-gpu \
+timeout $(( (SKILL_SECONDS + 120) * $(wc -w <<< "$SEEDS") )) "${TS[@]}" bench skill-gpu "${SKILL_ARGS[@]}" --out /tmp/skill-gpu \
     --json "$OUT/skill_gpu.json" | tee "$OUT/skill_gpu.txt"
 rc=${PIPESTATUS[0]}
 cp -f /tmp/skill-gpu/skill_gpu.png "$OUT/" 2>/dev/null
 echo "[$(elapsed) s] bench skill-gpu: rc $rc"
-# stopped before its record: the seed's own evaluations so far (test MWR, env steps, both clocks)
-[ -s "$OUT/skill_gpu.json" ] || cp -f /tmp/skill-gpu/*/seed0/eval.csv "$OUT/" 2>/dev/null
+# every seed's own evaluations, one file with the seed first (they survive a run stopped before its record)
+for f in /tmp/skill-gpu/*/seed*/eval.csv; do
+    [ -e "$f" ] || continue
+    seed=$(basename "$(dirname "$f")"); seed=${seed#seed}
+    [ -e "$OUT/evals.csv" ] || sed -n '1s/^/seed,/p' "$f" > "$OUT/evals.csv"
+    sed -n "2,\$s/^/$seed,/p" "$f" >> "$OUT/evals.csv"
+done
 
 # 3. the Warp env benchmark, in the time left of TOTAL_SECONDS
 if [ "${QUICK:-0}" = "1" ]; then ENV_SIZES=2; ENV_ARGS=(--steps 4 --rounds 1); else ENV_ARGS=(--steps 100 --rounds 2); fi

@@ -39,6 +39,7 @@ import dataclasses
 import json
 import math
 import statistics
+import textwrap
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -352,8 +353,9 @@ def plot_skill_gpu(result: dict[str, Any], path: Path) -> Path:
     """Test MWR against env steps and against the training's wall time (when each policy was frozen), one line
     per seed, the thresholds dashed and the goal's time dotted."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import EngFormatter
 
-    fig = Figure(figsize=(11, 4.4))
+    fig = Figure(figsize=(11, 4.8))
     axes = fig.subplots(1, 2, sharey=True)
     for s, run in enumerate(result["runs"]):
         ev = run["evaluations"]
@@ -366,9 +368,11 @@ def plot_skill_gpu(result: dict[str, Any], path: Path) -> Path:
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3)
     axes[1].axvline(result["goal_seconds"], linestyle=":", color="black", label=f"goal {result['goal_seconds']:g} s")
+    axes[0].xaxis.set_major_formatter(EngFormatter())  # 800k, 1.2M: millions of env steps stay legible
     axes[0].set_ylabel(f"test MWR ({result['eval_epochs']} seeded test matches)")
     axes[1].legend(fontsize=8)
-    fig.suptitle(_where(result).replace("\n", "; ") + "\n" + _goal_line(result), fontsize=8)
+    title = textwrap.wrap(_where(result).replace("\n", "; "), width=150)  # a long machine line stays on the page
+    fig.suptitle("\n".join([*title, _goal_line(result)]), fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
