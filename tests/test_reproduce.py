@@ -14,7 +14,7 @@ import pytest
 
 import triplesumo.agents.zoo
 from triplesumo import ENV_VERSION
-from triplesumo.agents.zoo import make_policy, policies_from_pairs
+from triplesumo.agents.zoo import make_policy, policies_from_pairs, policy_fingerprint
 from triplesumo.cli import main
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.evaluation.metrics_csv import read_table_bytes
@@ -727,3 +727,48 @@ def test_a_stage_leg_keeps_its_time_when_it_fails_is_killed_or_resumed(tmp_path:
     assert stage_seconds(book.data["stages"]["bug"]) == pytest.approx(sum(leg["seconds"] for leg in legs))
     assert "| bug | 0.0 min | 3 | not finished |" in "\n".join(_stage_times(book.data))
     assert stage_seconds({"seconds": 12.5, "done": "x"}) == 12.5  # a record from before legs
+
+
+@pytest.mark.slow  # three tiny reproductions from a given pair, 40 s each on the shared 2-core box
+def test_a_grown_bug_budget_trains_each_bug_on_as_one_longer_run_and_keeps_the_smaller_budgets_test(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--bug-env-steps larger on a re-run: each Bug resumes from its last checkpoint to the new budget and ends as a
+    run made at that budget from the start would; the test of the smaller budget moves to at-bug-env-steps-N/ with
+    the policies it played, the test is played again, and a smaller budget is refused."""
+    base = ["reproduce", "--tiny", "--pair", "zoo:ant", "zoo:spider", "--algos", "sac", "--seeds", "0",
+            "--no-progress"]
+    out, straight = tmp_path / "grown", tmp_path / "straight"
+    run, run_straight = (f / "bug" / "learn=bug=sac,seed=0" for f in (out, straight))
+    assert main([*base, "--out", str(out), "--bug-env-steps", "40"]) == 0
+    assert _csv_rows(run / "metrics.csv", header=True)[-1]["env_steps"] == "40"  # (tiny: 2 matches of 20 steps)
+    first_test = (out / "evaluation" / "per_seed.csv").read_bytes()
+    first_policy = (run / "policy.safetensors").read_bytes()
+
+    assert main([*base, "--out", str(out), "--bug-env-steps", "80"]) == 0
+    assert main([*base, "--out", str(straight), "--bug-env-steps", "80"]) == 0
+    assert _csv_rows(run / "metrics.csv", header=True)[-1]["env_steps"] == "80"
+    assert [leg["kind"] for leg in json.loads((run / "legs.json").read_text())["legs"]] == ["start", "resume"]
+    assert (run / "policy.safetensors").read_bytes() == (run_straight / "policy.safetensors").read_bytes()
+    assert [r[:4] for r in _csv_rows(run / "metrics.csv")] == [r[:4] for r in _csv_rows(run_straight / "metrics.csv")]
+    tests = [{r["candidate"]: r for r in _csv_rows(f / "evaluation" / "per_seed.csv", header=True)}
+             for f in (out, straight)]
+    assert {k: r["test_mwr"] for k, r in tests[0].items()} == {k: r["test_mwr"] for k, r in tests[1].items()}
+    assert tests[0]["trained"]["sha256"] == policy_fingerprint(str(run / "policy"))  # played again, the grown Bug
+
+    aside = out / "at-bug-env-steps-40"
+    assert (aside / "evaluation" / "per_seed.csv").read_bytes() == first_test  # the smaller budget's test, whole
+    assert (aside / "compare" / "compare.json").exists()
+    assert (aside / "policies" / "bug" / "learn=bug=sac,seed=0" / "policy.safetensors").read_bytes() == first_policy
+    record = _record(out)
+    [grown] = record["grown"]
+    assert grown["budget"] == {"bug_env_steps": {"from": 40, "to": 80}} and grown["folder"] == aside.name
+    assert sorted(grown["stages"]) == ["compare", "evaluation"] and grown["moved"] == ["evaluation", "compare"]
+    assert record["config"]["bug_env_steps"] == 80 and record["runs"][-1]["ran"] == ["bug", "evaluation", "compare"]
+    assert len(record["stages"]["bug"]["legs"]) == 2
+
+    capsys.readouterr()
+    assert main([*base, "--out", str(out), "--bug-env-steps", "40"]) == 2
+    err = capsys.readouterr().err
+    assert "can grow on a re-run, not shrink" in err and "bug_env_steps: 80 there, 40 given" in err
+    assert sorted(p.name for p in out.iterdir()) == sorted(["REPRODUCTION.md", "at-bug-env-steps-40", "bug", "compare",
+                                                            "contest", "evaluation", "reproduce.json"])

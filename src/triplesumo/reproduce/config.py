@@ -37,6 +37,12 @@ RUN_OPTIONS = ("progress", "sides_at_once", "status", "ray", "ray_address", "num
                "docs", "allow_other_ring")
 """ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
 make: a folder resumes with other values."""
+GROWABLE = ("bug_epochs", "bug_env_steps")
+"""Bug budgets a reproduction's folder may grow on a re-run (never shrink; ``bug_env_steps`` 0, no env-step limit, is
+the largest): each Bug goes on from its last checkpoint, replay buffer included, to the larger budget, as ``train
+--resume RUN --max-env-steps N`` does, which trains what one run at the larger budget would have. The test of the
+smaller budget is set aside, not lost (:func:`triplesumo.reproduce.run.set_aside_test`), and the test is played
+again."""
 PROTOCOL_FIELDS = ("out", "name", "learn", "learner", "seed", "epochs", "max_env_steps", "policies")
 """TrainConfig fields the protocol sets for every Bug run: an ablation cannot change them."""
 PRETRAIN_REWARD = RewardConfig(still=-1.0, draw=-200.0, axis_dead_zone=0.25, opponents="sum")

@@ -222,7 +222,8 @@ class Protocol:
         tiny = cfg.tiny
         self.steps = 20 if tiny else 500
         self.n_envs = 2 if tiny else cfg.n_envs
-        self.epochs = {"ant": 2, "spider": 2, "bug": 2, "contest": 4, "eval": 4} if tiny else {
+        # tiny: two rounds of the 2 matches for each Bug, so a Bug budget of 40 env steps stops one at half of it
+        self.epochs = {"ant": 2, "spider": 2, "bug": 4, "contest": 4, "eval": 4} if tiny else {
             "ant": cfg.ant_epochs, "spider": cfg.spider_epochs, "bug": cfg.bug_epochs, "contest": cfg.contest_epochs,
             "eval": cfg.eval_epochs}
         self.screen_every = 1 if tiny else cfg.screen_every
@@ -379,9 +380,8 @@ class Protocol:
     def bug_base(self) -> TrainConfig:
         base = self._base(name="bug", learn=("bug=ddpg",), policies=(f"ant={self.ant_policy}",
                                                                      f"spider={self.spider_policy}"),
-                          epochs=self.epochs["bug"],
-                          **({} if self.cfg.tiny else {"checkpoint_every": 500,
-                                                       "max_env_steps": self.cfg.bug_env_steps}))
+                          epochs=self.epochs["bug"], max_env_steps=self.cfg.bug_env_steps,
+                          **({} if self.cfg.tiny else {"checkpoint_every": 500}))
         if self.cfg.bug_eval_every:  # tiny: an evaluation of 2 matches every 20 env steps
             base = dataclasses.replace(base, eval_every=20 if self.cfg.tiny else self.cfg.bug_eval_every,
                                        eval_epochs=2 if self.cfg.tiny else self.cfg.bug_eval_epochs,

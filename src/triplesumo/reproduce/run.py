@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
+import shutil
 import signal
 import threading
 import time
@@ -16,7 +17,7 @@ from typing import Any
 from triplesumo._lock import held
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.model.specs import PhysicsConfig
-from triplesumo.reproduce.config import RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig, bug_runs
+from triplesumo.reproduce.config import GROWABLE, RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig, bug_runs
 from triplesumo.reproduce.protocol import Protocol
 from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status, stage_seconds
 from triplesumo.train import legs
@@ -52,11 +53,63 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     if set(bug_runs(recorded["algos"], recorded["seeds"], recorded["ddpg_runs"])) <= set(
             bug_runs(cfg.algos, cfg.seeds, cfg.ddpg_runs)):
         ignore = (*ignore, *runs)
+    shrunk = [k for k in GROWABLE if recorded.get(k) != config.get(k) and not _grows(recorded.get(k), config.get(k))]
+    if shrunk:
+        raise ValueError(f"{out} holds a reproduction whose Bugs trained to a larger budget ("
+                         + ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in shrunk)
+                         + "); a Bug budget can grow on a re-run, not shrink: choose another --out")
+    ignore = (*ignore, *GROWABLE)
     differ = sorted(k for k in {*config, *recorded} if k not in ignore and recorded.get(k) != config.get(k))
     if differ:
         raise ValueError(f"{out} holds a reproduction with other options ("
                          + ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in differ)
                          + "); re-running resumes it and needs the same options: choose another --out")
+
+
+def _grows(then: Any, now: Any) -> bool:
+    """Whether a Bug budget (:data:`GROWABLE`) given ``now`` is larger than the one recorded ``then``; 0 (no limit)
+    is the largest."""
+    if not isinstance(then, int) or not isinstance(now, int):
+        return False
+    return then != 0 and (now == 0 or now > then)
+
+
+def grown_budget(recorded: dict[str, Any], cfg: ReproduceConfig) -> dict[str, dict[str, int]]:
+    """The Bug budgets ``cfg`` grows over the reproduction ``recorded`` (``{field: {"from": old, "to": new}}``);
+    empty when they are the same. A record written before a field existed counts as its default."""
+    defaults = dataclasses.asdict(ReproduceConfig())
+    return {k: {"from": recorded.get(k, defaults[k]), "to": getattr(cfg, k)} for k in GROWABLE
+            if _grows(recorded.get(k, defaults[k]), getattr(cfg, k))}
+
+
+TEST_STAGES = ("evaluation", "compare")
+"""The stages that play and summarise the Bugs' test: what a grown Bug budget makes stale."""
+
+
+def set_aside_test(protocol: Protocol, record: dict[str, Any], grown: dict[str, dict[str, int]]) -> dict[str, Any]:
+    """Before the Bugs train on to a grown budget: move the test of the smaller one (``evaluation/``, ``compare/``)
+    to ``OUT/at-<budget>/`` with a copy of every Bug policy it played (each run's ``policy.*`` is replaced when it
+    trains on), and move those stages' entries from ``record["stages"]`` into the returned entry of
+    ``record["grown"]``. Nothing is deleted: the set-aside folder is the smaller budget's test, whole."""
+    out = protocol.out
+    label = "-".join(f"{k.replace('_', '-')}-{v['from']}" for k, v in grown.items())
+    aside = out / f"at-{label}"
+    if aside.exists():
+        raise FileExistsError(f"cannot set aside the test of the smaller Bug budget: {aside} exists already")
+    aside.mkdir()
+    moved: list[str] = []
+    for name in TEST_STAGES:
+        if (out / name).exists():
+            (out / name).rename(aside / name)
+            moved.append(name)
+    policies = aside / "policies"
+    for t in [*protocol.bug_trials(), *protocol.ablation_trials()]:
+        run = Path(t.config.out) / t.name
+        for f in sorted(run.glob("policy.*")):
+            (policies / run.parent.name / t.name).mkdir(parents=True, exist_ok=True)
+            shutil.copy2(f, policies / run.parent.name / t.name / f.name)
+    return {"budget": grown, "at": _now(), "version": code_version(), "folder": aside.name, "moved": moved,
+            "stages": {k: record["stages"].pop(k) for k in TEST_STAGES if k in record["stages"]}}
 
 
 HEARTBEAT_SECONDS = 60.0
@@ -127,10 +180,12 @@ def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
+    grown: dict[str, dict[str, int]] = {}
     if record:
         check_same_options(out, record["config"], cfg)
+        grown = grown_budget(record["config"], cfg)
     record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", []),
-              **{k: record[k] for k in ("published",) if k in record}}  # kept until a later --publish replaces it
+              **{k: record[k] for k in ("published", "grown") if k in record}}  # published: until a later --publish
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
     if cfg.status:
         print(format_status(protocol))
@@ -140,6 +195,13 @@ def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[
     record["runs"].append(run_now)
     run_now["machine"] = _machine(protocol)
     book = Record(path, record)
+    if grown:
+        entry = set_aside_test(protocol, record, grown)
+        record.setdefault("grown", []).append(entry)
+        book.write()
+        print("Bug budget grown (" + ", ".join(f"{k} {v['from']:,} -> {v['to']:,}" for k, v in grown.items())
+              + f"): the Bugs train on from their last checkpoints; the test of the smaller budget is kept in "
+              f"{out / entry['folder']}")
     n = len(protocol.stages)
     made_before = {stage.name for stage in protocol.stages if stage.complete()}
     made_with: dict[str, str] = {}  # a stage made alongside an earlier one of this run (the Spider beside the Ant)

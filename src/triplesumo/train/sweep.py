@@ -183,7 +183,8 @@ def run_trial(cfg: TrainConfig) -> dict[str, Any]:
     resumed_from = 0
     if saved and (run_dir / "config.json").exists():
         resumed_from = saved[-1][0]
-        result = train(cfg, resume_dir=run_dir, overrides={"epochs": cfg.epochs})
+        # the trial's budget, which may have grown since (a run at its old budget goes on to the new one)
+        result = train(cfg, resume_dir=run_dir, overrides={"epochs": cfg.epochs, "max_env_steps": cfg.max_env_steps})
     else:
         result = train(cfg, start_over=holds_run(run_dir))
     return {"trial": cfg.name, "run_dir": str(result.run_dir), "resumed_from": resumed_from,
