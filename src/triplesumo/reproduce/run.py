@@ -38,11 +38,12 @@ OPTIONS_ADDED_LATER: dict[str, Any] = {"bug_n_step": 1}
 did (one-step returns for the TD3 and SAC Bugs), written out: a record without one counts as this value."""
 
 
-def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> None:
+def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig) -> dict[str, dict[str, int]]:
     """``ValueError`` unless the reproduction recorded in ``out`` was made with ``cfg``'s options (:data:`RUN_OPTIONS`
-    aside, and the Bug runs' algorithms and seeds where ``cfg`` keeps every run the record names);
-    an option added since the record was written counts as what that run used: its value in
-    :data:`OPTIONS_ADDED_LATER`, else its default."""
+    aside, the Bug runs' algorithms and seeds where ``cfg`` keeps every run the record names, and Bug budgets that
+    grow); an option added since the record was written counts as what that run used: its value in
+    :data:`OPTIONS_ADDED_LATER`, else its default. Returns the Bug budgets ``cfg`` grows (:data:`GROWABLE`:
+    ``{field: {"from": old, "to": new}}``, empty when they are the same)."""
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
     defaults = json.loads(json.dumps(dataclasses.asdict(ReproduceConfig()))) | OPTIONS_ADDED_LATER
     recorded = {**{k: v for k, v in defaults.items() if k not in recorded}, **recorded}
@@ -53,17 +54,20 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     if set(bug_runs(recorded["algos"], recorded["seeds"], recorded["ddpg_runs"])) <= set(
             bug_runs(cfg.algos, cfg.seeds, cfg.ddpg_runs)):
         ignore = (*ignore, *runs)
-    shrunk = [k for k in GROWABLE if recorded.get(k) != config.get(k) and not _grows(recorded.get(k), config.get(k))]
+    def both(keys: list[str]) -> str:
+        return ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in keys)
+
+    grown = {k: {"from": recorded[k], "to": config[k]} for k in GROWABLE if _grows(recorded[k], config[k])}
+    shrunk = [k for k in GROWABLE if recorded[k] != config[k] and k not in grown]
     if shrunk:
-        raise ValueError(f"{out} holds a reproduction whose Bugs trained to a larger budget ("
-                         + ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in shrunk)
-                         + "); a Bug budget can grow on a re-run, not shrink: choose another --out")
+        raise ValueError(f"{out} holds a reproduction whose Bugs trained to a larger budget ({both(shrunk)}); "
+                         "a Bug budget can grow on a re-run, not shrink: choose another --out")
     ignore = (*ignore, *GROWABLE)
     differ = sorted(k for k in {*config, *recorded} if k not in ignore and recorded.get(k) != config.get(k))
     if differ:
-        raise ValueError(f"{out} holds a reproduction with other options ("
-                         + ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in differ)
-                         + "); re-running resumes it and needs the same options: choose another --out")
+        raise ValueError(f"{out} holds a reproduction with other options ({both(differ)}); "
+                         "re-running resumes it and needs the same options: choose another --out")
+    return grown
 
 
 def _grows(then: Any, now: Any) -> bool:
@@ -72,14 +76,6 @@ def _grows(then: Any, now: Any) -> bool:
     if not isinstance(then, int) or not isinstance(now, int):
         return False
     return then != 0 and (now == 0 or now > then)
-
-
-def grown_budget(recorded: dict[str, Any], cfg: ReproduceConfig) -> dict[str, dict[str, int]]:
-    """The Bug budgets ``cfg`` grows over the reproduction ``recorded`` (``{field: {"from": old, "to": new}}``);
-    empty when they are the same. A record written before a field existed counts as its default."""
-    defaults = dataclasses.asdict(ReproduceConfig())
-    return {k: {"from": recorded.get(k, defaults[k]), "to": getattr(cfg, k)} for k in GROWABLE
-            if _grows(recorded.get(k, defaults[k]), getattr(cfg, k))}
 
 
 TEST_STAGES = ("evaluation", "compare")
@@ -105,9 +101,10 @@ def set_aside_test(protocol: Protocol, record: dict[str, Any], grown: dict[str, 
     policies = aside / "policies"
     for t in [*protocol.bug_trials(), *protocol.ablation_trials()]:
         run = Path(t.config.out) / t.name
+        kept = policies / run.parent.name / t.name  # (bug/ or ablations/, then the trial)
         for f in sorted(run.glob("policy.*")):
-            (policies / run.parent.name / t.name).mkdir(parents=True, exist_ok=True)
-            shutil.copy2(f, policies / run.parent.name / t.name / f.name)
+            kept.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(f, kept / f.name)
     return {"budget": grown, "at": _now(), "version": code_version(), "folder": aside.name, "moved": moved,
             "stages": {k: record["stages"].pop(k) for k in TEST_STAGES if k in record["stages"]}}
 
@@ -180,10 +177,7 @@ def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
-    grown: dict[str, dict[str, int]] = {}
-    if record:
-        check_same_options(out, record["config"], cfg)
-        grown = grown_budget(record["config"], cfg)
+    grown = check_same_options(out, record["config"], cfg) if record else {}
     record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", []),
               **{k: record[k] for k in ("published", "grown") if k in record}}  # published: until a later --publish
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
