@@ -13,11 +13,13 @@ import dataclasses
 import json
 import math
 import shutil
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import torch
 
 import triplesumo.agents.zoo
 from conftest import TinyZoo, small_disk
@@ -36,6 +38,7 @@ from triplesumo.evaluation.evaluate import (
 )
 from triplesumo.evaluation.metrics import OUTCOMES, summarize
 from triplesumo.evaluation.parallel import ProcessRunner
+from triplesumo.evaluation.runner import play_match
 from triplesumo.model.specs import V0_PHYSICS, V1_PHYSICS
 from triplesumo.rules.config import MatchConfig
 from triplesumo.rules.rewards import DENSE_TERMS
@@ -138,6 +141,43 @@ def test_trained_actors_and_random_policies_give_the_same_epochs_for_any_n_envs(
     assert play(bug, others, epochs=4, n_envs=1) == three
     random_others = {**others, "spider": RandomPolicy(5)}
     assert play(bug, random_others, epochs=4, n_envs=1) == play(bug, random_others, epochs=4, n_envs=3)
+
+
+class ThreadCounter:
+    """A passive policy that notes torch's intra-op thread count at each call."""
+
+    def __init__(self) -> None:
+        self.seen: set[int] = set()
+
+    def __call__(self, obs: np.ndarray) -> np.ndarray:
+        self.seen.add(torch.get_num_threads())
+        return np.zeros(8, np.float32)
+
+
+def test_policies_play_on_one_torch_thread_with_the_same_rows_and_the_setting_restored(tiny_zoo: TinyZoo) -> None:
+    """One-observation calls are not worth splitting: the runner plays them on one torch thread (also from two
+    threads of a process at once), gives the rows of torch's other settings, and hands the setting back."""
+    bug = load_policy(tiny_zoo.bug_policy)[0]
+    others = fixed_others(tiny_zoo.zoo_dir)
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        one = play(bug, others, epochs=4, n_envs=2)
+        torch.set_num_threads(3)
+        counter = ThreadCounter()
+        assert play(bug, {**others, "spider": counter}, epochs=2, n_envs=2)
+        assert counter.seen == {1}
+        assert torch.get_num_threads() == 3
+        assert play(bug, others, epochs=4, n_envs=2) == one
+        assert torch.get_num_threads() == 3
+        with ThreadPoolExecutor(2) as pool:  # two runs in one process share the setting and restore it once
+            runs = list(pool.map(lambda _: play(bug, {**others, "spider": counter}, epochs=3, n_envs=2), range(2)))
+        assert runs[0] == runs[1] and counter.seen == {1}
+        assert torch.get_num_threads() == 3
+        record = play_match({"bug": counter}, seed=5, config=MatchConfig(max_steps=STEPS))
+        assert record.steps > 0 and counter.seen == {1} and torch.get_num_threads() == 3
+    finally:
+        torch.set_num_threads(before)
 
 
 def test_a_random_learner_is_reseeded_so_runs_repeat(tiny_zoo: TinyZoo) -> None:
