@@ -293,15 +293,28 @@ def test_a_record_written_before_bug_n_step_resumes_only_with_one_step_returns(t
 
 @pytest.mark.slow  # 109 s alone on the shared 2-core box
 def test_with_ray_the_bug_runs_train_as_ray_tasks_and_give_the_outputs_of_a_local_reproduction(
-        ray_session: Any, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """``--ray``: the stage-4 Bug runs train as Ray tasks (two at once here) and the test matches play as Ray tasks;
-    every run's rows, the contest and the per-seed test MWRs are those of the same reproduction without Ray, and
-    the folder resumes with or without ``--ray``."""
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--ray``: the stage-4 Bug runs train as Ray tasks (two at once here) and the contest's and test's matches play
+    as Ray tasks, all on one local Ray of ``--num-cpus``, started once and shut down at the end; every run's rows, the
+    contest and the per-seed test MWRs are those of the same reproduction without Ray, and the folder resumes with or
+    without ``--ray``."""
+    ray = pytest.importorskip("ray", reason='the "ray" extra is not installed (pip install "triplesumo[ray]")')
+    assert not ray.is_initialized()
+    starts: list[Any] = []
+    real_init = ray.init
+
+    def init(*args: Any, **kwargs: Any) -> Any:  # the real ray.init, its calls noted
+        starts.append(kwargs.get("num_cpus"))
+        return real_init(*args, **kwargs)
+
+    monkeypatch.setattr(ray, "init", init)
     argv = ["reproduce", "--tiny", "--algos", "ddpg", "ppo", "--seeds", "0", "1", "--no-progress"]
     assert main([*argv, "--out", str(tmp_path / "local")]) == 0
+    assert starts == []
     capsys.readouterr()
-    assert main([*argv, "--out", str(tmp_path / "ray"), "--ray", "--cpus-per-trial", "1"]) == 0
+    assert main([*argv, "--out", str(tmp_path / "ray"), "--ray", "--num-cpus", "2", "--cpus-per-trial", "1"]) == 0
     assert "4 Bug trials as Ray tasks" in capsys.readouterr().out
+    assert starts == [2] and not ray.is_initialized()  # the contest, the Bug runs and the test shared one Ray
     names = sorted(p.name for p in (tmp_path / "local" / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
     assert names == sorted(p.name for p in (tmp_path / "ray" / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
     assert len(names) == 4

@@ -3,12 +3,13 @@ verdict."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import functools
 import json
 import shlex
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -219,6 +220,8 @@ class Protocol:
     def __init__(self, cfg: ReproduceConfig) -> None:
         self.cfg = cfg
         self.out = Path(cfg.out).resolve()
+        self._ray_kept: contextlib.ExitStack | None = None
+        """Inside :meth:`one_ray`: holds the Ray the first stage on Ray connected to."""
         tiny = cfg.tiny
         self.steps = 20 if tiny else 500
         self.n_envs = 2 if tiny else cfg.n_envs
@@ -431,12 +434,36 @@ class Protocol:
             state = f"error: {result['error']}" if "error" in result else f"{result['seconds']:.0f} s"
             print(f"  Bug trial {left[k].name}: {state}")
 
-        with ray_tasks.session(self.cfg.ray_address, self.cfg.num_cpus or None):
+        with self._on_ray():
             results = ray_tasks.run_trials_on_ray([t.config for t in left], done, self.cfg.cpus_per_trial)
         failed = [f"{t.name} ({r['error']})" for t, r in zip(left, results, strict=True) if "error" in r]
         if failed:
             raise RuntimeError("Bug trials failed on Ray: " + "; ".join(failed) + "; run the same command again "
                                "to resume them")
+
+    # ------------------------------------------------------------ Ray
+    @contextlib.contextmanager
+    def one_ray(self) -> Iterator[None]:
+        """Inside, the stages on Ray (``ray``) share one: the first of them connects to ``ray_address`` or starts a
+        local Ray of ``num_cpus``, and it is shut down at the end. Stage 1 trains in processes of its own and never
+        waits for it. (A Ray per evaluation cost a start of seconds each, could time out starting on a busy machine,
+        and sized a local one by all the cores instead of ``num_cpus``.)"""
+        with contextlib.ExitStack() as kept:
+            self._ray_kept = kept
+            try:
+                yield
+            finally:
+                self._ray_kept = None
+
+    def _on_ray(self) -> contextlib.AbstractContextManager[None]:
+        """Connected to Ray in the block: for the rest of :meth:`one_ray` when inside it, else for the block only."""
+        from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
+
+        session = ray_tasks.session(self.cfg.ray_address, self.cfg.num_cpus or None)
+        if self._ray_kept is None:
+            return session
+        self._ray_kept.enter_context(session)  # connects once; later calls find Ray connected and add nothing
+        return contextlib.nullcontext()
 
     # ------------------------------------------------------------ evaluations
     def _evaluate(self, ecfg: EvaluateConfig) -> list[str]:
@@ -447,8 +474,8 @@ class Protocol:
             from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
 
             ecfg = dataclasses.replace(ecfg, ray=True, ray_address=self.cfg.ray_address)
-            with ray_tasks.ray_runner(ecfg.ray_address) as runner:
-                evaluate(dataclasses.replace(ecfg, resume=resume), runner)
+            with self._on_ray():
+                evaluate(dataclasses.replace(ecfg, resume=resume), ray_tasks.RayRunner())
         else:
             evaluate(dataclasses.replace(ecfg, resume=resume))
         return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]

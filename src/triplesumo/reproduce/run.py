@@ -169,8 +169,8 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     out = protocol.out
     if cfg.docs:  # before hours of training: the file and its markers are there
         _docs_markers(Path(cfg.docs).read_text().splitlines())
-    with held(out, "reproduce"):  # one reproduction per folder (each run and evaluation holds its own too)
-        return _run_reproduce(cfg, protocol, out)
+    with held(out, "reproduce"), protocol.one_ray():  # one reproduction per folder (each run and evaluation holds
+        return _run_reproduce(cfg, protocol, out)  # its own too); the stages on Ray share one
 
 
 def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[str, Any]:
