@@ -291,13 +291,13 @@ def test_a_record_written_before_bug_n_step_resumes_only_with_one_step_returns(t
     check_same_options(tmp_path, recorded, ReproduceConfig(out=str(tmp_path), bug_learn_every=16, bug_n_step=1))
 
 
-@pytest.mark.slow  # 109 s alone on the shared 2-core box
-def test_with_ray_the_bug_runs_train_as_ray_tasks_and_give_the_outputs_of_a_local_reproduction(
+@pytest.mark.slow  # 109 s alone on the shared 2-core box, before the --workers leg
+def test_with_ray_or_workers_the_bug_runs_train_at_once_and_give_the_outputs_of_a_local_reproduction(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """``--ray``: the stage-4 Bug runs train as Ray tasks (two at once here) and the contest's and test's matches play
-    as Ray tasks, all on one local Ray of ``--num-cpus``, started once and shut down at the end; every run's rows, the
-    contest and the per-seed test MWRs are those of the same reproduction without Ray, and the folder resumes with or
-    without ``--ray``."""
+    as Ray tasks, all on one local Ray of ``--num-cpus``, started once and shut down at the end. ``--workers 2``: the
+    same on two processes of this machine, without Ray. Every run's rows, the contest and the per-seed test MWRs are
+    those of the same reproduction in one process, and the folder resumes with or without either."""
     ray = pytest.importorskip("ray", reason='the "ray" extra is not installed (pip install "triplesumo[ray]")')
     assert not ray.is_initialized()
     starts: list[Any] = []
@@ -315,22 +315,28 @@ def test_with_ray_the_bug_runs_train_as_ray_tasks_and_give_the_outputs_of_a_loca
     assert main([*argv, "--out", str(tmp_path / "ray"), "--ray", "--num-cpus", "2", "--cpus-per-trial", "1"]) == 0
     assert "4 Bug trials as Ray tasks" in capsys.readouterr().out
     assert starts == [2] and not ray.is_initialized()  # the contest, the Bug runs and the test shared one Ray
+    assert main([*argv, "--out", str(tmp_path / "workers"), "--workers", "2"]) == 0
+    assert "4 Bug trials in 2 processes at once" in capsys.readouterr().out
+    assert starts == [2]  # no Ray
+    commands = " ".join(c for stage in _record(tmp_path / "workers")["stages"].values() for c in stage["commands"])
+    assert commands.count("--workers 2") == 4  # the contest's three checks and the test
     names = sorted(p.name for p in (tmp_path / "local" / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
-    assert names == sorted(p.name for p in (tmp_path / "ray" / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
     assert len(names) == 4
-    for name in names:
-        local, on_ray = (tmp_path / where / "bug" / name / "metrics.csv" for where in ("local", "ray"))
-        assert [r[:-1] for r in _csv_rows(on_ray)] == [r[:-1] for r in _csv_rows(local)]  # all but the wall time
-    for rel in ("contest/contest.json",):
-        assert (tmp_path / "ray" / rel).read_text() == (tmp_path / "local" / rel).read_text()
 
     def scores(where: str) -> dict[str, str]:
         rows = _csv_rows(tmp_path / where / "evaluation" / "per_seed.csv", header=True)
         return {Path(r["policy"]).parent.name or r["policy"]: r["test_mwr"] for r in rows}
 
-    assert scores("ray") == scores("local") and len(scores("ray")) == 6
-    assert main([*argv, "--out", str(tmp_path / "ray")]) == 0  # the same protocol: resumes (all skipped) without Ray
-    assert _record(tmp_path / "ray")["runs"][-1]["ran"] == []
+    for where in ("ray", "workers"):
+        assert names == sorted(p.name for p in (tmp_path / where / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
+        for name in names:
+            local, there = (tmp_path / w / "bug" / name / "metrics.csv" for w in ("local", where))
+            assert [r[:-1] for r in _csv_rows(there)] == [r[:-1] for r in _csv_rows(local)]  # all but the wall time
+        assert (tmp_path / where / "contest/contest.json").read_text() == (
+            tmp_path / "local" / "contest/contest.json").read_text()
+        assert scores(where) == scores("local") and len(scores(where)) == 6
+        assert main([*argv, "--out", str(tmp_path / where)]) == 0  # the same protocol: resumes (all skipped) as it is
+        assert _record(tmp_path / where)["runs"][-1]["ran"] == []
 
 
 def _csv_rows(path: Path, header: bool = False) -> list[Any]:

@@ -33,8 +33,8 @@ class PairError(RuntimeError):
     and the record)."""
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations of the paper preset (Gaussian noise, a smaller still punishment)."""
-RUN_OPTIONS = ("progress", "sides_at_once", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "publish",
-               "docs", "allow_other_ring")
+RUN_OPTIONS = ("progress", "sides_at_once", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "workers",
+               "publish", "docs", "allow_other_ring")
 """ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
 make: a folder resumes with other values."""
 GROWABLE = ("bug_epochs", "bug_env_steps")
@@ -193,6 +193,10 @@ class ReproduceConfig:
     """With ray, local Ray only: the CPUs it may use (0: all)."""
     cpus_per_trial: int = 1
     """With ray: the CPUs Ray reserves for each Bug run (so at most num_cpus / cpus_per_trial train at once)."""
+    workers: int = 1
+    """Without ray: the Bug runs of stage 4 and the ablations train in this many processes of this machine at once,
+    and the contest's and the test's matches play on as many (``evaluate --workers``). The outputs are those of one
+    process. Stage 1's two sides train as ``sides_at_once`` says, and their screens play in their own processes."""
 
     def __post_init__(self) -> None:
         for name in ("pretrain_seed", "contest_seed", "eval_seed"):
@@ -239,12 +243,15 @@ class ReproduceConfig:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 1, got {value!r}")
         if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in self.seeds):
             raise ValueError(f"ReproduceConfig.seeds must be ints >= 0, got {self.seeds!r}")
-        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1)):
+        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1), ("workers", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= {low}, got {value!r}")
         if (self.ray_address or self.num_cpus) and not self.ray:
             raise ValueError("ReproduceConfig.ray_address and num_cpus are options of ray (--ray)")
+        if self.workers > 1 and self.ray:
+            raise ValueError("ReproduceConfig.workers and ReproduceConfig.ray: Ray runs the tasks on its own CPUs "
+                             "(num_cpus, cpus_per_trial); give one of the two")
         check_ray("ReproduceConfig", self.ray, self.ray_address)
 
 

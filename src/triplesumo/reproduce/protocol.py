@@ -22,13 +22,13 @@ from triplesumo.algos.td3 import TD3Config
 from triplesumo.evaluation.compare import CompareConfig, compare, format_compare
 from triplesumo.evaluation.evaluate import EvaluateConfig, evaluate
 from triplesumo.evaluation.metrics_csv import open_table, read_table_bytes, table_exists
-from triplesumo.evaluation.parallel import ProcessRunner
+from triplesumo.evaluation.parallel import ProcessRunner, TaskRunner
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation, bug_runs
 from triplesumo.reproduce.pretrain import PAIR_FILE, SCREENS_FILE, Side, counts_of, play_pair_rule, read_record
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.run_folder import command_for
-from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, trials
+from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, run_trials, trials
 
 
 def _read_csv(path: Path) -> list[dict[str, str]]:
@@ -326,7 +326,7 @@ class Protocol:
 
         def screen(policy: str, out: Path) -> dict[str, int]:
             ecfg = self._check_config(out, role, policy, others, self.screen_epochs, self.cfg.screen_seed)
-            self._evaluate(ecfg)
+            self._evaluate(ecfg, here=True)  # in the side's process, beside the other side: no Ray, no processes
             return counts_of(out / "summary.json")
 
         return Side(role, self.out / role, self.screen_every, self.epochs[role],
@@ -413,33 +413,35 @@ class Protocol:
     def _train_trials(self, todo: list[Trial]) -> list[str]:
         left = [t for t in todo if not finished(t)]
         if self.cfg.ray:
-            self._train_on_ray(left)
+            from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
+
+            with self._on_ray():
+                self._train_as_tasks(left, ray_tasks.RayRunner(), f"as Ray tasks, {self.cfg.cpus_per_trial} CPU each")
+        elif self.cfg.workers > 1 and len(left) > 1:
+            self._train_as_tasks(left, ProcessRunner(self.cfg.workers),
+                                 f"in {min(self.cfg.workers, len(left))} processes at once")
         else:
             for t in left:
                 print(f"  Bug trial {t.name}")
                 run_trial(t.config)
         return [command_for(t.config) for t in todo]
 
-    def _train_on_ray(self, left: list[Trial]) -> None:
-        """The trials as Ray tasks, as many at once as Ray has CPUs for; ``RuntimeError`` naming any that failed
-        (the others finish first, and a re-run resumes the failed ones)."""
+    def _train_as_tasks(self, left: list[Trial], runner: TaskRunner, how: str) -> None:
+        """The trials as tasks of ``runner`` (Ray, or this machine's processes), as many at once as it runs;
+        ``RuntimeError`` naming any that failed (the others finish first, and a re-run resumes the failed ones)."""
         if not left:
             return
-        from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
-
-        print(f"  {len(left)} Bug trials as Ray tasks, {self.cfg.cpus_per_trial} CPU each: "
-              + ", ".join(t.name for t in left))
+        print(f"  {len(left)} Bug trials {how}: " + ", ".join(t.name for t in left))
 
         def done(k: int, result: dict[str, Any]) -> None:
             state = f"error: {result['error']}" if "error" in result else f"{result['seconds']:.0f} s"
             print(f"  Bug trial {left[k].name}: {state}")
 
-        with self._on_ray():
-            results = ray_tasks.run_trials_on_ray([t.config for t in left], done, self.cfg.cpus_per_trial)
+        results = run_trials(runner, [t.config for t in left], done, self.cfg.cpus_per_trial)
         failed = [f"{t.name} ({r['error']})" for t, r in zip(left, results, strict=True) if "error" in r]
         if failed:
-            raise RuntimeError("Bug trials failed on Ray: " + "; ".join(failed) + "; run the same command again "
-                               "to resume them")
+            raise RuntimeError("Bug trials failed: " + "; ".join(failed) + "; run the same command again to resume "
+                               "them")
 
     # ------------------------------------------------------------ Ray
     @contextlib.contextmanager
@@ -466,17 +468,21 @@ class Protocol:
         return contextlib.nullcontext()
 
     # ------------------------------------------------------------ evaluations
-    def _evaluate(self, ecfg: EvaluateConfig) -> list[str]:
+    def _evaluate(self, ecfg: EvaluateConfig, here: bool = False) -> list[str]:
+        """Play ``ecfg`` (resuming its folder): as Ray tasks with ``ray``, on ``workers`` processes, else in this
+        process; ``here``: in this process whatever the options (a screen, inside a side's own process)."""
         from triplesumo import _dcargs
 
         resume = (Path(ecfg.out) / "evaluation.json").exists()
-        if self.cfg.ray:  # the same rows, played as Ray tasks
+        if self.cfg.ray and not here:  # the same rows, played as Ray tasks
             from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
 
             ecfg = dataclasses.replace(ecfg, ray=True, ray_address=self.cfg.ray_address)
             with self._on_ray():
                 evaluate(dataclasses.replace(ecfg, resume=resume), ray_tasks.RayRunner())
         else:
+            if self.cfg.workers > 1 and not here:  # the same rows, played on this machine's processes
+                ecfg = dataclasses.replace(ecfg, workers=self.cfg.workers)
             evaluate(dataclasses.replace(ecfg, resume=resume))
         return [" ".join(shlex.quote(a) for a in ["triplesumo", "evaluate", *_dcargs.to_argv(ecfg)])]
 
