@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import os
 import signal
@@ -15,6 +16,7 @@ import pytest
 
 from conftest import own_ray_workers
 from triplesumo.algos.ddpg import DDPGConfig
+from triplesumo.evaluation.parallel import ProcessRunner
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.sweep import SweepConfig, parse_grid, run_sweep, trials
 
@@ -97,6 +99,14 @@ def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_
     assert {t: (tmp_path / "sweep" / t / "metrics.csv").read_bytes() for t in before} == before
     with pytest.raises(ValueError, match="holds a sweep with other fixed train options"):
         run_sweep(cfg, TINY.__class__(**{**TINY.__dict__, "steps_per_epoch": 31}), _on_ray())
+    # The same sweep on two processes of this machine (SweepConfig.workers): the rows and test MWRs of the one on Ray.
+    local = dataclasses.replace(cfg, out=str(tmp_path / "local"), workers=2)
+    on_processes = run_sweep(local, TINY, ProcessRunner(local.workers))
+    assert [r["test_mwr"] for r in on_processes["trials"]] == [r["test_mwr"] for r in rows]
+    for name in names:
+        ray_rows, local_rows = (_rows(tmp_path / where / name / "metrics.csv") for where in ("sweep", "local"))
+        assert [{k: v for k, v in r.items() if k != "wall_time"} for r in local_rows] == [
+            {k: v for k, v in r.items() if k != "wall_time"} for r in ray_rows]
 
 
 def _latest_epoch(latest: Path) -> int:
@@ -156,7 +166,7 @@ def test_the_command_line_takes_repeated_grids_and_fixed_train_options(capsys: p
     assert "ddpg has no field 'actr_lr'" in capsys.readouterr().err
 
 
-def test_without_ray_sweep_and_ray_options_name_the_extra(tmp_path: Path) -> None:
+def test_without_ray_sweep_and_ray_options_name_the_extra_and_sweep_runs_on_workers(tmp_path: Path) -> None:
     import subprocess
     import sys
 
@@ -164,13 +174,17 @@ def test_without_ray_sweep_and_ray_options_name_the_extra(tmp_path: Path) -> Non
               "from triplesumo.cli import main\n"
               f"codes = [main(['sweep', '--grid', 'seed=0', '--out', {str(tmp_path / 's')!r}]),\n"
               f"         main(['evaluate', '--ray', '--epochs', '1', '--out', {str(tmp_path / 'e')!r}]),\n"
-              f"         main(['tournament', '--ray', '--out', {str(tmp_path / 't')!r}])]\n"
-              "assert codes == [2, 2, 2], codes\n"
+              f"         main(['tournament', '--ray', '--out', {str(tmp_path / 't')!r}]),\n"
+              "         main(['sweep', '--grid', 'seed=0', '--workers', '1', '--epochs', '2',\n"
+              "               '--steps-per-epoch', '10', '--n-envs', '1', '--no-tensorboard', '--no-progress',\n"
+              f"               '--out', {str(tmp_path / 'w')!r}])]\n"
+              "assert codes == [2, 2, 2, 0], codes\n"
               "assert not [m for m, v in sys.modules.items() if v is not None and m.split('.')[0] == 'ray']\n")
     err = subprocess.run([sys.executable, "-c", script], check=True, capture_output=True, text=True,
                          env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[1] / "src")}).stderr
-    assert err.count('pip install "triplesumo[ray]"') == 3, err
+    assert err.count('pip install "triplesumo[ray]"') == 3 and "--workers N" in err, err
     assert not (tmp_path / "s").exists()
+    assert len(_rows(tmp_path / "w" / "seed=0" / "metrics.csv")) == 2  # --workers: trained without Ray
 
 
 @pytest.mark.slow  # 24 s alone on the shared 2-core box

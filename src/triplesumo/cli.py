@@ -255,13 +255,19 @@ def main(argv: list[str] | None = None) -> int:
 
             scfg = _dcargs.build(SweepConfig, args)
             base = _dcargs.build(TrainConfig, argparse.Namespace(**{k: v for k, v in vars(args).items() if k != "out"}))
-            if importlib.util.find_spec("ray") is None:
-                raise ValueError('triplesumo sweep runs its trials on Ray, which is not installed: '
-                                 'pip install "triplesumo[ray]"')
-            from triplesumo.integrations.ray_tasks import ray_runner
+            if scfg.workers:
+                from triplesumo.evaluation.parallel import ProcessRunner
 
-            with ray_runner(scfg.address, scfg.num_cpus or None, scfg.max_retries) as ray_tasks:
-                print(format_sweep(run_sweep(scfg, base, ray_tasks)))
+                print(format_sweep(run_sweep(scfg, base, ProcessRunner(scfg.workers))))
+            else:
+                if importlib.util.find_spec("ray") is None:
+                    raise ValueError('triplesumo sweep runs its trials on Ray, which is not installed: '
+                                     'pip install "triplesumo[ray]", or give --workers N to run them on N processes '
+                                     'of this machine')
+                from triplesumo.integrations.ray_tasks import ray_runner
+
+                with ray_runner(scfg.address, scfg.num_cpus or None, scfg.max_retries) as ray_tasks:
+                    print(format_sweep(run_sweep(scfg, base, ray_tasks)))
             print(f"summary: {scfg.out}/summary.csv, summary.json" + (f"; compare: {scfg.out}/compare/"
                                                                       if scfg.evaluate_epochs else ""))
         elif args.command == "reproduce":

@@ -61,7 +61,8 @@ SUMMARY_COLUMNS = ("trial", "group", "epochs", "env_steps", "final_mwr", "resume
 
 @dataclass(frozen=True)
 class SweepConfig:
-    """A grid of training runs as Ray tasks (the fixed train options come beside it)."""
+    """A grid of training runs as Ray tasks, or on this machine's processes (``workers``); the fixed train options
+    come beside it."""
 
     grid: tuple[str, ...] = ()
     """FIELD=V1,V2,...: a TrainConfig field by dotted name (seed, ddpg.actor_lr, scenario, ...) and its
@@ -77,6 +78,10 @@ class SweepConfig:
     max_retries: int = 3
     """Times Ray runs a task again whose worker died (a trial resumes from its last checkpoint; a chunk of the
     evaluation after training replays exactly)."""
+    workers: int = 0
+    """Run the trials, and the evaluation after them, on this many processes of this machine instead of Ray (0: on
+    Ray). Needs no Ray. The outputs are those of a sweep on Ray; a trial whose process dies is not run again here, and
+    re-running the sweep resumes it from its last checkpoint."""
     evaluate_epochs: int = 0
     """Test epochs per trial's policy after training (0: no evaluation and no compare table)."""
     eval_seed: int = 10_000
@@ -84,12 +89,16 @@ class SweepConfig:
 
     def __post_init__(self) -> None:
         check_seed(self.eval_seed, "SweepConfig.eval_seed")
-        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1), ("max_retries", 0), ("evaluate_epochs", 0)):
+        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1), ("max_retries", 0), ("evaluate_epochs", 0),
+                          ("workers", 0)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"SweepConfig.{name} must be an int >= {low}, got {value!r}")
         if self.address and self.num_cpus:
             raise ValueError("SweepConfig.num_cpus sizes a local Ray; a cluster (address) has its own CPUs")
+        if self.workers and (self.address or self.num_cpus):
+            raise ValueError("SweepConfig.workers runs the trials on this machine's processes, not on Ray: leave out "
+                             "SweepConfig.address and SweepConfig.num_cpus")
         parse_grid(self.grid)
 
 
