@@ -70,6 +70,11 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
+def _timeless(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    """Table rows without their wall time, which no two runs share."""
+    return [{k: v for k, v in r.items() if k != "wall_time"} for r in rows]
+
+
 @pytest.mark.slow  # 29 s alone on the shared 2-core box
 def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_session: Any,
                                                                            tmp_path: Path) -> None:
@@ -105,8 +110,40 @@ def test_a_two_seed_sweep_trains_evaluates_compares_and_resumes_by_skipping(ray_
     assert [r["test_mwr"] for r in on_processes["trials"]] == [r["test_mwr"] for r in rows]
     for name in names:
         ray_rows, local_rows = (_rows(tmp_path / where / name / "metrics.csv") for where in ("sweep", "local"))
-        assert [{k: v for k, v in r.items() if k != "wall_time"} for r in local_rows] == [
-            {k: v for k, v in r.items() if k != "wall_time"} for r in ray_rows]
+        assert _timeless(local_rows) == _timeless(ray_rows)
+
+
+@pytest.mark.slow  # three tiny sweeps of two trials on two processes
+def test_a_sweep_run_again_with_a_larger_budget_trains_its_trials_on_to_what_a_sweep_at_that_budget_makes(
+        tmp_path: Path) -> None:
+    """A larger epochs budget resumes every trial from its checkpoint; its rows and test MWRs are those of a sweep made
+    at that budget. The smaller budget's evaluation and compare move to ``at-epochs-2/`` with the policies they
+    played, ``sweep.json`` lists the growth, and a smaller budget or another option is refused, naming both values."""
+    runner = ProcessRunner(2)
+    small, large = (dataclasses.replace(TINY, epochs=e) for e in (2, 4))
+    cfg = SweepConfig(grid=("seed=0,1",), out=str(tmp_path / "grown"), evaluate_epochs=2, workers=2)
+    first = run_sweep(cfg, small, runner)
+    before = {r["trial"]: (tmp_path / "grown" / r["trial"] / "policy.safetensors").read_bytes()
+              for r in first["trials"]}
+    grown = run_sweep(cfg, large, runner)
+    straight = run_sweep(dataclasses.replace(cfg, out=str(tmp_path / "straight")), large, runner)
+    assert [r["epochs"] for r in grown["trials"]] == [4, 4] and [r["resumed_from"] for r in grown["trials"]] == [2, 2]
+    assert [r["test_mwr"] for r in grown["trials"]] == [r["test_mwr"] for r in straight["trials"]]
+    for name in before:
+        grown_rows, straight_rows = (_rows(tmp_path / where / name / "metrics.csv") for where in ("grown", "straight"))
+        assert _timeless(grown_rows) == _timeless(straight_rows)
+        kept = tmp_path / "grown" / "at-epochs-2" / "policies" / name / "policy.safetensors"
+        assert kept.read_bytes() == before[name] != (tmp_path / "grown" / name / "policy.safetensors").read_bytes()
+    aside = tmp_path / "grown" / "at-epochs-2"
+    assert (aside / "evaluation").is_dir() and (aside / "compare" / "compare.csv").is_file()
+    assert (tmp_path / "grown" / "compare" / "compare.csv").is_file()  # made again at the larger budget
+    record = json.loads((tmp_path / "grown" / "sweep.json").read_text())
+    assert [g["budget"] for g in record["grown"]] == [{"epochs": {"from": 2, "to": 4}}]
+    assert record["base"]["epochs"] == 4
+    with pytest.raises(ValueError, match=r"larger budget \(epochs: 4 then, 3 now\)"):
+        run_sweep(cfg, dataclasses.replace(TINY, epochs=3), runner)
+    with pytest.raises(ValueError, match=r"other fixed train options \(steps_per_epoch: 30 then, 31 now\)"):
+        run_sweep(cfg, dataclasses.replace(large, steps_per_epoch=31), runner)
 
 
 def _latest_epoch(latest: Path) -> int:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
-import shutil
 import signal
 import threading
 import time
@@ -21,6 +20,7 @@ from triplesumo.reproduce.config import GROWABLE, RECORD_FILE, REPORT_FILE, RUN_
 from triplesumo.reproduce.protocol import Protocol
 from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status, stage_seconds
 from triplesumo.train import legs
+from triplesumo.train.sweep import budget_grows, set_aside
 from triplesumo.version import ENV_VERSION, __version__
 
 
@@ -57,7 +57,7 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     def both(keys: list[str]) -> str:
         return ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in keys)
 
-    grown = {k: {"from": recorded[k], "to": config[k]} for k in GROWABLE if _grows(recorded[k], config[k])}
+    grown = {k: {"from": recorded[k], "to": config[k]} for k in GROWABLE if budget_grows(recorded[k], config[k])}
     shrunk = [k for k in GROWABLE if recorded[k] != config[k] and k not in grown]
     if shrunk:
         raise ValueError(f"{out} holds a reproduction whose Bugs trained to a larger budget ({both(shrunk)}); "
@@ -70,14 +70,6 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     return grown
 
 
-def _grows(then: Any, now: Any) -> bool:
-    """Whether a Bug budget (:data:`GROWABLE`) given ``now`` is larger than the one recorded ``then``; 0 (no limit)
-    is the largest."""
-    if not isinstance(then, int) or not isinstance(now, int):
-        return False
-    return then != 0 and (now == 0 or now > then)
-
-
 TEST_STAGES = ("evaluation", "compare")
 """The stages that play and summarise the Bugs' test: what a grown Bug budget makes stale."""
 
@@ -88,23 +80,8 @@ def set_aside_test(protocol: Protocol, record: dict[str, Any], grown: dict[str, 
     trains on), and move those stages' entries from ``record["stages"]`` into the returned entry of
     ``record["grown"]``. Nothing is deleted: the set-aside folder is the smaller budget's test, whole."""
     out = protocol.out
-    label = "-".join(f"{k.replace('_', '-')}-{v['from']}" for k, v in grown.items())
-    aside = out / f"at-{label}"
-    if aside.exists():
-        raise FileExistsError(f"cannot set aside the test of the smaller Bug budget: {aside} exists already")
-    aside.mkdir()
-    moved: list[str] = []
-    for name in TEST_STAGES:
-        if (out / name).exists():
-            (out / name).rename(aside / name)
-            moved.append(name)
-    policies = aside / "policies"
-    for t in [*protocol.bug_trials(), *protocol.ablation_trials()]:
-        run = Path(t.config.out) / t.name
-        kept = policies / run.parent.name / t.name  # (bug/ or ablations/, then the trial)
-        for f in sorted(run.glob("policy.*")):
-            kept.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(f, kept / f.name)
+    runs = [Path(t.config.out) / t.name for t in [*protocol.bug_trials(), *protocol.ablation_trials()]]
+    aside, moved = set_aside(out, TEST_STAGES, grown, runs)  # policies/bug/NAME, policies/ablations/NAME
     return {"budget": grown, "at": _now(), "version": code_version(), "folder": aside.name, "moved": moved,
             "stages": {k: record["stages"].pop(k) for k in TEST_STAGES if k in record["stages"]}}
 

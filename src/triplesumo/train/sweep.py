@@ -14,7 +14,9 @@ not Ray Tune trials: recovery is the project's own. A trial is :func:`run_trial`
 resumes its run folder from the last checkpoint when one exists
 (``train(..., resume_dir=...)``), else it starts the run. So a trial whose worker dies is
 run again by Ray and resumes, rows and replay buffer intact; a sweep run again skips
-finished trials and resumes the others. Tune would add a second checkpoint system, an
+finished trials and resumes the others. Run again with a larger budget (``epochs``, ``max_env_steps``: the one
+change of the fixed train options it takes), every trial trains on from its checkpoint and ends as a trial made at
+that budget would; the evaluation and compare of the smaller one move to ``OUT/at-<budget>/`` (:func:`set_aside`). Tune would add a second checkpoint system, an
 experiment state and a per-epoch report hook in the trainer, for nothing a grid needs.
 
 The summary (``summary.csv``, ``summary.json``): per trial its values, epochs, env
@@ -30,10 +32,12 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import datetime
 import io
 import itertools
 import json
 import math
+import shutil
 import typing
 from collections.abc import Callable, Sequence
 from contextlib import closing
@@ -237,17 +241,80 @@ def run_facts(run_dir: Path, window: int) -> dict[str, Any]:
     return {"epochs": len(rows), "env_steps": int(rows[-1]["env_steps"]) if rows else 0, "final_mwr": mwr}
 
 
-def _check_record(out: Path, record: dict[str, Any]) -> None:
+GROWABLE = ("epochs", "max_env_steps")
+"""The fixed train options a sweep run again may raise: its trials train on from their checkpoints to the new budget
+and end as trials made at it would (:func:`run_trial`)."""
+GROWN_STALE = ("evaluation", "compare")
+"""What a grown budget makes stale in a sweep's folder: it is set aside (:func:`set_aside`), then made again."""
+
+
+def budget_grows(then: Any, now: Any) -> bool:
+    """Whether a training budget (epochs, env steps) given ``now`` is larger than the one recorded ``then``; 0 (no
+    limit) is the largest."""
+    if isinstance(then, bool) or isinstance(now, bool) or not isinstance(then, int) or not isinstance(now, int):
+        return False
+    return then != 0 and (now == 0 or now > then)
+
+
+def set_aside(out: Path, names: Sequence[str], grown: dict[str, dict[str, Any]],
+              runs: Sequence[Path]) -> tuple[Path, list[str]]:
+    """Before runs train on to a grown budget: move ``out/NAME`` for each of ``names`` there is to
+    ``out/at-<budget>/`` (``at-max-env-steps-100000``), with a copy of each run's ``policy.*`` under
+    ``policies/<the run's path in out>/`` (a run's policy is replaced when it trains on). Returns that folder and the
+    names moved; nothing is deleted. ``FileExistsError`` if the folder exists."""
+    label = "-".join(f"{k.replace('_', '-')}-{v['from']}" for k, v in grown.items())
+    aside = out / f"at-{label}"
+    if aside.exists():
+        raise FileExistsError(f"cannot set aside what the smaller budget made: {aside} exists already")
+    aside.mkdir()
+    moved = []
+    for name in names:
+        if (out / name).exists():
+            (out / name).rename(aside / name)
+            moved.append(name)
+    for run in runs:
+        kept = aside / "policies" / Path(run).resolve().relative_to(out.resolve())
+        for f in sorted(run.glob("policy.*")):
+            kept.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(f, kept / f.name)
+    return aside, moved
+
+
+def _check_record(out: Path, record: dict[str, Any], runs: Sequence[Path]) -> None:
+    """Write the sweep's record, or check that the one in ``out`` has the same grid and fixed train options but for
+    budgets that grow (:data:`GROWABLE`); a grown budget sets aside the evaluation made at the smaller one and is
+    listed under ``grown``."""
     path = out / RECORD_FILE
     if not path.exists():
         atomic_write_bytes(path, (json.dumps(record, indent=2) + "\n").encode())
         return
     old = json.loads(path.read_text(encoding="utf-8"))
-    for key in ("grid", "base"):
-        if old.get(key) != record[key]:
-            what = "grid" if key == "grid" else "fixed train options"
-            raise ValueError(f"{out} holds a sweep with other {what} ({old.get(key)} then, {record[key]} now): "
-                             "re-running a sweep resumes it and needs the same options; choose another --out")
+    then, now = old.get("base", {}), record["base"]
+
+    def both(keys: list[str]) -> str:
+        return ", ".join(f"{k}: {then.get(k)!r} then, {now.get(k)!r} now" for k in keys)
+
+    if old.get("grid") != record["grid"]:
+        raise ValueError(f"{out} holds a sweep with other grid ({old.get('grid')} then, {record['grid']} now): "
+                         "re-running a sweep resumes it and needs the same options; choose another --out")
+    grown = {k: {"from": then.get(k), "to": now.get(k)} for k in GROWABLE if budget_grows(then.get(k), now.get(k))}
+    shrunk = [k for k in GROWABLE if then.get(k) != now.get(k) and k not in grown]
+    if shrunk:
+        raise ValueError(f"{out} holds a sweep whose trials trained to a larger budget ({both(shrunk)}): a budget "
+                         "can grow on a re-run, not shrink; choose another --out")
+    differ = sorted(k for k in {*then, *now} if k not in GROWABLE and then.get(k) != now.get(k))
+    if differ:
+        raise ValueError(f"{out} holds a sweep with other fixed train options ({both(differ)}): re-running a sweep "
+                         "resumes it and needs the same options but for a larger budget (epochs, max_env_steps); "
+                         "choose another --out")
+    if grown:
+        aside, moved = set_aside(out, GROWN_STALE, grown, runs)
+        entry = {"budget": grown, "at": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+                 "folder": aside.name, "moved": moved}
+        atomic_write_bytes(path, (json.dumps({**record, "grown": [*old.get("grown", []), entry]}, indent=2)
+                                  + "\n").encode())
+        print(f"sweep {out}: budget grown (" + ", ".join(f"{k} {v['from']:,} -> {v['to']:,}" for k, v in grown.items())
+              + f"): the trials train on from their checkpoints; what the smaller budget made is kept in {aside}")
 
 
 def run_sweep(cfg: SweepConfig, base: TrainConfig | None, runner: TaskRunner) -> dict[str, Any]:
@@ -263,7 +330,7 @@ def _run_sweep(cfg: SweepConfig, base: TrainConfig, runner: TaskRunner, out: Pat
     todo_all = trials(cfg, base)
     canonical = {k: v for k, v in config_to_json(dataclasses.replace(base, progress=False)).items()
                  if k not in ("out", "name")}  # what the sweep sets itself
-    _check_record(out, {"grid": list(cfg.grid), "base": canonical})
+    _check_record(out, {"grid": list(cfg.grid), "base": canonical}, [Path(t.config.out) / t.name for t in todo_all])
     results_path = out / "trials.json"
     previous = json.loads(results_path.read_text()) if results_path.exists() else {}
     todo = [t for t in todo_all if not finished(t)]
