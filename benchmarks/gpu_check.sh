@@ -83,7 +83,7 @@ if [ "${QUICK:-0}" = "1" ]; then
 else
     # shellcheck disable=SC2206
     SKILL_ARGS=(--device "$DEVICE" --n-envs "$N_ENVS" --max-seconds "$SKILL_SECONDS" --seeds $SEEDS
-                --eval-threads "$(( $(nproc) > 10 ? 8 : 1 ))")
+                --eval-threads 1 --eval-workers "$(( $(nproc) > 10 ? 8 : 1 ))")
 fi
 timeout $(( (SKILL_SECONDS + 120) * $(wc -w <<< "$SEEDS") )) "${TS[@]}" bench skill-gpu "${SKILL_ARGS[@]}" --out /tmp/skill-gpu \
     --json "$OUT/skill_gpu.json" | tee "$OUT/skill_gpu.txt"

@@ -22,6 +22,7 @@ from triplesumo.evaluation.evaluate import play_test_epochs
 from triplesumo.evaluation.metrics import summarize
 from triplesumo.rules.scenarios import scenario_config
 from triplesumo.train.config import TrainConfig
+from triplesumo.train.evaluations import shares
 from triplesumo.train.logger import EVAL_COLUMNS
 from triplesumo.train.loop import train
 
@@ -132,6 +133,9 @@ def test_a_run_stops_at_the_first_evaluation_at_its_target(tmp_path: Path) -> No
     ({"eval_every": 100, "self_play": True}, "a self-play run is rated by its league"),
     ({"eval_target": 0.2}, "eval_target stops at an evaluation: set eval_every too"),
     ({"eval_every": 100, "eval_target": 1.5}, r"TrainConfig.eval_target must be a test MWR in \[-1, 1\]"),
+    ({"eval_every": 100, "eval_background": True, "eval_workers": 0}, "TrainConfig.eval_workers must be an int >= 1"),
+    ({"eval_every": 100, "eval_workers": 2}, "eval_workers splits the background evaluations over processes: set "
+                                             "eval_background too"),
 ])
 def test_bad_evaluation_settings_name_the_field(tmp_path: Path, fields: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
@@ -146,12 +150,15 @@ def _figures(rows: list[dict[str, str]]) -> list[dict[str, str]]:
 
 @pytest.mark.slow  # 9 s alone on the shared 2-core box
 def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) -> None:
-    """In a worker process the evaluations play the same frozen policies on the same matches: the same rows
-    (only the times differ), and the training is the same as without them."""
+    """In a worker process, or split over several, the evaluations play the same frozen policies on the same
+    matches: the same rows (only the times differ), and the training is the same as without them."""
     inline = train(tiny(tmp_path, "inline", eval_every=EVERY, eval_epochs=TESTS))
     background = train(tiny(tmp_path, "background", eval_every=EVERY, eval_epochs=TESTS, eval_background=True))
     rows = _evals(background.run_dir / "eval.csv")
     assert len(rows) >= 3 and _figures(rows) == _figures(_evals(inline.run_dir / "eval.csv"))
+    # split over three worker processes, each evaluation's matches in parts (eval_workers): the same rows again
+    split = train(tiny(tmp_path, "split", eval_every=EVERY, eval_epochs=TESTS, eval_background=True, eval_workers=3))
+    assert _figures(_evals(split.run_dir / "eval.csv")) == _figures(rows)
     assert _metrics(background.run_dir) == _metrics(inline.run_dir)
     assert (background.run_dir / "policy.safetensors").read_bytes() == (
         inline.run_dir / "policy.safetensors").read_bytes()
@@ -165,6 +172,15 @@ def test_background_evaluations_write_the_rows_of_inline_ones(tmp_path: Path) ->
     import multiprocessing
 
     assert multiprocessing.active_children() == []  # and the worker is gone with the run
+
+
+def test_an_evaluation_is_split_into_four_ordered_parts_per_worker_none_empty() -> None:
+    assert shares(200, 1) == [(0, 200)]
+    assert shares(200, 2) == [(0, 25), (25, 50), (50, 75), (75, 100), (100, 125), (125, 150), (150, 175), (175, 200)]
+    assert shares(3, 8) == [(0, 1), (1, 2), (2, 3)]
+    parts = shares(201, 5)
+    assert len(parts) == 20 and parts[0][0] == 0 and parts[-1][1] == 201
+    assert all(a < b for a, b in parts) and all(parts[k][1] == parts[k + 1][0] for k in range(19))
 
 
 @pytest.mark.slow  # 11 s alone on the shared 2-core box

@@ -67,7 +67,7 @@ QUICK: dict[str, Any] = {"n_envs": 4, "device": "cpu", "updates_per_step": 2, "b
 """``--quick``'s budget on Warp's CPU device: 4 matches of 20 steps, an evaluation on 2 test matches every 40 env
 steps, up to 120 env steps."""
 SET_BY_BENCH = ("out", "name", "seed", "learner", "learn", "epochs", "max_env_steps", "max_minutes", "eval_every",
-                "eval_epochs", "eval_seed", "eval_target", "backend", "device", "n_envs", "n_threads")
+                "eval_epochs", "eval_seed", "eval_target", "eval_workers", "backend", "device", "n_envs", "n_threads")
 """The train fields the bench sets itself (from its own options): ``--train.X`` for them is refused."""
 SET_PER_ALGO = ("learn_every", "gradient_steps", "batch_size", "learning_starts")
 """The learner's schedule fields the bench sets from ``updates_per_step``, ``batch_size`` and ``warmup_steps``."""
@@ -123,6 +123,11 @@ class SkillGpuConfig:
     """Test match i resets with eval_seed + i."""
     eval_threads: int = 8
     """MuJoCo threads of the evaluation worker (the run's n_threads; the matches themselves run on the device)."""
+    eval_workers: int = 1
+    """Worker processes each evaluation's test matches are split over (the run's eval_workers), each with
+    eval_threads MuJoCo threads: the same figures, known sooner on a host with cores to spare. 1 is what the H200's
+    figures were measured with (about 50 s an evaluation); ``benchmarks/gpu_check.sh`` gives 8 workers of 1 thread
+    on a host of more than 10 cores, not yet measured on a GPU's host."""
     max_env_steps: int = 20_000_000
     """Budget per run in env steps."""
     max_seconds: float = 240.0
@@ -161,7 +166,7 @@ class SkillGpuConfig:
                 or any(isinstance(x, bool) or not isinstance(x, int | float) or not -1 <= x <= 1 for x in levels)):
             raise ValueError(f"SkillGpuConfig.thresholds must be test MWRs in [-1, 1], increasing, got {levels}")
         for name in ("n_envs", "updates_per_step", "batch_size", "eval_every", "eval_epochs", "eval_threads",
-                     "max_env_steps"):
+                     "eval_workers", "max_env_steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"SkillGpuConfig.{name} must be an int >= 1, got {value!r}")
@@ -183,7 +188,7 @@ class SkillGpuConfig:
                      if getattr(getattr(self.train, self.algo), name) != getattr(getattr(default, self.algo), name)]
         if set_here:
             raise ValueError(f"SkillGpuConfig.{set_here[0]} is set by the bench (from n_envs, device, "
-                             "updates_per_step, batch_size, warmup_steps, eval_threads, its budget and "
+                             "updates_per_step, batch_size, warmup_steps, eval_threads, eval_workers, its budget and "
                              "evaluations): leave it out")
 
     def run_config(self, seed: int) -> TrainConfig:
@@ -195,7 +200,8 @@ class SkillGpuConfig:
                                        learning_starts=self.warmup_steps * self.n_envs)
         return dataclasses.replace(
             t, **{self.algo: schedule}, backend="warp", device=self.device,
-            n_envs=self.n_envs, n_threads=self.eval_threads, out=str(Path(self.out).resolve() / self.algo),
+            n_envs=self.n_envs, n_threads=self.eval_threads, eval_workers=self.eval_workers,
+            out=str(Path(self.out).resolve() / self.algo),
             name=f"seed{seed}", seed=seed, learn=(f"bug={self.algo}",), epochs=10**9,
             max_env_steps=self.max_env_steps, max_minutes=self.max_seconds / 60.0, eval_every=self.eval_every,
             eval_epochs=self.eval_epochs, eval_seed=self.eval_seed, eval_target=self.thresholds[-1])

@@ -144,6 +144,10 @@ class TrainConfig:
     (policy_train_seconds: when its policy was frozen, as inline). An evaluation
     in flight at a checkpoint is saved with it and played again by a resume; the run's end waits for the
     last ones. Off: the training waits for each evaluation."""
+    eval_workers: int = 1
+    """With eval_background: the worker processes an evaluation's test matches are split over, each playing a
+    share of them in turn (the figures those of one process, as every match depends on its seed only); a machine
+    with cores to spare has each result sooner. 1: one worker."""
     eval_epochs: int = 200
     """Test matches per evaluation (eval_every); test match i resets with eval_seed + i."""
     eval_seed: int = 10_000
@@ -215,8 +219,13 @@ class TrainConfig:
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 0:
                 raise ValueError(f"TrainConfig.{name} must be an int >= 0, got {value!r}")
-        if not isinstance(self.eval_epochs, int) or isinstance(self.eval_epochs, bool) or self.eval_epochs < 1:
-            raise ValueError(f"TrainConfig.eval_epochs must be an int >= 1, got {self.eval_epochs!r}")
+        for name in ("eval_epochs", "eval_workers"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"TrainConfig.{name} must be an int >= 1, got {value!r}")
+        if self.eval_workers > 1 and not self.eval_background:
+            raise ValueError("TrainConfig.eval_workers splits the background evaluations over processes: set "
+                             "eval_background too")
         if self.eval_target is not None:
             if isinstance(self.eval_target, bool) or not isinstance(self.eval_target, int | float) or not (
                     -1 <= self.eval_target <= 1):

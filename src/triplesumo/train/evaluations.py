@@ -15,7 +15,7 @@ import multiprocessing
 import os
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.pool import AsyncResult, Pool
 from typing import Any
 
@@ -58,20 +58,50 @@ def play_evaluation(frozen: Frozen, pairs: tuple[str, ...], match_cfg: MatchConf
     resets with ``seed + i``) against the fixed policies of ``pairs`` (built afresh from ``seed``) and the other
     learners' frozen policies, rated in its first agent's seat. Returns each learner's summary and the seconds
     it took. Depends on its arguments only, so a worker process plays it as the training process does."""
+    played, seconds = play_evaluation_part(frozen, pairs, match_cfg, obs_mode, obs_dims, action_sizes, 0, epochs,
+                                           seed, n_envs, n_threads)
+    return summaries(played), seconds
+
+
+Played = dict[str, list[tuple[str, int]]]
+"""Per learner, the outcome and length of each test match played, in order."""
+
+
+def play_evaluation_part(frozen: Frozen, pairs: tuple[str, ...], match_cfg: MatchConfig, obs_mode: str,
+                         obs_dims: Mapping[str, int], action_sizes: Mapping[str, int], first: int, end: int,
+                         seed: int, n_envs: int, n_threads: int) -> tuple[Played, float]:
+    """Test matches ``first .. end - 1`` of :func:`play_evaluation`, for each learner: the outcome and length of
+    each, and the seconds they took. A match depends on its seed only, so the parts of an evaluation played apart
+    and put together in order are the evaluation played whole."""
     from triplesumo.evaluation.evaluate import play_test_epochs
-    from triplesumo.evaluation.metrics import summarize
 
     t0 = time.perf_counter()
     fixed = policies_from_pairs(pairs, seed, obs_mode, obs_dims=dict(obs_dims), action_sizes=dict(action_sizes))
     policies = {name: frozen_policy(tensors, norm) for name, (_, tensors, norm) in frozen.items()}
     seats = {agent: policies[name] for name, (agents, _, _) in frozen.items() for agent in agents}
-    done: list[tuple[str, dict[str, Any]]] = []
+    played: Played = {}
     for name, (agents, _, _) in frozen.items():
         agent = agents[0]
         others = {**fixed, **{a: p for a, p in seats.items() if a != agent}}
-        rows = play_test_epochs(policies[name], others, agent, epochs, seed, match_cfg, n_envs, n_threads)
-        done.append((name, dict(summarize([r["outcome"] for r in rows], [r["steps"] for r in rows]))))
-    return done, time.perf_counter() - t0
+        rows = play_test_epochs(policies[name], others, agent, end, seed, match_cfg, n_envs, n_threads, first=first)
+        played[name] = [(r["outcome"], r["steps"]) for r in rows]
+    return played, time.perf_counter() - t0
+
+
+def summaries(played: Played) -> list[tuple[str, dict[str, Any]]]:
+    """Each learner's summary (:func:`~triplesumo.evaluation.metrics.summarize`) of its test matches."""
+    from triplesumo.evaluation.metrics import summarize
+
+    return [(name, dict(summarize([o for o, _ in games], [n for _, n in games]))) for name, games in played.items()]
+
+
+def shares(epochs: int, workers: int) -> list[tuple[int, int]]:
+    """The ``(first, end)`` ranges an evaluation of ``epochs`` test matches is split into for ``workers`` processes:
+    four per worker (the matches last differently, and a worker that finishes early takes the next), none empty,
+    in order."""
+    parts = min(epochs, 4 * workers) if workers > 1 else 1
+    bounds = [round(k * epochs / parts) for k in range(parts + 1)]
+    return list(zip(bounds[:-1], bounds[1:], strict=True))
 
 
 WORKER_NICE = 19
@@ -101,7 +131,23 @@ class Pending:
     epochs: int
     train_seconds: float | None
     frozen: Frozen
-    future: AsyncResult[tuple[list[tuple[str, dict[str, Any]]], float]] | None = None
+    futures: list[AsyncResult[tuple[Played, float]]] = field(default_factory=list)
+    """The parts of its test matches handed to the workers (:func:`shares`), in order."""
+    handed: float = 0.0
+    """When it was handed to the workers (``time.perf_counter``)."""
+
+    def ready(self) -> bool:
+        """Whether every part is back."""
+        return bool(self.futures) and all(f.ready() for f in self.futures)
+
+    def result(self) -> tuple[list[tuple[str, dict[str, Any]]], float]:
+        """Each learner's summary over the parts put together, and the seconds from handing it over to its last part
+        (the wall time it took, its parts side by side); a worker's error is raised here."""
+        played: Played = {}
+        for future in self.futures:
+            for name, games in future.get()[0].items():
+                played.setdefault(name, []).extend(games)
+        return summaries(played), time.perf_counter() - self.handed
 
 
 class Evaluations:
@@ -133,10 +179,14 @@ class Evaluations:
                 cfg.eval_epochs, cfg.eval_seed, cfg.n_envs, cfg.n_threads)
 
     def _submit(self, job: Pending) -> None:
+        cfg = self.cfg
         if self._pool is None:  # spawned, not forked: the training process holds threads (torch, the learner's)
-            self._pool = multiprocessing.get_context("spawn").Pool(1, initializer=_worker_init,
+            self._pool = multiprocessing.get_context("spawn").Pool(cfg.eval_workers, initializer=_worker_init,
                                                                    initargs=(os.getpid(),))
-        job.future = self._pool.apply_async(play_evaluation, self._args(job.frozen))
+        job.handed = time.perf_counter()
+        job.futures = [self._pool.apply_async(play_evaluation_part, (
+            job.frozen, self.pairs, self.match_cfg, cfg.obs_mode, self.obs_dims, self.action_sizes, first, end,
+            cfg.eval_seed, cfg.n_envs, cfg.n_threads)) for first, end in shares(cfg.eval_epochs, cfg.eval_workers)]
         self.pending.append(job)
 
     def __call__(self, learners: Sequence[Learner], log: MetricsLog, env_steps: int, epochs: int,
@@ -167,21 +217,21 @@ class Evaluations:
         reached = False
         while self.pending:
             job = self.pending[0]
-            assert job.future is not None
-            if not job.future.ready():
+            if not job.ready():
                 if not wait:
                     break
                 t0 = time.perf_counter()
-                job.future.wait()
+                for future in job.futures:
+                    future.wait()
                 self.seconds += time.perf_counter() - t0  # the wait is the evaluations', not the training's
-            done, played = job.future.get()  # (an error in the worker is raised here)
+            done, played = job.result()  # (an error in the worker is raised here)
             self.pending.pop(0)
             reached = self._write(job, done, played, log, train_seconds) or reached
         return reached
 
     def ready(self) -> bool:
         """Whether the oldest background evaluation is back (:meth:`collect` would write it)."""
-        return bool(self.pending) and self.pending[0].future is not None and self.pending[0].future.ready()
+        return bool(self.pending) and self.pending[0].ready()
 
     def _write(self, job: Pending, done: list[tuple[str, dict[str, Any]]], played: float, log: MetricsLog,
                train_seconds: float) -> bool:

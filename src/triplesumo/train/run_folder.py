@@ -65,15 +65,15 @@ FORK_FILE = "fork.json"
 
 
 RESUME_OVERRIDES = ("epochs", "max_env_steps", "max_minutes", "progress", "save_replay", "n_threads",
-                    "eval_background", "allow_other_ring")
+                    "eval_background", "eval_workers", "allow_other_ring")
 """The TrainConfig fields a resumed run may change (``train --resume RUN --epochs N ...``): budgets (a run that
 stopped at its epochs or env steps goes on to larger ones, e.g. ``--max-env-steps 2000000``, and trains what it
 would have had it never stopped), output,
 and ``n_threads``, the threads stepping the CPU physics, which advance every match alone and bit for bit
 whatever their number (``tests/test_batch.py``), so that a run started on a laptop goes on with the cores of a
-larger machine and trains exactly what it would have; and ``eval_background``, where the evaluations play
-(their figures are the same); and ``allow_other_ring``, which lets a policy of another ring play and changes
-nothing else."""
+larger machine and trains exactly what it would have; and ``eval_background`` and ``eval_workers``, where the
+evaluations play (their figures are the same); and ``allow_other_ring``, which lets a policy of another ring play
+and changes nothing else."""
 
 
 def flag_list(fields: Iterable[str]) -> str:
@@ -117,7 +117,7 @@ def _check_keys(data: Any, cls: type, where: str, source: str) -> dict[str, Any]
 
 ADDED_LATER = ("learn", "share", "td3", "sac", "ppo", "self_play", "league", "max_env_steps", "physics", "backend",
                "device", "eval_every", "eval_epochs", "eval_seed", "eval_target", "learner_config",
-               "eval_background", "allow_other_ring")
+               "eval_background", "allow_other_ring", "eval_workers")
 """TrainConfig fields newer than the first run folders (several learners, self-play, an env-step
 budget, evaluations while training): a config.json without them gets their defaults; any other
 missing key is an error."""

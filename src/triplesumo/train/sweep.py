@@ -9,14 +9,16 @@ trial's values (``seed=0,ddpg.actor_lr=1e-4``). Values are read with the field's
 a tuple field takes its items separated by spaces (``policies=ant=zoo:ant spider=random``).
 
 Trials run as tasks of the runner :func:`run_sweep` is handed (:func:`run_trials`; the command
-line hands down :class:`triplesumo.integrations.ray_tasks.RayRunner`, so trials are Ray tasks),
+line hands down :class:`triplesumo.integrations.ray_tasks.RayRunner`, so trials are Ray tasks, or with ``--workers``
+a :class:`~triplesumo.evaluation.parallel.ProcessRunner` of this machine's processes),
 not Ray Tune trials: recovery is the project's own. A trial is :func:`run_trial`: it
 resumes its run folder from the last checkpoint when one exists
 (``train(..., resume_dir=...)``), else it starts the run. So a trial whose worker dies is
 run again by Ray and resumes, rows and replay buffer intact; a sweep run again skips
 finished trials and resumes the others. Run again with a larger budget (``epochs``, ``max_env_steps``: the one
 change of the fixed train options it takes), every trial trains on from its checkpoint and ends as a trial made at
-that budget would; the evaluation and compare of the smaller one move to ``OUT/at-<budget>/`` (:func:`set_aside`). Tune would add a second checkpoint system, an
+that budget would; the evaluation and compare of the smaller one move to ``OUT/at-<budget>/`` (:func:`set_aside`).
+Tune would add a second checkpoint system, an
 experiment state and a per-epoch report hook in the trainer, for nothing a grid needs.
 
 The summary (``summary.csv``, ``summary.json``): per trial its values, epochs, env
