@@ -461,10 +461,10 @@ class Protocol:
         """Connected to Ray in the block: for the rest of :meth:`one_ray` when inside it, else for the block only."""
         from triplesumo.integrations import ray_tasks  # only here: the core never imports Ray
 
-        session = ray_tasks.session(self.cfg.ray_address, self.cfg.num_cpus or None)
+        connected = ray_tasks.session(self.cfg.ray_address, self.cfg.num_cpus or None)
         if self._ray_kept is None:
-            return session
-        self._ray_kept.enter_context(session)  # connects once; later calls find Ray connected and add nothing
+            return connected
+        self._ray_kept.enter_context(connected)  # connects once; later calls find Ray connected and add nothing
         return contextlib.nullcontext()
 
     # ------------------------------------------------------------ evaluations
