@@ -20,7 +20,7 @@ from triplesumo.reproduce.config import GROWABLE, RECORD_FILE, REPORT_FILE, RUN_
 from triplesumo.reproduce.protocol import Protocol
 from triplesumo.reproduce.reporting import _docs_markers, _write_report, format_status, stage_seconds
 from triplesumo.train import legs
-from triplesumo.train.sweep import budget_grows, set_aside
+from triplesumo.train.sweep import budget_changes, set_aside
 from triplesumo.version import ENV_VERSION, __version__
 
 
@@ -57,8 +57,7 @@ def check_same_options(out: Path, recorded: dict[str, Any], cfg: ReproduceConfig
     def both(keys: list[str]) -> str:
         return ", ".join(f"{k}: {recorded.get(k)!r} there, {config.get(k)!r} given" for k in keys)
 
-    grown = {k: {"from": recorded[k], "to": config[k]} for k in GROWABLE if budget_grows(recorded[k], config[k])}
-    shrunk = [k for k in GROWABLE if recorded[k] != config[k] and k not in grown]
+    grown, shrunk = budget_changes(recorded, config, GROWABLE)
     if shrunk:
         raise ValueError(f"{out} holds a reproduction whose Bugs trained to a larger budget ({both(shrunk)}); "
                          "a Bug budget can grow on a re-run, not shrink: choose another --out")

@@ -51,18 +51,6 @@ def frozen_policy(tensors: Mapping[str, np.ndarray], normalizes: bool) -> Frozen
     return FrozenPolicy.from_tensors(tensors, prefix="actor.", obs_norm_prefix="obs_norm." if normalizes else None)
 
 
-def play_evaluation(frozen: Frozen, pairs: tuple[str, ...], match_cfg: MatchConfig, obs_mode: str,
-                    obs_dims: Mapping[str, int], action_sizes: Mapping[str, int], epochs: int, seed: int, n_envs: int,
-                    n_threads: int) -> tuple[list[tuple[str, dict[str, Any]]], float]:
-    """One evaluation: each learner's frozen policy on the ``epochs`` seeded test matches (test match ``i``
-    resets with ``seed + i``) against the fixed policies of ``pairs`` (built afresh from ``seed``) and the other
-    learners' frozen policies, rated in its first agent's seat. Returns each learner's summary and the seconds
-    it took. Depends on its arguments only, so a worker process plays it as the training process does."""
-    played, seconds = play_evaluation_part(frozen, pairs, match_cfg, obs_mode, obs_dims, action_sizes, 0, epochs,
-                                           seed, n_envs, n_threads)
-    return summaries(played), seconds
-
-
 Played = dict[str, list[tuple[str, int]]]
 """Per learner, the outcome and length of each test match played, in order."""
 
@@ -70,8 +58,11 @@ Played = dict[str, list[tuple[str, int]]]
 def play_evaluation_part(frozen: Frozen, pairs: tuple[str, ...], match_cfg: MatchConfig, obs_mode: str,
                          obs_dims: Mapping[str, int], action_sizes: Mapping[str, int], first: int, end: int,
                          seed: int, n_envs: int, n_threads: int) -> tuple[Played, float]:
-    """Test matches ``first .. end - 1`` of :func:`play_evaluation`, for each learner: the outcome and length of
-    each, and the seconds they took. A match depends on its seed only, so the parts of an evaluation played apart
+    """Test matches ``first .. end - 1`` of one evaluation: each learner's frozen policy on the seeded test matches
+    (test match ``i`` resets with ``seed + i``) against the fixed policies of ``pairs`` (built afresh from ``seed``)
+    and the other learners' frozen policies, rated in its first agent's seat. Returns, for each learner, the outcome
+    and length of each match, and the seconds they took. Depends on its arguments only, so a worker process plays it
+    as the training process does; and as a match depends on its seed only, the parts of an evaluation played apart
     and put together in order are the evaluation played whole."""
     from triplesumo.evaluation.evaluate import play_test_epochs
 
@@ -173,10 +164,11 @@ class Evaluations:
         every = self.cfg.eval_every
         return bool(every) and steps_now // every > steps_before // every
 
-    def _args(self, frozen: Frozen) -> tuple[Any, ...]:
+    def _args(self, frozen: Frozen, first: int, end: int) -> tuple[Any, ...]:
+        """The arguments of :func:`play_evaluation_part` for test matches ``first .. end - 1``."""
         cfg = self.cfg
-        return (frozen, self.pairs, self.match_cfg, cfg.obs_mode, self.obs_dims, self.action_sizes,
-                cfg.eval_epochs, cfg.eval_seed, cfg.n_envs, cfg.n_threads)
+        return (frozen, self.pairs, self.match_cfg, cfg.obs_mode, self.obs_dims, self.action_sizes, first, end,
+                cfg.eval_seed, cfg.n_envs, cfg.n_threads)
 
     def _submit(self, job: Pending) -> None:
         cfg = self.cfg
@@ -184,15 +176,14 @@ class Evaluations:
             self._pool = multiprocessing.get_context("spawn").Pool(cfg.eval_workers, initializer=_worker_init,
                                                                    initargs=(os.getpid(),))
         job.handed = time.perf_counter()
-        job.futures = [self._pool.apply_async(play_evaluation_part, (
-            job.frozen, self.pairs, self.match_cfg, cfg.obs_mode, self.obs_dims, self.action_sizes, first, end,
-            cfg.eval_seed, cfg.n_envs, cfg.n_threads)) for first, end in shares(cfg.eval_epochs, cfg.eval_workers)]
+        job.futures = [self._pool.apply_async(play_evaluation_part, self._args(job.frozen, first, end))
+                       for first, end in shares(cfg.eval_epochs, cfg.eval_workers)]
         self.pending.append(job)
 
     def __call__(self, learners: Sequence[Learner], log: MetricsLog, env_steps: int, epochs: int,
                  train_seconds: float) -> bool:
         """Evaluate each learner's current policy, frozen (no exploration), on the run's seeded test matches
-        (``eval_epochs`` from ``eval_seed``, on the CPU; :func:`play_evaluation`). Inline: its row is written
+        (``eval_epochs`` from ``eval_seed``, on the CPU; :func:`play_evaluation_part`). Inline: its row is written
         now, and True means every learner's test MWR reached ``eval_target``. With ``eval_background`` it is
         handed to the worker and False is returned: :meth:`collect` writes it when it is back.
 
@@ -207,7 +198,8 @@ class Evaluations:
             return False
         reached = self.collect(log, train_seconds, wait=True)  # (ones a resume handed to the worker come first)
         t0 = time.perf_counter()
-        done, played = play_evaluation(*self._args(frozen))
+        games, played = play_evaluation_part(*self._args(frozen, 0, self.cfg.eval_epochs))
+        done = summaries(games)
         self.seconds += time.perf_counter() - t0
         return self._write(job, done, played, log, train_seconds) or reached
 

@@ -41,7 +41,7 @@ import json
 import math
 import shutil
 import typing
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
@@ -258,6 +258,14 @@ def budget_grows(then: Any, now: Any) -> bool:
     return then != 0 and (now == 0 or now > then)
 
 
+def budget_changes(then: Mapping[str, Any], now: Mapping[str, Any],
+                   fields: Sequence[str]) -> tuple[dict[str, dict[str, Any]], list[str]]:
+    """Of the budget ``fields``, those ``now`` grows over ``then`` (``{field: {"from": old, "to": new}}``,
+    :func:`budget_grows`) and those it changes otherwise (a shrink: to be refused)."""
+    grown = {k: {"from": then.get(k), "to": now.get(k)} for k in fields if budget_grows(then.get(k), now.get(k))}
+    return grown, [k for k in fields if then.get(k) != now.get(k) and k not in grown]
+
+
 def set_aside(out: Path, names: Sequence[str], grown: dict[str, dict[str, Any]],
               runs: Sequence[Path]) -> tuple[Path, list[str]]:
     """Before runs train on to a grown budget: move ``out/NAME`` for each of ``names`` there is to
@@ -299,8 +307,7 @@ def _check_record(out: Path, record: dict[str, Any], runs: Sequence[Path]) -> No
     if old.get("grid") != record["grid"]:
         raise ValueError(f"{out} holds a sweep with other grid ({old.get('grid')} then, {record['grid']} now): "
                          "re-running a sweep resumes it and needs the same options; choose another --out")
-    grown = {k: {"from": then.get(k), "to": now.get(k)} for k in GROWABLE if budget_grows(then.get(k), now.get(k))}
-    shrunk = [k for k in GROWABLE if then.get(k) != now.get(k) and k not in grown]
+    grown, shrunk = budget_changes(then, now, GROWABLE)
     if shrunk:
         raise ValueError(f"{out} holds a sweep whose trials trained to a larger budget ({both(shrunk)}): a budget "
                          "can grow on a re-run, not shrink; choose another --out")
