@@ -331,12 +331,26 @@ def test_with_ray_or_workers_the_bug_runs_train_at_once_and_give_the_outputs_of_
         assert names == sorted(p.name for p in (tmp_path / where / "bug").iterdir() if p.is_dir() and "seed=" in p.name)
         for name in names:
             local, there = (tmp_path / w / "bug" / name / "metrics.csv" for w in ("local", where))
-            assert [r[:-1] for r in _csv_rows(there)] == [r[:-1] for r in _csv_rows(local)]  # all but the wall time
+            assert_same_rows(_csv_rows(there), _csv_rows(local))
         assert (tmp_path / where / "contest/contest.json").read_text() == (
             tmp_path / "local" / "contest/contest.json").read_text()
         assert scores(where) == scores("local") and len(scores(where)) == 6
         assert main([*argv, "--out", str(tmp_path / where)]) == 0  # the same protocol: resumes (all skipped) as it is
         assert _record(tmp_path / where)["runs"][-1]["ran"] == []
+
+
+def assert_same_rows(got: list[list[str]], want: list[list[str]]) -> None:
+    """Two runs' ``metrics.csv`` rows are the same game, all but the wall time (the last column): outcomes, steps and
+    env steps equal, every other number equal to 1e-6 relative. Not to the bit: a run in another process can differ
+    in the last bits (CI's machine once gave 1e-8 relative in the partner's velocity term from the first match on,
+    in a Bug run on a Ray worker or a spawned process against the same run in pytest's own), while a seed, a policy or
+    a setting mixed up changes these sums in their first digits."""
+    assert len(got) == len(want)
+    for g, w in zip(got, want, strict=True):
+        assert len(g) == len(w) and g[:2] == w[:2] and g[3] == w[3] and g[-2] == w[-2], (g, w)  # epoch, outcome, steps
+        numbers = [k for k in range(2, len(w) - 1) if k not in (3, len(w) - 2)]
+        got, wanted = ([float(row[k]) for k in numbers] for row in (g, w))
+        assert got == pytest.approx(wanted, rel=1e-6, abs=1e-9), (g, w)
 
 
 def _csv_rows(path: Path, header: bool = False) -> list[Any]:
