@@ -16,6 +16,7 @@ import pytest
 
 import triplesumo
 from triplesumo._lock import LOCK_FILE, held
+from triplesumo._lock import holder as holder_of
 from triplesumo.cli import main
 
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(triplesumo.__file__).parents[1]),
@@ -129,3 +130,24 @@ def test_holds_nest_in_one_process_and_the_last_release_removes_what_the_hold_ma
         assert (folder / LOCK_FILE).read_text().strip() == str(os.getpid())
     assert folder.is_dir() and not (folder / LOCK_FILE).exists()
 
+
+
+def test_holder_names_a_live_holder_only_and_leaves_the_lock_to_the_writers(
+        holder: tuple[Path, int], tmp_path: Path) -> None:
+    """:func:`holder` (what ``reproduce --status`` shows) reads the lock file: another process's live hold, this
+    process's own, none once a hold ends or when the file names a process that is gone (a ``kill -9``)."""
+    folder, pid = holder
+    assert holder_of(folder) == f"PID {pid}"
+    assert main(["compact", str(folder)]) == 2  # reading took nothing: the holder still refuses a writer
+    free = tmp_path / "free"
+    assert holder_of(free) is None  # no folder
+    with held(free):
+        assert holder_of(free) == f"PID {os.getpid()}"
+    assert holder_of(free) is None and free.exists() is False
+    gone = subprocess.Popen([sys.executable, "-c", HOLD, str(free)], env=ENV, stdout=subprocess.PIPE)
+    assert gone.stdout is not None and gone.stdout.readline() == b"held\n"
+    assert holder_of(free) == f"PID {gone.pid}"
+    gone.send_signal(signal.SIGKILL)
+    gone.wait()
+    assert (free / LOCK_FILE).read_text().strip() == str(gone.pid)  # left behind, naming a process that is gone
+    assert holder_of(free) is None

@@ -6,7 +6,10 @@ import csv
 import dataclasses
 import gzip
 import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -392,9 +395,30 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
     assert main([*argv, "--status"]) == 0
     rows = {line.split()[1]: line.split()[2:] for line in capsys.readouterr().out.splitlines()[1:-1]}
     assert rows["learn=bug=ddpg,seed=0"][:2] == ["complete", _rows_env_steps(out / "bug" / "learn=bug=ddpg,seed=0")]
-    assert rows["learn=bug=ddpg,seed=1"][:3] == ["running", "or", "stopped"]
+    assert rows["learn=bug=ddpg,seed=1"][0] == "stopped"
     assert rows["ant"][0] == rows["spider"][0] == rows["contest"][0] == rows["compare"][0] == "complete"
     assert _record(out) == record  # nothing ran, nothing recorded
+    # while a reproduction works in the folder (another process holds it and the run it trains), --status reads it
+    # as it is, names that process and writes nothing (the report is that reproduction's)
+    report = (out / "REPRODUCTION.md").read_bytes()
+    (out / "REPRODUCTION.md").write_bytes(b"the live run's report\n")
+    live = subprocess.Popen([sys.executable, "-c", HOLD_ALL, str(out), str(run)], stdout=subprocess.PIPE,
+                            env={**os.environ, "PYTHONPATH": str(Path(triplesumo.__file__).parents[1])})
+    try:
+        assert live.stdout is not None and live.stdout.readline() == b"held\n"
+        capsys.readouterr()
+        assert main([*argv, "--status"]) == 0
+        printed = capsys.readouterr().out
+        rows = {line.split()[1]: line.split()[2:] for line in printed.splitlines()[1:-1]}
+        assert rows["learn=bug=ddpg,seed=1"][:3] == ["running", "(PID", f"{live.pid})"], printed
+        assert rows["learn=bug=ddpg,seed=0"][0] == "complete"
+        assert f"a reproduction is at work in {out}, PID {live.pid}" in printed.splitlines()[-1]
+        assert (out / "REPRODUCTION.md").read_bytes() == b"the live run's report\n" and _record(out) == record
+        assert (out / ".lock").read_text().strip() == str(live.pid)
+    finally:
+        live.kill()
+        live.wait()
+    (out / "REPRODUCTION.md").write_bytes(report)
     skill = (out / "REPRODUCTION.md").read_text().split("## Time to skill")[1]
     assert "| learn=bug=ddpg,seed=1 | not yet |" in skill and "| learn=bug=ddpg,seed=0 | not yet |" not in skill
     whole = next(line for line in skill.splitlines() if line.startswith("The whole protocol"))
@@ -415,6 +439,39 @@ def test_status_runs_nothing_and_tells_where_each_stage_and_bug_run_stands(
     capsys.readouterr()
     assert main([*argv, "--status", "--docs", str(page)]) == 2
     assert "<!-- reproduce:begin -->" in capsys.readouterr().err and page.read_text() == "# Ours, no markers\n"
+
+
+HOLD_ALL = """
+import sys, time, contextlib
+from triplesumo._lock import held
+with contextlib.ExitStack() as stack:
+    for folder in sys.argv[1:]:
+        stack.enter_context(held(folder))
+    print("held", flush=True)
+    time.sleep(600)
+"""
+"""A process that holds the folders it is given (as a reproduction and the run it trains do) until killed."""
+
+
+def test_the_pace_of_a_run_is_read_from_its_last_rows_since_its_last_stop(tmp_path: Path) -> None:
+    """``pace``: env steps per second over the last rows' wall times, back at most 600 s and never across a stop
+    (a gap of more than 600 s between two rows); None over less than 30 s."""
+    from triplesumo.reproduce.reporting import pace
+
+    def rows(*spans: tuple[float, int, float, int]) -> None:  # (start time, rows, seconds per row, steps per row)
+        lines, steps = ["epoch,env_steps,wall_time"], 0
+        for start, n, dt, per in spans:
+            for k in range(n):
+                steps += per
+                lines.append(f"{len(lines)},{steps},{start + k * dt}")
+        (tmp_path / "metrics.csv").write_text("\n".join(lines) + "\n")
+
+    rows((1e9, 300, 10.0, 100))
+    assert pace(tmp_path) == pytest.approx(10.0)  # 100 env steps every 10 s, the last 600 s of 3,000
+    rows((1e9, 300, 10.0, 100), (1e9 + 3000 + 7200, 20, 5.0, 200))  # resumed after 2 h at twice the pace
+    assert pace(tmp_path) == pytest.approx(40.0)
+    rows((1e9, 300, 10.0, 100), (1e9 + 3000 + 7200, 3, 5.0, 200))  # 10 s since the resume: too short to tell
+    assert pace(tmp_path) is None
 
 
 def _rows_env_steps(run: Path) -> str:

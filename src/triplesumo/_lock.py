@@ -27,7 +27,7 @@ try:
 except ImportError:  # pragma: no cover (Windows: no advisory locks; holding does nothing)
     fcntl = None  # type: ignore[assignment]
 
-__all__ = ["LOCK_FILE", "FolderInUseError", "held", "held_tree", "move_held"]
+__all__ = ["LOCK_FILE", "FolderInUseError", "held", "held_tree", "holder", "move_held"]
 
 LOCK_FILE = ".lock"
 """The lock file inside a held folder (it holds the holder's PID)."""
@@ -60,6 +60,30 @@ def _holder(path: Path) -> str:
     except OSError:
         text = ""
     return f"PID {text}" if text.isdigit() else "a process whose PID is not written yet"
+
+
+def holder(folder: Path | str) -> str | None:
+    """Who holds ``folder`` now (``"PID N"``), read from its lock file without touching the lock, or None. A holder
+    that lets go removes the file, and one killed leaves it naming a process that is gone, so the file names a
+    holder only while that process is alive. For a status to show, not a guard: it never gets in a writer's way
+    (a probe of the lock itself would refuse a writer that asked at that moment), and a PID the system has reused
+    since reads as a holder."""
+    if fcntl is None:  # pragma: no cover (no lock files where holding does nothing)
+        return None
+    path = Path(folder) / LOCK_FILE
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace").strip()
+    except OSError:
+        return None
+    if not text.isdigit():
+        return _holder(path)  # its holder took it a moment ago and is writing its PID
+    try:
+        os.kill(int(text), 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:  # alive, another user's
+        pass
+    return f"PID {text}"
 
 
 def _lock(folder: Path, what: str) -> int:

@@ -3,6 +3,7 @@ the time-to-skill curves."""
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
 import os
@@ -11,9 +12,10 @@ import shlex
 from pathlib import Path
 from typing import Any
 
+from triplesumo._lock import LOCK_FILE, holder
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.evaluation.compare import trial_group
-from triplesumo.evaluation.metrics_csv import table_exists
+from triplesumo.evaluation.metrics_csv import open_table, table_exists
 from triplesumo.reproduce.config import PUSH_MIN, REPORT_FILE, RUN_OPTIONS, SKILL, ReproduceConfig
 from triplesumo.reproduce.protocol import ENGAGEMENT_FILE, NOT_PLAYED, Protocol, _read_csv, contest_can_pass
 from triplesumo.train.logger import policy_seconds
@@ -58,32 +60,70 @@ def embed_report(text: str, out: Path, page: str, page_dir: Path) -> str:
 
 
 def status(protocol: Protocol) -> list[dict[str, Any]]:
-    """Where each stage and each Bug run of the folder stands: rows of stage, run, state (``complete``, ``running
-    or stopped``, ``not started``), env steps and the newest test MWR of the run's evaluations while training."""
+    """Where each stage and each Bug run of the folder stands: rows of stage, run, state, env steps, the newest test
+    MWR of the run's evaluations while training, and ``left``: a running Bug run's seconds to its env-step budget at
+    its recent pace (:func:`pace`; None when not known). The state is ``complete``, ``running (PID N)`` while a
+    process holds the run's folder or one inside it (an evaluation, a screen), ``stopped`` when it started and no
+    process holds it (a re-run resumes it), or ``not started``."""
     trials = {"bug": protocol.bug_trials(), "ablations": protocol.ablation_trials()}
     rows: list[dict[str, Any]] = []
     for stage in protocol.stages:
         if stage.name in trials:  # one row per Bug run
-            runs = [(t.name, Path(t.config.out) / t.name, finished(t)) for t in trials[stage.name]]
+            runs = [(t.name, Path(t.config.out) / t.name, finished(t), t.config.max_env_steps)
+                    for t in trials[stage.name]]
         else:  # one row for the stage; a training stage's run folder is named after it
-            runs = [(stage.name, protocol.out / stage.name, stage.complete())]
-        for name, folder, done in runs:
+            runs = [(stage.name, protocol.out / stage.name, stage.complete(), 0)]
+        for name, folder, done, budget in runs:
             started = table_exists(folder / "metrics.csv")
+            who = None if done else holder_in(folder)
+            steps = run_facts(folder, 200)["env_steps"] if started else None
             evals = _evals(folder)
+            rate = pace(folder) if who and steps is not None and budget else None
             rows.append({"stage": stage.name, "run": name,
-                         "state": "complete" if done else "running or stopped" if started else "not started",
-                         "env_steps": run_facts(folder, 200)["env_steps"] if started else None,
-                         "test_mwr": float(evals[-1]["test_mwr"]) if evals else None})
+                         "state": ("complete" if done else f"running ({who})" if who else "stopped" if started
+                                   else "not started"),
+                         "env_steps": steps, "test_mwr": float(evals[-1]["test_mwr"]) if evals else None,
+                         "left": max(budget - steps, 0) / rate if rate and steps is not None else None})
     return rows
+
+
+def holder_in(folder: Path) -> str | None:
+    """Who holds ``folder`` or a folder inside it (:func:`triplesumo._lock.holder`), or None."""
+    if not folder.is_dir():
+        return None
+    return next((who for lock in (folder / LOCK_FILE, *folder.rglob(f"*/{LOCK_FILE}"))
+                 if (who := holder(lock.parent)) is not None), None)
+
+
+PACE_SECONDS = 600.0
+""":func:`pace` reads a run's last rows back this far in wall time (or to a stop between two rows, or 400 rows)."""
+
+
+def pace(run: Path) -> float | None:
+    """A run's recent env steps per second, from the wall times of the last rows of its ``metrics.csv`` (the rows
+    since a gap of more than :data:`PACE_SECONDS` between two of them: a stop and a resume), or None when those
+    rows span less than 30 s."""
+    with open_table(run / "metrics.csv") as fh:
+        rows = [(float(r["wall_time"]), int(r["env_steps"])) for r in list(csv.DictReader(fh))[-400:]]
+    if not rows:
+        return None
+    end_time, end_steps = rows[-1]
+    first = len(rows) - 1
+    while first > 0 and rows[first][0] - rows[first - 1][0] <= PACE_SECONDS \
+            and end_time - rows[first - 1][0] <= PACE_SECONDS:
+        first -= 1
+    seconds = end_time - rows[first][0]
+    return (end_steps - rows[first][1]) / seconds if seconds >= 30 else None
 
 
 def format_status(protocol: Protocol) -> str:
     """:func:`status` as a table."""
-    lines = [f"{'stage':<11} {'run':<44} {'state':<19} {'env steps':>11} {'test MWR':>9}"]
+    lines = [f"{'stage':<11} {'run':<44} {'state':<19} {'env steps':>11} {'test MWR':>9}  left"]
     for r in status(protocol):
         steps = "-" if r["env_steps"] is None else f"{r['env_steps']:,}"
         mwr = "-" if r["test_mwr"] is None else f"{r['test_mwr']:+.3f}"
-        lines.append(f"{r['stage']:<11} {r['run']:<44} {r['state']:<19} {steps:>11} {mwr:>9}")
+        left = "" if r["left"] is None else f"  {_duration(r['left'])}"
+        lines.append(f"{r['stage']:<11} {r['run']:<44} {r['state']:<19} {steps:>11} {mwr:>9}{left}")
     return "\n".join(lines)
 
 

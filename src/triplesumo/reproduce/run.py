@@ -13,7 +13,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from triplesumo._lock import held
+from triplesumo._lock import held, holder
 from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import GROWABLE, RECORD_FILE, REPORT_FILE, RUN_OPTIONS, ReproduceConfig, bug_runs
@@ -145,8 +145,22 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     out = protocol.out
     if cfg.docs:  # before hours of training: the file and its markers are there
         _docs_markers(Path(cfg.docs).read_text().splitlines())
+    if cfg.status and (who := holder(out)) is not None:  # read while the reproduction there works: nothing written
+        record = _check_record(cfg, out)
+        print(format_status(protocol))
+        print(f"(a reproduction is at work in {out}, {who}: it writes the report; --status wrote nothing)")
+        return record
     with held(out, "reproduce"), protocol.one_ray():  # one reproduction per folder (each run and evaluation holds
         return _run_reproduce(cfg, protocol, out)  # its own too); the stages on Ray share one
+
+
+def _check_record(cfg: ReproduceConfig, out: Path) -> dict[str, Any]:
+    """The folder's record (empty if none), after :func:`check_same_options` held this config to it."""
+    path = out / RECORD_FILE
+    record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+    if record:
+        check_same_options(out, record["config"], cfg)
+    return record
 
 
 def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[str, Any]:
