@@ -91,8 +91,7 @@ def holder_in(folder: Path) -> str | None:
     """Who holds ``folder`` or a folder inside it (:func:`triplesumo._lock.holder`), or None."""
     if not folder.is_dir():
         return None
-    return next((who for lock in (folder / LOCK_FILE, *folder.rglob(f"*/{LOCK_FILE}"))
-                 if (who := holder(lock.parent)) is not None), None)
+    return next((who for lock in folder.rglob(LOCK_FILE) if (who := holder(lock.parent)) is not None), None)
 
 
 PACE_SECONDS = 600.0

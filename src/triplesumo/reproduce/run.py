@@ -146,7 +146,7 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
     if cfg.docs:  # before hours of training: the file and its markers are there
         _docs_markers(Path(cfg.docs).read_text().splitlines())
     if cfg.status and (who := holder(out)) is not None:  # read while the reproduction there works: nothing written
-        record = _check_record(cfg, out)
+        record, _ = _check_record(cfg, out)
         print(format_status(protocol))
         print(f"(a reproduction is at work in {out}, {who}: it writes the report; --status wrote nothing)")
         return record
@@ -154,20 +154,18 @@ def run_reproduce(cfg: ReproduceConfig) -> dict[str, Any]:
         return _run_reproduce(cfg, protocol, out)  # its own too); the stages on Ray share one
 
 
-def _check_record(cfg: ReproduceConfig, out: Path) -> dict[str, Any]:
-    """The folder's record (empty if none), after :func:`check_same_options` held this config to it."""
+def _check_record(cfg: ReproduceConfig, out: Path) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """The folder's record (empty if none) and the Bug budgets ``cfg`` grows, after :func:`check_same_options`
+    held this config to it."""
     path = out / RECORD_FILE
     record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
-    if record:
-        check_same_options(out, record["config"], cfg)
-    return record
+    return record, check_same_options(out, record["config"], cfg) if record else {}
 
 
 def _run_reproduce(cfg: ReproduceConfig, protocol: Protocol, out: Path) -> dict[str, Any]:
     path = out / RECORD_FILE
-    record: dict[str, Any] = json.loads(path.read_text()) if path.exists() else {}
+    record, grown = _check_record(cfg, out)
     config = json.loads(json.dumps(dataclasses.asdict(cfg)))
-    grown = check_same_options(out, record["config"], cfg) if record else {}
     record = {"config": config, "stages": record.get("stages", {}), "runs": record.get("runs", []),
               **{k: record[k] for k in ("published", "grown") if k in record}}  # published: until a later --publish
     run_now: dict[str, Any] = {"version": code_version(), "started": _now(), "ran": [], "skipped": []}
