@@ -50,17 +50,15 @@ from triplesumo.agents.policy_file import atomic_write_bytes
 from triplesumo.benchmarks import report, versions
 from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.metrics_csv import open_table, table_exists
-from triplesumo.train.config import ALGOS, TrainConfig
+from triplesumo.train.config import ALGOS, TrainConfig, parallel_schedule
 from triplesumo.train.logger import policy_seconds
 from triplesumo.train.loop import train
-from triplesumo.train.machine import machine, reference_speed
+from triplesumo.train.machine import device_reference, machine, reference_speed
 from triplesumo.train.run_folder import holds_run
 
 RECORD = "skill_gpu.json"
 PLOT = "skill_gpu.png"
 DEFAULT_OUT = "runs/skill-gpu"
-DEVICE_REFERENCE_STEPS = 50
-"""Timed steps of all the matches in the device reference collection (after one untimed step)."""
 QUICK: dict[str, Any] = {"n_envs": 4, "device": "cpu", "updates_per_step": 2, "batch_size": 16, "warmup_steps": 2,
                          "eval_every": 40, "eval_epochs": 2, "eval_threads": 1, "max_env_steps": 120,
                          "max_seconds": 600.0}
@@ -194,53 +192,14 @@ class SkillGpuConfig:
     def run_config(self, seed: int) -> TrainConfig:
         """The train config of the run with ``seed``: on Warp with n_envs matches, the learner's massively parallel
         schedule, evaluated every eval_every, stopped at the highest threshold or the budget."""
-        t = self.train
-        schedule = dataclasses.replace(getattr(t, self.algo), learn_every=self.n_envs,
-                                       gradient_steps=self.updates_per_step, batch_size=self.batch_size,
-                                       learning_starts=self.warmup_steps * self.n_envs)
+        t = parallel_schedule(dataclasses.replace(self.train, n_envs=self.n_envs), self.algo, self.updates_per_step,
+                              self.batch_size, self.warmup_steps)
         return dataclasses.replace(
-            t, **{self.algo: schedule}, backend="warp", device=self.device,
-            n_envs=self.n_envs, n_threads=self.eval_threads, eval_workers=self.eval_workers,
+            t, backend="warp", device=self.device, n_threads=self.eval_threads, eval_workers=self.eval_workers,
             out=str(Path(self.out).resolve() / self.algo),
             name=f"seed{seed}", seed=seed, learn=(f"bug={self.algo}",), epochs=10**9,
             max_env_steps=self.max_env_steps, max_minutes=self.max_seconds / 60.0, eval_every=self.eval_every,
             eval_epochs=self.eval_epochs, eval_seed=self.eval_seed, eval_target=self.thresholds[-1])
-
-
-def device_reference(train_cfg: TrainConfig, steps: int = DEVICE_REFERENCE_STEPS, seed: int = 0) -> dict[str, Any]:
-    """The device's speed on the run's physics, and its start-up cost: ``train_cfg.n_envs`` matches of its match
-    on its Warp device, uniform random actions drawn on the device from ``seed``, no policy and no learner. The
-    first step (building the batch, compiling or loading every Warp kernel, capturing the CUDA graphs) is timed
-    apart as ``first_step_seconds``; the next ``steps`` give ``env_steps_per_s``. Run in the bench's process
-    before the training, it leaves Warp's kernels loaded, so the training's clock holds no compiling."""
-    import torch
-
-    from triplesumo.envs.warp import make_warp_vector_env
-
-    t0 = time.perf_counter()
-    env = make_warp_vector_env(train_cfg.match_config(), train_cfg.n_envs, train_cfg.device, seed=seed)
-    try:
-        dev = env.device
-        sync: Any = (lambda: torch.cuda.synchronize(dev)) if dev.type == "cuda" else (lambda: None)
-        gen = torch.Generator(device=dev).manual_seed(seed)
-        shape = (env.num_envs, env.n_agents, env.act_dim)
-        env.reset(seed=seed)
-        env.step(torch.rand(shape, generator=gen, device=dev) * 2 - 1)
-        torch.ones((64, 64), device=dev).matmul(torch.ones((64, 64), device=dev))  # (the learner's BLAS, loaded)
-        sync()
-        first = time.perf_counter() - t0
-        actions = [torch.rand(shape, generator=gen, device=dev) * 2 - 1 for _ in range(min(steps, 16))]
-        sync()
-        t1 = time.perf_counter()
-        for k in range(steps):
-            env.step(actions[k % len(actions)])
-        sync()
-        seconds = time.perf_counter() - t1
-    finally:
-        env.close()
-    return {"device": str(env.device), "n_envs": train_cfg.n_envs, "steps": steps,
-            "env_steps": steps * train_cfg.n_envs, "first_step_seconds": round(first, 3),
-            "env_steps_per_s": round(steps * train_cfg.n_envs / max(seconds, 1e-9), 1)}
 
 
 def read_curve(run_dir: Path) -> list[dict[str, Any]]:

@@ -13,7 +13,7 @@ from triplesumo.envs.seeding import check_seed
 from triplesumo.evaluation.evaluate import check_ray
 from triplesumo.rules.config import RewardConfig
 from triplesumo.train import sweep
-from triplesumo.train.config import ALGOS, TrainConfig
+from triplesumo.train.config import ALGOS, BACKENDS, TrainConfig
 
 RECORD_FILE = "reproduce.json"
 REPORT_FILE = "REPRODUCTION.md"
@@ -34,7 +34,7 @@ class PairError(RuntimeError):
 ABLATION_ALIASES = {"noise": "ddpg.noise", "still": "reward.still"}
 """Short names of the ablations of the paper preset (Gaussian noise, a smaller still punishment)."""
 RUN_OPTIONS = ("progress", "sides_at_once", "status", "ray", "ray_address", "num_cpus", "cpus_per_trial", "workers",
-               "publish", "docs", "allow_other_ring")
+               "publish", "docs", "allow_other_ring", "device", "warp_eval_workers")
 """ReproduceConfig fields that say how the stages run (or what happens to their results afterwards), not what they
 make: a folder resumes with other values."""
 GROWABLE = ("bug_epochs", "bug_env_steps")
@@ -197,6 +197,31 @@ class ReproduceConfig:
     """Without ray: the Bug runs of stage 4 and the ablations train in this many processes of this machine at once,
     and the contest's and the test's matches play on as many (``evaluate --workers``). The outputs are those of one
     process. Stage 1's two sides train as ``sides_at_once`` says, and their screens play in their own processes."""
+    backend: str = "cpu"
+    """Where stage 1's sides and the Bugs train: cpu (MuJoCo on this machine's cores, the exact reference) or warp
+    (MuJoCo Warp: ``warp_envs`` matches at once on ``device``; every learner on the parallel schedule of
+    ``warp_updates`` gradient steps of ``warp_batch`` transitions per step of all the matches, as ``bench skill-gpu``;
+    a checkpoint at each leg's and run's end only). The screens, the pairs' matches, the contest, the engagement and
+    the test play on the CPU in ``n_envs`` matches whatever the backend: every rule is checked, and every figure
+    measured, on the reference backend. Warp runs no PPO (its rollouts are sized for 16 matches) and no Ray (whose
+    tasks reserve CPUs, not the device): the Bugs train one after another, or on ``workers`` processes sharing the
+    device."""
+    device: str = "cuda"
+    """With backend warp: Warp's device, cuda (a GPU) or cpu (Warp's CPU device: a check of the protocol, not a
+    speed)."""
+    warp_envs: int = 4096
+    """With backend warp: matches stepped at once on the device while a side or a Bug trains (an epoch stays one
+    match, so the epoch budgets and screens count what they count on the CPU)."""
+    warp_updates: int = 16
+    """With backend warp: gradient steps after every step of all the matches (``bench skill-gpu``'s
+    updates_per_step)."""
+    warp_batch: int = 4096
+    """With backend warp: transitions per gradient step."""
+    warp_warmup: int = 8
+    """With backend warp: steps of all the matches of random warm-up before the first update."""
+    warp_eval_workers: int = 8
+    """With backend warp: the Bug runs' evaluations (``bug_eval_every``) play in the background, on this many
+    worker processes of the host, while the device trains on (``train --eval-workers``)."""
 
     def __post_init__(self) -> None:
         for name in ("pretrain_seed", "contest_seed", "eval_seed"):
@@ -253,6 +278,22 @@ class ReproduceConfig:
             raise ValueError("ReproduceConfig.workers and ReproduceConfig.ray: Ray runs the tasks on its own CPUs "
                              "(num_cpus, cpus_per_trial); give one of the two")
         check_ray("ReproduceConfig", self.ray, self.ray_address)
+        if self.backend not in BACKENDS:
+            raise ValueError(f"ReproduceConfig.backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.device not in ("cuda", "cpu"):
+            raise ValueError(f"ReproduceConfig.device must be cuda or cpu (Warp's CPU device), got {self.device!r}")
+        for name, low in (("warp_envs", 1), ("warp_updates", 1), ("warp_batch", 1), ("warp_warmup", 0),
+                          ("warp_eval_workers", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise ValueError(f"ReproduceConfig.{name} must be an int >= {low}, got {value!r}")
+        if self.backend == "warp":
+            if "ppo" in self.algos:
+                raise ValueError("ReproduceConfig.algos: ppo does not train on backend warp here (its rollouts are "
+                                 "sized for 16 matches, not thousands); train it with --backend cpu, or leave it out")
+            if self.ray:
+                raise ValueError("ReproduceConfig.ray with backend warp: Ray's tasks reserve CPUs, not the device; "
+                                 "the Bugs train one after another on the device, or on --workers processes sharing it")
 
 
 def bug_runs(algos: Any, seeds: Any, ddpg_runs: int) -> list[tuple[str, int]]:

@@ -26,7 +26,7 @@ from triplesumo.evaluation.parallel import ProcessRunner, TaskRunner
 from triplesumo.model.specs import PhysicsConfig
 from triplesumo.reproduce.config import CONTEST_BAND, PUSH_MIN, ContestError, ReproduceConfig, Stage, ablation, bug_runs
 from triplesumo.reproduce.pretrain import PAIR_FILE, SCREENS_FILE, Side, counts_of, play_pair_rule, read_record
-from triplesumo.train.config import TrainConfig
+from triplesumo.train.config import TrainConfig, parallel_schedule
 from triplesumo.train.run_folder import command_for
 from triplesumo.train.sweep import SweepConfig, Trial, finished, run_facts, run_trial, run_trials, trials
 
@@ -232,6 +232,11 @@ class Protocol:
         self.screen_every = 1 if tiny else cfg.screen_every
         self.screen_epochs = 4 if tiny else cfg.screen_epochs
         self.physics = PhysicsConfig(border_rim=cfg.border_rim)
+        # backend warp: matches on the device, the parallel schedule (tiny: 2 matches, 2 updates of 8)
+        self.warp: dict[str, int] = ({"n_envs": 2, "updates": 2, "batch": 8, "warmup": 1, "eval_workers": 1} if tiny
+                                     else {"n_envs": cfg.warp_envs, "updates": cfg.warp_updates,
+                                           "batch": cfg.warp_batch, "warmup": cfg.warp_warmup,
+                                           "eval_workers": cfg.warp_eval_workers})
         self.stages = [
             *(self._pretrain_stage(role, against)
               for role, against in (() if cfg.pair else (("ant", "a still Spider, Bug still"),
@@ -303,6 +308,22 @@ class Protocol:
                            allow_other_ring=self.cfg.allow_other_ring,
                            save_replay=self.cfg.save_replay, **extra, **kw)
 
+    def on_backend(self, t: TrainConfig) -> TrainConfig:
+        """A training config of the protocol on its backend: unchanged on cpu; on warp, ``warp_envs`` matches on the
+        device, every off-policy learner on the parallel schedule, a checkpoint at the end of each leg or run only
+        (thousands of matches end every few steps: one every few hundred epochs would save the device's replay
+        buffer every few seconds), and the evaluations in the background on ``warp_eval_workers`` processes (the
+        device trains on while the host plays the test matches)."""
+        if self.cfg.backend == "cpu":
+            return t
+        w = self.warp
+        t = dataclasses.replace(t, backend="warp", device=self.cfg.device, n_envs=w["n_envs"], checkpoint_every=10**9)
+        if t.eval_every:
+            t = dataclasses.replace(t, eval_background=True, eval_workers=w["eval_workers"])
+        for algo in ("ddpg", "td3", "sac"):
+            t = parallel_schedule(t, algo, w["updates"], w["batch"], w["warmup"])
+        return t
+
     def pretrain(self, role: str) -> TrainConfig:
         """Stage ``ant`` or ``spider``: that side alone learns (DDPG) to push still opponents (every other agent
         passive: a body that neither leaves the ring by itself nor pushes back), on the pre-training reward, up to its
@@ -311,8 +332,8 @@ class Protocol:
         base = self._base(name=role, learn=(f"{role}=ddpg",), policies=others, epochs=self.epochs[role],
                           seed=self.cfg.pretrain_seed, reward=self.cfg.pretrain)
         # one gradient step per 5 transitions, as the v1 pair learned (docs/REPRODUCTION.md)
-        return base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
-                                                              checkpoint_every=250)
+        return self.on_backend(base if self.cfg.tiny else dataclasses.replace(base, ddpg=DDPGConfig(learn_every=5),
+                                                                              checkpoint_every=250))
 
     def side(self, role: str) -> Side:
         """A side's training in legs with its screens (:class:`~triplesumo.reproduce.pretrain.Side`)."""
@@ -391,10 +412,10 @@ class Protocol:
                                        eval_seed=self.cfg.eval_seed)
         schedule: dict[str, Any] = {name: value for name, value in (("learn_every", self.cfg.bug_learn_every),
                                                                     ("n_step", self.cfg.bug_n_step)) if value}
-        if self.cfg.tiny or not schedule:
-            return base
-        return dataclasses.replace(base, td3=dataclasses.replace(base.td3, **schedule),
-                                   sac=dataclasses.replace(base.sac, **schedule))
+        if not self.cfg.tiny and schedule:
+            base = dataclasses.replace(base, td3=dataclasses.replace(base.td3, **schedule),
+                                       sac=dataclasses.replace(base.sac, **schedule))
+        return self.on_backend(base)  # (on warp the parallel schedule replaces learn_every; n_step is kept)
 
     def bug_trials(self) -> list[Trial]:
         return [t for sweep in self.sweeps() for t in trials(sweep, self.bug_base())]

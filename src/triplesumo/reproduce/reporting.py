@@ -145,8 +145,13 @@ def _machines(record: dict[str, Any]) -> list[str]:
     lines = ["| run started | machine | reference (ms per env step) | stages run |", "| --- | --- | ---: | --- |"]
     for r in runs:
         m = r["machine"]
-        lines.append(f"| {r['started']} | {m['cpu']}, {m['cores']} cores | {m['reference']['ms_per_env_step']:.3f} | "
-                     f"{', '.join(r['ran'])} |")
+        where = f"{m['cpu']}, {m['cores']} cores"
+        if m.get("backend") == "warp":  # the sides and Bugs trained on the device; the checks played on this CPU
+            dev = m.get("device_reference")
+            where += (f"; trained on Warp's {m['device']} device ({m.get('gpu') or 'no GPU'}"
+                      + (f", {dev['env_steps_per_s']:,.0f} env steps/s of {dev['n_envs']:,} matches with random "
+                         f"actions" if dev else "") + ")")
+        lines.append(f"| {r['started']} | {where} | {m['reference']['ms_per_env_step']:.3f} | {', '.join(r['ran'])} |")
     return [*lines, ""]
 
 

@@ -296,3 +296,17 @@ class TrainConfig:
     def learners(self) -> dict[str, str]:
         """Learning agent -> algorithm, in the order given."""
         return {pair.split("=")[0]: pair.split("=")[1] for pair in self.learn}
+
+
+def parallel_schedule(cfg: TrainConfig, algo: str, updates_per_step: int, batch_size: int,
+                      warmup_steps: int) -> TrainConfig:
+    """``cfg`` with the off-policy ``algo``'s update schedule for many matches at once (MuJoCo Warp's, docs/gpu.md):
+    after every step of all ``cfg.n_envs`` matches (``learn_every = n_envs`` transitions), ``updates_per_step``
+    gradient steps of ``batch_size`` transitions, once ``warmup_steps`` such steps of random warm-up are collected
+    (``learning_starts = warmup_steps x n_envs``). The algorithm's other fields are kept."""
+    if algo not in ALGOS or algo == "ppo":
+        raise ValueError(f"parallel_schedule: an off-policy algorithm ({', '.join(a for a in ALGOS if a != 'ppo')}) "
+                         f"updates on this schedule, got {algo!r}")
+    schedule = dataclasses.replace(getattr(cfg, algo), learn_every=cfg.n_envs, gradient_steps=updates_per_step,
+                                   batch_size=batch_size, learning_starts=warmup_steps * cfg.n_envs)
+    return dataclasses.replace(cfg, **{algo: schedule})

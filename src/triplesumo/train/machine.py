@@ -3,6 +3,7 @@ records beside its times, since two machines with the same CPU name can differ i
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -49,8 +50,6 @@ def reference_speed(train_cfg: TrainConfig, repeats: int = 3, seed: int = 0) -> 
     collection (``train_cfg``'s match and ``n_envs`` matches on its ``n_threads`` MuJoCo threads, uniform random
     actions drawn from ``seed``, :data:`REFERENCE_STEPS` steps, no learner), the best of ``repeats``. The same
     collection on every machine, so that times to skill measured on two machines can be set side by side."""
-    import time
-
     import numpy as np
 
     env = VectorMatches(train_cfg.n_envs, train_cfg.match_config(), train_cfg.n_threads)
@@ -90,3 +89,43 @@ def reference_seconds(seconds: float, reference: Mapping[str, Mapping[str, Any]]
     (:data:`REFERENCE_MS_PER_ENV_STEP`): ``seconds * 0.7 / ms``, with ``ms`` the mean of the collections before and
     after (:func:`machine_ms_per_env_step`). A time on a box twice as slow counts half: a slower box is not a miss."""
     return seconds * REFERENCE_MS_PER_ENV_STEP / machine_ms_per_env_step(reference)
+
+
+DEVICE_REFERENCE_STEPS = 50
+"""Timed steps of all the matches in the device reference collection (after one untimed step)."""
+
+
+def device_reference(train_cfg: TrainConfig, steps: int = DEVICE_REFERENCE_STEPS, seed: int = 0) -> dict[str, Any]:
+    """The device's speed on the run's physics, and its start-up cost: ``train_cfg.n_envs`` matches of its match
+    on its Warp device, uniform random actions drawn on the device from ``seed``, no policy and no learner. The
+    first step (building the batch, compiling or loading every Warp kernel, capturing the CUDA graphs) is timed
+    apart as ``first_step_seconds``; the next ``steps`` give ``env_steps_per_s``. Run in the bench's process
+    before the training, it leaves Warp's kernels loaded, so the training's clock holds no compiling."""
+    import torch
+
+    from triplesumo.envs.warp import make_warp_vector_env
+
+    t0 = time.perf_counter()
+    env = make_warp_vector_env(train_cfg.match_config(), train_cfg.n_envs, train_cfg.device, seed=seed)
+    try:
+        dev = env.device
+        sync: Any = (lambda: torch.cuda.synchronize(dev)) if dev.type == "cuda" else (lambda: None)
+        gen = torch.Generator(device=dev).manual_seed(seed)
+        shape = (env.num_envs, env.n_agents, env.act_dim)
+        env.reset(seed=seed)
+        env.step(torch.rand(shape, generator=gen, device=dev) * 2 - 1)
+        torch.ones((64, 64), device=dev).matmul(torch.ones((64, 64), device=dev))  # (the learner's BLAS, loaded)
+        sync()
+        first = time.perf_counter() - t0
+        actions = [torch.rand(shape, generator=gen, device=dev) * 2 - 1 for _ in range(min(steps, 16))]
+        sync()
+        t1 = time.perf_counter()
+        for k in range(steps):
+            env.step(actions[k % len(actions)])
+        sync()
+        seconds = time.perf_counter() - t1
+    finally:
+        env.close()
+    return {"device": str(env.device), "n_envs": train_cfg.n_envs, "steps": steps,
+            "env_steps": steps * train_cfg.n_envs, "first_step_seconds": round(first, 3),
+            "env_steps_per_s": round(steps * train_cfg.n_envs / max(seconds, 1e-9), 1)}
