@@ -4,6 +4,7 @@
 # On the GPU machine, from the repository root, with $OUT set by the device tool (results come back from it):
 #     bash benchmarks/gpu_check.sh stage   # only copy the carried wheels (.whl/N) to /tmp/triplesumo-wheels
 #     bash benchmarks/gpu_check.sh         # stage the last ones, install, then measure (about 8 minutes)
+#     bash benchmarks/gpu_check.sh reproduce   # stage, install, then the whole reproduction on Warp (issue 51)
 # The wheels come from benchmarks/gpu_wheels.sh, run beforehand on a machine with PyPI (it says how many calls).
 #
 # What it writes under $OUT (at most 8 files come back):
@@ -14,12 +15,17 @@
 #     evals.csv            every seed's evaluations (test MWR, env steps, both clocks), also when bench skill-gpu was
 #                          stopped before writing its record
 #     env_warp.json/.txt   triplesumo bench env --backend warp (env and raw mujoco_warp steps/s per size)
+# or, with reproduce: reproduce.txt (what it printed), reproduce.json (each stage's wall time, the machine, the GPU, the
+#     device's start-up and rate; kept when the time limit stops it mid-stage), REPRODUCTION.md, contest.json,
+#     per_seed.csv (the test), screens-ant.json and screens-spider.json (stage 1's screens).
 #
 # Knobs (environment): DEVICE (cuda; cpu runs the same steps on Warp's CPU device, a check of this script),
 # QUICK=1 (bench skill-gpu --quick, tiny sizes everywhere), SEEDS ("0": training seeds, one after another; each waits
 # for its evaluations, about 2 minutes a seed on the H200), SKILL_SECONDS (150: training budget of each seed),
 # TOTAL_SECONDS (480: the env benchmark gets what is left), N_ENVS (4096), ENV_SIZES (1024,4096,16384),
 # PYTHON (python3), SKIP_INSTALL=1 (packages already importable). Give the call about 560 s.
+# reproduce's knobs: REPRO_SECONDS (540: its time limit), REPRO_SEEDS ("0 1 2": the SAC Bugs' seeds); QUICK=1 runs
+# --tiny. The protocol's wall time on a GPU has never been measured: a run the limit stops says how far it got.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-/tmp/gpu_check_out}
@@ -75,6 +81,26 @@ EOF
 } > "$OUT/machine.txt" 2>&1
 cat "$OUT/machine.txt"
 echo "[$(elapsed) s] installed"
+
+# 2'. or the whole reproduction on Warp: stage 1's sides and the SAC Bugs on the device, every check and the test on
+#     the host's CPU (docs/reproduce.md, "On a GPU")
+if [ "${1:-run}" = "reproduce" ]; then
+    if [ "${QUICK:-0}" = "1" ]; then
+        REPRO_ARGS=(--tiny --no-sides-at-once)
+    else
+        REPRO_ARGS=(--workers 3 --warp-eval-workers "$(( $(nproc) > 10 ? 4 : 1 ))")
+    fi
+    # shellcheck disable=SC2086
+    timeout "${REPRO_SECONDS:-540}" "${TS[@]}" reproduce --backend warp --device "$DEVICE" --algos sac \
+        --seeds ${REPRO_SEEDS:-0 1 2} --no-progress "${REPRO_ARGS[@]}" --out /tmp/reproduce | tee "$OUT/reproduce.txt"
+    rc=${PIPESTATUS[0]}
+    for f in reproduce.json REPRODUCTION.md contest/contest.json evaluation/per_seed.csv; do
+        cp -f "/tmp/reproduce/$f" "$OUT/" 2>/dev/null
+    done
+    for side in ant spider; do cp -f "/tmp/reproduce/$side/screens.json" "$OUT/screens-$side.json" 2>/dev/null; done
+    echo "[$(elapsed) s] reproduce --backend warp: rc $rc"
+    exit "$rc"
+fi
 
 # 2. time to skill on the device: SAC Bug, N_ENVS matches, evaluations in the background on the CPU (its device
 #    reference collection compiles Warp's kernels, cached in ~/.cache/warp for step 3)
