@@ -99,7 +99,7 @@ def device_reference(train_cfg: TrainConfig, steps: int = DEVICE_REFERENCE_STEPS
     """The device's speed on the run's physics, and its start-up cost: ``train_cfg.n_envs`` matches of its match
     on its Warp device, uniform random actions drawn on the device from ``seed``, no policy and no learner. The
     first step (building the batch, compiling or loading every Warp kernel, capturing the CUDA graphs) is timed
-    apart as ``first_step_seconds``; the next ``steps`` give ``env_steps_per_s``. Run in the bench's process
+    apart as ``first_step_seconds``; the next ``steps`` give ``env_steps_per_s``. Run in a training's process
     before the training, it leaves Warp's kernels loaded, so the training's clock holds no compiling."""
     import torch
 
