@@ -5,6 +5,8 @@ from __future__ import annotations
 import csv
 import json
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -322,6 +324,30 @@ def test_the_headline_table_is_recomputed_from_the_committed_matches() -> None:
 
 
 # ------------------------------------------------------------------ aliases: one copy of each weights file
+TIME_FOLDERS = ("docs/runs/scratch-v2/seed-3", "docs/runs/scratch-v2/seed-1", "docs/runs/scratch-v3/seed-3",
+                "docs/runs/scratch-v3/seed-1")
+
+
+def test_where_a_pairs_time_goes_is_recomputed_from_the_committed_records(tmp_path: Path) -> None:
+    """docs/reproduce.md's table of item 4's levers is what benchmarks/reproduce_time.py prints from the committed
+    folders' records; a folder that is no reproduction is refused by name."""
+    script = ROOT / "benchmarks" / "reproduce_time.py"
+    facts = tmp_path / "time.json"
+    done = subprocess.run([sys.executable, str(script), *TIME_FOLDERS, "--json", str(facts)], cwd=ROOT,
+                          capture_output=True, text=True, check=True)
+    assert done.stdout.strip() in (ROOT / "docs" / "reproduce.md").read_text()
+    rows = {Path(f["folder"]).parent.name + "/" + Path(f["folder"]).name: f for f in json.loads(facts.read_text())}
+    # pair 3 from scratch: the sides' own legs and screens, against stage 1's recorded wall time
+    s1 = rows["scratch-v2/seed-3"]["stage1"]
+    own = sum(s["train_seconds"] + s["screen_seconds"] for s in s1["sides"].values())
+    assert s1["wall_seconds"] == json.loads((ROOT / TIME_FOLDERS[0] / "reproduce.json").read_text())["stages"][
+        "ant"]["seconds"] and s1["side_by_side_speedup"] == round(own / s1["wall_seconds"], 2) > 1
+    assert rows["scratch-v2/seed-1"]["bug"]["wall_seconds"] is None  # (a record before stage legs: not recorded)
+    assert rows["scratch-v3/seed-3"]["stage1"] is None and len(rows["scratch-v3/seed-3"]["bug"]["runs"]) == 5
+    refused = subprocess.run([sys.executable, str(script), str(tmp_path)], capture_output=True, text=True)
+    assert refused.returncode == 2 and f"{tmp_path}: no reproduce.json" in refused.stderr
+
+
 def test_every_shipped_weights_file_is_stored_once_and_zoo_bug_is_an_alias() -> None:
     from triplesumo.agents.policy_file import file_sha256
 
