@@ -24,8 +24,11 @@
 # for its evaluations, about 2 minutes a seed on the H200), SKILL_SECONDS (150: training budget of each seed),
 # TOTAL_SECONDS (480: the env benchmark gets what is left), N_ENVS (4096), ENV_SIZES (1024,4096,16384),
 # PYTHON (python3), SKIP_INSTALL=1 (packages already importable). Give the call about 560 s.
-# reproduce's knobs: REPRO_SECONDS (540: its time limit), REPRO_SEEDS ("0 1 2": the SAC Bugs' seeds); QUICK=1 runs
-# --tiny. The protocol's wall time on a GPU has never been measured: a run the limit stops says how far it got.
+# reproduce's knobs: REPRO_SECONDS (540: its time limit), REPRO_SEEDS ("0 1 2": the SAC Bugs' seeds), REPRO_PAIR
+# (empty: stage 1 from scratch; "ANT SPIDER": that pair, the protocol from the contest on, e.g. pair 3's committed
+# docs/runs/scratch-v2/seed-3/ant/screens/policy-4000 docs/runs/scratch-v2/seed-3/spider/screens/policy-8000),
+# REPRO_ENV_STEPS (each Bug's env-step budget; empty: the protocol's); QUICK=1 runs --tiny. The protocol's wall time
+# on a GPU has never been measured: a run the limit stops says how far it got.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 OUT=${OUT:-/tmp/gpu_check_out}
@@ -90,6 +93,9 @@ if [ "${1:-run}" = "reproduce" ]; then
     else
         REPRO_ARGS=(--workers 3 --warp-eval-workers "$(( $(nproc) > 10 ? 4 : 1 ))")
     fi
+    # shellcheck disable=SC2206
+    [ -n "${REPRO_PAIR:-}" ] && REPRO_ARGS+=(--pair $REPRO_PAIR)
+    [ -n "${REPRO_ENV_STEPS:-}" ] && REPRO_ARGS+=(--bug-env-steps "$REPRO_ENV_STEPS")
     # shellcheck disable=SC2086
     timeout "${REPRO_SECONDS:-540}" "${TS[@]}" reproduce --backend warp --device "$DEVICE" --algos sac \
         --seeds ${REPRO_SEEDS:-0 1 2} --no-progress "${REPRO_ARGS[@]}" --out /tmp/reproduce | tee "$OUT/reproduce.txt"
