@@ -222,13 +222,13 @@ def _machine(protocol: Protocol) -> dict[str, Any]:
     """The machine this run of the protocol ran on and its speed, as ``bench skill`` records them: the CPU and a
     fixed seeded collection of the Bug stage's matches (ms per env step), so that stage times measured on two
     machines can be set side by side."""
-    from triplesumo.train.machine import device_reference, machine, reference_speed
+    from triplesumo.train.machine import DEVICE_REFERENCE_STEPS, device_reference, machine, reference_speed
 
     base = protocol.bug_base()
     host = dataclasses.replace(base, backend="cpu", device=None, n_envs=protocol.n_envs)  # what the tests play on
     found = {**machine(base), "reference": reference_speed(host, repeats=1 if protocol.cfg.tiny else 3)}
     if base.backend == "warp":  # the device's speed and start-up (building, compiling or loading Warp's kernels)
-        found["device_reference"] = device_reference(base, steps=5 if protocol.cfg.tiny else 50)
+        found["device_reference"] = device_reference(base, steps=5 if protocol.cfg.tiny else DEVICE_REFERENCE_STEPS)
     return found
 
 
