@@ -118,6 +118,21 @@ def test_make_policy_plays_a_policy_file_with_torch_where_installed_or_numpy_on_
     np.testing.assert_allclose(numpy_actor(obs), torch_actor(obs), atol=1e-4)
 
 
+@pytest.mark.parametrize("argv", [["reproduce", "--tiny", "--backend", "warp", "--device", "cpu", "--algos", "sac"],
+                                  ["train", "--backend", "warp", "--device", "cpu", "--epochs", "1"]])
+def test_backend_warp_without_the_gpu_extra_is_refused_before_it_starts(
+        argv: list[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "mujoco_warp" else real(name, *a))
+    out = tmp_path / "out"
+    assert cli.main([*argv, "--out", str(out)]) == 2
+    assert capsys.readouterr().err == (f'triplesumo {argv[0]} needs MuJoCo Warp: pip install "triplesumo[gpu]"\n')
+    assert not out.exists()  # nothing started: no folder, no record
+
+
 def test_require_passes_where_everything_is_installed() -> None:
     for command in _extras.COMMAND_EXTRAS:
         _extras.require(command, ("video",))  # (the refusals: tests/test_wheel.py, in a venv without the extras)

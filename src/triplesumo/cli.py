@@ -167,8 +167,10 @@ def main(argv: list[str] | None = None) -> int:
     command = next((a for a in argv if not a.startswith("-")), "")  # (the only options before it are -h, --help)
     try:
         args = _parser(command).parse_args(argv)
-        # the extras it needs (and --video's), checked before it starts, not when it writes its plots or video
-        _extras.require(command, ("video",) if getattr(args, "video", None) else ())
+        # the extras it needs (and --video's, --backend warp's), checked before it starts, not when it writes its
+        # plots or video or first steps the device
+        _extras.require(command, (*(("video",) if getattr(args, "video", None) else ()),
+                                  *(("gpu",) if getattr(args, "backend", None) == "warp" else ())))
         if args.command == "demo":
             from triplesumo.demo import DemoConfig, run_demo
 
