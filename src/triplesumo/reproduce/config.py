@@ -268,7 +268,8 @@ class ReproduceConfig:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= 1, got {value!r}")
         if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in self.seeds):
             raise ValueError(f"ReproduceConfig.seeds must be ints >= 0, got {self.seeds!r}")
-        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1), ("workers", 1)):
+        for name, low in (("num_cpus", 0), ("cpus_per_trial", 1), ("workers", 1), ("warp_envs", 1), ("warp_updates", 1),
+                          ("warp_batch", 1), ("warp_warmup", 0), ("warp_eval_workers", 1)):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 raise ValueError(f"ReproduceConfig.{name} must be an int >= {low}, got {value!r}")
@@ -282,11 +283,6 @@ class ReproduceConfig:
             raise ValueError(f"ReproduceConfig.backend must be one of {BACKENDS}, got {self.backend!r}")
         if self.device not in ("cuda", "cpu"):
             raise ValueError(f"ReproduceConfig.device must be cuda or cpu (Warp's CPU device), got {self.device!r}")
-        for name, low in (("warp_envs", 1), ("warp_updates", 1), ("warp_batch", 1), ("warp_warmup", 0),
-                          ("warp_eval_workers", 1)):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < low:
-                raise ValueError(f"ReproduceConfig.{name} must be an int >= {low}, got {value!r}")
         if self.backend == "warp":
             if "ppo" in self.algos:
                 raise ValueError("ReproduceConfig.algos: ppo does not train on backend warp here (its rollouts are "
