@@ -438,7 +438,7 @@ SCRATCH: dict[str, dict[int, dict[str, int]]] = {
     "scratch-v4": {3: {"sac": 5, "passive": 1, "random": 1}}}
 """Per protocol version (its folder under docs/runs): the from-scratch pair seeds that made a contest, and the runs
 of each algorithm and baseline on their test. ``scratch-v3`` reruns the Bugs under protocol change 1, ``scratch-v4``
-under protocol change 2 (pair 1's still training)."""
+under protocol change 2."""
 SECTION = {"scratch-v2": "**Pair seed {}:", "scratch-v3": "**Protocol change 1, pair seed {}:",
            "scratch-v4": "**Protocol change 2, pair seed {}:"}
 """How docs/reproduce.md opens a version's section on one pair seed."""
