@@ -24,6 +24,7 @@ from triplesumo.agents.policy_file import file_sha256, load_policy, load_tensors
 from triplesumo.cli import main
 from triplesumo.train.fork import added_seeds, check_fork, fork_run
 from triplesumo.train.league_config import LeagueConfig
+from triplesumo.train.legs import read_legs
 from triplesumo.train.loop import Trainer, train
 from triplesumo.train.run_folder import config_from_json
 
@@ -397,6 +398,7 @@ def test_compact_drop_replay_leaves_a_checkpoint_that_resumes_with_an_empty_buff
     resumed = train(tiny(tmp_path, "run", epochs=4, save_replay=True), resume_dir=run, overrides={"epochs": 6})
     assert resumed.epochs == 6
     assert "holds no replay buffer" in capsys.readouterr().out
+    assert [(leg["kind"], leg.get("replay")) for leg in read_legs(run)] == [("start", None), ("resume", "empty")]
     assert checkpoint.holds_replay(checkpoint.latest(run))  # and saves its new buffer again
     (checkpoint.latest(damaged) / "replay.npz").unlink()
     with pytest.raises(checkpoint.CheckpointError, match=r"replay.npz: file not found"):

@@ -82,6 +82,10 @@ def test_legs_file_errors_name_the_file(tmp_path: Path) -> None:
     assert set(leg) == set(LEG_KEYS) and leg["versions"]["triplesumo"]
     with pytest.raises(ValueError, match="leg kind 'begin'"):
         make_leg("begin", 0, 0, None, {}, "")
+    assert make_leg("resume", 8, 80, "run-1", {}, "", replay="empty")["replay"] == "empty"
+    for kind, replay in (("start", "empty"), ("resume", "lost")):
+        with pytest.raises(ValueError, match=f"a {kind} leg's replay '{replay}'"):
+            make_leg(kind, 0, 0, None, {}, "", replay=replay)
     write_legs(tmp_path, [leg])
     assert read_legs(tmp_path) == [leg]
     cases = {
@@ -91,6 +95,7 @@ def test_legs_file_errors_name_the_file(tmp_path: Path) -> None:
         json.dumps({"format": LEGS_FORMAT, "legs": {}}): "'legs' must be a list",
         json.dumps({"format": LEGS_FORMAT, "legs": [{"kind": "start"}]}): r"leg 0 lacks \['epoch'",
         json.dumps({"format": LEGS_FORMAT, "legs": [leg | {"kind": "begin"}]}): "leg 0 has kind 'begin'",
+        json.dumps({"format": LEGS_FORMAT, "legs": [leg | {"replay": "partial"}]}): "leg 0 has replay 'partial'",
     }
     for text, message in cases.items():
         path.write_text(text)
@@ -128,6 +133,7 @@ def test_a_run_its_resume_an_older_resume_and_a_fork_record_their_legs(tmp_path:
     assert [(leg["kind"], leg["epoch"]) for leg in legs] == [("start", 0), ("resume", 8)]
     assert legs[1]["command"] == "triplesumo " + " ".join(argv) and legs[1]["budget"]["epochs"] == 16
     assert legs[1]["env_steps"] > 0
+    assert "replay" not in legs[0] and legs[1]["replay"] == "restored"  # the checkpoint's buffer, an exact resume
     assert load_policy(run.run_dir / "policy-ant+bug")[1]["legs"] == legs
     resumed = Trainer(both(tmp_path, epochs=16), run_dir=run.run_dir, resume=True)
     after = member_manifests(resumed)
@@ -147,6 +153,7 @@ def test_a_run_its_resume_an_older_resume_and_a_fork_record_their_legs(tmp_path:
     result = train(cfg, resume_dir=fork_dir)
     fork_legs = read_legs(fork_dir)
     assert [(leg["kind"], leg["epoch"]) for leg in fork_legs] == [("start", 0), ("fork", 8)]
+    assert fork_legs[1]["replay"] == "restored"  # a fork copies the parent checkpoint's buffer
     assert load_policy(result.run_dir / "policy-spider")[1]["legs"] == fork_legs
     assert train(cfg, resume_dir=fork_dir, overrides={"epochs": 12}).epochs >= 12
     assert [leg["kind"] for leg in read_legs(fork_dir)] == ["start", "fork", "resume"]

@@ -404,7 +404,8 @@ def _skill_section(protocol: Protocol) -> list[str]:
              f"Bug's test MWR first reached {SKILL:+.2f}, from the evaluations stage 4 made while training: every "
              f"{first.eval_every:,} env steps, the current policy frozen on the first {first.eval_epochs} test "
              "matches of stage 5. Measured on the machine that ran each run, never projected; a resumed run adds "
-             "the training times of its legs, and restarts with an empty replay buffer.", "",
+             "the training times of its legs; it goes on with its replay buffer, or with an empty one from a "
+             "checkpoint compacted of it (each resumed leg in its `legs.json` says which: `\"replay\"`).", "",
              "| run | reached | env steps | training wall time | evaluations | best test MWR (at env steps) |",
              "| --- | --- | ---: | ---: | ---: | ---: |"]
     for trial, run in runs:

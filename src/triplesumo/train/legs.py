@@ -22,6 +22,12 @@ wheel). A resume from a checkpoint older than the newest cuts the legs that star
 after it (their epochs are trained again); a fork starts with its parent's legs up to the
 fork's epoch. The trainer writes the legs into every policy manifest (its own and its league
 snapshots), so a shipped policy names the code of every leg that trained it.
+
+A ``resume`` or ``fork`` leg of a run with an off-policy learner also says what became of the
+replay buffer: ``"replay": "restored"`` (the checkpoint's, so the leg goes on exactly as the run
+would have) or ``"empty"`` (a checkpoint saved without it or compacted of it, ``triplesumo
+compact --drop-replay``: the leg goes on with an empty buffer, not exactly as the run would have).
+Legs written before this key existed lack it.
 """
 
 from __future__ import annotations
@@ -44,6 +50,8 @@ LEGS_FORMAT = "triplesumo-legs/1"
 LEG_KINDS = ("start", "resume", "fork")
 LEG_KEYS = ("kind", "epoch", "env_steps", "run_id", "code", "versions", "budget", "started", "command")
 """What every leg records (module docstring)."""
+REPLAY_STATES = ("restored", "empty")
+"""What a resumed leg of an off-policy run says of its replay buffer (``"replay"``, module docstring)."""
 
 
 def _git(package: Path, *args: str) -> str | None:
@@ -77,13 +85,17 @@ def versions() -> dict[str, str]:
 
 
 def make_leg(kind: str, epoch: int, env_steps: int, run_id: str | None, budget: dict[str, Any],
-             command: str, code: dict[str, Any] | None = None) -> dict[str, Any]:
-    """A leg starting now at ``epoch`` / ``env_steps`` (``code``: default :func:`code_version`)."""
+             command: str, code: dict[str, Any] | None = None, replay: str | None = None) -> dict[str, Any]:
+    """A leg starting now at ``epoch`` / ``env_steps`` (``code``: default :func:`code_version`; ``replay``: what a
+    resumed off-policy run's buffer is, one of :data:`REPLAY_STATES`, or None to say nothing)."""
     if kind not in LEG_KINDS:
         raise ValueError(f"leg kind {kind!r}: expected one of {LEG_KINDS}")
+    if replay is not None and (kind == "start" or replay not in REPLAY_STATES):
+        raise ValueError(f"a {kind} leg's replay {replay!r}: expected one of {REPLAY_STATES} on a resume or fork")
     return {"kind": kind, "epoch": int(epoch), "env_steps": int(env_steps), "run_id": run_id,
             "code": code_version() if code is None else code, "versions": versions(), "budget": dict(budget),
-            "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"), "command": command}
+            "started": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"), "command": command,
+            **({} if replay is None else {"replay": replay})}
 
 
 def read_legs(run_dir: Path | str) -> list[dict[str, Any]]:
@@ -104,6 +116,8 @@ def read_legs(run_dir: Path | str) -> list[dict[str, Any]]:
             raise PolicyFileError(f"{path}: leg {i} lacks {missing}")
         if leg["kind"] not in LEG_KINDS:
             raise PolicyFileError(f"{path}: leg {i} has kind {leg['kind']!r}, expected one of {LEG_KINDS}")
+        if leg.get("replay", "restored") not in REPLAY_STATES:
+            raise PolicyFileError(f"{path}: leg {i} has replay {leg['replay']!r}, expected one of {REPLAY_STATES}")
     return legs
 
 
@@ -137,13 +151,15 @@ class RunRecord:
     legs: list[dict[str, Any]] = field(default_factory=list)
 
     def start_leg(self, run_dir: Path, resumed: bool, epoch: int, env_steps: int,
-                  budget: dict[str, Any]) -> dict[str, Any]:
+                  budget: dict[str, Any], replay: str | None = None) -> dict[str, Any]:
         """Append this leg to ``RUN/legs.json`` (cutting the legs of epochs trained again) and return it:
-        ``start`` for a new run, ``fork`` for a fork continued from its fork epoch, else ``resume``."""
+        ``start`` for a new run, ``fork`` for a fork continued from its fork epoch, else ``resume``; ``replay``
+        (:data:`REPLAY_STATES`) is what a resumed off-policy run's replay buffer is."""
         kind = "start"
         if resumed:
             kind = "fork" if self.forked_from is not None and epoch == int(self.forked_from["epoch"]) else "resume"
-        leg = make_leg(kind, epoch, env_steps, self.run_id, budget, self.session_command)
+        leg = make_leg(kind, epoch, env_steps, self.run_id, budget, self.session_command,
+                       replay=replay if resumed else None)
         self.legs = [*legs_before(read_legs(run_dir), epoch), leg]
         with writing(Path(run_dir) / LEGS_FILE):
             write_legs(run_dir, self.legs)

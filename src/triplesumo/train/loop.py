@@ -145,6 +145,9 @@ class Trainer:
                                        dict(zip(probe.agents, probe.action_sizes, strict=True)), self.pairs)
         self.restored: Path | None = None
         """The checkpoint folder this resume restored (None for a new run)."""
+        self.replay: str | None = None
+        """What this resume's replay buffer is, as its leg says: "restored", "empty" (the checkpoint held none, or
+        ``save_replay`` is off), or None (a new run, or one with no off-policy learner)."""
         if resume:
             self._restore(from_checkpoint)
         else:
@@ -304,7 +307,8 @@ class Trainer:
         the latest makes the folder that checkpoint's (:func:`adopt_checkpoint`)."""
         cfg, c = self.cfg, self.collector
         self.record.start_leg(self.run_dir, self.resumed, c.epochs_done, c.env_steps, {
-            "epochs": cfg.epochs, "max_minutes": cfg.max_minutes, "max_env_steps": cfg.max_env_steps})
+            "epochs": cfg.epochs, "max_minutes": cfg.max_minutes, "max_env_steps": cfg.max_env_steps},
+            replay=self.replay)
         if self.restored is not None:
             adopt_checkpoint(self.run_dir, self.restored, c.epochs_done, self._write_policies)
 
@@ -353,6 +357,8 @@ class Trainer:
         saved = load_to_resume(self.run_dir, from_checkpoint, wants_replay, within, self.learners[0].name,
                                self.cfg.n_envs)
         self.restored = saved.folder
+        if any(isinstance(lr, OffPolicyLearner) for lr in self.learners):
+            self.replay = "empty" if saved.replay is None else "restored"
         check_resumable(saved, self.cfg, self.run_dir)
         with checkpoint.restoring(saved):
             for learner in self.learners:
