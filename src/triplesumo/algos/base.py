@@ -83,6 +83,8 @@ class Algorithm:
         self.obs_dim = obs_dim
         self.act_dim = act_dim
         self.config = config
+        self.seed = seed
+        """The seed the networks were built under (and the generator's, plus 1)."""
         self.device = torch.device(device)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)

@@ -124,6 +124,12 @@ class OffPolicyConfig:
     :mod:`triplesumo.algos.nstep`). 1: one-step TD (the paper, SB3, CleanRL). It makes the replay's contents, so
     a fork keeps it."""
 
+    reset_every: int = 0
+    """Re-initialise the learner every this many gradient updates (0: never): every network, its target and its
+    optimiser as a learner of the same config builds them under a seed drawn from the learner's and the reset's
+    index; the replay, the observation normaliser and the update count are kept (Nikishin et al., ICML 2022;
+    D'Oro et al., ICLR 2023: resets let a learner take more updates per transition without losing plasticity)."""
+
     update_dtype: str = "float32"
     """The dtype of the gradient updates' matrix products: float32, or bfloat16 (``torch.autocast`` around each
     update: the hidden layers' products in bfloat16, each network's output layer, the losses, the weights and
@@ -132,7 +138,7 @@ class OffPolicyConfig:
     updates' rounding, so runs are not bit for bit those in float32."""
 
     TUNABLE: ClassVar[tuple[str, ...]] = ("actor_lr", "critic_lr", "gamma", "tau", "batch_size", "learn_every",
-                                          "gradient_steps", "weight_decay", "update_dtype")
+                                          "gradient_steps", "weight_decay", "update_dtype", "reset_every")
     """The fields a run continued from a checkpoint may change (``train --fork RUN --ddpg.actor-lr 2e-5``,
     fine-tuning): step sizes, the update schedule and exploration, on which no saved tensor's shape or
     meaning depends. The others (widths, replay size, normalisation, noise kind, warm-up) make what the
@@ -147,6 +153,7 @@ class OffPolicyConfig:
         for name in ("batch_size", "buffer_size", "learn_every", "gradient_steps", "n_step"):
             at_least(self, name, 1)
         at_least(self, "learning_starts", 0)
+        at_least(self, "reset_every", 0)
         non_negative(self, "weight_decay")
         flag(self, "normalize_obs")
         require(self, "update_dtype", self.update_dtype in UPDATE_DTYPES,

@@ -107,7 +107,27 @@ class OffPolicyAlgorithm(Algorithm):
         prepared = self.batch(batch)
         with self.update_precision():
             stats = self.train_step(prepared)
-        return self.finish_update(stats)
+        stats = self.finish_update(stats)
+        if self.config.reset_every and self.num_updates % self.config.reset_every == 0:
+            self.reset()
+        return stats
+
+    def reset(self) -> None:
+        """Re-initialise the learner (``reset_every``): every network, target and optimiser as a learner of the same
+        config builds them under a seed drawn from this learner's seed and the reset's index
+        (``num_updates // reset_every``), so a resumed run resets as an uninterrupted one does. The weights are
+        copied into the networks in place (the optimisers, the exported policy and an acting copy keep pointing
+        at them) and Adam's moments start again; the observation normaliser, the update count, the learner's
+        generator and the caller's replay are kept."""
+        index = self.num_updates // self.config.reset_every
+        seed = int(np.random.SeedSequence([self.seed, index]).generate_state(1)[0])
+        fresh = type(self)(self.obs_dim, self.act_dim, self.config, seed, device=self.device)
+        with torch.no_grad():
+            for name in self.modules:
+                if name != "obs_norm":
+                    getattr(self, name).load_state_dict(getattr(fresh, name).state_dict())
+        for name in self.optimizers:
+            getattr(self, name).state.clear()
 
     def update_precision(self) -> contextlib.AbstractContextManager[Any]:
         """The context an update runs in: nothing for float32; for bfloat16, ``torch.autocast`` without its cache

@@ -130,9 +130,9 @@ run used: a saved league section without one gets it. The values are written out
 so that a default changed later cannot change how an old run resumes."""
 
 ALGO_ADDED_LATER: dict[str, dict[str, Any]] = {
-    "sac": {"critic_norm": "none", "n_step": 1, "update_dtype": "float32"},
-    "ddpg": {"n_step": 1, "update_dtype": "float32"},
-    "td3": {"n_step": 1, "update_dtype": "float32"},
+    "sac": {"critic_norm": "none", "n_step": 1, "update_dtype": "float32", "reset_every": 0},
+    "ddpg": {"n_step": 1, "update_dtype": "float32", "reset_every": 0},
+    "td3": {"n_step": 1, "update_dtype": "float32", "reset_every": 0},
 }
 """Learner config fields newer than the first run folders of their algorithm, with what every earlier run trained
 with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates), likewise written out."""
