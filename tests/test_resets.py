@@ -12,10 +12,9 @@ from typing import Any
 import numpy as np
 import pytest
 import torch
-from safetensors.torch import load_file, save_file
 
-from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch  # the same random batches
-from test_sac_options import resumed_equals_uninterrupted
+from test_ddpg import ACT_DIM, BATCH, OBS_DIM
+from test_sac_options import learn, reloaded, resumed_equals_uninterrupted
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.algos.sac import SAC, SACConfig
 from triplesumo.algos.td3 import TD3, TD3Config
@@ -31,14 +30,6 @@ LEARNERS: dict[str, tuple[Any, Any]] = {
 }
 
 
-def _steps(agent: Any, rounds: range) -> list[dict[str, float]]:
-    out = []
-    for i in rounds:
-        agent.observe(_batch(100 + i)["obs"])
-        out.append(agent.update(_batch(i)))
-    return out
-
-
 def _networks(agent: Any) -> dict[str, torch.Tensor]:
     return {k: v for k, v in agent.state_dict().items() if not k.startswith("obs_norm.")}
 
@@ -52,12 +43,12 @@ def test_a_reset_rebuilds_every_network_and_optimiser_in_place(algo: str) -> Non
     cls, config = LEARNERS[algo]
     agent = cls(OBS_DIM, ACT_DIM, config, seed=0)
     actor, policy_actor = agent.actor, agent.policy.actor
-    _steps(agent, range(2))
+    learn(agent, range(2))
     first = cls(OBS_DIM, ACT_DIM, config, seed=_reset_seed(0, 1))
     assert any(not torch.equal(v, _networks(first)[k]) for k, v in _networks(agent).items())  # not yet
     assert any(getattr(agent, name).state_dict()["state"] for name in agent.optimizers)
     norm = agent.obs_norm.state_dict() if agent.obs_norm is not None else {}
-    _steps(agent, range(2, 3))  # update 3: then the reset
+    learn(agent, range(2, 3))  # update 3: then the reset
     assert agent.num_updates == 3
     built = _networks(first)
     assert _networks(agent).keys() == built.keys()
@@ -68,9 +59,9 @@ def test_a_reset_rebuilds_every_network_and_optimiser_in_place(algo: str) -> Non
         assert torch.equal(agent.obs_norm.state_dict()[key], value), key
     assert agent.actor is actor and agent.policy.actor is policy_actor  # in place: the policy follows
     # the next update learns from the fresh networks, as the fresh learner's own first update does
-    stats = _steps(agent, range(3, 4))[0]
+    stats = learn(agent, range(3, 4))[0]
     assert all(np.isfinite(v) for v in stats.values())
-    _steps(agent, range(4, 6))  # update 6: the second reset draws another seed than the first
+    learn(agent, range(4, 6))  # update 6: the second reset draws another seed than the first
     second = _networks(cls(OBS_DIM, ACT_DIM, config, seed=_reset_seed(0, 2)))
     for key, value in _networks(agent).items():
         assert torch.equal(value, second[key]), key
@@ -79,11 +70,11 @@ def test_a_reset_rebuilds_every_network_and_optimiser_in_place(algo: str) -> Non
 
 def test_no_reset_by_default_and_the_field_is_validated() -> None:
     assert SACConfig().reset_every == DDPGConfig().reset_every == TD3Config().reset_every == 0
-    cls, config = LEARNERS["sac"]
+    _, config = LEARNERS["sac"]
     plain = dataclasses.replace(config, reset_every=0)
     agent, again = SAC(OBS_DIM, ACT_DIM, plain, seed=0), SAC(OBS_DIM, ACT_DIM, config, seed=0)
-    _steps(agent, range(6))
-    _steps(again, range(6))
+    learn(agent, range(6))
+    learn(again, range(6))
     assert any(not torch.equal(v, _networks(again)[k]) for k, v in _networks(agent).items())
     with pytest.raises(ValueError, match="SACConfig.reset_every must be >= 0"):
         SACConfig(reset_every=-1)
@@ -97,15 +88,9 @@ def test_a_learner_checkpointed_just_after_a_reset_resumes_bit_for_bit(tmp_path:
     uninterrupted one does (at update 6) and ends with the same weights."""
     cls, config = LEARNERS[algo]
     uninterrupted = cls(OBS_DIM, ACT_DIM, config, seed=0)
-    _steps(uninterrupted, range(3))
-    tensors, meta = uninterrupted.optimizer_state()
-    save_file(uninterrupted.state_dict(), tmp_path / "w.safetensors")
-    save_file(tensors, tmp_path / "o.safetensors")
-    (tmp_path / "o.json").write_text(json.dumps(meta))
-    resumed = cls(OBS_DIM, ACT_DIM, config, seed=0)
-    resumed.load_state_dict(load_file(tmp_path / "w.safetensors"))
-    resumed.load_optimizer_state(load_file(tmp_path / "o.safetensors"), json.loads((tmp_path / "o.json").read_text()))
-    assert _steps(uninterrupted, range(3, 8)) == _steps(resumed, range(3, 8))
+    learn(uninterrupted, range(3))
+    resumed = reloaded(uninterrupted, cls(OBS_DIM, ACT_DIM, config, seed=7), tmp_path)
+    assert learn(uninterrupted, range(3, 8)) == learn(resumed, range(3, 8))
     for key, value in uninterrupted.state_dict().items():
         assert torch.equal(resumed.state_dict()[key], value), key
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -136,28 +137,37 @@ def test_critic_norm_is_validated() -> None:
     assert SACConfig(**json.loads(json.dumps(dataclasses.asdict(CFG)))) == CFG
 
 
+def learn(agent: Any, rounds: range) -> list[dict[str, float]]:
+    """One update per round on the shared random batches, the normaliser seeing the round's observations first;
+    the updates' stats."""
+    out = []
+    for i in rounds:
+        agent.observe(_batch(100 + i)["obs"])
+        out.append(agent.update(_batch(i)))
+    return out
+
+
+def reloaded(agent: Any, fresh: Any, tmp_path: Path) -> Any:
+    """``fresh`` (a learner built under another seed) loaded with ``agent``'s weights and optimiser state, through
+    safetensors and JSON files, as a checkpoint holds them."""
+    tensors, meta = agent.optimizer_state()
+    save_file(agent.state_dict(), tmp_path / "w.safetensors")
+    save_file(tensors, tmp_path / "o.safetensors")
+    (tmp_path / "o.json").write_text(json.dumps(meta))
+    fresh.load_state_dict(load_file(tmp_path / "w.safetensors"))
+    fresh.load_optimizer_state(load_file(tmp_path / "o.safetensors"), json.loads((tmp_path / "o.json").read_text()))
+    return fresh
+
+
 @pytest.mark.parametrize("norm", ["layer", "batch"])
 def test_a_normalised_critic_learner_resumes_bit_for_bit(tmp_path: Path, norm: str) -> None:
     def make(seed: int = 0) -> SAC:
         return SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm=norm), seed=seed)
 
-    def steps(agent: SAC, rounds: range) -> list[dict[str, float]]:
-        out = []
-        for i in rounds:
-            agent.observe(_batch(100 + i)["obs"])
-            out.append(agent.update(_batch(i)))
-        return out
-
     uninterrupted = make()
-    steps(uninterrupted, range(3))
-    tensors, meta = uninterrupted.optimizer_state()
-    save_file(uninterrupted.state_dict(), tmp_path / "w.safetensors")
-    save_file(tensors, tmp_path / "o.safetensors")
-    (tmp_path / "o.json").write_text(json.dumps(meta))
-    resumed = make(seed=7)
-    resumed.load_state_dict(load_file(tmp_path / "w.safetensors"))
-    resumed.load_optimizer_state(load_file(tmp_path / "o.safetensors"), json.loads((tmp_path / "o.json").read_text()))
-    assert steps(uninterrupted, range(3, 6)) == steps(resumed, range(3, 6))
+    learn(uninterrupted, range(3))
+    resumed = reloaded(uninterrupted, make(seed=7), tmp_path)
+    assert learn(uninterrupted, range(3, 6)) == learn(resumed, range(3, 6))
     for key, value in uninterrupted.state_dict().items():
         assert torch.equal(resumed.state_dict()[key], value), key
     if norm == "layer":  # a plain critic's checkpoint lacks the norms

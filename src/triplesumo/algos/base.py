@@ -244,10 +244,10 @@ class Algorithm:
         Tensor keys are ``<optimizer>.state.<param index>.<exp_avg|exp_avg_sq|step>`` and,
         for learners that draw random numbers in updates, ``generator.state``; ``meta`` holds
         each optimiser's ``param_groups`` (lr, betas, ...; on loading, :data:`CONFIG_KEYS` come from the
-        learner's config) and ``num_updates``.
+        learner's config), ``num_updates`` and the learner's ``seed`` (a reset draws from it).
         """
         tensors: dict[str, torch.Tensor] = {}
-        meta: dict[str, Any] = {"num_updates": self.num_updates}
+        meta: dict[str, Any] = {"num_updates": self.num_updates, "seed": self.seed}
         for name in self.optimizers:
             sd = getattr(self, name).state_dict()
             for index, param_state in sd["state"].items():
@@ -313,6 +313,7 @@ class Algorithm:
         if self.generator is not None:
             self.generator.set_state(tensors["generator.state"].to(torch.uint8).cpu())
         self.num_updates = int(meta["num_updates"])
+        self.seed = int(meta.get("seed", self.seed))  # (a checkpoint from before resets kept no seed)
 
     def check_finite(self) -> None:
         """Raise :class:`DivergenceError` if any weight or statistic is NaN or infinite."""
