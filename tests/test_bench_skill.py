@@ -232,6 +232,23 @@ def test_reference_seconds_of_a_recorded_bench() -> None:
     assert reference_seconds(100.0, {"before": {"ms_per_env_step": 1.4}}) == pytest.approx(50.0)
 
 
+def test_the_plots_title_wraps_a_long_median_line_instead_of_running_off_the_figure() -> None:
+    """docs/bench/skill_tau02.json: one seed of three reached, so its median line is 190 characters, which ran off
+    both sides of the 11-inch figure before it was wrapped."""
+    from triplesumo.benchmarks.skill import TITLE_WIDTH, plot_title
+
+    record = json.loads((Path(__file__).parents[1] / "docs/bench/skill_tau02.json").read_text())
+    title = plot_title(record)
+    lines = title.split("\n")
+    assert max(len(line) for line in lines) <= TITLE_WIDTH
+    assert len(lines) == 4  # what, the machine, and the median line in two
+    assert lines[1] == "2 CPU cores (AMD EPYC), reference collection 3.602 ms per env step"
+    median = " ".join(lines[2:])  # nothing lost in the wrapping
+    assert median == ("sac: median (min - max) over 3 seeds, 1 reached: not reached (100,000 - not reached) env steps, "
+                      "not reached (1541 - not reached) s, not reached (299 - not reached) reference s")
+    assert plot_title(record, width=1000).split("\n")[2] == median  # one line when it fits
+
+
 def test_the_median_and_spread_over_seeds_count_a_seed_not_reached_as_beyond_the_budget() -> None:
     from triplesumo.benchmarks.skill import spread
 

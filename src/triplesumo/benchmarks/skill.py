@@ -50,6 +50,7 @@ import dataclasses
 import json
 import math
 import statistics
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -78,6 +79,8 @@ PLOT = "skill.png"
 CURVE_DEPENDS_ON = ("train", "eval_every", "eval_epochs", "eval_seed")
 """The :class:`SkillConfig` fields the test-MWR curves depend on: a resumed bench must keep them."""
 DEFAULT_OUT = "runs/skill"
+TITLE_WIDTH = 130
+"""Characters per line of the plot's title, which fit its 11-inch width at 9 points."""
 QUICK = {"eval_every": 40, "eval_epochs": 4, "max_env_steps": 120}
 """``--quick``'s budget: an evaluation on 4 test matches every 40 env steps (one 20-step epoch of 2 matches),
 up to 120 env steps."""
@@ -329,16 +332,23 @@ def plot_skill(result: dict[str, Any], path: Path) -> Path:
         ax.grid(alpha=0.3)
     axes[0].set_ylabel(f"test MWR ({result['eval_epochs']} seeded test matches)")
     axes[0].legend(fontsize=8)
-    m, ms = result["machine"], result["reference"]["ms_per_env_step"]
-    medians = "; ".join(_summary_line(algo, entry["summary"], result["max_env_steps"])
-                        for algo, entry in result["algos"].items())
-    fig.suptitle(f"time to skill: Bug's test MWR while training (star: first evaluation at the target)\n"
-                 f"{m['cores']} CPU cores ({m['cpu']}), reference collection {ms:.3f} ms per env step\n{medians}",
-                 fontsize=9)
+    title = plot_title(result)
+    fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     return path
+
+
+def plot_title(result: dict[str, Any], width: int = TITLE_WIDTH) -> str:
+    """The plot's title: what it shows, the machine, and each algorithm's median line, wrapped to ``width``
+    characters so that none runs off the figure."""
+    m, ms = result["machine"], result["reference"]["ms_per_env_step"]
+    lines = ["time to skill: Bug's test MWR while training (star: first evaluation at the target)",
+             f"{m['cores']} CPU cores ({m['cpu']}), reference collection {ms:.3f} ms per env step"]
+    for algo, entry in result["algos"].items():
+        lines += textwrap.wrap(_summary_line(algo, entry["summary"], result["max_env_steps"]), width)
+    return "\n".join(lines)
 
 
 def _median_range(s: dict[str, float | None], fmt: str) -> str:
