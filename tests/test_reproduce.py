@@ -269,7 +269,7 @@ def test_bug_trials_give_td3_and_sac_the_shared_schedule_and_keep_ddpg_at_the_pa
     assert (by_algo["td3"].td3.learn_every, by_algo["td3"].td3.n_step) == (8, 5)
     assert (by_algo["sac"].sac.learn_every, by_algo["sac"].sac.n_step) == (8, 5)
     assert (by_algo["ddpg"].ddpg.learn_every, by_algo["ddpg"].ddpg.n_step) == (30, 1)  # the paper preset, untouched
-    assert by_algo["td3"].max_env_steps == 1_000_000
+    assert by_algo["td3"].max_env_steps == 2_000_000  # protocol change 2's budget
     assert "--td3.learn-every 8 --td3.n-step 5" in command_for(by_algo["td3"])  # the recorded command says so
     shipped = {t.config.learn[0].split("=")[1]: t.config  # the recipe the shipped pair's Bugs trained with
                for t in Protocol(ReproduceConfig(out=str(tmp_path), seeds=(0,), algos=ALGOS, bug_learn_every=16,

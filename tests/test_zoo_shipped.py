@@ -325,7 +325,7 @@ def test_the_headline_table_is_recomputed_from_the_committed_matches() -> None:
 
 # ------------------------------------------------------------------ aliases: one copy of each weights file
 TIME_FOLDERS = ("docs/runs/scratch-v2/seed-3", "docs/runs/scratch-v2/seed-1", "docs/runs/scratch-v3/seed-3",
-                "docs/runs/scratch-v3/seed-1", "docs/runs/scratch-v4/seed-3")
+                "docs/runs/scratch-v3/seed-1", "docs/runs/scratch-v4/seed-3", "docs/runs/scratch-v4/seed-1")
 
 
 def test_where_a_pairs_time_goes_is_recomputed_from_the_committed_records(tmp_path: Path) -> None:
@@ -435,7 +435,7 @@ RUNS = ROOT / "docs" / "runs"
 SCRATCH: dict[str, dict[int, dict[str, int]]] = {
     "scratch-v2": {1: {"sac": 5, "ddpg": 3, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}},
     "scratch-v3": {1: {"sac": 5, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}},
-    "scratch-v4": {3: {"sac": 5, "passive": 1, "random": 1}}}
+    "scratch-v4": {1: {"sac": 5, "passive": 1, "random": 1}, 3: {"sac": 5, "passive": 1, "random": 1}}}
 """Per protocol version (its folder under docs/runs): the from-scratch pair seeds that made a contest, and the runs
 of each algorithm and baseline on their test. ``scratch-v3`` reruns the Bugs under protocol change 1, ``scratch-v4``
 under protocol change 2."""
@@ -443,7 +443,7 @@ SECTION = {"scratch-v2": "**Pair seed {}:", "scratch-v3": "**Protocol change 1, 
            "scratch-v4": "**Protocol change 2, pair seed {}:"}
 """How docs/reproduce.md opens a version's section on one pair seed."""
 SCRATCH_PAIRS = [(version, seed) for version, pairs in SCRATCH.items() for seed in sorted(pairs)]
-HEADLINES = ("scratch-v2", "scratch-v3")
+HEADLINES = ("scratch-v2", "scratch-v3", "scratch-v4")
 """The protocol versions whose every contest pair has its Bugs tested: each has a headline over all its runs."""
 
 
