@@ -622,3 +622,38 @@ def test_a_full_disk_while_writing_rows_names_the_table(tmp_path: Path) -> None:
         with pytest.raises(OSError, match=rf"{small / 'ev' / 'trained' / 'metrics.csv'}: a row was not written"):
             evaluate(cfg)
         assert (small / "ev" / "trained" / "metrics.csv").read_text().count("\n") > 10  # the rows before it
+
+
+def test_plot_redraws_an_evaluation_folders_comparison_from_its_recorded_rows(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`triplesumo plot` on an evaluation folder (a committed one: packed tables, absolute policy paths) draws
+    compare_mwr.png and compare_rewards.png from summary.json's candidates and their rows, named as evaluate names
+    them, at the window it used; a damaged summary is named."""
+    from triplesumo.cli import main
+    from triplesumo.evaluation import plots
+    from triplesumo.evaluation.evaluate import curve_name
+
+    folder = tmp_path / "evaluation"
+    source = Path(__file__).parents[1] / "docs/runs/scratch-v4/seed-1/evaluation"
+    shutil.copytree(source, folder, ignore=shutil.ignore_patterns("*.png"))
+    summary = json.loads((folder / "summary.json").read_text())
+    seen: dict[str, Any] = {}
+    real = plots.plot_comparison
+
+    def spy(curves: dict[str, dict[str, np.ndarray]], out: Path, window: int = 200) -> list[Path]:
+        seen.update(names=list(curves), rows={n: len(c["outcome"]) for n, c in curves.items()}, window=window)
+        return real(curves, out, window=window)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plots, "plot_comparison", spy)
+        assert main(["plot", str(folder)]) == 0
+    assert seen["names"] == [curve_name("bug", label, c["policy"]) for label, c in summary["candidates"].items()]
+    assert set(seen["rows"].values()) == {2000} and seen["window"] == summary["config"]["window"] == 200
+    printed = capsys.readouterr().out.split()
+    assert printed == [str(folder / "compare_mwr.png"), str(folder / "compare_rewards.png")]
+    for name in ("compare_mwr.png", "compare_rewards.png"):
+        assert (folder / name).read_bytes()[:8] == PNG, name
+
+    (folder / "summary.json").write_text('{"candidates": {}}')
+    assert main(["plot", str(folder)]) == 2
+    assert f"{folder / 'summary.json'}: not an evaluation summary" in capsys.readouterr().err

@@ -266,3 +266,42 @@ def test_bad_evaluations_are_named(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="no run"):
         plot_evaluations({}, tmp_path / "x.png")
     assert not (tmp_path / "x.png").exists()
+
+
+def test_a_comparison_of_runs_named_by_long_paths_keeps_its_axes_and_its_legend_on_the_figure(
+        tmp_path: Path, run: dict[str, np.ndarray]) -> None:
+    """evaluate names each curve by its candidate and absolute policy path (150+ characters): the legend goes below
+    the axes with labels cut to LABEL_MAX, so neither squeezes the axes nor runs off the figure (it did both)."""
+    from matplotlib.figure import Figure
+
+    from triplesumo.evaluation import plots
+    from triplesumo.evaluation.plots import LABEL_MAX, legend_label
+
+    long = "bug trained-work-main-results-scratch-v4-seed-1-bug-learn-bug-sac-seed-{0}-policy " \
+           "(/work/main/results/scratch-v4/seed-1/bug/learn=bug=sac,seed={0}/policy)"
+    label = legend_label(long.format(4))
+    assert len(label) == LABEL_MAX and label.startswith("bug trained-") and label.endswith("seed=4/policy)")
+    assert legend_label("passive") == "passive"
+
+    drawn: list[Figure] = []
+    real_save = plots.save_figure
+
+    def keep(fig: Figure, path: Path, dpi: int) -> Path:
+        fig.draw_without_rendering()  # lay out as savefig does, then measure before the figure is cleared
+        box = fig.bbox
+        axes = fig.axes[0].get_window_extent()
+        legend = fig.legends[0].get_window_extent()
+        assert axes.width > 0.75 * box.width and axes.height > 0.45 * box.height, (path.name, axes, box)
+        assert box.x0 <= legend.x0 and legend.x1 <= box.x1 and box.y0 <= legend.y0 and legend.y1 <= axes.y0, (
+            path.name, legend, box)
+        drawn.append(fig)
+        return real_save(fig, path, dpi)
+
+    curves = {long.format(s): _synthetic_run(240, seed=s) for s in range(5)}
+    curves["bug passive (passive)"] = _synthetic_run(240, seed=9, p_win=0.1)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plots, "save_figure", keep)
+        paths = plot_comparison(curves, tmp_path / "compare", window=30)
+    assert len(drawn) == 2
+    for path in paths:
+        _assert_real_png(path)

@@ -118,9 +118,12 @@ def _parser(command: str | None = None) -> argparse.ArgumentParser:
     average.add_argument("policies", nargs="+", help="policy files of one run (e.g. "
                                                      "runs/x/league/members/spider-00{40,41,42}/spider)")
     average.add_argument("--out", required=True, help="the averaged policy file to write (e.g. runs/x/swa-spider)")
-    plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv")
-    plot.add_argument("run_dir", help="run folder (holds metrics.csv, or metrics-<agent>.csv per learning agent)")
-    plot.add_argument("--window", type=int, default=200, help="λ of the rolling curves and MWR (default: 200)")
+    plot = sub.add_parser("plot", help="write the paper's figures (PNG) from a run folder's metrics.csv, or an "
+                                       "evaluation folder's comparison plots from its recorded rows")
+    plot.add_argument("run_dir", help="run folder (holds metrics.csv, or metrics-<agent>.csv per learning agent), "
+                                      "or an evaluation folder (holds summary.json)")
+    plot.add_argument("--window", type=int, default=None, help="λ of the rolling curves and MWR (default: 200; an "
+                                                               "evaluation folder's: the one it used)")
     zoo = sub.add_parser("zoo", help="list the shipped policies, or publish a trained one into the zoo")
     zoo.add_argument("action", choices=["list", "publish"])
     zoo.add_argument("policy", nargs="?", help="publish: the run's policy file (e.g. runs/ant/policy)")
@@ -304,9 +307,15 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.out}: the mean of {len(args.policies)} {made['agent']} policies "
                   f"(epochs {[s['epochs'] for s in made['average']['sources']]})")
         elif args.command == "plot":
-            from triplesumo.train.run_folder import plot_metrics
+            if (Path(args.run_dir) / "summary.json").is_file():  # an evaluation folder: its comparison plots
+                from triplesumo.evaluation.evaluate import plot_evaluation_folder
 
-            print("\n".join(str(p) for p in plot_metrics(args.run_dir, args.window)))
+                drawn = plot_evaluation_folder(args.run_dir, args.window)
+            else:
+                from triplesumo.train.run_folder import plot_metrics
+
+                drawn = plot_metrics(args.run_dir, 200 if args.window is None else args.window)
+            print("\n".join(str(p) for p in drawn))
         elif args.command == "zoo":
             import json
 

@@ -34,6 +34,7 @@ import contextlib
 import csv
 import json
 import math
+import os
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, field
@@ -436,7 +437,7 @@ def _evaluate(cfg: EvaluateConfig, runner: TaskRunner | None) -> dict[str, Any]:
         plot_run(
             metrics, out / label / "plots", window=cfg.window, title=f"test: {cfg.learner}={spec}", label=cfg.learner
         )
-        curves[f"{cfg.learner} {label} ({spec})"] = metrics
+        curves[curve_name(cfg.learner, label, spec)] = metrics
         outcomes = metrics["outcome"].tolist()
         lwr[label] = local_winning_rate(outcomes)
         stats = summarize(outcomes, metrics["steps"])
@@ -454,6 +455,31 @@ def _evaluate(cfg: EvaluateConfig, runner: TaskRunner | None) -> dict[str, Any]:
     _write_json(out / "summary.json", summary)
     _write_per_seed(out / PER_SEED_FILE, summary, record)
     return summary
+
+
+def curve_name(learner: str, label: str, spec: str) -> str:
+    """A candidate's name in the comparison plots: the learning agent, the candidate and its policy."""
+    return f"{learner} {label} ({spec})"
+
+
+def plot_evaluation_folder(folder: str | os.PathLike[str], window: int | None = None) -> list[Path]:
+    """Draw an evaluation folder's ``compare_mwr.png`` and ``compare_rewards.png`` again from its recorded rows
+    (``summary.json``'s candidates and each one's ``metrics.csv``), playing nothing: e.g. after a change to the
+    plots. ``window`` defaults to the one the evaluation used."""
+    from triplesumo.evaluation.plots import plot_comparison, read_metrics_csv
+
+    folder = Path(folder)
+    source = folder / "summary.json"
+    try:
+        summary = json.loads(source.read_text())
+        config, candidates = summary["config"], summary["candidates"]
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{folder}: no summary.json, so no evaluation folder to plot") from None
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(f"{source}: not an evaluation summary ({exc})") from None
+    curves = {curve_name(config["learner"], label, c["policy"]): read_metrics_csv(folder / label / "metrics.csv")
+              for label, c in candidates.items()}
+    return plot_comparison(curves, folder, window=config["window"] if window is None else window)
 
 
 def _write_pages(matches: Path, n: int) -> list[Path]:

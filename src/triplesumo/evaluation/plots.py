@@ -69,6 +69,10 @@ TERM_PREFIX: Final[str] = "reward_"
 _STRING_COLUMNS: Final[frozenset[str]] = frozenset({"outcome"})
 _FIGSIZE: Final[tuple[float, float]] = (8.0, 4.5)
 _DPI: Final[int] = 110
+LABEL_MAX: Final[int] = 90
+"""A comparison's legend labels are cut to this many characters (the middle elided): a run named by its
+absolute policy path otherwise pushes the legend off the figure and squeezes the axes to a sliver."""
+_LEGEND_ROW_INCHES: Final[float] = 0.22
 
 
 # --------------------------------------------------------------------------- reading
@@ -549,24 +553,45 @@ def plot_comparison(
             longest = epochs
     folder = _prepare_dir(out_dir)
 
-    fig, ax = _new_axes(f"moving winning rate (λ = {window})", "epoch", "MWR")
+    rows = len(prepared) + 2  # the runs, the partial window and the zero line
+    fig, ax = _comparison_axes(f"moving winning rate (λ = {window})", "MWR", rows)
     _shade_partial(ax, longest, window)
     for name, epochs, mwr, _ in prepared:
-        ax.plot(epochs, mwr, lw=1.2, label=name)
+        ax.plot(epochs, mwr, lw=1.2, label=legend_label(name))
     ax.axhline(0.0, color="k", lw=0.8, ls="--", label="0: as many wins as losses")
     ax.set_ylim(-1.05, 1.05)
-    ax.legend(loc="best")
+    _legend_below(fig, ax)
     mwr_path = _save(fig, folder / "compare_mwr.png")
 
-    fig, ax = _new_axes(
-        "total reward per epoch",
-        "epoch",
-        f"reward (rolling mean over λ = {window} epochs)",
-    )
+    fig, ax = _comparison_axes("total reward per epoch", f"reward (rolling mean over λ = {window} epochs)", rows)
     _shade_partial(ax, longest, window)
     for name, epochs, _, reward in prepared:
-        ax.plot(epochs, reward, lw=1.2, label=name)
+        ax.plot(epochs, reward, lw=1.2, label=legend_label(name))
     ax.axhline(0.0, color="k", lw=0.6)
-    ax.legend(loc="best")
+    _legend_below(fig, ax)
     rewards_path = _save(fig, folder / "compare_rewards.png")
     return [mwr_path, rewards_path]
+
+
+def legend_label(name: str, limit: int = LABEL_MAX) -> str:
+    """``name`` if it fits in ``limit`` characters, else its start and end around an ellipsis (the end of a
+    policy path names the run)."""
+    if len(name) <= limit:
+        return name
+    tail = (limit - 1) // 2
+    return f"{name[:limit - 1 - tail]}…{name[-tail:]}"
+
+
+def _comparison_axes(title: str, ylabel: str, legend_rows: int) -> tuple[Figure, Axes]:
+    """The axes of a comparison, on a figure made taller by the legend rows that go below it, so the axes keep
+    :data:`_FIGSIZE`'s height however many runs are compared."""
+    fig, ax = _new_axes(title, "epoch", ylabel)
+    width, height = _FIGSIZE
+    fig.set_size_inches(width, height + _LEGEND_ROW_INCHES * legend_rows)
+    return fig, ax
+
+
+def _legend_below(fig: Figure, ax: Axes) -> None:
+    """One legend entry per row below the axes, outside them (the constrained layout makes room)."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=1, fontsize="small", frameon=False)
