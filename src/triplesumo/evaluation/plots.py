@@ -210,9 +210,10 @@ def _title(prefix: str, what: str) -> str:
     return f"{prefix}: {what}" if prefix else what
 
 
-def _new_axes(title: str, xlabel: str, ylabel: str) -> tuple[Figure, Axes]:
+def _new_axes(title: str, xlabel: str, ylabel: str,
+              figsize: tuple[float, float] = _FIGSIZE) -> tuple[Figure, Axes]:
     """A new, pyplot-free figure with one labelled axes and a light grid."""
-    fig = Figure(figsize=_FIGSIZE, layout="constrained")
+    fig = Figure(figsize=figsize, layout="constrained")
     ax = fig.add_subplot()
     ax.set_title(title)
     ax.set_xlabel(xlabel)
@@ -585,10 +586,8 @@ def legend_label(name: str, limit: int = LABEL_MAX) -> str:
 def _comparison_axes(title: str, ylabel: str, legend_rows: int) -> tuple[Figure, Axes]:
     """The axes of a comparison, on a figure made taller by the legend rows that go below it, so the axes keep
     :data:`_FIGSIZE`'s height however many runs are compared."""
-    fig, ax = _new_axes(title, "epoch", ylabel)
     width, height = _FIGSIZE
-    fig.set_size_inches(width, height + _LEGEND_ROW_INCHES * legend_rows)
-    return fig, ax
+    return _new_axes(title, "epoch", ylabel, figsize=(width, height + _LEGEND_ROW_INCHES * legend_rows))
 
 
 def _legend_below(fig: Figure, ax: Axes) -> None:
