@@ -142,6 +142,13 @@ class Critic(nn.Module):
         """Q-values ``(...,)`` for ``(..., obs_dim)`` obs and ``(..., act_dim)`` actions."""
         return self.net(torch.cat([obs, action], dim=-1)).squeeze(-1)
 
+    def regression_loss(self, obs: torch.Tensor, action: torch.Tensor,
+                        target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The loss of regressing ``Q(s, a)`` onto the TD targets ``target (B,)``, and the Q-values ``(B,)`` (with
+        their graph): ``mean (Q - y)²``. A critic that learns another way (a histogram of returns) states its own."""
+        q = self(obs, action)
+        return F.mse_loss(q, target), q
+
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 """Bounds of a state-dependent log σ (CleanRL's SAC squashes into them with tanh)."""

@@ -161,9 +161,13 @@ class OffPolicyAlgorithm(Algorithm):
 
     def regress_critics(self, critics: Sequence[Critic], optimizer: torch.optim.Optimizer,
                         b: Mapping[str, torch.Tensor], y: torch.Tensor) -> dict[str, float]:
-        """One Adam step on ``Σ_i mean (Q_i(s, a) - y)²``; returns ``critic_loss`` and ``q_mean``
-        (mean Q_1(s, a)), both before the step."""
-        return self.step_critics([critic(b["obs"], b["act"]) for critic in critics], y, optimizer)
+        """One Adam step on the sum of the critics' regression losses onto ``y`` (``Σ_i mean (Q_i(s, a) - y)²`` for
+        plain critics: :meth:`~triplesumo.agents.networks.Critic.regression_loss`); returns ``critic_loss`` and
+        ``q_mean`` (mean Q_1(s, a)), both before the step."""
+        losses, qs = zip(*(critic.regression_loss(b["obs"], b["act"], y) for critic in critics), strict=True)
+        loss = sum(losses[1:], losses[0])
+        descend(optimizer, loss)
+        return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
 
     def step_critics(self, qs: Sequence[torch.Tensor], y: torch.Tensor,
                      optimizer: torch.optim.Optimizer) -> dict[str, float]:

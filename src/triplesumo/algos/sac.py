@@ -33,12 +33,15 @@ from torch import nn
 
 from triplesumo.agents.networks import Critic, GaussianActor, mlp, plain_block
 from triplesumo.algos.base import adam, descend, frozen
-from triplesumo.algos.config import OffPolicyConfig, flag, learning_rate, real, require
+from triplesumo.algos.config import OffPolicyConfig, at_least, flag, learning_rate, real, require
+from triplesumo.algos.hlgauss import HLGaussCritic
 from triplesumo.algos.noise import ActionNoise
 from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
 
 CRITIC_NORMS = ("none", "layer", "batch")
 """The values of :attr:`SACConfig.critic_norm`."""
+CRITIC_LOSSES = ("mse", "hl_gauss")
+"""The values of :attr:`SACConfig.critic_loss`."""
 
 
 @dataclass(frozen=True)
@@ -83,12 +86,33 @@ class SACConfig(OffPolicyConfig):
     and no target networks, so ``tau`` is unused: :class:`BatchNormCritic`). It makes the critics' tensors, so a
     fork keeps it."""
 
+    critic_loss: str = "mse"
+    """How both critics learn their TD targets: mse (the mean squared error, SAC's); or hl_gauss (each critic gives
+    a histogram of ``value_bins`` bins on ``[value_low, value_high]``, its Q their expected value, learned by the
+    cross-entropy against the target's Gaussian-smoothed histogram: Farebrother et al., ICML 2024,
+    :mod:`triplesumo.algos.hlgauss`). It makes the critics' tensors, so a fork keeps it; not with
+    ``critic_norm="batch"``."""
+    value_low: float = -1000.0
+    """Lower end of hl_gauss's support: below every return of the game (a loss, -400, after a match of still
+    punishment, about -400 more)."""
+    value_high: float = 1000.0
+    """Upper end of hl_gauss's support: above every return of the game (a win, +500, and its velocity terms)."""
+    value_bins: int = 101
+    """hl_gauss's bins on ``[value_low, value_high]`` (20 units wide on the default support)."""
+
     TUNABLE: ClassVar[tuple[str, ...]] = (*OffPolicyConfig.TUNABLE, "alpha_lr", "target_entropy")
 
     def __post_init__(self) -> None:
         super().__post_init__()
         require(self, "critic_norm", self.critic_norm in CRITIC_NORMS,
                 f"must be one of {', '.join(CRITIC_NORMS)}, got {self.critic_norm!r}")
+        require(self, "critic_loss", self.critic_loss in CRITIC_LOSSES,
+                f"must be one of {', '.join(CRITIC_LOSSES)}, got {self.critic_loss!r}")
+        require(self, "critic_loss", not (self.critic_loss == "hl_gauss" and self.critic_norm == "batch"),
+                "hl_gauss does not go with critic_norm batch (CrossQ's joint pass regresses Q-values)")
+        require(self, "value_high", real(self, "value_high") > real(self, "value_low"),
+                f"must be above value_low ({self.value_low}), got {self.value_high}")
+        at_least(self, "value_bins", 2)
         require(self, "alpha", real(self, "alpha") > 0, "must be > 0")
         flag(self, "learn_alpha")
         learning_rate(self, "alpha_lr")
@@ -104,8 +128,12 @@ class LayerNormCritic(Critic):
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (256, 256)) -> None:
         nn.Module.__init__(self)
         self.obs_dim, self.act_dim, self.hidden = obs_dim, act_dim, tuple(hidden)
-        self.net = mlp(obs_dim + act_dim, self.hidden, 1,
-                       block=lambda width_in, width: [nn.Linear(width_in, width), nn.LayerNorm(width), nn.LeakyReLU()])
+        self.net = mlp(obs_dim + act_dim, self.hidden, 1, block=self.block)
+
+    @staticmethod
+    def block(width_in: int, width: int) -> list[nn.Module]:
+        """One hidden layer: ``Linear -> LayerNorm -> LeakyReLU``."""
+        return [nn.Linear(width_in, width), nn.LayerNorm(width), nn.LeakyReLU()]
 
 
 BATCH_NORM_MOMENTUM = 0.01
@@ -166,9 +194,7 @@ class SAC(OffPolicyAlgorithm):
         at all), temperature."""
         hidden = self.config.hidden
         self.actor = GaussianActor(self.obs_dim, self.act_dim, hidden, state_dependent_std=True)
-        critic = {"none": Critic, "layer": LayerNormCritic, "batch": BatchNormCritic}[self.config.critic_norm]
-        self.critic = critic(self.obs_dim, self.act_dim, hidden)
-        self.critic2 = critic(self.obs_dim, self.act_dim, hidden)
+        self.critic, self.critic2 = self.build_critic(), self.build_critic()
         self.critics = [self.critic, self.critic2]
         if self.config.critic_norm == "batch":
             self.modules = ("actor", "critic", "critic2", "temperature")
@@ -182,6 +208,16 @@ class SAC(OffPolicyAlgorithm):
         self.target_entropy = (float(-self.act_dim) if self.config.target_entropy is None
                                else float(self.config.target_entropy))
         """H̄: the entropy the temperature steers the policy towards."""
+
+    def build_critic(self) -> Critic:
+        """One critic as :attr:`SACConfig.critic_norm` and :attr:`SACConfig.critic_loss` make it."""
+        c = self.config
+        if c.critic_loss == "hl_gauss":
+            block = LayerNormCritic.block if c.critic_norm == "layer" else plain_block
+            return HLGaussCritic(self.obs_dim, self.act_dim, c.hidden, c.value_low, c.value_high, c.value_bins,
+                                 block=block)
+        critic = {"none": Critic, "layer": LayerNormCritic, "batch": BatchNormCritic}[c.critic_norm]
+        return critic(self.obs_dim, self.act_dim, c.hidden)
 
     def build_optimizers(self) -> None:
         """The actor's and the critics' Adam, and log α's when the temperature is learned."""
