@@ -44,6 +44,11 @@ class HLGaussCritic(Critic):
     :meth:`forward` is their expected value, :meth:`regression_loss` HL-Gauss's cross-entropy. ``block`` is the
     hidden layer's (:func:`~triplesumo.agents.networks.plain_block`, or a normalised one)."""
 
+    edges: torch.Tensor
+    """The ``bins + 1`` bin edges (a buffer made from the config, not checkpointed)."""
+    centres: torch.Tensor
+    """The ``bins`` bin centres."""
+
     def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...], low: float, high: float, bins: int,
                  block: Callable[[int, int], list[nn.Module]] = plain_block) -> None:
         nn.Module.__init__(self)

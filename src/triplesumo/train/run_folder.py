@@ -136,7 +136,8 @@ ALGO_ADDED_LATER: dict[str, dict[str, Any]] = {
     "td3": {"n_step": 1, "update_dtype": "float32", "reset_every": 0},
 }
 """Learner config fields newer than the first run folders of their algorithm, with what every earlier run trained
-with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates, squared-error critics), likewise written out."""
+with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates, squared-error critics), likewise
+written out."""
 REWARD_ADDED_LATER: dict[str, Any] = {"axis_dead_zone": 0.0, "opponents": "mean"}
 """RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs; how several
 opponents' terms combine), with what every earlier run was paid by, likewise."""
