@@ -15,7 +15,7 @@ import torch
 import torch.nn.functional as F
 
 from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t  # the same random batches
-from test_sac_options import TINY, learn, reloaded, resumed_equals_uninterrupted
+from test_sac_options import TINY, learn, reloaded, resumed_equals_uninterrupted, twin_of
 from triplesumo.agents.networks import Critic
 from triplesumo.algos.hlgauss import SIGMA_RATIO, HLGaussCritic, bin_edges, hl_gauss
 from triplesumo.algos.sac import SAC, LayerNormCritic, SACConfig
@@ -61,14 +61,10 @@ def test_an_hl_gauss_critic_is_the_expectation_of_its_histogram() -> None:
 def test_an_hl_gauss_update_is_the_cross_entropy_against_the_td_targets_histogram() -> None:
     """The critic loss of one update equals the cross-entropy computed by hand from the pre-update weights and the
     learner's generator; the mean squared error on the same Q-values is another number."""
-    config = dataclasses.replace(CFG, normalize_obs=False)
-    agent = SAC(OBS_DIM, ACT_DIM, config, seed=0)
+    agent = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, normalize_obs=False), seed=0)
     for i, net in enumerate(agent.critics + agent.critic_targets):
         _perturb(net, i + 1)
-    twin = SAC(OBS_DIM, ACT_DIM, config, seed=5)
-    twin.load_state_dict(agent.state_dict())
-    assert twin.generator is not None and agent.generator is not None
-    twin.generator.set_state(agent.generator.get_state())
+    twin = twin_of(agent)
     batch = _batch(3)
     b = {k: _t(v) for k, v in batch.items()}
     with torch.no_grad():

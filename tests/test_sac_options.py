@@ -95,6 +95,16 @@ def test_batch_norm_critics_normalise_before_each_linear_layer_and_have_no_targe
     assert plain.target_pairs  # the class's targets are untouched
 
 
+def twin_of(agent: SAC) -> SAC:
+    """A learner of ``agent``'s config built under another seed, with its weights and generator state: it draws the
+    samples ``agent``'s next update will, for a hand computation of that update."""
+    twin = SAC(OBS_DIM, ACT_DIM, agent.config, seed=5)
+    twin.load_state_dict(agent.state_dict())
+    assert twin.generator is not None and agent.generator is not None
+    twin.generator.set_state(agent.generator.get_state())
+    return twin
+
+
 def test_a_batch_norm_critic_step_regresses_both_halves_of_one_joint_pass() -> None:
     """The critic loss of an update is the one computed by hand from a joint training-mode pass of
     ``[(s, a); (s', a')]`` with the pre-update weights and generator; the input layer's running mean moves toward
@@ -102,10 +112,7 @@ def test_a_batch_norm_critic_step_regresses_both_halves_of_one_joint_pass() -> N
     agent = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(BN, normalize_obs=False), seed=0)
     _perturb(agent.critic, 1)
     _perturb(agent.critic2, 2)
-    twin = SAC(OBS_DIM, ACT_DIM, dataclasses.replace(BN, normalize_obs=False), seed=5)
-    twin.load_state_dict(agent.state_dict())
-    assert twin.generator is not None and agent.generator is not None
-    twin.generator.set_state(agent.generator.get_state())
+    twin = twin_of(agent)
     batch = _batch(3)
     b = {k: _t(v) for k, v in batch.items()}
     with torch.no_grad():

@@ -165,15 +165,19 @@ class OffPolicyAlgorithm(Algorithm):
         plain critics: :meth:`~triplesumo.agents.networks.Critic.regression_loss`); returns ``critic_loss`` and
         ``q_mean`` (mean Q_1(s, a)), both before the step."""
         losses, qs = zip(*(critic.regression_loss(b["obs"], b["act"], y) for critic in critics), strict=True)
-        loss = sum(losses[1:], losses[0])
-        descend(optimizer, loss)
-        return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
+        return self.descend_critics(losses, qs, optimizer)
 
     def step_critics(self, qs: Sequence[torch.Tensor], y: torch.Tensor,
                      optimizer: torch.optim.Optimizer) -> dict[str, float]:
         """One Adam step on ``Σ_i mean (q_i - y)²`` for critics' Q-values ``qs`` already computed (with their graph);
         returns ``critic_loss`` and ``q_mean`` (mean ``qs[0]``), both before the step."""
-        losses = [F.mse_loss(q, y) for q in qs]
+        return self.descend_critics([F.mse_loss(q, y) for q in qs], qs, optimizer)
+
+    @staticmethod
+    def descend_critics(losses: Sequence[torch.Tensor], qs: Sequence[torch.Tensor],
+                        optimizer: torch.optim.Optimizer) -> dict[str, float]:
+        """One Adam step on the sum of the critics' ``losses``; returns it as ``critic_loss`` and ``q_mean`` (mean
+        ``qs[0]``), both before the step."""
         loss = sum(losses[1:], losses[0])
         descend(optimizer, loss)
         return {"critic_loss": loss.item(), "q_mean": qs[0].detach().mean().item()}
