@@ -111,3 +111,29 @@ def test_skill_diagnosis_plays_the_pair_it_is_given(tmp_path) -> None:
     assert sorted(summary) == ["again", "still"]
     s = summary["still"]
     assert (s["matches"], s["mwr"], s["none_out"], s["ant_out"], s["spider_out"]) == (2, 0.0, 1.0, 0.0, 0.0)
+
+
+def test_skill_diagnosis_snapshots_groups_policies_by_env_steps(tmp_path) -> None:
+    """``--snapshots`` groups ``GROUP-ENVSTEPS`` labels, orders them by env steps, and writes their spread and a
+    plot; a label without env steps is left out, and a folder without a summary is refused by name."""
+    import json
+    import runpy
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "skill_diagnosis.py"
+    main = runpy.run_path(str(script))["main"]
+    png = tmp_path / "snap.png"
+    with pytest.raises(SystemExit, match="summary.json: no summary"):
+        main(["--out", str(tmp_path), "--snapshots", str(png)])
+    summary = {"s0-200": {"mwr": 0.3}, "s0-100": {"mwr": 0.1}, "s0-150": {"mwr": -0.1}, "s1-90": {"mwr": 0.2},
+               "skilled": {"mwr": 0.5}}
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    assert main(["--out", str(tmp_path), "--snapshots", str(png), "--target", "0.2"]) == 0
+    stats = json.loads((tmp_path / "snapshots.json").read_text())
+    assert sorted(stats) == ["s0", "s1"]
+    s0 = stats["s0"]
+    assert s0["env_steps"] == [100, 150, 200] and s0["mwr"] == [0.1, -0.1, 0.3]
+    assert s0["mean"] == pytest.approx(0.1, abs=1e-4) and s0["sd"] == pytest.approx(0.2, abs=1e-4)
+    assert (s0["min"], s0["max"], s0["share_at_target"]) == (-0.1, 0.3, pytest.approx(1 / 3, abs=1e-4))
+    assert stats["s1"]["sd"] is None and stats["s1"]["share_at_target"] == 1.0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
