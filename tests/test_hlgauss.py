@@ -15,7 +15,7 @@ import torch
 import torch.nn.functional as F
 
 from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t  # the same random batches
-from test_sac_options import TINY, learn, reloaded, resumed_equals_uninterrupted, twin_of
+from test_sac_options import TINY, resumed_equals_uninterrupted, resumes_bit_for_bit, twin_of
 from triplesumo.agents.networks import Critic
 from triplesumo.algos.hlgauss import SIGMA_RATIO, HLGaussCritic, bin_edges, hl_gauss
 from triplesumo.algos.sac import SAC, LayerNormCritic, SACConfig
@@ -122,12 +122,7 @@ def test_an_hl_gauss_learner_resumes_bit_for_bit(tmp_path: Path) -> None:
     def make(seed: int = 0) -> SAC:
         return SAC(OBS_DIM, ACT_DIM, CFG, seed=seed)
 
-    uninterrupted = make()
-    learn(uninterrupted, range(3))
-    resumed = reloaded(uninterrupted, make(seed=7), tmp_path)
-    assert learn(uninterrupted, range(3, 6)) == learn(resumed, range(3, 6))
-    for key, value in uninterrupted.state_dict().items():
-        assert torch.equal(resumed.state_dict()[key], value), key
+    resumes_bit_for_bit(make, tmp_path)
 
 
 def test_an_hl_gauss_training_run_resumed_equals_the_uninterrupted_one(tmp_path: Path) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -166,17 +167,24 @@ def reloaded(agent: Any, fresh: Any, tmp_path: Path) -> Any:
     return fresh
 
 
-@pytest.mark.parametrize("norm", ["layer", "batch"])
-def test_a_normalised_critic_learner_resumes_bit_for_bit(tmp_path: Path, norm: str) -> None:
-    def make(seed: int = 0) -> SAC:
-        return SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm=norm), seed=seed)
 
+def resumes_bit_for_bit(make: Callable[..., Any], tmp_path: Path) -> Any:
+    """Learn 3 rounds, reload into a learner built with another seed, and assert that 3 more rounds give the same
+    stats and state as the uninterrupted learner's; return the uninterrupted learner."""
     uninterrupted = make()
     learn(uninterrupted, range(3))
     resumed = reloaded(uninterrupted, make(seed=7), tmp_path)
     assert learn(uninterrupted, range(3, 6)) == learn(resumed, range(3, 6))
     for key, value in uninterrupted.state_dict().items():
         assert torch.equal(resumed.state_dict()[key], value), key
+    return uninterrupted
+
+@pytest.mark.parametrize("norm", ["layer", "batch"])
+def test_a_normalised_critic_learner_resumes_bit_for_bit(tmp_path: Path, norm: str) -> None:
+    def make(seed: int = 0) -> SAC:
+        return SAC(OBS_DIM, ACT_DIM, dataclasses.replace(CFG, critic_norm=norm), seed=seed)
+
+    uninterrupted = resumes_bit_for_bit(make, tmp_path)
     if norm == "layer":  # a plain critic's checkpoint lacks the norms
         with pytest.raises(KeyError, match=r"missing key 'critic\.net\.1\.bias' \(8 missing\)"):
             make().load_state_dict({k: v for k, v in uninterrupted.state_dict().items() if ".net.1." not in k})
