@@ -130,6 +130,11 @@ class OffPolicyConfig:
     index; the replay, the observation normaliser and the update count are kept (Nikishin et al., ICML 2022;
     D'Oro et al., ICLR 2023: resets let a learner take more updates per transition without losing plasticity)."""
 
+    pessimism: float = 1.0
+    """β of twin critics' joint estimate ``mean - β |Q_1 - Q_2| / 2`` in the TD target (and SAC's actor loss): 1,
+    their minimum (clipped double Q: TD3's and SAC's), 0 their mean, below 0 optimistic (TOP, Moskovitz et al.,
+    NeurIPS 2021; BRO, Nauman et al., 2024). In [-1, 1]. DDPG's one critic is its own estimate whatever β."""
+
     update_dtype: str = "float32"
     """The dtype of the gradient updates' matrix products: float32, or bfloat16 (``torch.autocast`` around each
     update: the hidden layers' products in bfloat16, each network's output layer, the losses, the weights and
@@ -138,7 +143,8 @@ class OffPolicyConfig:
     updates' rounding, so runs are not bit for bit those in float32."""
 
     TUNABLE: ClassVar[tuple[str, ...]] = ("actor_lr", "critic_lr", "gamma", "tau", "batch_size", "learn_every",
-                                          "gradient_steps", "weight_decay", "update_dtype", "reset_every")
+                                          "gradient_steps", "weight_decay", "update_dtype", "reset_every",
+                                          "pessimism")
     """The fields a run continued from a checkpoint may change (``train --fork RUN --ddpg.actor-lr 2e-5``,
     fine-tuning): step sizes, the update schedule and exploration, on which no saved tensor's shape or
     meaning depends. The others (widths, replay size, normalisation, noise kind, warm-up) make what the
@@ -155,6 +161,7 @@ class OffPolicyConfig:
         at_least(self, "learning_starts", 0)
         at_least(self, "reset_every", 0)
         non_negative(self, "weight_decay")
+        require(self, "pessimism", -1 <= real(self, "pessimism") <= 1, f"must be in [-1, 1], got {self.pessimism}")
         flag(self, "normalize_obs")
         require(self, "update_dtype", self.update_dtype in UPDATE_DTYPES,
                 f"must be one of {', '.join(UPDATE_DTYPES)}, got {self.update_dtype!r}")

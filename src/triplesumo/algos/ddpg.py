@@ -35,7 +35,7 @@ from triplesumo.agents.networks import Actor, Critic
 from triplesumo.algos.base import descend, frozen
 from triplesumo.algos.config import OffPolicyConfig, real, require
 from triplesumo.algos.noise import NOISE_KINDS
-from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
+from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, joint_q
 
 
 @dataclass(frozen=True)
@@ -105,12 +105,13 @@ class DDPG(OffPolicyAlgorithm):
 
         Uses the TARGET actor μ' and the TARGET critic Q' (Lillicrap et al., 2015), without
         gradients. ``done = 1`` (a real win/loss terminal) removes the bootstrap term.
-        (TD3: the smoothed target action and the smaller of the two target critics.)
+        (TD3: the smoothed target action and the two target critics' joint estimate, by default the smaller.)
         """
         b = self.batch(batch)
         with torch.no_grad():
             next_action = self.target_action(b["next_obs"])  # μ'(s'): TARGET actor
-            next_q = min_q(self.critic_targets, b["next_obs"], next_action)  # Q'(s', μ'(s')): TARGET critic
+            # Q'(s', μ'(s')): the TARGET critic (TD3: both, joined by the config's pessimism)
+            next_q = joint_q(self.critic_targets, b["next_obs"], next_action, self.config.pessimism)
             return b["rew"] + self.bootstrap(b) * next_q
 
     def update_critic(self, batch: Batch) -> dict[str, float]:

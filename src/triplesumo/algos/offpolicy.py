@@ -40,9 +40,26 @@ Batch = Mapping[str, np.ndarray | torch.Tensor]
 ``ReplayBuffer.sample``)."""
 
 
-def min_q(critics: Sequence[Critic], obs: torch.Tensor, action: torch.Tensor) -> torch.Tensor:
-    """``min_i Q_i(s, a)`` over the critics (clipped double Q); one critic gives its own Q."""
-    return functools.reduce(torch.minimum, (critic(obs, action) for critic in critics))
+def combine_q(qs: Sequence[torch.Tensor], pessimism: float = 1.0) -> torch.Tensor:
+    """The critics' joint estimate of Q from their values ``qs``: one critic's own; two critics'
+    ``mean - β |Q_1 - Q_2| / 2`` with β = ``pessimism``. β = 1 is their minimum (clipped double Q, Fujimoto et al.,
+    2018), computed as ``torch.minimum`` so that the default stays bit for bit what it was; β = 0 is their mean;
+    β < 0 is optimistic (TOP, Moskovitz et al., 2021; BRO, Nauman et al., 2024)."""
+    if len(qs) == 1:
+        return qs[0]
+    if len(qs) != 2:
+        raise ValueError(f"combine_q takes one or two critics' values, got {len(qs)}")
+    if pessimism == 1.0:
+        return functools.reduce(torch.minimum, qs)
+    q1, q2 = qs
+    return (q1 + q2) / 2 - pessimism * (q1 - q2).abs() / 2
+
+
+def joint_q(critics: Sequence[Critic], obs: torch.Tensor, action: torch.Tensor,
+            pessimism: float = 1.0) -> torch.Tensor:
+    """The critics' joint estimate of ``Q(s, a)`` (:func:`combine_q`): by default ``min_i Q_i(s, a)`` (clipped
+    double Q); one critic gives its own Q."""
+    return combine_q([critic(obs, action) for critic in critics], pessimism)
 
 
 class OffPolicyAlgorithm(Algorithm):

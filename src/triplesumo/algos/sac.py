@@ -16,13 +16,14 @@ The policy is a squashed Gaussian (:class:`~triplesumo.agents.networks.GaussianA
 state-dependent log σ), with the tanh change of variables in ``log π``. There is no target
 actor. The temperature falls when the policy's entropy is above the target and rises when it
 is below. Exploration samples the policy (no noise process); the deterministic policy (and
-the exported one) is ``tanh(μ(s))``. Defaults are CleanRL's ``sac_continuous_action.py``, but for the update
-schedule: one update per 8 transitions with 5-step returns, the recipe measured fastest to skill here.
+the exported one) is ``tanh(μ(s))``. ``min_i`` above is the default ``pessimism`` 1; another β reads
+``mean - β |Q_1 - Q_2| / 2`` instead (:func:`~triplesumo.algos.offpolicy.combine_q`). Defaults are CleanRL's
+``sac_continuous_action.py``, but for the update schedule: one update per 8 transitions with 5-step returns, the
+recipe measured fastest to skill here.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -36,7 +37,7 @@ from triplesumo.algos.base import adam, descend, frozen
 from triplesumo.algos.config import OffPolicyConfig, at_least, flag, learning_rate, real, require
 from triplesumo.algos.hlgauss import HLGaussCritic
 from triplesumo.algos.noise import ActionNoise
-from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, min_q
+from triplesumo.algos.offpolicy import Batch, OffPolicyAlgorithm, combine_q, joint_q
 
 CRITIC_NORMS = ("none", "layer", "batch")
 """The values of :attr:`SACConfig.critic_norm`."""
@@ -234,18 +235,20 @@ class SAC(OffPolicyAlgorithm):
     # ------------------------------------------------------------------------ learning
 
     def td_target(self, batch: Batch) -> torch.Tensor:
-        """``y = r + γ (1 - done) (min_i Q'_i(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')``, ``(B,)`` (γ^m with
-        n-step returns: :meth:`~triplesumo.algos.offpolicy.OffPolicyAlgorithm.bootstrap`)."""
+        """``y = r + γ (1 - done) (Q'(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')``, ``(B,)``, with ``Q'`` the target
+        critics' joint estimate (by default ``min_i Q'_i``: :func:`~triplesumo.algos.offpolicy.combine_q`) and γ^m
+        with n-step returns (:meth:`~triplesumo.algos.offpolicy.OffPolicyAlgorithm.bootstrap`)."""
         b = self.batch(batch)
         with torch.no_grad():
             next_action, next_log_prob = self.actor.sample(b["next_obs"], self.generator)
-            next_q = min_q(self.critic_targets, b["next_obs"], next_action)  # TARGET critics
+            next_q = joint_q(self.critic_targets, b["next_obs"], next_action, self.config.pessimism)  # TARGETs
             soft_value = next_q - self.temperature() * next_log_prob
             return b["rew"] + self.bootstrap(b) * soft_value
 
     def regress_critics_jointly(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
         """CrossQ's critic step (batch-norm critics, no targets): one Adam step on ``Σ_i mean (Q_i(s, a) - y)²`` with
-        ``y = r + γ (1 - done) (min_i Q_i(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')``, where each critic reads
+        ``y = r + γ (1 - done) (Q(s', a') - α log π(a'|s'))``, ``a' ~ π(·|s')`` and ``Q`` the critics' joint estimate
+        (by default ``min_i Q_i``), where each critic reads
         ``[(s, a); (s', a')]`` in one pass in training mode and its ``(s', a')`` half enters ``y`` detached. Returns
         ``critic_loss`` and ``q_mean`` (mean Q_1(s, a)), both before the step; the critics are back in evaluation
         mode after it."""
@@ -261,12 +264,13 @@ class SAC(OffPolicyAlgorithm):
             for critic in self.critics:
                 critic.eval()
         with torch.no_grad():
-            next_q = functools.reduce(torch.minimum, next_qs)
+            next_q = combine_q(next_qs, self.config.pessimism)
             y = b["rew"] + self.bootstrap(b) * (next_q - self.temperature() * next_log_prob)
         return self.step_critics(list(qs), y, self.critic_optimizer)
 
     def update_actor(self, batch: Batch) -> tuple[dict[str, float], torch.Tensor]:
-        """One Adam step on ``mean (α log π(a|s) - min_i Q_i(s, a))`` (critics and α held fixed).
+        """One Adam step on ``mean (α log π(a|s) - Q(s, a))``, ``Q`` the critics' joint estimate (by default
+        ``min_i Q_i``; critics and α held fixed).
 
         Returns ``actor_loss`` and ``entropy`` (mean ``-log π``) before the step, and the
         batch's ``log π(a|s)`` (detached) for the temperature step.
@@ -275,7 +279,7 @@ class SAC(OffPolicyAlgorithm):
         with frozen(*self.critics):
             action, log_prob = self.actor.sample(obs, self.generator)
             alpha = self.temperature().detach()
-            loss = (alpha * log_prob - min_q(self.critics, obs, action)).mean()
+            loss = (alpha * log_prob - joint_q(self.critics, obs, action, self.config.pessimism)).mean()
             descend(self.actor_optimizer, loss)
         log_prob = log_prob.detach()
         return {"actor_loss": loss.item(), "entropy": -log_prob.mean().item()}, log_prob

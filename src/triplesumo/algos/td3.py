@@ -7,7 +7,8 @@ places::
     2. target smoothing      ã = clip(μ'(s') + clip(ε, -c, c), -1, 1), ε ~ N(0, σ̃²)   (target_action)
     3. delayed updates       actor and targets step once every d critic steps       (actor_due)
 
-Both critics regress onto the same ``y``; the actor ascends Q_1 only. Defaults are the
+Both critics regress onto the same ``y``; the actor ascends Q_1 only. ``min_i`` is the default ``pessimism`` 1;
+another β reads ``mean - β |Q'_1 - Q'_2| / 2`` (:func:`~triplesumo.algos.offpolicy.combine_q`). Defaults are the
 paper's and CleanRL's ``td3_continuous_action.py``.
 """
 

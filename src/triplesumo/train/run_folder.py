@@ -131,13 +131,13 @@ so that a default changed later cannot change how an old run resumes."""
 
 ALGO_ADDED_LATER: dict[str, dict[str, Any]] = {
     "sac": {"critic_norm": "none", "n_step": 1, "update_dtype": "float32", "reset_every": 0, "critic_loss": "mse",
-            "value_low": -1000.0, "value_high": 1000.0, "value_bins": 101},
-    "ddpg": {"n_step": 1, "update_dtype": "float32", "reset_every": 0},
-    "td3": {"n_step": 1, "update_dtype": "float32", "reset_every": 0},
+            "value_low": -1000.0, "value_high": 1000.0, "value_bins": 101, "pessimism": 1.0},
+    "ddpg": {"n_step": 1, "update_dtype": "float32", "reset_every": 0, "pessimism": 1.0},
+    "td3": {"n_step": 1, "update_dtype": "float32", "reset_every": 0, "pessimism": 1.0},
 }
 """Learner config fields newer than the first run folders of their algorithm, with what every earlier run trained
-with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates, squared-error critics), likewise
-written out."""
+with (no LayerNorm in SAC's critics, one-step TD targets, float32 updates, squared-error critics, the twin
+critics' minimum), likewise written out."""
 REWARD_ADDED_LATER: dict[str, Any] = {"axis_dead_zone": 0.0, "opponents": "mean"}
 """RewardConfig fields newer than the first run folders (the dead zone of the velocity terms' signs; how several
 opponents' terms combine), with what every earlier run was paid by, likewise."""
