@@ -15,7 +15,7 @@ import pytest
 import torch
 
 from test_ddpg import ACT_DIM, BATCH, OBS_DIM, _batch, _perturb, _t
-from test_sac_options import learn, resumes_bit_for_bit
+from test_sac_options import learn, resumes_bit_for_bit, twin_of
 from triplesumo import _dcargs
 from triplesumo.algos.ddpg import DDPG, DDPGConfig
 from triplesumo.algos.offpolicy import combine_q
@@ -43,15 +43,6 @@ def test_combine_q_is_the_minimum_at_one_the_mean_at_zero_and_the_maximum_at_min
         combine_q([q1, q2, q1], 0.0)
 
 
-def _twin(agent: Any, cls: type) -> Any:
-    """A learner of ``agent``'s class and config built under another seed, with its weights and generator state."""
-    twin = cls(OBS_DIM, ACT_DIM, agent.config, seed=5)
-    twin.load_state_dict(agent.state_dict())
-    if agent.generator is not None:
-        twin.generator.set_state(agent.generator.get_state())
-    return twin
-
-
 def _perturbed(cls: type, config: Any) -> Any:
     agent = cls(OBS_DIM, ACT_DIM, config, seed=0)
     for k, name in enumerate(("critic", "critic2", "critic_target", "critic2_target")):
@@ -62,7 +53,7 @@ def _perturbed(cls: type, config: Any) -> Any:
 @pytest.mark.parametrize("beta", [0.0, 0.5, -1.0])
 def test_the_sac_td_target_reads_the_target_critics_joint_estimate(beta: float) -> None:
     agent = _perturbed(SAC, dataclasses.replace(SAC_CFG, pessimism=beta))
-    twin = _twin(agent, SAC)
+    twin = twin_of(agent)
     batch = _batch(3)
     b = {k: _t(v) for k, v in batch.items()}
     with torch.no_grad():
@@ -80,7 +71,7 @@ def test_the_sac_td_target_reads_the_target_critics_joint_estimate(beta: float) 
 @pytest.mark.parametrize("beta", [0.0, -0.5])
 def test_the_sac_actor_ascends_the_online_critics_joint_estimate(beta: float) -> None:
     agent = _perturbed(SAC, dataclasses.replace(SAC_CFG, pessimism=beta))
-    twin = _twin(agent, SAC)
+    twin = twin_of(agent)
     obs = _t(_batch(4)["obs"])
     with torch.no_grad():
         action, log_prob = twin.actor.sample(obs, twin.generator)
@@ -95,7 +86,7 @@ def test_the_sac_actor_ascends_the_online_critics_joint_estimate(beta: float) ->
 
 def test_the_td3_td_target_reads_the_joint_estimate_at_the_smoothed_action() -> None:
     agent = _perturbed(TD3, dataclasses.replace(TD3_CFG, pessimism=0.0))
-    twin = _twin(agent, TD3)
+    twin = twin_of(agent)
     batch = _batch(5)
     b = {k: _t(v) for k, v in batch.items()}
     with torch.no_grad():

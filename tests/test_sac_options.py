@@ -96,10 +96,10 @@ def test_batch_norm_critics_normalise_before_each_linear_layer_and_have_no_targe
     assert plain.target_pairs  # the class's targets are untouched
 
 
-def twin_of(agent: SAC) -> SAC:
-    """A learner of ``agent``'s config built under another seed, with its weights and generator state: it draws the
-    samples ``agent``'s next update will, for a hand computation of that update."""
-    twin = SAC(OBS_DIM, ACT_DIM, agent.config, seed=5)
+def twin_of(agent: Any) -> Any:
+    """A learner of ``agent``'s class and config built under another seed, with its weights and generator state: it
+    draws the samples ``agent``'s next update will, for a hand computation of that update."""
+    twin = type(agent)(OBS_DIM, ACT_DIM, agent.config, seed=5)
     twin.load_state_dict(agent.state_dict())
     assert twin.generator is not None and agent.generator is not None
     twin.generator.set_state(agent.generator.get_state())
@@ -167,7 +167,6 @@ def reloaded(agent: Any, fresh: Any, tmp_path: Path) -> Any:
     return fresh
 
 
-
 def resumes_bit_for_bit(make: Callable[..., Any], tmp_path: Path) -> Any:
     """Learn 3 rounds, reload into a learner built with another seed, and assert that 3 more rounds give the same
     stats and state as the uninterrupted learner's; return the uninterrupted learner."""
@@ -178,6 +177,7 @@ def resumes_bit_for_bit(make: Callable[..., Any], tmp_path: Path) -> Any:
     for key, value in uninterrupted.state_dict().items():
         assert torch.equal(resumed.state_dict()[key], value), key
     return uninterrupted
+
 
 @pytest.mark.parametrize("norm", ["layer", "batch"])
 def test_a_normalised_critic_learner_resumes_bit_for_bit(tmp_path: Path, norm: str) -> None:
