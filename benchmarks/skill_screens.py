@@ -1,6 +1,7 @@
 """Can the time-to-skill screens tell their candidates apart? A pooled look at ``bench skill`` records.
 
-``python benchmarks/skill_screens.py --record LABEL=FILE [LABEL=FILE ...] [--at 100000] [--target 0.2] [--json OUT]``
+``python benchmarks/skill_screens.py --record LABEL=FILE [LABEL=FILE ...] [--at 100000] [--target 0.2]
+[--baseline LABEL] [--json OUT]``
 reads ``bench skill`` records (``skill.json``, or the ``--json`` copy the docs keep), one label per candidate (a
 label may name several files, e.g. seeds run apart), and takes from every SAC seed:
 
@@ -13,7 +14,10 @@ It then asks whether the candidates differ by more than their seeds do: a one-wa
 over the candidates with at least two (``scipy.stats.f_oneway``), the pooled within-candidate standard deviation,
 the between-candidate standard deviation by the method of moments for unequal groups (truncated at 0), and from the
 pooled standard deviation the number of seeds per arm a two-sided 5% test needs to find a given lift with 80% power
-(normal approximation: ``2 (z_0.975 + z_0.8)^2 σ^2 / Δ^2``). Prints a table and, with ``--json``, writes it all.
+(normal approximation: ``2 (z_0.975 + z_0.8)^2 σ^2 / Δ^2``). With ``--baseline LABEL`` it also pairs every candidate
+with that label seed by seed (the same seed starts the same networks and warm-up under most candidates): the mean
+difference per candidate, the standard deviation of the differences about it, and the pairs a paired test needs
+(``(z_0.975 + z_0.8)^2 σ_d^2 / Δ^2``). Prints a table and, with ``--json``, writes it all.
 
 A seed given twice for one label must carry the same curve (a bench repeats a seed exactly); two different curves
 are refused, naming both files."""
@@ -80,6 +84,29 @@ def seeds_per_arm(sd: float, lift: float, alpha: float = 0.05, power: float = 0.
     return math.ceil(2 * z * z * sd * sd / (lift * lift))
 
 
+def paired(results: dict[str, dict[int, dict[str, Any]]], baseline: str) -> dict[str, Any]:
+    """Each candidate against ``baseline`` on the seeds both have values for: the mean difference per candidate, and
+    the pooled standard deviation of the differences about their candidate's mean (candidates with two pairs or
+    more), with the pairs a paired two-sided 5% test with 80% power needs per lift."""
+    from scipy.stats import norm
+
+    if baseline not in results:
+        raise ValueError(f"baseline {baseline!r} is not one of the labels {sorted(results)}")
+    base = {k: s["value"] for k, s in results[baseline].items() if s["value"] is not None}
+    diffs = {label: [s["value"] - base[k] for k, s in seeds.items() if s["value"] is not None and k in base]
+             for label, seeds in results.items() if label != baseline}
+    out: dict[str, Any] = {"baseline": baseline,
+                           "mean_difference": {lbl: float(np.mean(d)) if d else None for lbl, d in diffs.items()}}
+    groups = [np.array(d) for d in diffs.values() if len(d) >= 2]
+    dof = sum(len(g) - 1 for g in groups)
+    if dof:
+        sd = math.sqrt(sum(((g - g.mean()) ** 2).sum() for g in groups) / dof)
+        z = norm.ppf(0.975) + norm.ppf(0.8)
+        out |= {"pairs": int(sum(len(g) for g in groups)), "difference_sd": sd,
+                "pairs_needed": {f"{lift:.2f}": math.ceil(z * z * sd * sd / (lift * lift)) for lift in LIFTS}}
+    return out
+
+
 def analyse(results: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
     """Per-candidate rows and the pooled statistics (see the module's doc)."""
     from scipy.stats import f_oneway
@@ -132,6 +159,11 @@ def format_table(result: dict[str, Any], at: int, target: float) -> str:
                      f"(method of moments, truncated at 0), grand mean {p['grand_mean']:+.3f}")
         lines.append("seeds per arm for a two-sided 5% test with 80% power: " + ", ".join(
             f"lift {lift}: {n}" for lift, n in p["seeds_per_arm"].items()))
+    q = result.get("paired")
+    if q and "difference_sd" in q:
+        lines.append(f"paired with {q['baseline']} on the same seed ({q['pairs']} pairs): SD of the differences "
+                     f"{q['difference_sd']:.3f}; pairs needed: " + ", ".join(
+                         f"lift {lift}: {n}" for lift, n in q["pairs_needed"].items()))
     return "\n".join(lines)
 
 
@@ -141,6 +173,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
                         help="a candidate's label and one of its bench skill records (repeat a label for more files)")
     parser.add_argument("--at", type=int, default=100_000, help="env-step budget of the evaluation compared")
     parser.add_argument("--target", type=float, default=0.2, help="test MWR of skill")
+    parser.add_argument("--baseline", help="also compare every candidate with this label on the same seeds")
     parser.add_argument("--json", type=Path, help="write the result here too")
     args = parser.parse_args(argv)
     records = []
@@ -149,8 +182,14 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         if not sep or not label or not file:
             parser.error(f"--record takes LABEL=FILE, got {item!r}")
         records.append((label, Path(file)))
-    result = analyse(gather(records, args.at, args.target)) | {"at": args.at, "target": args.target,
-                                                               "records": [[lbl, str(f)] for lbl, f in records]}
+    results = gather(records, args.at, args.target)
+    result = analyse(results) | {"at": args.at, "target": args.target,
+                                 "records": [[lbl, str(f)] for lbl, f in records]}
+    if args.baseline:
+        try:
+            result["paired"] = paired(results, args.baseline)
+        except ValueError as e:
+            parser.error(str(e))
     print(format_table(result, args.at, args.target))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)

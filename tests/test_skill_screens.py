@@ -118,3 +118,32 @@ def test_the_script_reads_the_default_recipes_committed_record_and_writes_json(t
     assert "s0:+0.355 s1:+0.040 s2:+0.180" in printed and "1 of 5 seeds reached +0.20 by 100,000" in printed
     with pytest.raises(SystemExit):
         m.main(["--record", "no-equals-sign"])
+
+
+def test_pairing_with_a_baseline_uses_the_seeds_both_have_and_matches_a_hand_computation(tmp_path: Path,
+                                                                                          capsys: pytest.CaptureFixture
+                                                                                          ) -> None:
+    m = _module()
+
+    def seeds(values: dict[int, float | None]) -> dict[int, dict]:
+        return {k: {"value": v, "reached": v is None, "curve": [], "source": ""} for k, v in values.items()}
+
+    results = {"base": seeds({0: 0.1, 1: 0.2, 2: -0.1, 3: 0.0}), "a": seeds({0: 0.3, 1: 0.3, 2: None, 5: 0.9}),
+               "b": seeds({0: 0.0, 1: 0.0, 2: 0.1, 3: 0.2}), "c": seeds({3: 0.5})}
+    out = m.paired(results, "base")
+    da, db = np.array([0.2, 0.1]), np.array([-0.1, -0.2, 0.2, 0.2])  # seed 2 of a is censored, seed 5 unpaired
+    assert out["mean_difference"] == {"a": pytest.approx(0.15), "b": pytest.approx(0.025), "c": pytest.approx(0.5)}
+    sd = math.sqrt((((da - da.mean()) ** 2).sum() + ((db - db.mean()) ** 2).sum()) / (1 + 3))  # c: one pair only
+    assert out["pairs"] == 6 and out["difference_sd"] == pytest.approx(sd)
+    z = 1.959964 + 0.841621
+    assert out["pairs_needed"]["0.10"] == math.ceil(z * z * sd * sd / 0.01)
+    with pytest.raises(ValueError, match=r"baseline 'nope' is not one of the labels \['a', 'b', 'base', 'c'\]"):
+        m.paired(results, "nope")
+    a = _write(tmp_path / "a.json", {0: [0.0, 0.0, 0.0, 0.05], 1: [0.0, 0.0, 0.0, -0.05]})
+    b = _write(tmp_path / "b.json", {0: [0.0, 0.0, 0.0, 0.25], 1: [0.0, 0.0, 0.0, 0.0]})
+    c = _write(tmp_path / "c.json", {0: [0.0, 0.0, 0.0, 0.1], 1: [0.0, 0.0, 0.0, 0.1]})
+    result = m.main(["--record", f"a={a}", f"b={b}", f"c={c}", "--baseline", "a"])
+    assert result["paired"]["mean_difference"] == {"b": pytest.approx(0.125), "c": pytest.approx(0.1)}
+    assert "paired with a on the same seed (4 pairs)" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        m.main(["--record", f"a={a}", "--baseline", "x"])
