@@ -342,3 +342,26 @@ def test_the_default_recipes_final_skill_is_recomputed_from_its_committed_matche
     for value in scores:
         assert f"{value:+.3f}" in page
     assert f"(mean {np.mean(scores):+.3f})" in page
+
+
+@pytest.mark.slow  # two tiny runs in two processes
+def test_workers_train_seeds_at_once_and_give_the_curves_of_one_after_another(
+        tmp_path: Path, not_reached: tuple[Path, dict[str, Any]], capsys: pytest.CaptureFixture[str]) -> None:
+    """``--workers 2``: seeds 0 and 1 in two processes; seed 0's curve is the one the bench trained alone (the
+    fixture's), the record lists the seeds in order, and the same bench run again one after another trains nothing
+    (``workers`` is not part of what the curves depend on)."""
+    _, alone = not_reached
+    cfg = _tiny(tmp_path / "w", target=1.0, seeds=(1, 0), workers=2)
+    result = run_skill(cfg)
+    runs = result["algos"]["ddpg"]["runs"]
+    assert [r["seed"] for r in runs] == [1, 0] and all(r["status"] == "not reached" for r in runs)
+    keys = ("env_steps", "budget", "test_mwr", "n_win", "n_loss", "n_draw")
+    assert [{k: e[k] for k in keys} for e in runs[1]["evaluations"]] == [
+        {k: e[k] for k in keys} for e in alone["algos"]["ddpg"]["runs"][0]["evaluations"]]
+    assert "2 at once" in capsys.readouterr().out
+    metrics = tmp_path / "w" / "ddpg" / "seed1" / "metrics.csv"
+    stamp = metrics.stat().st_mtime_ns
+    again = run_skill(dataclasses.replace(cfg, workers=1))
+    assert again["algos"] == result["algos"] and metrics.stat().st_mtime_ns == stamp
+    with pytest.raises(ValueError, match=r"SkillConfig\.workers must be an int >= 1, got 0"):
+        _tiny(tmp_path, workers=0)
