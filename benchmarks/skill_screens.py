@@ -75,21 +75,25 @@ def gather(records: list[tuple[str, Path]], at: int, target: float) -> dict[str,
     return out
 
 
-def seeds_per_arm(sd: float, lift: float, alpha: float = 0.05, power: float = 0.8) -> int:
+def seeds_per_arm(sd: float, lift: float, alpha: float = 0.05, power: float = 0.8, paired: bool = False) -> int:
     """Seeds per arm for a two-sided two-sample test at ``alpha`` to find ``lift`` with ``power``, normal
-    approximation, standard deviation ``sd`` in both arms."""
+    approximation, standard deviation ``sd`` in both arms; ``paired``: pairs for a paired test whose differences
+    have standard deviation ``sd``."""
     from scipy.stats import norm
 
     z = norm.ppf(1 - alpha / 2) + norm.ppf(power)
-    return math.ceil(2 * z * z * sd * sd / (lift * lift))
+    return math.ceil((1 if paired else 2) * z * z * sd * sd / (lift * lift))
+
+
+def pooled_variance(groups: list[np.ndarray]) -> float:
+    """The groups' squared deviations about their own means, over their degrees of freedom (sum of n_i - 1)."""
+    return float(sum(((g - g.mean()) ** 2).sum() for g in groups)) / sum(len(g) - 1 for g in groups)
 
 
 def paired(results: dict[str, dict[int, dict[str, Any]]], baseline: str) -> dict[str, Any]:
     """Each candidate against ``baseline`` on the seeds both have values for: the mean difference per candidate, and
     the pooled standard deviation of the differences about their candidate's mean (candidates with two pairs or
     more), with the pairs a paired two-sided 5% test with 80% power needs per lift."""
-    from scipy.stats import norm
-
     if baseline not in results:
         raise ValueError(f"baseline {baseline!r} is not one of the labels {sorted(results)}")
     base = {k: s["value"] for k, s in results[baseline].items() if s["value"] is not None}
@@ -98,12 +102,10 @@ def paired(results: dict[str, dict[int, dict[str, Any]]], baseline: str) -> dict
     out: dict[str, Any] = {"baseline": baseline,
                            "mean_difference": {lbl: float(np.mean(d)) if d else None for lbl, d in diffs.items()}}
     groups = [np.array(d) for d in diffs.values() if len(d) >= 2]
-    dof = sum(len(g) - 1 for g in groups)
-    if dof:
-        sd = math.sqrt(sum(((g - g.mean()) ** 2).sum() for g in groups) / dof)
-        z = norm.ppf(0.975) + norm.ppf(0.8)
+    if groups:
+        sd = math.sqrt(pooled_variance(groups))
         out |= {"pairs": int(sum(len(g) for g in groups)), "difference_sd": sd,
-                "pairs_needed": {f"{lift:.2f}": math.ceil(z * z * sd * sd / (lift * lift)) for lift in LIFTS}}
+                "pairs_needed": {f"{lift:.2f}": seeds_per_arm(sd, lift, paired=True) for lift in LIFTS}}
     return out
 
 
@@ -125,9 +127,8 @@ def analyse(results: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
         n_i = np.array([len(g) for g in groups], float)
         big_n, k = n_i.sum(), len(groups)
         grand = np.concatenate(groups).mean()
-        ssw = float(sum(((g - g.mean()) ** 2).sum() for g in groups))
         ssb = float(sum(len(g) * (g.mean() - grand) ** 2 for g in groups))
-        msw, msb = ssw / (big_n - k), ssb / (k - 1)
+        msw, msb = pooled_variance(groups), ssb / (k - 1)
         n0 = (big_n - (n_i ** 2).sum() / big_n) / (k - 1)
         test = f_oneway(*groups)
         within = math.sqrt(msw)

@@ -5,6 +5,7 @@
 
 import contextlib
 import functools
+import importlib.util
 import os
 import re
 import subprocess
@@ -14,6 +15,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 from collections.abc import Callable, Iterator  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
+from types import ModuleType  # noqa: E402
 from typing import Any  # noqa: E402
 
 import mujoco  # noqa: E402
@@ -226,3 +228,13 @@ def relative_links(page: Path) -> list[str]:
     text = re.sub(r"`[^`\n]*`", "", text)  # inline code
     targets = [a or b for a, b in _LINK.findall(text)]
     return [t for t in targets if not re.match(r"[a-z]+:", t) and not t.startswith("#")]
+
+
+def module_from_file(path: Path) -> ModuleType:
+    """A Python file outside the package (a script of benchmarks/, a file of docs/) loaded as a module named after
+    it."""
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module

@@ -2,7 +2,6 @@
 to end."""
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 from types import ModuleType
@@ -10,6 +9,7 @@ from types import ModuleType
 import numpy as np
 import pytest
 
+from conftest import module_from_file
 from triplesumo.algos.sac import SACConfig
 from triplesumo.train.config import TrainConfig
 from triplesumo.train.loop import train
@@ -19,11 +19,7 @@ SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "critic_bias.py"
 
 
 def _module() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("critic_bias", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return module_from_file(SCRIPT)
 
 
 def test_soft_returns_add_the_entropy_term_where_an_n_step_target_bootstraps() -> None:

@@ -27,7 +27,7 @@ from types import ModuleType
 
 import pytest
 
-from conftest import relative_links, tracked_files
+from conftest import module_from_file, relative_links, tracked_files
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -140,11 +140,7 @@ def test_the_learners_page_shows_a_runnable_example() -> None:
 
 def _docs_module(name: str) -> ModuleType:
     """A Python file of docs/ (not a package) as a module."""
-    spec = importlib.util.spec_from_file_location(name, DOCS / f"{name}.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return module_from_file(DOCS / f"{name}.py")
 
 
 def _generator() -> ModuleType:

@@ -1,7 +1,6 @@
 """benchmarks/skill_screens.py: what it takes from bench skill records, and its pooled statistics."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -10,16 +9,14 @@ from types import ModuleType
 import numpy as np
 import pytest
 
+from conftest import module_from_file
+
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "benchmarks" / "skill_screens.py"
 
 
 def _module() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("skill_screens", SCRIPT)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return module_from_file(SCRIPT)
 
 
 def _record(curves: dict[int, list[float]], every: int = 25_000) -> dict:
