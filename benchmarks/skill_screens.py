@@ -1,9 +1,10 @@
 """Can the time-to-skill screens tell their candidates apart? A pooled look at ``bench skill`` records.
 
-``python benchmarks/skill_screens.py --record LABEL=FILE [LABEL=FILE ...] [--at 100000] [--target 0.2]
-[--baseline LABEL] [--json OUT]``
+``python benchmarks/skill_screens.py --record LABEL=FILE[@ALGO] [LABEL=FILE[@ALGO] ...] [--at 100000]
+[--target 0.2] [--baseline LABEL] [--json OUT]``
 reads ``bench skill`` records (``skill.json``, or the ``--json`` copy the docs keep), one label per candidate (a
-label may name several files, e.g. seeds run apart), and takes from every SAC seed:
+label may name several files, e.g. seeds run apart), and takes from every seed of the record's learner (its only
+one, or the one ``@ALGO`` names; a candidate may be another learner than SAC):
 
 - its test MWR at the evaluation whose budget is ``--at`` env steps; a seed whose bench stopped earlier because it
   had reached ``--target`` (the bench ends a seed at its first evaluation at the target) has none there and is
@@ -35,13 +36,22 @@ LIFTS = (0.05, 0.10, 0.15)
 """Lifts in test MWR the seed counts are given for."""
 
 
-def seed_results(record: dict[str, Any], at: int, target: float, source: str) -> dict[int, dict[str, Any]]:
-    """Per SAC seed of one ``bench skill`` record: ``value`` (test MWR at budget ``at``, None if censored),
-    ``reached`` (at the target by ``at``), ``curve`` ((budget, test MWR) pairs) and ``source``."""
+def seed_results(record: dict[str, Any], at: int, target: float, source: str,
+                 algo: str | None = None) -> dict[int, dict[str, Any]]:
+    """Per seed of one ``bench skill`` record's learner ``algo`` (None: the record's only one): ``value`` (test MWR
+    at budget ``at``, None if censored), ``reached`` (at the target by ``at``), ``curve`` ((budget, test MWR)
+    pairs) and ``source``."""
+    algos = record.get("algos") if isinstance(record, dict) else None
+    if not isinstance(algos, dict) or not algos:
+        raise ValueError(f"{source}: not a bench skill record (no algos)")
+    if algo is None:
+        if len(algos) > 1:
+            raise ValueError(f"{source}: holds {', '.join(algos)}; name one as FILE@ALGO")
+        algo = next(iter(algos))
     try:
-        runs = record["algos"]["sac"]["runs"]
+        runs = algos[algo]["runs"]
     except (KeyError, TypeError):
-        raise ValueError(f"{source}: not a bench skill record with SAC runs (no algos.sac.runs)") from None
+        raise ValueError(f"{source}: no runs of {algo} (the record holds {', '.join(algos)})") from None
     out = {}
     for run in runs:
         curve = [(int(e["budget"]), float(e["test_mwr"])) for e in run["evaluations"]]
@@ -58,16 +68,17 @@ def seed_results(record: dict[str, Any], at: int, target: float, source: str) ->
     return out
 
 
-def gather(records: list[tuple[str, Path]], at: int, target: float) -> dict[str, dict[int, dict[str, Any]]]:
-    """``{label: {seed: seed_results}}`` over every (label, file) pair, in the order given."""
+def gather(records: list[tuple[str, Path, str | None]], at: int,
+           target: float) -> dict[str, dict[int, dict[str, Any]]]:
+    """``{label: {seed: seed_results}}`` over every (label, file, learner or None) triple, in the order given."""
     out: dict[str, dict[int, dict[str, Any]]] = {}
-    for label, path in records:
+    for label, path, algo in records:
         try:
             record = json.loads(path.read_text())
         except (OSError, json.JSONDecodeError) as e:
             raise ValueError(f"{path}: cannot read a bench skill record ({e})") from None
         seeds = out.setdefault(label, {})
-        for seed, result in seed_results(record, at, target, str(path)).items():
+        for seed, result in seed_results(record, at, target, str(path), algo).items():
             if seed in seeds and seeds[seed]["curve"] != result["curve"]:
                 raise ValueError(f"{label}: seed {seed} has two different curves, in {seeds[seed]['source']} and "
                                  f"{path}")
@@ -170,8 +181,9 @@ def format_table(result: dict[str, Any], at: int, target: float) -> str:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--record", nargs="+", required=True, metavar="LABEL=FILE",
-                        help="a candidate's label and one of its bench skill records (repeat a label for more files)")
+    parser.add_argument("--record", nargs="+", required=True, metavar="LABEL=FILE[@ALGO]",
+                        help="a candidate's label and one of its bench skill records (repeat a label for more "
+                             "files); @ALGO picks the learner of a record that holds several")
     parser.add_argument("--at", type=int, default=100_000, help="env-step budget of the evaluation compared")
     parser.add_argument("--target", type=float, default=0.2, help="test MWR of skill")
     parser.add_argument("--baseline", help="also compare every candidate with this label on the same seeds")
@@ -180,12 +192,16 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     records = []
     for item in args.record:
         label, sep, file = item.partition("=")
-        if not sep or not label or not file:
-            parser.error(f"--record takes LABEL=FILE, got {item!r}")
-        records.append((label, Path(file)))
-    results = gather(records, args.at, args.target)
+        file, at_sign, algo = file.partition("@")
+        if not sep or not label or not file or (at_sign and not algo):
+            parser.error(f"--record takes LABEL=FILE or LABEL=FILE@ALGO, got {item!r}")
+        records.append((label, Path(file), algo or None))
+    try:
+        results = gather(records, args.at, args.target)
+    except ValueError as e:
+        parser.error(str(e))
     result = analyse(results) | {"at": args.at, "target": args.target,
-                                 "records": [[lbl, str(f)] for lbl, f in records]}
+                                 "records": [[lbl, str(f) + (f"@{a}" if a else "")] for lbl, f, a in records]}
     if args.baseline:
         try:
             result["paired"] = paired(results, args.baseline)

@@ -45,23 +45,53 @@ def test_a_seed_gives_its_value_at_the_budget_or_is_censored_when_it_stopped_at_
     assert not seed_results(_record({4: [0.3, 0.1]}), 50_000, 0.4, "r.json")[4]["reached"]
     with pytest.raises(ValueError, match=r"r\.json: seed 5 has no evaluation at 100,000"):
         seed_results(_record({5: [0.0, 0.1]}), 100_000, 0.2, "r.json")  # stopped early without reaching
-    with pytest.raises(ValueError, match=r"x\.json: not a bench skill record"):
+    with pytest.raises(ValueError, match=r"x\.json: no runs of ppo"):
         seed_results({"algos": {"ppo": {}}}, 100_000, 0.2, "x.json")
+    with pytest.raises(ValueError, match=r"x\.json: not a bench skill record"):
+        seed_results({"command": "triplesumo bench train"}, 100_000, 0.2, "x.json")
+
+
+def test_the_learner_is_the_records_only_one_or_the_one_named() -> None:
+    seed_results = _module().seed_results
+    td3 = _record({0: [0.0, 0.1, 0.1, 0.3]})
+    td3["algos"] = {"td3": td3["algos"]["sac"]}
+    assert seed_results(td3, 100_000, 0.2, "t.json")[0]["value"] == 0.3  # its only learner, not SAC
+    both = {"algos": {**td3["algos"], **_record({0: [0.0, 0.0, 0.0, -0.1]})["algos"]}}
+    with pytest.raises(ValueError, match=r"b\.json: holds td3, sac; name one as FILE@ALGO"):
+        seed_results(both, 100_000, 0.2, "b.json")
+    assert seed_results(both, 100_000, 0.2, "b.json", "sac")[0]["value"] == -0.1
+    assert seed_results(both, 100_000, 0.2, "b.json", "td3")[0]["value"] == 0.3
+    with pytest.raises(ValueError, match=r"b\.json: no runs of ppo \(the record holds td3, sac\)"):
+        seed_results(both, 100_000, 0.2, "b.json", "ppo")
+
+
+def test_the_command_line_reads_file_at_algo(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    both = _record({0: [0.0, 0.1, 0.1, 0.3], 1: [0.0, 0.0, 0.0, 0.1]})
+    both["algos"]["td3"] = _record({0: [0.0, 0.0, 0.0, -0.1], 1: [0.0, 0.0, 0.2, 0.0]})["algos"]["sac"]
+    path = tmp_path / "both.json"
+    path.write_text(json.dumps(both))
+    out = _module().main(["--record", f"sac={path}@sac", f"td3={path}@td3", "--json", str(tmp_path / "o.json")])
+    rows = {r["candidate"]: r for r in out["rows"]}
+    assert rows["sac"]["values"] == {0: 0.3, 1: 0.1} and rows["td3"]["values"] == {0: -0.1, 1: 0.0}
+    assert rows["td3"]["reached"] == 1 and out["records"][1] == ["td3", f"{path}@td3"]
+    with pytest.raises(SystemExit):
+        _module().main(["--record", f"x={path}"])  # two learners, none named
+    assert "holds sac, td3; name one as FILE@ALGO" in capsys.readouterr().err
 
 
 def test_gather_joins_a_candidates_files_and_refuses_two_curves_for_one_seed(tmp_path: Path) -> None:
     gather = _module().gather
     a = _write(tmp_path / "a.json", {0: [0.0, 0.1, 0.1, 0.1], 1: [0.0, 0.0, 0.0, 0.2]})
     b = _write(tmp_path / "b.json", {1: [0.0, 0.0, 0.0, 0.2], 2: [0.1, 0.1, 0.1, -0.1]})
-    out = gather([("x", a), ("x", b), ("y", b)], 100_000, 0.2)
+    out = gather([("x", a, None), ("x", b, None), ("y", b, None)], 100_000, 0.2)
     assert sorted(out["x"]) == [0, 1, 2] and sorted(out["y"]) == [1, 2]
     assert out["x"][1]["source"] == str(a)  # the first file that gave the seed
     c = _write(tmp_path / "c.json", {0: [0.0, 0.1, 0.1, 0.3]})
     with pytest.raises(ValueError, match=r"x: seed 0 has two different curves, in .*a\.json and .*c\.json"):
-        gather([("x", a), ("x", c)], 100_000, 0.2)
+        gather([("x", a, None), ("x", c, None)], 100_000, 0.2)
     (tmp_path / "bad.json").write_text("{")
     with pytest.raises(ValueError, match=r"bad\.json: cannot read"):
-        gather([("x", tmp_path / "bad.json")], 100_000, 0.2)
+        gather([("x", tmp_path / "bad.json", None)], 100_000, 0.2)
 
 
 def test_pooled_statistics_match_a_hand_computation() -> None:
