@@ -164,6 +164,29 @@ def test_the_stop_rule_on_a_curve() -> None:
     done = outcome(cfg, curve(0.1, 0.19, 0.0))
     assert done["status"] == "not reached" and done["best_test_mwr"] == 0.19 and done["best_at_env_steps"] == 23
     assert outcome(cfg, curve(0.1, 0.1, 0.1, 0.9))["status"] == "not reached"  # beyond the budget: not counted
+    # without the stop a run at the target trains on to the budget, and is then reported as reached where it first was
+    go_on = dataclasses.replace(cfg, stop_at_target=False)
+    assert outcome(go_on, curve(0.1, 0.2))["status"] == "running"
+    full = outcome(go_on, curve(0.1, 0.2, 0.0))
+    assert full["status"] == "reached" and full["at"] == 1 and full["env_steps"] == 23 and full["seconds"] == 2.0
+    assert outcome(go_on, curve(0.1, 0.19, 0.0)) == done
+    assert cfg.run_config("sac", 0).eval_target == 0.2 and go_on.run_config("sac", 0).eval_target is None
+
+
+@pytest.mark.slow  # 5 s alone on the shared 2-core box
+def test_without_the_stop_a_run_that_reaches_the_target_trains_to_the_budget(tmp_path: Path) -> None:
+    out = tmp_path / "b"
+    assert main(["bench", "skill", "--algos", "ddpg", "--seeds", "0", "--target", "-1", "--no-stop-at-target",
+                 "--eval-every", str(EVERY), "--eval-epochs", "4", "--max-env-steps", str(3 * EVERY), "--out",
+                 str(out), "--train.policies", "ant=random", "spider=random", "--train.steps-per-epoch", "20",
+                 "--train.n-envs", "2", "--no-train.eval-background", "--no-train.progress",
+                 "--no-train.tensorboard", "--train.ddpg.hidden", "16", "16", "--train.ddpg.learning-starts",
+                 "10", "--train.ddpg.batch-size", "8"]) == 0
+    entry = json.loads((out / "skill.json").read_text())["algos"]["ddpg"]["runs"][0]
+    assert [e["budget"] for e in entry["evaluations"]] == [EVERY, 2 * EVERY, 3 * EVERY]  # not stopped at the first
+    assert entry["status"] == "reached" and entry["at"] == 0
+    assert entry["env_steps"] == entry["evaluations"][0]["env_steps"] < max(_checkpoint_steps(out / "ddpg" / "seed0"))
+    assert json.loads((out / "ddpg" / "seed0" / "config.json").read_text())["eval_target"] is None
 
 
 @pytest.mark.parametrize(("kw", "message"), [

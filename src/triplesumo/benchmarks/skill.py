@@ -10,7 +10,9 @@ match ``i`` resets with ``eval_seed + i``, as ``triplesumo evaluate``), into the
 default they play in a worker process while Bug trains on (``--train.eval-background``;
 ``--no-train.eval-background``: inline). A run stops at the first evaluation whose test MWR is ``>= target``
 (*reached*, ``train --eval-target``) or at ``max_env_steps`` (*not reached*: reported as such, with the best
-test MWR seen).
+test MWR seen). ``--no-stop-at-target`` trains every run to ``max_env_steps`` instead, so that every seed has a
+value at every evaluation (a comparison of recipes at a fixed budget needs them: a seed stopped at its first
+crossing has none later); the report is the same, the first evaluation at the target.
 
 Times, from each evaluation's row: ``seconds`` is the training's own wall time (collection, learning and
 checkpoints; the trainer's clock, carried across resumes) when the policy that reached the target was frozen
@@ -114,7 +116,11 @@ class SkillConfig:
     """Training seeds: each its own run of each algorithm (OUT/ALGO/seedS, train --seed S); the report gives the
     median and the spread (min-max) over them."""
     target: float = 0.2
-    """Stop at the first evaluation whose test MWR is >= this (in [-1, 1])."""
+    """Skill: the first evaluation whose test MWR is >= this (in [-1, 1]) is the time to skill, and the run
+    stops there unless ``stop_at_target`` is off."""
+    stop_at_target: bool = True
+    """Stop a run at its first evaluation at the target; off: train every run to max_env_steps, for the test MWR
+    of every seed at every evaluation (the time to skill is reported the same)."""
     eval_every: int = 25_000
     """Env steps between evaluations (each at the step that crosses a multiple of it)."""
     eval_epochs: int = 200
@@ -177,12 +183,17 @@ class SkillConfig:
                              "leave it out")
 
     def run_config(self, algo: str, seed: int) -> TrainConfig:
-        """The train config of ``algo``'s run with ``seed``: evaluated every eval_every, stopped at the target or
-        the budget."""
+        """The train config of ``algo``'s run with ``seed``: evaluated every eval_every, stopped at the target
+        (unless ``stop_at_target`` is off) or the budget."""
         return dataclasses.replace(self.train, out=str(Path(self.out).resolve() / algo), name=f"seed{seed}",
                                    seed=seed, learn=(f"bug={algo}",), epochs=10**9, max_env_steps=self.max_env_steps,
                                    eval_every=self.eval_every, eval_epochs=self.eval_epochs, eval_seed=self.eval_seed,
-                                   eval_target=self.target)
+                                   eval_target=self.stop_target)
+
+    @property
+    def stop_target(self) -> float | None:
+        """The runs' ``train --eval-target``: the target, or None (train to the budget) without stop_at_target."""
+        return self.target if self.stop_at_target else None
 
 
 def _depends(cfg: SkillConfig) -> dict[str, Any]:
@@ -220,14 +231,15 @@ def _curve(cfg: SkillConfig, run_dir: Path) -> list[dict[str, Any]]:
 def outcome(cfg: SkillConfig, evaluations: list[dict[str, Any]]) -> dict[str, Any]:
     """The stop rule on a curve: the first evaluation with test MWR >= target (reached: its env steps, the
     training's clock when its policy was frozen, ``seconds``, and when its result was known, ``wall_seconds``),
-    else whether the budget is spent (not reached) or training goes on. Evaluations past max_env_steps (a raised
-    budget, later lowered) do not count."""
+    else whether the budget is spent (not reached) or training goes on. Without ``stop_at_target`` a run that has
+    reached the target goes on (status running) until the budget is spent. Evaluations past max_env_steps (a
+    raised budget, later lowered) do not count."""
     within = [e for e in evaluations if e["budget"] <= cfg.max_env_steps]  # a prefix: budgets grow
+    spent = bool(within) and within[-1]["budget"] + cfg.eval_every > cfg.max_env_steps  # no evaluation left
     for k, e in enumerate(within):
-        if e["test_mwr"] >= cfg.target:
+        if e["test_mwr"] >= cfg.target and (cfg.stop_at_target or spent):
             return {"status": "reached", "reached": True, "at": k, "env_steps": e["env_steps"],
                     "seconds": e["policy_train_seconds"], "wall_seconds": e["wall_seconds"]}
-    spent = bool(within) and within[-1]["budget"] + cfg.eval_every > cfg.max_env_steps  # no evaluation left
     best = max(within, key=lambda e: e["test_mwr"]) if within else None
     return {"status": "not reached" if spent else "running", "reached": False, "at": None, "env_steps": None,
             "seconds": None, "wall_seconds": None,
@@ -272,7 +284,7 @@ def _bench_run(cfg: SkillConfig, algo: str, seed: int) -> list[dict[str, Any]]:
     if outcome(cfg, _curve(cfg, run_dir))["status"] == "running":
         if checkpoint.checkpoints(run_dir):  # goes on from the last checkpoint, to this bench's budget and target
             train(run_cfg, resume_dir=run_dir, overrides={"max_env_steps": cfg.max_env_steps,
-                                                           "eval_target": cfg.target})
+                                                           "eval_target": cfg.stop_target})
         else:
             train(run_cfg, start_over=holds_run(run_dir))
     return _curve(cfg, run_dir)
