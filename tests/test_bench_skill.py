@@ -123,6 +123,8 @@ def test_resume_raised_budget_lost_evaluation_and_lower_target(not_reached: tupl
     assert lower["env_steps"] == lower["evaluations"][1]["env_steps"]
     assert lower["seconds"] == lower["evaluations"][1]["policy_train_seconds"] == float(rows[1]["train_seconds"])
     assert _checkpoint_steps(out / "ddpg" / "seed0") == steps
+    # nothing trained, so the record keeps the machine its times were measured on, not one measured now
+    assert json.loads((out / "skill.json").read_text())["machine"] == again["machine"]
     with pytest.raises(ValueError, match="other eval_epochs"):
         run_skill(_tiny(out, eval_epochs=5))
 

@@ -39,7 +39,8 @@ options, resumes each run from its last checkpoint (exactly: the checkpoints hol
 evaluations past the checkpoint are played again). The test-MWR curve of a seed depends only on ``train``,
 ``eval_every``, ``eval_epochs`` and ``eval_seed``; ``target``, ``max_env_steps``, ``seeds``, ``algos`` and
 ``workers`` may change between runs (the stop rule is applied to the recorded curve first, so a lower target needs no
-training). Writes ``OUT/skill.json`` (and ``--json F``), ``OUT/skill.png`` (test MWR against env steps and
+training; a bench that trains nothing keeps the record's machine and reference collections, those of the box the
+times were measured on). Writes ``OUT/skill.json`` (and ``--json F``), ``OUT/skill.png`` (test MWR against env steps and
 against training wall time, one line per seed) and prints a table. ``--quick`` checks all of it on a tiny
 budget in minutes (not a time to skill).
 
@@ -190,6 +191,11 @@ class SkillConfig:
                                    eval_every=self.eval_every, eval_epochs=self.eval_epochs, eval_seed=self.eval_seed,
                                    eval_target=self.stop_target)
 
+    def run_dir(self, algo: str, seed: int) -> Path:
+        """The run folder of ``algo``'s run with ``seed``: OUT/ALGO/seedS."""
+        run_cfg = self.run_config(algo, seed)
+        return Path(run_cfg.out) / run_cfg.name
+
     @property
     def stop_target(self) -> float | None:
         """The runs' ``train --eval-target``: the target, or None (train to the budget) without stop_at_target."""
@@ -279,8 +285,7 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
 def _bench_run(cfg: SkillConfig, algo: str, seed: int) -> list[dict[str, Any]]:
     """Train (or resume) the run of ``algo`` and ``seed`` until the stop rule decides on its curve; returns the
     curve."""
-    run_cfg = cfg.run_config(algo, seed)
-    run_dir = Path(run_cfg.out) / run_cfg.name
+    run_cfg, run_dir = cfg.run_config(algo, seed), cfg.run_dir(algo, seed)
     if outcome(cfg, _curve(cfg, run_dir))["status"] == "running":
         if checkpoint.checkpoints(run_dir):  # goes on from the last checkpoint, to this bench's budget and target
             train(run_cfg, resume_dir=run_dir, overrides={"max_env_steps": cfg.max_env_steps,
@@ -311,7 +316,13 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
         "target": cfg.target, "eval_every": cfg.eval_every, "eval_epochs": cfg.eval_epochs,
         "eval_background": cfg.train.eval_background, "max_env_steps": cfg.max_env_steps, "seeds": list(cfg.seeds),
         "machine": machine(cfg.train), "algos": {}}
-    result["machine"]["reference"] = {"before": reference_speed(cfg.train)}
+    pairs = [(algo, seed) for algo in cfg.algos for seed in cfg.seeds]
+    trains = any(outcome(cfg, _curve(cfg, cfg.run_dir(a, s)))["status"] == "running" for a, s in pairs)
+    kept = not trains and old is not None and "reference" in old.get("machine", {})
+    if kept and old is not None:  # nothing to train: the times are the recorded runs', so is the machine
+        result["machine"] = old["machine"]
+    else:
+        result["machine"]["reference"] = {"before": reference_speed(cfg.train)}
 
     done: dict[tuple[str, int], list[dict[str, Any]]] = {}
 
@@ -319,11 +330,10 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
         """Record a finished run; the record lists the finished runs in the order of algos and seeds."""
         done[algo, seed] = evaluations
         result["algos"] = {a: {"runs": [{"seed": s, "evaluations": done[a, s], **outcome(cfg, done[a, s]),
-                                          "run_dir": str(out / a / f"seed{s}")} for s in cfg.seeds if (a, s) in done]}
+                                          "run_dir": str(cfg.run_dir(a, s))} for s in cfg.seeds if (a, s) in done]}
                            for a in cfg.algos if any((a, s) in done for s in cfg.seeds)}
         _write(path, result)
 
-    pairs = [(algo, seed) for algo in cfg.algos for seed in cfg.seeds]
     if cfg.workers == 1:
         for algo, seed in pairs:
             print(f"bench skill: Bug with {algo}, seed {seed}, target test MWR {cfg.target:+.2f}")
@@ -341,7 +351,8 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
             except BaseException:
                 ex.shutdown(wait=False, cancel_futures=True)
                 raise
-    result["machine"]["reference"]["after"] = reference_speed(cfg.train)
+    if not kept:
+        result["machine"]["reference"]["after"] = reference_speed(cfg.train)
     _write(path, result)
     plot_skill(result, out / PLOT)
     report(format_skill(result), result, cfg.json or None)
