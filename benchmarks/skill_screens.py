@@ -11,6 +11,10 @@ one, or the one ``@ALGO`` names; a candidate may be another learner than SAC):
   counted as *censored*: it enters the counts below but not the means;
 - whether it reached ``--target`` at an evaluation of budget at most ``--at``.
 
+Per candidate it gives the share of its seeds at the target by ``--at`` with its exact (Clopper-Pearson) 95%
+interval, and from it the chance that the median of 3 fresh seeds reaches the target by ``--at`` (at least two of
+three: ``3 p^2 - 2 p^3``, increasing in ``p``, so the interval's ends map to its ends): item 1's figure for that recipe.
+
 It then asks whether the candidates differ by more than their seeds do: a one-way ANOVA of the values at ``--at``
 over the candidates with at least two (``scipy.stats.f_oneway``), the pooled within-candidate standard deviation,
 the between-candidate standard deviation by the method of moments for unequal groups (truncated at 0), and from the
@@ -120,6 +124,22 @@ def paired(results: dict[str, dict[int, dict[str, Any]]], baseline: str) -> dict
     return out
 
 
+def median_of_three(p: float) -> float:
+    """The chance that at least two of three independent seeds, each at the target with chance ``p``, are: the
+    median of three seeds' env steps to the target is then within the budget."""
+    return 3 * p * p - 2 * p ** 3
+
+
+def reach_share(reached: int, n: int) -> dict[str, Any]:
+    """``reached`` of ``n`` seeds: the share, its exact 95% interval, and :func:`median_of_three` at each."""
+    from scipy.stats import binomtest
+
+    ci = binomtest(reached, n).proportion_ci(confidence_level=0.95, method="exact")
+    share, lo, hi = reached / n, float(ci.low), float(ci.high)
+    return {"share": share, "ci": [lo, hi], "median_of_3": median_of_three(share),
+            "median_of_3_ci": [median_of_three(lo), median_of_three(hi)]}
+
+
 def analyse(results: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
     """Per-candidate rows and the pooled statistics (see the module's doc)."""
     from scipy.stats import f_oneway
@@ -130,7 +150,8 @@ def analyse(results: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
         rows.append({"candidate": label, "seeds": sorted(seeds), "values": {k: s["value"] for k, s in seeds.items()},
                      "reached": sum(s["reached"] for s in seeds.values()), "n": len(seeds),
                      "censored": sum(s["value"] is None for s in seeds.values()),
-                     "mean": float(np.mean(values)) if values else None})
+                     "mean": float(np.mean(values)) if values else None,
+                     "reach": reach_share(sum(s["reached"] for s in seeds.values()), len(seeds))})
     groups = [np.array([v for v in r["values"].values() if v is not None]) for r in rows]
     groups = [g for g in groups if len(g) >= 2]
     pooled: dict[str, Any] = {"candidates": len(groups), "values": int(sum(len(g) for g in groups))}
@@ -155,12 +176,18 @@ def analyse(results: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
 def format_table(result: dict[str, Any], at: int, target: float) -> str:
     """The printed table."""
     lines = [f"test MWR at {at:,} env steps per seed (c: stopped earlier at {target:+.2f}); reached: seeds at "
-             f"{target:+.2f} by {at:,}", "",
-             f"{'candidate':28s} {'seeds':>5s} {'reached':>7s} {'mean':>7s}  values"]
+             f"{target:+.2f} by {at:,}, and their share with its 95% interval; 3-seed median: the chance that the "
+             f"median of 3 fresh seeds is at {target:+.2f} by {at:,}", "",
+             f"{'candidate':28s} {'seeds':>5s} {'reached':>7s} {'share (95%)':>17s} {'3-seed median':>19s} "
+             f"{'mean':>7s}  values"]
     for r in result["rows"]:
         values = " ".join(f"s{k}:{'c' if v is None else f'{v:+.3f}'}" for k, v in sorted(r["values"].items()))
         mean = "-" if r["mean"] is None else f"{r['mean']:+.3f}"
-        lines.append(f"{r['candidate']:28s} {r['n']:5d} {r['reached']:7d} {mean:>7s}  {values}")
+        q = r["reach"]
+        share = f"{q['share']:.2f} ({q['ci'][0]:.2f}-{q['ci'][1]:.2f})"
+        med = f"{q['median_of_3']:.2f} ({q['median_of_3_ci'][0]:.2f}-{q['median_of_3_ci'][1]:.2f})"
+        lines.append(f"{r['candidate']:28s} {r['n']:5d} {r['reached']:7d} {share:>17s} {med:>19s} {mean:>7s}  "
+                     f"{values}")
     p = result["pooled"]
     lines.append("")
     lines.append(f"{p['reached']} of {p['runs']} seeds reached {target:+.2f} by {at:,}")

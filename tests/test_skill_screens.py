@@ -94,6 +94,21 @@ def test_gather_joins_a_candidates_files_and_refuses_two_curves_for_one_seed(tmp
         gather([("x", tmp_path / "bad.json", None)], 100_000, 0.2)
 
 
+def test_the_share_at_the_target_and_the_chance_of_a_three_seed_median() -> None:
+    m = _module()
+    assert m.median_of_three(0.5) == 0.5 and m.median_of_three(0.0) == 0.0 and m.median_of_three(1.0) == 1.0
+    assert m.median_of_three(0.4) == pytest.approx(3 * 0.4 ** 2 * 0.6 + 0.4 ** 3)  # two of three, or all three
+    q = m.reach_share(4, 11)
+    assert q["share"] == pytest.approx(4 / 11)
+    from scipy.stats import beta
+
+    # Clopper-Pearson by its definition: the beta quantiles at 2.5% and 97.5%
+    assert q["ci"] == pytest.approx([beta.ppf(0.025, 4, 8), beta.ppf(0.975, 5, 7)])
+    assert q["median_of_3_ci"] == pytest.approx([m.median_of_three(c) for c in q["ci"]])
+    assert q["median_of_3_ci"][0] < q["median_of_3"] < q["median_of_3_ci"][1]
+    assert m.reach_share(0, 4)["ci"][0] == 0.0 and m.reach_share(4, 4)["ci"][1] == 1.0
+
+
 def test_pooled_statistics_match_a_hand_computation() -> None:
     m = _module()
     groups = {"a": [0.1, 0.3, 0.2], "b": [-0.1, 0.1], "c": [0.5, 0.4, 0.6, 0.7]}
@@ -104,6 +119,7 @@ def test_pooled_statistics_match_a_hand_computation() -> None:
     out = m.analyse(results)
     rows = {r["candidate"]: r for r in out["rows"]}
     assert rows["c"]["mean"] == pytest.approx(0.55) and rows["c"]["reached"] == 4
+    assert rows["a"]["reach"]["share"] == pytest.approx(2 / 3) and rows["c"]["reach"]["median_of_3"] == 1.0
     assert rows["d"]["censored"] == 1 and rows["d"]["mean"] == 0.0 and rows["d"]["reached"] == 1
     p = out["pooled"]
     assert (p["candidates"], p["values"], p["runs"], p["reached"]) == (3, 9, 11, 7)
