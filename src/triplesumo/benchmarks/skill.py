@@ -318,9 +318,10 @@ def run_skill(cfg: SkillConfig) -> dict[str, Any]:
         "machine": machine(cfg.train), "algos": {}}
     pairs = [(algo, seed) for algo in cfg.algos for seed in cfg.seeds]
     trains = any(outcome(cfg, _curve(cfg, cfg.run_dir(a, s)))["status"] == "running" for a, s in pairs)
-    kept = not trains and old is not None and "reference" in old.get("machine", {})
-    if kept and old is not None:  # nothing to train: the times are the recorded runs', so is the machine
-        result["machine"] = old["machine"]
+    recorded = old.get("machine") if old is not None else None
+    kept = not trains and recorded is not None and "reference" in recorded
+    if kept:  # nothing to train: the times are the recorded runs', so is the machine they ran on
+        result["machine"] = recorded
     else:
         result["machine"]["reference"] = {"before": reference_speed(cfg.train)}
 
