@@ -147,11 +147,10 @@ def analyse(results: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
     rows = []
     for label, seeds in results.items():
         values = [s["value"] for s in seeds.values() if s["value"] is not None]
+        reached = sum(s["reached"] for s in seeds.values())
         rows.append({"candidate": label, "seeds": sorted(seeds), "values": {k: s["value"] for k, s in seeds.items()},
-                     "reached": sum(s["reached"] for s in seeds.values()), "n": len(seeds),
-                     "censored": sum(s["value"] is None for s in seeds.values()),
-                     "mean": float(np.mean(values)) if values else None,
-                     "reach": reach_share(sum(s["reached"] for s in seeds.values()), len(seeds))})
+                     "reached": reached, "n": len(seeds), "censored": sum(s["value"] is None for s in seeds.values()),
+                     "mean": float(np.mean(values)) if values else None, "reach": reach_share(reached, len(seeds))})
     groups = [np.array([v for v in r["values"].values() if v is not None]) for r in rows]
     groups = [g for g in groups if len(g) >= 2]
     pooled: dict[str, Any] = {"candidates": len(groups), "values": int(sum(len(g) for g in groups))}
@@ -167,9 +166,7 @@ def analyse(results: dict[str, dict[int, dict[str, Any]]]) -> dict[str, Any]:
         pooled |= {"f": float(test.statistic), "p": float(test.pvalue), "within_sd": within,
                    "between_sd": math.sqrt(max(0.0, (msb - msw) / n0)), "grand_mean": float(grand),
                    "seeds_per_arm": {f"{lift:.2f}": seeds_per_arm(within, lift) for lift in LIFTS}}
-    reached = sum(r["reached"] for r in rows)
-    runs = sum(r["n"] for r in rows)
-    pooled |= {"runs": runs, "reached": reached}
+    pooled |= {"runs": sum(r["n"] for r in rows), "reached": sum(r["reached"] for r in rows)}
     return {"rows": rows, "pooled": pooled}
 
 
